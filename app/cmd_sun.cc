@@ -1,0 +1,128 @@
+// rouen sun: solar position for a place and time, or for a CSV batch.
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+#include "app/commands.h"
+#include "core/error.h"
+#include "core/solar.h"
+
+namespace rouen {
+namespace {
+
+struct SunArgs {
+  double lat = 0, lon = 0, height = 0;
+  std::string time, batch;
+  bool json = false;
+  double pressure = 1010, temperature = 10;
+};
+
+std::string Trim(const std::string& s) {
+  size_t a = s.find_first_not_of(" \t\r"), b = s.find_last_not_of(" \t\r");
+  return a == std::string::npos ? "" : s.substr(a, b - a + 1);
+}
+
+void RunBatch(const SunArgs& a) {
+  std::ifstream in(a.batch);
+  if (!in) throw Error(a.batch + ": cannot open");
+  std::string line;
+  int lineno = 0;
+  std::printf("utc,lat,lon,elev_m,azimuth_deg,elevation_deg,elevation_true_deg\n");
+  while (std::getline(in, line)) {
+    ++lineno;
+    std::string t = Trim(line);
+    if (t.empty() || t[0] == '#') continue;
+    if (lineno == 1 && t.rfind("utc", 0) == 0) continue;  // header
+    std::vector<std::string> cols;
+    std::stringstream ss(t);
+    std::string c;
+    while (std::getline(ss, c, ',')) cols.push_back(Trim(c));
+    if (cols.size() != 4)
+      throw Error(a.batch + ":" + std::to_string(lineno) +
+                  ": expected 4 columns utc,lat,lon,elev_m, got " + std::to_string(cols.size()));
+    Site site;
+    try {
+      size_t used = 0;
+      site.lat_deg = std::stod(cols[1], &used);
+      if (used != cols[1].size()) throw std::invalid_argument("lat");
+      site.lon_deg = std::stod(cols[2], &used);
+      if (used != cols[2].size()) throw std::invalid_argument("lon");
+      site.height_m = std::stod(cols[3], &used);
+      if (used != cols[3].size()) throw std::invalid_argument("elev_m");
+    } catch (const std::exception&) {
+      throw Error(a.batch + ":" + std::to_string(lineno) + ": lat, lon and elev_m must be numbers");
+    }
+    if (std::abs(site.lat_deg) > 90 || std::abs(site.lon_deg) > 180)
+      throw Error(a.batch + ":" + std::to_string(lineno) + ": latitude/longitude out of range");
+    UtcTime t0;
+    try {
+      t0 = ParseIso8601(cols[0]);
+    } catch (const Error& e) {
+      throw Error(a.batch + ":" + std::to_string(lineno) + ": " + e.what());
+    }
+    SunPosition p = ComputeSunPosition(t0, site, {a.pressure, a.temperature});
+    std::printf("%s,%.6f,%.6f,%.3f,%.6f,%.6f,%.6f\n", cols[0].c_str(), site.lat_deg, site.lon_deg,
+                site.height_m, p.azimuth_deg, p.elevation_deg, p.elevation_true_deg);
+  }
+}
+
+void Run(const SunArgs& a) {
+  if (!a.batch.empty()) return RunBatch(a);
+  if (a.time.empty()) throw Error("sun: give --time (or --batch FILE.csv)");
+  if (std::abs(a.lat) > 90 || std::abs(a.lon) > 180)
+    throw Error("sun: latitude/longitude out of range");
+  UtcTime t = ParseIso8601(a.time);
+  Site site{a.lat, a.lon, a.height};
+  SunPosition p = ComputeSunPosition(t, site, {a.pressure, a.temperature});
+  if (a.json) {
+    nlohmann::json j = {{"utc", t.Iso8601(3)},
+                        {"lat_deg", a.lat},
+                        {"lon_deg", a.lon},
+                        {"height_m", a.height},
+                        {"azimuth_deg", p.azimuth_deg},
+                        {"elevation_deg", p.elevation_deg},
+                        {"elevation_true_deg", p.elevation_true_deg},
+                        {"zenith_deg", 90 - p.elevation_deg},
+                        {"distance_au", p.distance_au},
+                        {"angular_radius_deg", p.angular_radius_deg},
+                        {"solid_angle_sr", p.SolidAngleSr()}};
+    std::printf("%s\n", j.dump(2).c_str());
+    return;
+  }
+  std::printf("utc                 %s\n", t.Iso8601(3).c_str());
+  std::printf("azimuth             %.6f deg (from north, eastward)\n", p.azimuth_deg);
+  std::printf("elevation           %.6f deg (refracted, %.0f mbar, %.1f C)\n", p.elevation_deg,
+              a.pressure, a.temperature);
+  std::printf("elevation (airless) %.6f deg\n", p.elevation_true_deg);
+  std::printf("earth-sun distance  %.6f AU\n", p.distance_au);
+  std::printf("angular radius      %.5f deg (solid angle %.4e sr)\n", p.angular_radius_deg,
+              p.SolidAngleSr());
+}
+
+}  // namespace
+
+void RegisterSun(CLI::App& app) {
+  auto a = std::make_shared<SunArgs>();
+  CLI::App* c = app.add_subcommand(
+      "sun", "Solar position (topocentric azimuth/elevation) for a place and a UTC time");
+  c->footer(
+      "Examples:\n"
+      "  rouen sun --lat 37.8722 --lon -122.2578 --height 60 --time 2026-08-25T13:30:00-07:00\n"
+      "  rouen sun --batch fixes.csv      (columns utc,lat,lon,elev_m; prints CSV with\n"
+      "                                    azimuth_deg,elevation_deg,elevation_true_deg)");
+  c->add_option("--lat", a->lat, "Latitude, degrees north");
+  c->add_option("--lon", a->lon, "Longitude, degrees east (west is negative)");
+  c->add_option("--height", a->height, "Height above the WGS84 ellipsoid, metres");
+  c->add_option("--time", a->time, "ISO 8601 time with a zone, e.g. 2026-08-25T13:30:00Z");
+  c->add_option("--batch", a->batch, "CSV file with columns utc,lat,lon,elev_m");
+  c->add_flag("--json", a->json, "Print JSON");
+  c->add_option("--pressure", a->pressure, "Air pressure for refraction, mbar")
+      ->capture_default_str();
+  c->add_option("--temperature", a->temperature, "Air temperature for refraction, Celsius")
+      ->capture_default_str();
+  c->callback([a] { Run(*a); });
+}
+
+}  // namespace rouen

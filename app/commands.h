@@ -1,0 +1,48 @@
+// The rouen CLI: one subcommand per stage, each a thin function over library calls.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+namespace rouen {
+
+void RegisterSun(CLI::App& app);
+void RegisterCapture(CLI::App& app);
+void RegisterCalib(CLI::App& app);  // rouen calib response
+void RegisterHdr(CLI::App& app);
+void RegisterDemo(CLI::App& app);
+
+}  // namespace rouen
+
+#include <filesystem>
+
+#include "capture/controller.h"
+#include "capture/rig.h"
+
+namespace rouen {
+
+struct CaptureSessionOptions {
+  bool resume = false;
+  std::filesystem::path from_session;  // replay source
+};
+// Creates (or resumes) a session folder and runs the plan with the rig's devices. Installs a
+// SIGINT/SIGTERM handler for the duration so Ctrl-C stops cleanly after the frame in flight.
+CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
+                                const std::filesystem::path& out,
+                                const CaptureSessionOptions& opts, bool show_progress);
+
+}  // namespace rouen
+
+#include "calib/response.h"
+
+namespace rouen {
+
+struct ListedExposure {
+  std::string path;
+  double seconds;
+};
+// Reads an exposure list ("image seconds" per line, '#' comments, paths relative to the list).
+std::vector<ListedExposure> ReadExposureList(const std::string& list);
+// Loads the listed LDR images as one bracket, checking sizes and channels.
+Bracket LoadBracket(const std::vector<ListedExposure>& listed);
+
+}  // namespace rouen

@@ -1,0 +1,84 @@
+// Offline processing of a session: calibrate (response curve, HDR radiance per bracket),
+// then solve (sun, sky, environment per slot; irradiance; pseudo-albedos). Each stage writes
+// its files into the work folder so it can be inspected or rerun alone.
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "calib/response.h"
+#include "core/mesh.h"
+#include "core/session.h"
+#include "solve/albedo.h"
+#include "solve/environment.h"
+#include "solve/grid.h"
+#include "solve/irradiance.h"
+#include "solve/raycast.h"
+#include "solve/sky_fit.h"
+#include "solve/sun.h"
+
+namespace rouen {
+
+struct PipelineOptions {
+  std::filesystem::path work_dir;        // calib/ and scene/ are written here
+  std::vector<int> exclude_albedo_slots;  // held-out slots: their architecture photos unused
+  bool quick = false;
+  std::function<void(const std::string&)> log;  // progress lines
+};
+
+// One bracket merged to radiance.
+struct HdrGroup {
+  std::string name;
+  int slot = 0;
+  Target target = Target::kArchitecture;
+  Image radiance;                // kRadiance
+  std::vector<uint8_t> valid;    // 1 where some frame was well exposed
+  Intrinsics intrinsics;
+  Pose pose;
+  UtcTime utc;                   // median frame time
+  double nd_density = 0;
+};
+
+struct CalibResult {
+  ResponseCurve response;
+  ResponseSummary response_summary;
+  std::map<std::string, HdrGroup> groups;
+};
+
+// Response curve from the session's LDR brackets, then every bracket merged to radiance
+// (sky and aureole brackets of a slot merge together). Writes calib/response.json and
+// calib/hdr/<group>.exr.
+CalibResult CalibrateSession(const Session& session, const PipelineOptions& options);
+
+struct SlotSolve {
+  int slot = 0;
+  UtcTime utc;
+  SunPosition sun;            // from GPS site + UTC (ERFA)
+  SunMeasurement sun_measured;
+  SkyFitSummary sky_summary;
+  Lighting lighting;
+};
+
+struct SolveResult {
+  Mesh mesh;
+  SurfaceGrid grid;
+  std::unique_ptr<RayCaster> caster;
+  HemisphereCache hemisphere;
+  std::vector<SlotSolve> slots;
+  std::vector<SlotIrradiance> irradiance;  // per slot, with interreflection
+  AlbedoResult albedo;
+};
+
+// Sun, sky and environment per slot; irradiance at the surface grid; pseudo-albedos from the
+// architecture photos of the slots not excluded.
+SolveResult SolveSession(const Session& session, const CalibResult& calib,
+                         const PipelineOptions& options);
+
+// Site of a session: the GPS fixes' mean when there are any, else session.json's site.
+Site SessionSite(const Session& session);
+
+}  // namespace rouen

@@ -1,0 +1,42 @@
+// Merging bracketed digital frames into one radiance image (Debevec & Malik 1997, eq. 6;
+// Yu & Malik 1998 §3).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "core/image.h"
+#include "core/response_curve.h"
+
+namespace rouen {
+
+struct MergeOptions {
+  // Digital numbers at or below `dark_level` or at or above `saturation_level` get weight 0;
+  // in between the weight is a hat peaking half-way.
+  double dark_level = 5.0;
+  double saturation_level = 250.0;
+
+  void Validate() const;  // throws rouen::Error explaining the bad field
+};
+
+struct MergeSummary {
+  int64_t pixels = 0;
+  int64_t saturated_pixels = 0;  // some channel saturated in every frame (value is a lower bound)
+  int64_t dark_pixels = 0;       // some channel dark in every frame (value from the longest)
+  double seconds = 0;
+};
+
+// Per channel ln L = sum_j w(z_j) (g(z_j) - ln X_j) / sum_j w(z_j), with X_j the effective
+// exposure factor (seconds x gain x 10^-nd) of frame j. Returns a kRadiance image in the
+// curve's units (relative radiance). A channel saturated in every frame takes the shortest
+// exposure's g(255) - ln X_min (a lower bound); one dark in every frame takes the longest
+// exposure's reading. `valid_mask`, when given, gets width x height entries: 1 where every
+// channel had at least one well-exposed frame, 0 elsewhere.
+// Throws rouen::Error for no frames, mismatched sizes or channel counts, frames that are not
+// digital numbers, non-positive or non-finite exposures, values outside 0..255, or an
+// invalid curve.
+Image MergeHdr(const std::vector<const Image*>& frames, const std::vector<double>& exposures,
+               const ResponseCurve& curve, const MergeOptions& options,
+               MergeSummary* summary = nullptr, std::vector<uint8_t>* valid_mask = nullptr);
+
+}  // namespace rouen

@@ -1,0 +1,263 @@
+#include "calib/response.h"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "calib/test_util.h"
+#include "core/error.h"
+
+namespace rouen {
+namespace {
+
+using testing::MakeBracket;
+using testing::RadianceField;
+using testing::TrueLogExposure;
+using testing::TrueSlope;
+
+const std::vector<double> kExposures = {1.0 / 64, 1.0 / 16, 1.0 / 4, 1.0, 4.0, 16.0};
+
+bool StrictlyIncreasing(const std::vector<double>& g) {
+  for (size_t z = 1; z < g.size(); ++z) {
+    if (!(g[z] > g[z - 1])) return false;
+  }
+  return true;
+}
+
+TEST(RecoverResponse, MatchesSyntheticCurveUpToConstant) {
+  // Radiance spans e^-5..e^4; with exposures 1/64..16 every value is well exposed somewhere.
+  const Image radiance = RadianceField(240, 160, -5.0, 4.0, 7);
+  std::vector<Bracket> brackets = {MakeBracket(radiance, kExposures, 0.7, 11)};
+  ResponseSummary summary;
+  const ResponseCurve curve = RecoverResponse(brackets, ResponseOptions{}, &summary);
+  EXPECT_GT(summary.samples_used, 150);
+  EXPECT_GT(summary.residual_rms, 0);
+  // Quantisation (uniform, +-0.5 DN) plus 0.7 DN Gaussian noise is ~0.76 DN per reading;
+  // through the slope (0.017 ln/DN at z = 128, ~1.25/z in the toe) and the hat weight that is
+  // 0.03-0.07 ln, depending on how many readings fall in the toe and shoulder; a curve off by
+  // a few DN anywhere in the middle would exceed 0.1.
+  EXPECT_LT(summary.residual_rms, 0.1);
+  EXPECT_TRUE(curve.valid());
+  for (int c = 0; c < 3; ++c) {
+    ASSERT_EQ(curve.g[c].size(), 256u);
+    EXPECT_TRUE(StrictlyIncreasing(curve.g[c])) << "channel " << c;
+    EXPECT_DOUBLE_EQ(curve.g[c][128], 0.0);
+    const double offset = TrueLogExposure(c, 128);
+    for (int z = 20; z <= 235; ++z) {
+      // Hundreds of readings per level average the noise away; what remains is the bias of
+      // the smoothness term and of the discrete levels: allow 0.05 (1 DN of slope in the
+      // middle, 3 DN at z = 128) or half a DN of the local slope where it is steeper.
+      const double tol = std::max(0.05, 0.5 * TrueSlope(c, z));
+      EXPECT_NEAR(curve.g[c][z], TrueLogExposure(c, z) - offset, tol)
+          << "channel " << c << " z " << z;
+    }
+  }
+}
+
+TEST(RecoverResponse, PoolsBracketsOfDifferentScenes) {
+  const Image dark = RadianceField(120, 90, -5.0, 0.0, 3);
+  const Image bright = RadianceField(100, 80, -1.0, 4.0, 4);
+  std::vector<Bracket> brackets = {MakeBracket(dark, {1.0 / 4, 1.0, 4.0, 16.0}, 0.5, 1),
+                                   MakeBracket(bright, {1.0 / 64, 1.0 / 16, 1.0 / 4, 1.0}, 0.5, 2)};
+  ResponseSummary summary;
+  const ResponseCurve curve = RecoverResponse(brackets, ResponseOptions{}, &summary);
+  EXPECT_GT(summary.samples_used, 300);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_TRUE(StrictlyIncreasing(curve.g[c]));
+    const double offset = TrueLogExposure(c, 128);
+    for (int z = 20; z <= 235; ++z) {
+      EXPECT_NEAR(curve.g[c][z], TrueLogExposure(c, z) - offset,
+                  std::max(0.05, 0.5 * TrueSlope(c, z)))
+          << "channel " << c << " z " << z;
+    }
+  }
+}
+
+TEST(RecoverResponse, SingleChannelFramesGiveOneCurveForAllChannels) {
+  const Image radiance = RadianceField(120, 90, -5.0, 4.0, 5);
+  Bracket rgb = MakeBracket(radiance, kExposures, 0.5, 3);
+  Bracket mono;
+  mono.exposures = rgb.exposures;
+  for (const Image& f : rgb.frames) {
+    Image m(f.width, f.height, 1, PixelUnits::kDigital);
+    for (int y = 0; y < f.height; ++y) {
+      for (int x = 0; x < f.width; ++x) m.at(x, y) = f.at(x, y, 1);
+    }
+    mono.frames.push_back(m);
+  }
+  const ResponseCurve curve = RecoverResponse({mono}, ResponseOptions{}, nullptr);
+  EXPECT_EQ(curve.g[0], curve.g[1]);
+  EXPECT_EQ(curve.g[2], curve.g[1]);
+  const double offset = TrueLogExposure(1, 128);
+  for (int z = 20; z <= 235; ++z) {
+    EXPECT_NEAR(curve.g[1][z], TrueLogExposure(1, z) - offset,
+                std::max(0.05, 0.5 * TrueSlope(1, z)));
+  }
+}
+
+TEST(RecoverResponse, MonotoneAndFiniteWhereLevelsNeverOccur) {
+  // Radiance confined to a narrow range and two exposures: most levels never occur.
+  const Image radiance = RadianceField(80, 60, -1.0, -0.5, 9);
+  std::vector<Bracket> brackets = {MakeBracket(radiance, {1.0, 2.0}, 0.0, 1)};
+  const ResponseCurve curve = RecoverResponse(brackets, ResponseOptions{}, nullptr);
+  for (int c = 0; c < 3; ++c) {
+    for (double v : curve.g[c]) ASSERT_TRUE(std::isfinite(v));
+    EXPECT_TRUE(StrictlyIncreasing(curve.g[c]));
+  }
+}
+
+TEST(RecoverResponse, MaskAndMisregisteredPixelsAreNotSampled) {
+  const Image radiance = RadianceField(120, 90, -5.0, 4.0, 5);
+  Bracket b = MakeBracket(radiance, kExposures, 0.5, 3);
+  // Pure-blue padding in the shortest frame only (as in the Memorial set): its pixels darken
+  // as exposure grows, so they must be rejected, or they would bend the blue curve.
+  for (int y = 0; y < 30; ++y) {
+    for (int x = 0; x < b.frames[0].width; ++x) {
+      b.frames[0].at(x, y, 0) = 0;
+      b.frames[0].at(x, y, 1) = 0;
+      b.frames[0].at(x, y, 2) = 255;
+    }
+  }
+  const ResponseCurve curve = RecoverResponse({b}, ResponseOptions{}, nullptr);
+  const double offset = TrueLogExposure(2, 128);
+  for (int z = 20; z <= 235; ++z) {
+    EXPECT_NEAR(curve.g[2][z], TrueLogExposure(2, z) - offset,
+                std::max(0.05, 0.5 * TrueSlope(2, z)));
+  }
+  // A mask that excludes everything leaves no samples.
+  b.mask.assign(static_cast<size_t>(b.frames[0].width) * b.frames[0].height, 0);
+  EXPECT_THROW(RecoverResponse({b}, ResponseOptions{}, nullptr), Error);
+}
+
+TEST(RecoverResponse, RejectsBadInput) {
+  const Image radiance = RadianceField(40, 30, -3.0, 2.0, 1);
+  const Bracket good = MakeBracket(radiance, {0.25, 1.0, 4.0}, 0.0, 1);
+  const ResponseOptions opt;
+  EXPECT_NO_THROW(RecoverResponse({good}, opt, nullptr));
+
+  EXPECT_THROW(RecoverResponse({}, opt, nullptr), Error);
+  Bracket b = good;
+  b.exposures = {1.0, 1.0, 1.0};
+  EXPECT_THROW(RecoverResponse({b}, opt, nullptr), Error);  // all exposures equal
+  b = good;
+  b.frames.resize(1);
+  b.exposures.resize(1);
+  EXPECT_THROW(RecoverResponse({b}, opt, nullptr), Error);  // fewer than 2 exposures
+  b = good;
+  b.exposures[1] = -1;
+  EXPECT_THROW(RecoverResponse({b}, opt, nullptr), Error);
+  b.exposures[1] = 0;
+  EXPECT_THROW(RecoverResponse({b}, opt, nullptr), Error);
+  b.exposures[1] = std::nan("");
+  EXPECT_THROW(RecoverResponse({b}, opt, nullptr), Error);
+  b.exposures[1] = INFINITY;
+  EXPECT_THROW(RecoverResponse({b}, opt, nullptr), Error);
+  b = good;
+  b.exposures.pop_back();
+  EXPECT_THROW(RecoverResponse({b}, opt, nullptr), Error);  // count mismatch
+  b = good;
+  b.frames[2] = Image(41, 30, 3, PixelUnits::kDigital);
+  EXPECT_THROW(RecoverResponse({b}, opt, nullptr), Error);  // size mismatch
+  b = good;
+  b.frames[2] = Image(40, 30, 1, PixelUnits::kDigital);
+  EXPECT_THROW(RecoverResponse({b}, opt, nullptr), Error);  // channels within a bracket
+  b = good;
+  for (Image& f : b.frames) f = Image(40, 30, 1, PixelUnits::kDigital, 100.f);
+  EXPECT_THROW(RecoverResponse({good, b}, opt, nullptr), Error);  // channels across brackets
+  b = good;
+  b.frames[0].units = PixelUnits::kRadiance;
+  EXPECT_THROW(RecoverResponse({b}, opt, nullptr), Error);
+  b = good;
+  b.frames[1].at(3, 3, 1) = std::nan("");
+  EXPECT_THROW(RecoverResponse({b}, opt, nullptr), Error);
+  b = good;
+  b.frames[1].at(3, 3, 1) = 300;
+  EXPECT_THROW(RecoverResponse({b}, opt, nullptr), Error);
+  b = good;
+  b.mask.assign(10, 1);
+  EXPECT_THROW(RecoverResponse({b}, opt, nullptr), Error);  // mask size
+
+  ResponseOptions bad;
+  bad.samples_per_bracket = 0;
+  EXPECT_THROW(bad.Validate(), Error);
+  bad = ResponseOptions{};
+  bad.lambda = -1;
+  EXPECT_THROW(bad.Validate(), Error);
+  bad.lambda = std::nan("");
+  EXPECT_THROW(bad.Validate(), Error);
+  bad = ResponseOptions{};
+  bad.weight_epsilon = 0;
+  EXPECT_THROW(bad.Validate(), Error);
+  EXPECT_THROW(RecoverResponse({good}, bad, nullptr), Error);
+}
+
+// ---- Real data: Debevec's Memorial Church bracket. ----
+
+std::filesystem::path MemorialDir() {
+  return std::filesystem::path(ROUEN_SHARED_DIR) / "data" / "hdr" / "memorial";
+}
+
+// Loads the 16 frames cropped as the data set's README says (top 30, bottom 20, left 3,
+// right 4 px) to remove the blue registration padding.
+Bracket LoadMemorial() {
+  Bracket b;
+  std::ifstream list(MemorialDir() / "exposures.txt");
+  std::string line;
+  while (std::getline(list, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream in(line);
+    std::string file;
+    double seconds = 0;
+    in >> file >> seconds;
+    const Image full = ReadImage((MemorialDir() / file).string());
+    const int x0 = 3, y0 = 30, w = full.width - 3 - 4, h = full.height - 30 - 20;
+    Image crop(w, h, full.channels, full.units);
+    for (int y = 0; y < h; ++y) {
+      for (int x = 0; x < w; ++x) {
+        for (int c = 0; c < full.channels; ++c) crop.at(x, y, c) = full.at(x + x0, y + y0, c);
+      }
+    }
+    b.frames.push_back(std::move(crop));
+    b.exposures.push_back(seconds);
+  }
+  return b;
+}
+
+TEST(RecoverResponse, MemorialIsMonotoneAndStableUnderResampling) {
+  if (!std::filesystem::exists(std::filesystem::path(ROUEN_SHARED_DIR) / "data")) {
+    GTEST_SKIP() << "no shared data directory at " << ROUEN_SHARED_DIR << "/data";
+  }
+  const Bracket memorial = LoadMemorial();
+  ASSERT_EQ(memorial.frames.size(), 16u);
+  ResponseOptions opt;
+  opt.samples_per_bracket = 200;
+  ResponseSummary s1, s2;
+  const ResponseCurve c1 = RecoverResponse({memorial}, opt, &s1);
+  opt.samples_per_bracket = 400;
+  opt.seed = 2;
+  const ResponseCurve c2 = RecoverResponse({memorial}, opt, &s2);
+  double max_diff = 0;
+  for (int c = 0; c < 3; ++c) {
+    for (double v : c1.g[c]) ASSERT_TRUE(std::isfinite(v));
+    EXPECT_TRUE(StrictlyIncreasing(c1.g[c])) << "channel " << c;
+    EXPECT_TRUE(StrictlyIncreasing(c2.g[c])) << "channel " << c;
+    // Both are pinned at g(128) = 0, so they are already aligned there.
+    for (int z = 20; z <= 235; ++z)
+      max_diff = std::max(max_diff, std::abs(c1.g[c][z] - c2.g[c][z]));
+    // One stop apart, 16 frames: the curve spans several stops between z = 20 and 235.
+    EXPECT_GT(c1.g[c][235] - c1.g[c][20], std::log(8.0));
+  }
+  EXPECT_LE(max_diff, 0.1);
+  RecordProperty("max_abs_delta_g", std::to_string(max_diff));
+  RecordProperty("seconds_200", std::to_string(s1.seconds));
+  RecordProperty("seconds_400", std::to_string(s2.seconds));
+  RecordProperty("residual_rms", std::to_string(s1.residual_rms));
+}
+
+}  // namespace
+}  // namespace rouen

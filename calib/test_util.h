@@ -1,0 +1,98 @@
+// Synthetic brackets for the calib tests: a known response applied to a known radiance field.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "calib/response.h"
+#include "core/image.h"
+#include "core/response_curve.h"
+
+namespace rouen::testing {
+
+// z = 255 (x / (x + k_c))^0.8 with k_c per channel: a film-like curve with a toe and a shoulder.
+inline double TrueDigital(int c, double x) {
+  static const double kK[3] = {0.25, 0.3, 0.4};
+  return 255.0 * std::pow(x / (x + kK[c]), 0.8);
+}
+
+// Exact inverse: ln x for a (fractional) digital number 0 < z < 255.
+inline double TrueLogExposure(int c, double z) {
+  static const double kK[3] = {0.25, 0.3, 0.4};
+  const double u = std::pow(z / 255.0, 1.25);
+  return std::log(kK[c] * u / (1 - u));
+}
+
+// d ln x / dz of the true curve (ln units per digital number).
+inline double TrueSlope(int c, double z) {
+  return 0.5 * (TrueLogExposure(c, z + 1) - TrueLogExposure(c, z - 1));
+}
+
+// The true curve tabulated as a ResponseCurve; the open ends z = 0 and 255 (ln x = -inf and
+// +inf) are extrapolated linearly from their neighbours.
+inline ResponseCurve TrueCurve() {
+  ResponseCurve r;
+  for (int c = 0; c < 3; ++c) {
+    r.g[c].resize(256);
+    for (int z = 1; z < 255; ++z) r.g[c][z] = TrueLogExposure(c, z);
+    r.g[c][0] = 2 * r.g[c][1] - r.g[c][2];
+    r.g[c][255] = 2 * r.g[c][254] - r.g[c][253];
+  }
+  return r;
+}
+
+// Piecewise-constant random radiance (blocks of `block` pixels, log-uniform between
+// exp(log_lo) and exp(log_hi)), with a smooth ramp inside each block so neighbours differ.
+inline Image RadianceField(int w, int h, double log_lo, double log_hi, uint64_t seed,
+                           int block = 6) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(log_lo, log_hi);
+  const int bw = (w + block - 1) / block, bh = (h + block - 1) / block;
+  std::vector<double> base(static_cast<size_t>(bw) * bh * 3);
+  for (double& v : base) v = u(rng);
+  Image img(w, h, 3, PixelUnits::kRadiance);
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      for (int c = 0; c < 3; ++c) {
+        // Channels correlated (same block brightness) with a colour offset.
+        const double l = base[(static_cast<size_t>(y / block) * bw + x / block) * 3 + 0] +
+                         0.3 *
+                             (base[(static_cast<size_t>(y / block) * bw + x / block) * 3 + c] -
+                              0.5 * (log_lo + log_hi)) /
+                             (log_hi - log_lo) +
+                         0.01 * (x % block);
+        img.at(x, y, c) = static_cast<float>(std::exp(l));
+      }
+    }
+  }
+  return img;
+}
+
+// One frame: z = round(TrueDigital(x * exposure) + noise), clamped to 0..255.
+inline Image Expose(const Image& radiance, double exposure, double noise_dn, std::mt19937_64* rng) {
+  std::normal_distribution<double> n(0.0, noise_dn);
+  Image f(radiance.width, radiance.height, 3, PixelUnits::kDigital);
+  for (int y = 0; y < radiance.height; ++y) {
+    for (int x = 0; x < radiance.width; ++x) {
+      for (int c = 0; c < 3; ++c) {
+        double z = TrueDigital(c, radiance.at(x, y, c) * exposure);
+        if (noise_dn > 0) z += n(*rng);
+        f.at(x, y, c) = static_cast<float>(std::clamp(std::round(z), 0.0, 255.0));
+      }
+    }
+  }
+  return f;
+}
+
+inline Bracket MakeBracket(const Image& radiance, const std::vector<double>& exposures,
+                           double noise_dn, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  Bracket b;
+  b.exposures = exposures;
+  for (double e : exposures) b.frames.push_back(Expose(radiance, e, noise_dn, &rng));
+  return b;
+}
+
+}  // namespace rouen::testing

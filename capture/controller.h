@@ -1,0 +1,102 @@
+// The capture controller: runs a plan per time-of-day slot (sun through an ND filter,
+// aureole bands, sky, landscape, architecture views), brackets each view adaptively and
+// journals every frame with its GPS fix and the sun position at its timestamp.
+#pragma once
+
+#include <atomic>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "capture/device.h"
+#include "core/session.h"
+#include "core/solar.h"
+
+namespace rouen {
+
+struct BracketOptions {
+  double step_stops = 2.0;            // exposure ratio between bracket frames, in stops
+  double min_exposure_s = 1.0 / 8000;
+  double max_exposure_s = 30.0;
+  int max_frames = 8;                 // per view
+  double saturation_dn = 250;         // a pixel at or above this is saturated
+  double noise_floor_dn = 6;          // a pixel at or below this is under the noise floor
+  double max_saturated_fraction = 2e-4;  // of the pixels of interest
+  double max_dark_fraction = 2e-3;
+  void Validate() const;  // throws rouen::Error
+};
+
+struct CapturePlan {
+  std::vector<UtcTime> slots;     // simulated rigs jump to these; real rigs use "now" (one slot)
+  std::vector<Target> targets = {Target::kSun, Target::kAureole, Target::kSky,
+                                 Target::kLandscape, Target::kArchitecture};
+  double sun_nd_density = 4.5;    // ND filter for the sun frames (optical density)
+  double sun_start_exposure_s = 1.0 / 1000;
+  int sun_extra_longer_frames = 2;  // frames above the unsaturated one, for HDR
+  std::vector<double> aureole_exposures_s = {1.0 / 8000, 1.0 / 2000, 1.0 / 500};
+  double start_exposure_s = 1.0 / 250;
+  double sun_exclusion_deg = 4.0;   // pixels this close to the sun are not "of interest"
+  BracketOptions bracket;
+  void Validate() const;
+};
+
+struct CaptureProgress {
+  int slot = 0, slots = 0;
+  Target target = Target::kSun;
+  int view = 0;
+  int frames_total = 0;
+  double exposure_s = 0;
+  double saturated_fraction = 0;  // of the last frame's pixels of interest
+  std::string gps_status;
+};
+
+struct CaptureSummary {
+  int frames = 0;
+  int slots_done = 0;
+  bool stopped = false;  // stop flag seen; everything written so far is journalled
+  std::vector<std::string> warnings;
+};
+
+struct CaptureDevices {
+  Camera* camera = nullptr;
+  Gps* gps = nullptr;      // may be null: the fallback site is used, with a warning
+  Clock* clock = nullptr;
+};
+
+class CaptureController {
+ public:
+  CaptureController(CaptureDevices devices, CapturePlan plan, Site fallback_site);
+
+  // Captures every slot of the plan into `writer`. Groups already complete in the writer
+  // (from an interrupted run) are skipped, so a resumed capture continues where it stopped.
+  CaptureSummary Run(SessionWriter& writer, const std::function<void(const CaptureProgress&)>& progress,
+                     const std::atomic<bool>* stop);
+
+ private:
+  bool CaptureGroup(SessionWriter& writer, int slot, Target target, int view,
+                    CaptureSummary& summary);
+  FrameRecord Journal(SessionWriter& writer, const CapturedFrame& frame, int slot, Target target,
+                      const std::string& group);
+  void Notify(double exposure_s, double saturated_fraction);
+  // Fractions of saturated and dark pixels among the pixels of interest.
+  void Meter(const CapturedFrame& frame, Target target, double* saturated, double* dark,
+             double* max_dn) const;
+
+  CaptureDevices dev_;
+  CapturePlan plan_;
+  Site fallback_site_;
+  std::function<void(const CaptureProgress&)> progress_fn_;
+  const std::atomic<bool>* stop_ = nullptr;
+  CaptureProgress progress_;
+  std::optional<GpsFix> last_fix_;
+};
+
+// The plan as stored in session.json ("plan"), so a replay runs the recorded plan.
+nlohmann::json PlanToJson(const CapturePlan& plan);
+CapturePlan PlanFromJson(const nlohmann::json& j);  // throws rouen::Error
+
+// Group name of a bracket: "slot<k>/<target>/view<v>".
+std::string GroupName(int slot, Target target, int view);
+
+}  // namespace rouen

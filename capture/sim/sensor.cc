@@ -1,0 +1,146 @@
+#include "capture/sim/sensor.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "core/error.h"
+
+namespace rouen {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+uint64_t Mix(uint64_t x) {
+  x += 0x9E3779B97F4A7C15ULL;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
+  return x ^ (x >> 31);
+}
+
+// Two independent standard normal numbers from a hash (Box-Muller).
+void Normals(uint64_t h, double* n1, double* n2) {
+  const double u1 = ((h >> 32) + 0.5) * (1.0 / 4294967296.0);
+  const double u2 = ((h & 0xffffffffULL) + 0.5) * (1.0 / 4294967296.0);
+  const double r = std::sqrt(-2.0 * std::log(u1));
+  *n1 = r * std::cos(2 * kPi * u2);
+  *n2 = r * std::sin(2 * kPi * u2);
+}
+
+}  // namespace
+
+void SensorParams::Validate() const {
+  auto fail = [](const std::string& m) { throw Error("sensor parameters: " + m); };
+  if (!(full_well_e >= 100 && full_well_e < 1e7)) fail("full_well_e must be in [100, 1e7)");
+  if (!(read_noise_e >= 0 && read_noise_e < 1000)) fail("read_noise_e must be in [0, 1000)");
+  if (!(sensitivity > 0 && std::isfinite(sensitivity))) fail("sensitivity must be positive");
+  for (int c = 0; c < 3; ++c) {
+    if (!(gamma[c] > 0.1 && gamma[c] <= 1.5)) fail("gamma must be in (0.1, 1.5]");
+    if (!(shoulder[c] > 0.05 && shoulder[c] < 100)) fail("shoulder must be in (0.05, 100)");
+    if (!(toe[c] >= 0 && toe[c] < 1)) fail("toe must be in [0, 1)");
+    if (!(black[c] >= 0 && black[c] < 0.5)) fail("black must be in [0, 0.5)");
+  }
+}
+
+SimSensor::SimSensor(const SensorParams& params) : p_(params) { p_.Validate(); }
+
+double SimSensor::Curve(int c, double x) const {
+  x = std::clamp(x, 0.0, 1.0);
+  const double b = p_.black[c], g = p_.gamma[c];
+  const double b_g = std::pow(b, g);
+  const double u = (std::pow(x + b, g) - b_g) / (std::pow(1.0 + b, g) - b_g);
+  const double s = p_.shoulder[c];
+  const double y1 = u * (1.0 + s) / (u + s);
+  const double smooth = y1 * y1 * (3.0 - 2.0 * y1);
+  return 255.0 * ((1.0 - p_.toe[c]) * y1 + p_.toe[c] * smooth);
+}
+
+double SimSensor::InverseCurve(int c, double dn) const {
+  dn = std::clamp(dn, 0.0, 255.0);
+  double lo = 0.0, hi = 1.0;
+  for (int it = 0; it < 64; ++it) {
+    const double mid = 0.5 * (lo + hi);
+    if (Curve(c, mid) < dn)
+      lo = mid;
+    else
+      hi = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
+double SimSensor::DigitalValue(int c, double exposure) const {
+  return Curve(c, p_.sensitivity * exposure);
+}
+
+double SimSensor::TrueLogExposure(int c, double dn) const {
+  return std::log(InverseCurve(c, std::max(dn, 0.25)) / p_.sensitivity);
+}
+
+ResponseCurve SimSensor::TrueResponse() const {
+  ResponseCurve r;
+  for (int c = 0; c < 3; ++c) {
+    r.g[c].resize(256);
+    for (int z = 0; z < 256; ++z) r.g[c][z] = TrueLogExposure(c, z);
+  }
+  return r;
+}
+
+double SimSensor::LinearNoiseStd(double x, double gain) const {
+  const double electrons = x * p_.full_well_e / gain;
+  return gain / p_.full_well_e *
+         std::sqrt(std::max(electrons, 0.0) + p_.read_noise_e * p_.read_noise_e);
+}
+
+Image SimSensor::CaptureLinear(const Image& radiance, double exposure_s, double gain,
+                               double nd_density, uint64_t seed) const {
+  if (radiance.channels != 3 || radiance.units != PixelUnits::kRadiance) {
+    throw Error("sim sensor: expected a 3-channel radiance image");
+  }
+  if (!(exposure_s > 0) || !(gain >= 1) || !(nd_density >= 0) || !std::isfinite(exposure_s) ||
+      !std::isfinite(gain) || !std::isfinite(nd_density)) {
+    throw Error("sim sensor: exposure must be > 0, gain >= 1 and ND density >= 0");
+  }
+  Image out(radiance.width, radiance.height, 3, PixelUnits::kOther);
+  // Electrons per unit radiance: the gain amplifies after the photodiode.
+  const double e_per_radiance =
+      p_.sensitivity * exposure_s * std::pow(10.0, -nd_density) * p_.full_well_e;
+  const double fw = p_.full_well_e;
+  const uint64_t base = Mix(seed ^ 0xC0FFEE1234ULL);
+  tbb::parallel_for(tbb::blocked_range<int>(0, radiance.height, 8),
+                    [&](const tbb::blocked_range<int>& r) {
+                      for (int y = r.begin(); y != r.end(); ++y) {
+                        for (int x = 0; x < radiance.width; ++x) {
+                          for (int c = 0; c < 3; ++c) {
+                            const size_t idx = radiance.index(x, y, c);
+                            const double l = std::max(0.0, static_cast<double>(radiance.data[idx]));
+                            const double mean_e = l * e_per_radiance;
+                            double n1, n2;
+                            Normals(Mix(base + idx), &n1, &n2);
+                            // Shot noise (Gaussian approximation of Poisson), full well, read
+                            // noise.
+                            double e = std::clamp(mean_e + std::sqrt(mean_e) * n1, 0.0, fw);
+                            e += p_.read_noise_e * n2;
+                            out.data[idx] = static_cast<float>(std::clamp(gain * e / fw, 0.0, 1.0));
+                          }
+                        }
+                      }
+                    });
+  return out;
+}
+
+Image SimSensor::Capture(const Image& radiance, double exposure_s, double gain, double nd_density,
+                         uint64_t seed) const {
+  Image out = CaptureLinear(radiance, exposure_s, gain, nd_density, seed);
+  out.units = PixelUnits::kDigital;
+  for (size_t i = 0; i < out.data.size(); ++i) {
+    const int c = static_cast<int>(i % 3);
+    out.data[i] =
+        static_cast<float>(std::clamp(std::floor(Curve(c, out.data[i]) + 0.5), 0.0, 255.0));
+  }
+  return out;
+}
+
+}  // namespace rouen

@@ -1,0 +1,166 @@
+#include "capture/sim/sim_devices.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+namespace rouen {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+uint64_t Mix(uint64_t x) {
+  x += 0x9E3779B97F4A7C15ULL;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
+  return x ^ (x >> 31);
+}
+
+double Normal(uint64_t h) {
+  const double u1 = ((h >> 32) + 0.5) * (1.0 / 4294967296.0);
+  const double u2 = ((h & 0xffffffffULL) + 0.5) * (1.0 / 4294967296.0);
+  return std::sqrt(-2.0 * std::log(u1)) * std::cos(2 * kPi * u2);
+}
+
+UtcTime DefaultStart() { return FromCivil(CivilTime{2026, 8, 25, 20, 0, 0.0}); }
+
+}  // namespace
+
+SimClock::SimClock() : SimClock(DefaultStart()) {}
+SimClock::SimClock(UtcTime start) : now_(start), slot_(start) {}
+
+bool SimClock::JumpTo(UtcTime t) {
+  now_ = t;
+  slot_ = t;
+  return true;
+}
+
+void SimClock::Advance(double seconds) {
+  if (!(seconds >= 0) || !std::isfinite(seconds)) {
+    throw Error("sim clock: cannot advance by " + std::to_string(seconds) + " s");
+  }
+  now_ = now_.PlusSeconds(seconds);
+}
+
+SimCamera::SimCamera(std::shared_ptr<SimWorld> world, SimClock* clock, bool quick, uint64_t seed,
+                     const SensorParams& sensor)
+    : world_(std::move(world)), clock_(clock), quick_(quick), seed_(seed), sensor_(sensor) {
+  if (!world_ || !clock_) throw Error("sim camera: needs a world and a clock");
+}
+
+std::vector<ControlInfo> SimCamera::Controls() const {
+  return {{"exposure_s", kMinExposure, kMaxExposure, exposure_},
+          {"gain", kMinGain, kMaxGain, gain_},
+          {"nd_density", 0.0, 10.0, nd_}};
+}
+
+double SimCamera::SetExposure(double seconds) {
+  if (!(seconds > 0) || !std::isfinite(seconds)) {
+    throw DeviceError("sim0: exposure " + std::to_string(seconds) + " s is not positive");
+  }
+  const double thirds = std::round(3.0 * std::log2(seconds));
+  exposure_ = std::clamp(std::exp2(thirds / 3.0), kMinExposure, kMaxExposure);
+  return exposure_;
+}
+
+double SimCamera::SetGain(double gain) {
+  if (!std::isfinite(gain)) throw DeviceError("sim0: gain is not finite");
+  gain_ = std::clamp(gain, kMinGain, kMaxGain);
+  return gain_;
+}
+
+void SimCamera::SetNdFilter(double density) {
+  if (!(density >= 0) || !std::isfinite(density)) {
+    throw DeviceError("sim0: ND density " + std::to_string(density) + " must be >= 0");
+  }
+  nd_ = density;
+}
+
+int SimCamera::ViewCount(Target target) const { return target == Target::kArchitecture ? 4 : 1; }
+
+void SimCamera::Aim(Target target, int view) {
+  if (view < 0 || view >= ViewCount(target)) {
+    throw DeviceError(std::string("sim0: target ") + TargetName(target) + " has no view " +
+                      std::to_string(view));
+  }
+  target_ = target;
+  view_ = view;
+}
+
+SimView SimCamera::CurrentView() {
+  world_->SetTime(clock_->SlotTime());
+  switch (target_) {
+    case Target::kSun:
+      return world_->SunView();
+    case Target::kAureole:
+    case Target::kSky:
+      return world_->SkyView();
+    case Target::kLandscape:
+      return world_->LandscapeView();
+    case Target::kArchitecture:
+      return world_->ArchitectureViews(quick_)[view_];
+    case Target::kCalibration:
+      return world_->ArchitectureViews(quick_)[0];
+  }
+  return world_->ArchitectureViews(quick_)[0];
+}
+
+const Image& SimCamera::CurrentRadiance() {
+  const SimView v = CurrentView();
+  // Aureole frames show the same sky as sky frames.
+  const int t =
+      target_ == Target::kAureole ? static_cast<int>(Target::kSky) : static_cast<int>(target_);
+  const auto key = std::make_tuple(t, view_, clock_->SlotTime().ns);
+  auto it = cache_.find(key);
+  if (it == cache_.end()) {
+    it = cache_.emplace(key, world_->RenderRadiance(v.intrinsics, v.pose)).first;
+  }
+  return it->second;
+}
+
+CapturedFrame SimCamera::Grab() {
+  const Image& radiance = CurrentRadiance();
+  const SimView v = CurrentView();
+  CapturedFrame f;
+  f.image = sensor_.Capture(radiance, exposure_, gain_, nd_, Mix(seed_ * 1000003ULL + frames_++));
+  f.hdr = false;
+  f.exposure_s = exposure_;
+  f.gain = gain_;
+  f.nd_density = nd_;
+  f.utc = clock_->Now().PlusSeconds(0.5 * exposure_);
+  f.intrinsics = v.intrinsics;
+  f.pose = v.pose;
+  clock_->Advance(exposure_ + 0.2);
+  return f;
+}
+
+SimGps::SimGps(std::shared_ptr<SimWorld> world, SimClock* clock, uint64_t seed,
+               double sigma_horizontal_m)
+    : world_(std::move(world)), clock_(clock), seed_(seed), sigma_(sigma_horizontal_m) {
+  if (!world_ || !clock_) throw Error("sim gps: needs a world and a clock");
+  if (!(sigma_ >= 0) || !std::isfinite(sigma_)) throw Error("sim gps: bad noise sigma");
+}
+
+std::optional<GpsFix> SimGps::Poll() {
+  const Site& site = world_->site();
+  const uint64_t h = Mix(seed_ * 0x51ED27ULL + polls_++);
+  const double north = sigma_ * Normal(Mix(h + 1));
+  const double east = sigma_ * Normal(Mix(h + 2));
+  const double up = 1.7 * sigma_ * Normal(Mix(h + 3));
+  // Metres to degrees on the WGS84 ellipsoid (meridian and prime-vertical radii).
+  const double a = 6378137.0, e2 = 6.69437999014e-3;
+  const double lat = site.lat_deg * kPi / 180;
+  const double w = std::sqrt(1 - e2 * std::sin(lat) * std::sin(lat));
+  const double m_radius = a * (1 - e2) / (w * w * w), n_radius = a / w;
+  GpsFix f;
+  f.utc = clock_->Now();
+  f.lat_deg = site.lat_deg + north / m_radius * 180 / kPi;
+  f.lon_deg = site.lon_deg + east / (n_radius * std::cos(lat)) * 180 / kPi;
+  f.height_m = site.height_m + up;
+  f.mode = 3;
+  f.satellites = 9;
+  f.hdop = 0.9;
+  return f;
+}
+
+}  // namespace rouen

@@ -1,0 +1,47 @@
+// Float images, interleaved channels, row 0 at the top. Every image states its units.
+#pragma once
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+namespace rouen {
+
+enum class PixelUnits {
+  kDigital,   // camera output, digital numbers 0..255 (8-bit LDR)
+  kRadiance,  // scene-linear relative radiance, per colour band (W m^-2 sr^-1 up to a scale)
+  kOther,
+};
+
+struct Image {
+  int width = 0, height = 0, channels = 3;
+  PixelUnits units = PixelUnits::kOther;
+  std::vector<float> data;
+
+  Image() = default;
+  Image(int w, int h, int c = 3, PixelUnits u = PixelUnits::kOther, float fill = 0.f)
+      : width(w), height(h), channels(c), units(u), data(static_cast<size_t>(w) * h * c, fill) {}
+  bool empty() const { return data.empty(); }
+  size_t index(int x, int y, int c = 0) const {
+    return (static_cast<size_t>(y) * width + x) * channels + c;
+  }
+  float& at(int x, int y, int c = 0) { return data[index(x, y, c)]; }
+  float at(int x, int y, int c = 0) const { return data[index(x, y, c)]; }
+  // Bilinear sample at continuous pixel coordinates (pixel centres at integer + 0.5),
+  // clamped to the border.
+  float Sample(double x, double y, int c) const;
+};
+
+enum class StoredType { kUint8, kUint16, kHalf, kFloat };
+
+// Reads any format OpenImageIO knows. 8/16-bit files come back as digital numbers on a
+// 0..255 scale (kDigital), float/half files as kRadiance. Throws rouen::Error naming the file.
+Image ReadImage(const std::string& path);
+// Writes through OpenImageIO, choosing the format from the extension. Integer types clamp
+// and round the values (0..255 scale for kUint8; for kUint16 values on the same 0..255 scale
+// are stored x257 as 0..65535, so ReadImage gives them back). The file is written under a
+// temporary name, fsynced and renamed, so a crash never leaves a partial file. Non-finite
+// values, and values beyond 65504 for kHalf, are refused with rouen::Error.
+void WriteImage(const std::string& path, const Image& image, StoredType type);
+
+}  // namespace rouen

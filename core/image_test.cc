@@ -1,0 +1,164 @@
+#include "core/image.h"
+
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "core/error.h"
+#include "core/files.h"
+
+namespace fs = std::filesystem;
+
+namespace rouen {
+namespace {
+
+class ImageTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("rouen_core_image_" + std::to_string(::getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string P(const std::string& name) const { return (dir_ / name).string(); }
+  int CountFiles() const {
+    int n = 0;
+    for (const auto& e : fs::directory_iterator(dir_)) {
+      (void)e;
+      ++n;
+    }
+    return n;
+  }
+  fs::path dir_;
+};
+
+Image Ramp(int w, int h, int c, PixelUnits u, float scale) {
+  Image img(w, h, c, u);
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      for (int k = 0; k < c; ++k) {
+        img.at(x, y, k) = scale * (x + 3 * y + 7 * k) / (w + 3 * h + 7 * c);
+      }
+    }
+  }
+  return img;
+}
+
+TEST_F(ImageTest, Png8RoundTrip) {
+  const Image img = Ramp(17, 9, 3, PixelUnits::kDigital, 255.f);
+  WriteImage(P("a.png"), img, StoredType::kUint8);
+  EXPECT_EQ(CountFiles(), 1);  // no temporary left behind
+  const Image back = ReadImage(P("a.png"));
+  EXPECT_EQ(back.width, 17);
+  EXPECT_EQ(back.height, 9);
+  EXPECT_EQ(back.channels, 3);
+  EXPECT_EQ(back.units, PixelUnits::kDigital);
+  for (size_t i = 0; i < img.data.size(); ++i) {
+    EXPECT_EQ(back.data[i], std::round(img.data[i])) << i;
+  }
+}
+
+TEST_F(ImageTest, IntegerWritesClampAndRound) {
+  Image img(3, 1, 1, PixelUnits::kDigital);
+  img.data = {-20.f, 127.4f, 300.f};
+  WriteImage(P("c.png"), img, StoredType::kUint8);
+  const Image back = ReadImage(P("c.png"));
+  EXPECT_EQ(back.channels, 1);  // one channel stays one channel
+  EXPECT_EQ(back.data, (std::vector<float>{0.f, 127.f, 255.f}));
+}
+
+TEST_F(ImageTest, Png16RoundTripOnTheDigitalScale) {
+  const Image img = Ramp(11, 5, 3, PixelUnits::kDigital, 255.f);
+  WriteImage(P("b.png"), img, StoredType::kUint16);
+  const Image back = ReadImage(P("b.png"));
+  EXPECT_EQ(back.units, PixelUnits::kDigital);
+  for (size_t i = 0; i < img.data.size(); ++i) {
+    EXPECT_NEAR(back.data[i], img.data[i], 0.5 / 257 + 1e-4) << i;  // 16-bit quantisation
+  }
+}
+
+TEST_F(ImageTest, ExrHalfAndFloat) {
+  Image img = Ramp(8, 6, 3, PixelUnits::kRadiance, 1000.f);
+  img.at(0, 0, 0) = 1e-3f;
+  WriteImage(P("h.exr"), img, StoredType::kHalf);
+  const Image half = ReadImage(P("h.exr"));
+  EXPECT_EQ(half.units, PixelUnits::kRadiance);
+  for (size_t i = 0; i < img.data.size(); ++i) {
+    EXPECT_NEAR(half.data[i], img.data[i], std::abs(img.data[i]) * 1.0 / 2048 + 1e-7) << i;
+  }
+  img.at(1, 1, 1) = 1e6f;  // beyond half
+  EXPECT_THROW(WriteImage(P("h2.exr"), img, StoredType::kHalf), Error);
+  WriteImage(P("f.exr"), img, StoredType::kFloat);
+  EXPECT_EQ(ReadImage(P("f.exr")).data, img.data);
+}
+
+TEST_F(ImageTest, RefusesNonFiniteValues) {
+  Image img = Ramp(4, 4, 3, PixelUnits::kRadiance, 1.f);
+  img.at(2, 3, 1) = NAN;
+  try {
+    WriteImage(P("n.exr"), img, StoredType::kFloat);
+    ADD_FAILURE();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("n.exr"), std::string::npos);
+  }
+  img.at(2, 3, 1) = INFINITY;
+  EXPECT_THROW(WriteImage(P("n.exr"), img, StoredType::kHalf), Error);
+  EXPECT_THROW(WriteImage(P("n.png"), img, StoredType::kUint8), Error);
+  EXPECT_EQ(CountFiles(), 0);
+  EXPECT_THROW(WriteImage(P("e.png"), Image(), StoredType::kUint8), Error);
+}
+
+TEST_F(ImageTest, RgbaLosesAlpha) {
+  Image img = Ramp(5, 4, 4, PixelUnits::kDigital, 255.f);
+  WriteImage(P("rgba.png"), img, StoredType::kUint8);
+  const Image back = ReadImage(P("rgba.png"));
+  EXPECT_EQ(back.channels, 3);
+  for (int y = 0; y < 4; ++y) {
+    for (int x = 0; x < 5; ++x) {
+      for (int c = 0; c < 3; ++c) EXPECT_EQ(back.at(x, y, c), std::round(img.at(x, y, c)));
+    }
+  }
+}
+
+TEST_F(ImageTest, CorruptFilesGiveErrorsNamingTheFile) {
+  const Image img = Ramp(64, 64, 3, PixelUnits::kDigital, 255.f);
+  WriteImage(P("full.png"), img, StoredType::kUint8);
+  const std::string bytes = ReadFileToString(P("full.png"));
+  WriteFileAtomic(P("cut.png"), std::string_view(bytes).substr(0, bytes.size() / 2));
+  WriteFileAtomic(P("text.exr"), "this is not an OpenEXR file\n");
+  WriteFileAtomic(P("empty.png"), "");
+  for (const char* name : {"cut.png", "text.exr", "empty.png", "missing.png"}) {
+    try {
+      ReadImage(P(name));
+      ADD_FAILURE() << name;
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
+    }
+  }
+}
+
+TEST_F(ImageTest, WritingToAMissingFolderFails) {
+  EXPECT_THROW(WriteImage(P("nope/a.png"), Ramp(2, 2, 3, PixelUnits::kDigital, 1.f),
+                          StoredType::kUint8),
+               Error);
+}
+
+TEST(ImageSampleTest, Bilinear) {
+  Image img(2, 2, 1);
+  img.data = {0.f, 10.f, 20.f, 30.f};
+  EXPECT_FLOAT_EQ(img.Sample(0.5, 0.5, 0), 0.f);   // pixel centre
+  EXPECT_FLOAT_EQ(img.Sample(1.5, 1.5, 0), 30.f);
+  EXPECT_FLOAT_EQ(img.Sample(1.0, 0.5, 0), 5.f);   // between two centres
+  EXPECT_FLOAT_EQ(img.Sample(1.0, 1.0, 0), 15.f);  // middle of four
+  EXPECT_FLOAT_EQ(img.Sample(0.75, 1.25, 0), 0.25f * 10 + 0.75f * 20);
+  EXPECT_FLOAT_EQ(img.Sample(-5.0, 0.5, 0), 0.f);  // clamped at the border
+  EXPECT_FLOAT_EQ(img.Sample(9.0, 9.0, 0), 30.f);
+}
+
+}  // namespace
+}  // namespace rouen

@@ -1,0 +1,30 @@
+// Triangle meshes from Wavefront OBJ; OBJ groups ("g name") become blocks.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace rouen {
+
+struct Mesh {
+  std::vector<Eigen::Vector3d> vertices;        // world frame (ENU metres)
+  std::vector<Eigen::Vector3i> triangles;       // counter-clockwise seen from outside
+  std::vector<int> triangle_block;              // block index per triangle
+  std::vector<std::string> block_names;
+
+  Eigen::Vector3d Normal(int t) const;  // unit outward normal
+  double Area(int t) const;
+  int AddBlock(const std::string& name);
+  void AddTriangle(int a, int b, int c, int block);
+  // Adds a planar convex polygon (vertices counter-clockwise seen from outside) as a fan.
+  void AddPolygon(const std::vector<Eigen::Vector3d>& points, int block);
+};
+
+// Throws rouen::Error with file and line for malformed input (bad indices, bad numbers,
+// faces with fewer than 3 vertices, degenerate triangles).
+Mesh ReadObj(const std::string& path);
+void WriteObj(const std::string& path, const Mesh& mesh);
+
+}  // namespace rouen

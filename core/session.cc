@@ -1,0 +1,521 @@
+#include "core/session.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <set>
+
+#include "core/error.h"
+#include "core/files.h"
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace rouen {
+namespace {
+
+constexpr int kFormatVersion = 1;
+constexpr float kHalfMax = 65504.0f;
+
+std::string Errno() { return std::strerror(errno); }
+
+const json& Need(const json& j, const char* key, const char* what) {
+  if (!j.is_object()) throw Error(std::string(what) + ": expected a JSON object");
+  auto it = j.find(key);
+  if (it == j.end()) throw Error(std::string(what) + ": missing key \"" + key + "\"");
+  return *it;
+}
+
+double NeedNumber(const json& j, const char* key, const char* what) {
+  const json& v = Need(j, key, what);
+  if (!v.is_number()) throw Error(std::string(what) + ": key \"" + key + "\" is not a number");
+  return v.get<double>();
+}
+
+int64_t NeedInt(const json& j, const char* key, const char* what) {
+  const json& v = Need(j, key, what);
+  if (!v.is_number_integer()) {
+    throw Error(std::string(what) + ": key \"" + key + "\" is not an integer");
+  }
+  return v.get<int64_t>();
+}
+
+std::string NeedString(const json& j, const char* key, const char* what) {
+  const json& v = Need(j, key, what);
+  if (!v.is_string()) throw Error(std::string(what) + ": key \"" + key + "\" is not a string");
+  return v.get<std::string>();
+}
+
+bool NeedBool(const json& j, const char* key, const char* what) {
+  const json& v = Need(j, key, what);
+  if (!v.is_boolean()) throw Error(std::string(what) + ": key \"" + key + "\" is not a boolean");
+  return v.get<bool>();
+}
+
+template <typename T, typename F>
+T Optional(const json& j, const char* key, T fallback, F need) {
+  auto it = j.find(key);
+  if (it == j.end()) return fallback;
+  return need(j, key);
+}
+
+UtcTime NeedTime(const json& j, const char* key, const char* what) {
+  const std::string s = NeedString(j, key, what);
+  try {
+    return ParseIso8601(s);
+  } catch (const Error& e) {
+    throw Error(std::string(what) + ": key \"" + key + "\": " + e.what());
+  }
+}
+
+void CheckFinite(double v, const char* name) {
+  if (!std::isfinite(v)) throw Error(std::string("frame record: ") + name + " is not finite");
+}
+
+void CheckFrameFinite(const FrameRecord& f) {
+  CheckFinite(f.exposure_s, "exposure_s");
+  CheckFinite(f.gain, "gain");
+  CheckFinite(f.aperture_f, "aperture_f");
+  CheckFinite(f.nd_density, "nd_density");
+  CheckFinite(f.sun_azimuth_deg, "sun azimuth_deg");
+  CheckFinite(f.sun_elevation_deg, "sun elevation_deg");
+  if (f.gps) {
+    CheckFinite(f.gps->lat_deg, "gps lat_deg");
+    CheckFinite(f.gps->lon_deg, "gps lon_deg");
+    CheckFinite(f.gps->height_m, "gps height_m");
+    CheckFinite(f.gps->hdop, "gps hdop");
+  }
+  if (f.pose && (!f.pose->rotation.allFinite() || !f.pose->position.allFinite())) {
+    throw Error("frame record: pose is not finite");
+  }
+  if (f.intrinsics) f.intrinsics->Validate();
+}
+
+std::string JournalPath(const fs::path& dir) { return (dir / "frames.jsonl").string(); }
+
+// Parses one journal line into a record; throws rouen::Error without location.
+FrameRecord ParseRecord(std::string_view line) {
+  json j;
+  try {
+    j = json::parse(line);
+  } catch (const json::exception& e) {
+    throw Error(std::string("not valid JSON: ") + e.what());
+  }
+  try {
+    return j.get<FrameRecord>();
+  } catch (const json::exception& e) {
+    throw Error(e.what());
+  }
+}
+
+int OpenJournal(const fs::path& dir) {
+  const std::string p = JournalPath(dir);
+  const int fd = ::open(p.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+  if (fd < 0) throw Error(p + ": cannot open for appending: " + Errno());
+  return fd;
+}
+
+void FsyncDir(const fs::path& dir) {
+  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) throw Error(dir.string() + ": cannot open: " + Errno());
+  ::fsync(fd);
+  ::close(fd);
+}
+
+}  // namespace
+
+const char* TargetName(Target t) {
+  switch (t) {
+    case Target::kSun: return "sun";
+    case Target::kAureole: return "aureole";
+    case Target::kSky: return "sky";
+    case Target::kLandscape: return "landscape";
+    case Target::kArchitecture: return "architecture";
+    case Target::kCalibration: return "calibration";
+  }
+  return "architecture";
+}
+
+Target ParseTarget(const std::string& s) {
+  for (Target t : {Target::kSun, Target::kAureole, Target::kSky, Target::kLandscape,
+                   Target::kArchitecture, Target::kCalibration}) {
+    if (s == TargetName(t)) return t;
+  }
+  throw Error("unknown target \"" + s +
+              "\" (sun, aureole, sky, landscape, architecture or calibration)");
+}
+
+void to_json(json& j, const FrameRecord& f) {
+  json gps = nullptr;
+  if (f.gps) {
+    gps = json{{"utc", f.gps->utc.Iso8601(9)}, {"lat_deg", f.gps->lat_deg},
+               {"lon_deg", f.gps->lon_deg},    {"height_m", f.gps->height_m},
+               {"mode", f.gps->mode},          {"satellites", f.gps->satellites},
+               {"hdop", f.gps->hdop}};
+  }
+  j = json{{"id", f.id},
+           {"device", f.device},
+           {"target", TargetName(f.target)},
+           {"group", f.group},
+           {"slot", f.slot},
+           {"utc", f.utc.Iso8601(9)},
+           {"hdr", f.hdr},
+           {"exposure_s", f.exposure_s},
+           {"gain", f.gain},
+           {"aperture_f", f.aperture_f},
+           {"nd_density", f.nd_density},
+           {"gps", gps},
+           {"sun", {{"azimuth_deg", f.sun_azimuth_deg}, {"elevation_deg", f.sun_elevation_deg}}},
+           {"intrinsics", f.intrinsics ? json(*f.intrinsics) : json(nullptr)},
+           {"pose", f.pose ? json(*f.pose) : json(nullptr)},
+           {"file", f.file},
+           {"sha256", f.sha256}};
+}
+
+void from_json(const json& j, FrameRecord& f) {
+  const char* what = "frame record";
+  FrameRecord r;
+  r.id = NeedInt(j, "id", what);
+  r.device = NeedString(j, "device", what);
+  r.target = ParseTarget(NeedString(j, "target", what));
+  r.group = Optional<std::string>(j, "group", "", [&](const json& x, const char* k) {
+    return NeedString(x, k, what);
+  });
+  r.slot = static_cast<int>(Optional<int64_t>(j, "slot", 0, [&](const json& x, const char* k) {
+    return NeedInt(x, k, what);
+  }));
+  r.utc = NeedTime(j, "utc", what);
+  r.hdr = Optional<bool>(j, "hdr", false, [&](const json& x, const char* k) {
+    return NeedBool(x, k, what);
+  });
+  r.exposure_s = NeedNumber(j, "exposure_s", what);
+  r.gain = NeedNumber(j, "gain", what);
+  r.aperture_f = NeedNumber(j, "aperture_f", what);
+  r.nd_density = NeedNumber(j, "nd_density", what);
+  const json& gps = Need(j, "gps", what);
+  if (!gps.is_null()) {
+    const char* gw = "frame record: gps";
+    if (!gps.is_object()) throw Error("frame record: key \"gps\" is neither null nor an object");
+    GpsFix g;
+    g.utc = NeedTime(gps, "utc", gw);
+    g.lat_deg = NeedNumber(gps, "lat_deg", gw);
+    g.lon_deg = NeedNumber(gps, "lon_deg", gw);
+    g.height_m = NeedNumber(gps, "height_m", gw);
+    g.mode = static_cast<int>(NeedInt(gps, "mode", gw));
+    g.satellites = static_cast<int>(NeedInt(gps, "satellites", gw));
+    g.hdop = NeedNumber(gps, "hdop", gw);
+    r.gps = g;
+  }
+  const json& sun = Need(j, "sun", what);
+  r.sun_azimuth_deg = NeedNumber(sun, "azimuth_deg", "frame record: sun");
+  r.sun_elevation_deg = NeedNumber(sun, "elevation_deg", "frame record: sun");
+  auto it = j.find("intrinsics");
+  if (it != j.end() && !it->is_null()) {
+    try {
+      r.intrinsics = it->get<Intrinsics>();
+    } catch (const Error& e) {
+      throw Error(std::string("frame record: key \"intrinsics\": ") + e.what());
+    }
+  }
+  it = j.find("pose");
+  if (it != j.end() && !it->is_null()) {
+    try {
+      r.pose = it->get<Pose>();
+    } catch (const Error& e) {
+      throw Error(std::string("frame record: key \"pose\": ") + e.what());
+    }
+  }
+  r.file = NeedString(j, "file", what);
+  r.sha256 = NeedString(j, "sha256", what);
+  f = std::move(r);
+}
+
+void to_json(json& j, const SessionInfo& s) {
+  j = json{{"format_version", s.format_version},
+           {"site", {{"lat_deg", s.site.lat_deg},
+                     {"lon_deg", s.site.lon_deg},
+                     {"height_m", s.site.height_m}}},
+           {"site_source", s.site_source},
+           {"rig", s.rig},
+           {"created_utc", s.created_utc},
+           {"clock_offset_s", s.clock_offset_s},
+           {"model", s.model},
+           {"notes", s.notes},
+           {"extra", s.extra}};
+}
+
+void from_json(const json& j, SessionInfo& s) {
+  const char* what = "session info";
+  SessionInfo r;
+  r.format_version = static_cast<int>(NeedInt(j, "format_version", what));
+  if (r.format_version < 1 || r.format_version > kFormatVersion) {
+    throw Error("session info: format_version " + std::to_string(r.format_version) +
+                " is not supported (this build reads " + std::to_string(kFormatVersion) + ")");
+  }
+  const json& site = Need(j, "site", what);
+  r.site.lat_deg = NeedNumber(site, "lat_deg", "session info: site");
+  r.site.lon_deg = NeedNumber(site, "lon_deg", "session info: site");
+  r.site.height_m = NeedNumber(site, "height_m", "session info: site");
+  if (std::abs(r.site.lat_deg) > 90 || std::abs(r.site.lon_deg) > 360) {
+    throw Error("session info: site latitude/longitude out of range");
+  }
+  auto str = [&](const json& x, const char* k) { return NeedString(x, k, what); };
+  r.site_source = Optional<std::string>(j, "site_source", r.site_source, str);
+  r.rig = Optional<std::string>(j, "rig", "", str);
+  r.created_utc = Optional<std::string>(j, "created_utc", "", str);
+  r.clock_offset_s = Optional<double>(j, "clock_offset_s", 0.0, [&](const json& x,
+                                                                     const char* k) {
+    return NeedNumber(x, k, what);
+  });
+  r.model = Optional<std::string>(j, "model", "", str);
+  r.notes = Optional<std::string>(j, "notes", "", str);
+  auto it = j.find("extra");
+  if (it != j.end() && !it->is_null()) {
+    if (!it->is_object()) throw Error("session info: key \"extra\" is not an object");
+    r.extra = *it;
+  }
+  s = std::move(r);
+}
+
+// ---------------------------------------------------------------------------------------
+// Session
+
+Session Session::Load(const fs::path& dir) {
+  Session s;
+  s.dir_ = dir;
+  const fs::path info_path = dir / "session.json";
+  if (!fs::is_directory(dir)) {
+    throw Error(dir.string() + ": not a session folder (no such directory)");
+  }
+  {
+    const std::string text = ReadFileToString(info_path);
+    json j;
+    try {
+      j = json::parse(text);
+    } catch (const json::exception& e) {
+      throw Error(info_path.string() + ": not valid JSON: " + e.what());
+    }
+    try {
+      s.info_ = j.get<SessionInfo>();
+    } catch (const Error& e) {
+      throw Error(info_path.string() + ": " + e.what());
+    } catch (const json::exception& e) {
+      throw Error(info_path.string() + ": " + e.what());
+    }
+  }
+  const std::string journal = JournalPath(dir);
+  const std::string text = ReadFileToString(journal);
+  std::set<int64_t> ids;
+  size_t pos = 0;
+  int line_no = 0;
+  while (pos < text.size()) {
+    size_t end = text.find('\n', pos);
+    const bool terminated = end != std::string::npos;
+    if (!terminated) end = text.size();
+    std::string_view line(text.data() + pos, end - pos);
+    pos = end + 1;
+    ++line_no;
+    const std::string where = journal + ":" + std::to_string(line_no) + ": ";
+    if (line.find_first_not_of(" \t\r") == std::string_view::npos) continue;
+    try {
+      FrameRecord f = ParseRecord(line);
+      fs::path p;
+      try {
+        p = ResolveInside(dir, f.file);
+      } catch (const Error& e) {
+        throw Error(std::string("file: ") + e.what());
+      }
+      if (!fs::is_regular_file(p)) throw Error("frame file " + p.string() + " is missing");
+      if (!ids.insert(f.id).second) throw Error("duplicate frame id " + std::to_string(f.id));
+      if (!terminated) {
+        s.warnings_.push_back(where + "last line has no newline (kept; it parsed completely)");
+      }
+      s.frames_.push_back(std::move(f));
+    } catch (const Error& e) {
+      if (!terminated) {
+        s.warnings_.push_back(where + "ignored a last line cut short (" + e.what() + ")");
+        continue;
+      }
+      throw Error(where + e.what());
+    }
+  }
+  return s;
+}
+
+fs::path Session::PathOf(const FrameRecord& f) const {
+  try {
+    return ResolveInside(dir_, f.file);
+  } catch (const Error& e) {
+    throw Error(dir_.string() + ": frame " + std::to_string(f.id) + ": " + e.what());
+  }
+}
+
+Image Session::LoadFrame(const FrameRecord& f, bool verify) const {
+  const fs::path p = PathOf(f);
+  if (verify) {
+    const std::string actual = Sha256File(p);
+    if (actual != f.sha256) {
+      throw Error(p.string() + ": sha256 mismatch (journal " + f.sha256 + ", file " + actual +
+                  ")");
+    }
+  }
+  return ReadImage(p.string());
+}
+
+// ---------------------------------------------------------------------------------------
+// SessionWriter
+
+SessionWriter SessionWriter::Create(const fs::path& dir, const SessionInfo& info) {
+  std::error_code ec;
+  if (fs::exists(dir, ec)) {
+    if (!fs::is_directory(dir)) throw Error(dir.string() + ": exists and is not a directory");
+    if (!fs::is_empty(dir)) {
+      throw Error(dir.string() + ": refusing to create a session in a non-empty folder "
+                                 "(use resume to continue it)");
+    }
+  }
+  fs::create_directories(dir / "frames", ec);
+  if (ec) throw Error(dir.string() + ": cannot create the session folder: " + ec.message());
+  SessionWriter w;
+  w.dir_ = dir;
+  w.info_ = info;
+  if (w.info_.created_utc.empty()) w.info_.created_utc = NowUtc().Iso8601(3);
+  WriteFileAtomic(dir / "session.json", json(w.info_).dump(2) + "\n");
+  w.journal_fd_ = OpenJournal(dir);
+  if (::fsync(w.journal_fd_) != 0) throw Error(JournalPath(dir) + ": fsync failed: " + Errno());
+  FsyncDir(dir);
+  if (dir.has_parent_path()) FsyncDir(dir.parent_path());
+  return w;
+}
+
+SessionWriter SessionWriter::Resume(const fs::path& dir) {
+  if (!fs::is_regular_file(dir / "session.json")) {
+    throw Error(dir.string() + ": cannot resume: no session.json");
+  }
+  // A journal line cut short by a crash: keep it if it is complete but for the newline,
+  // otherwise truncate it away.
+  const std::string journal = JournalPath(dir);
+  {
+    const std::string text = ReadFileToString(journal);
+    if (!text.empty() && text.back() != '\n') {
+      const size_t last_nl = text.rfind('\n');
+      const size_t start = last_nl == std::string::npos ? 0 : last_nl + 1;
+      bool complete = false;
+      try {
+        const FrameRecord f = ParseRecord(std::string_view(text).substr(start));
+        complete = fs::is_regular_file(ResolveInside(dir, f.file));
+      } catch (const Error&) {
+        complete = false;
+      }
+      const int fd = ::open(journal.c_str(), O_WRONLY | O_CLOEXEC);
+      if (fd < 0) throw Error(journal + ": cannot open: " + Errno());
+      bool ok;
+      if (complete) {
+        ok = ::pwrite(fd, "\n", 1, static_cast<off_t>(text.size())) == 1;
+      } else {
+        ok = ::ftruncate(fd, static_cast<off_t>(start)) == 0;
+      }
+      ok = ok && ::fsync(fd) == 0;
+      const std::string e = Errno();
+      ::close(fd);
+      if (!ok) throw Error(journal + ": cannot repair the last line: " + e);
+    }
+  }
+  // Leftover temporary files from an interrupted write.
+  for (const fs::path& folder : {dir, dir / "frames"}) {
+    std::error_code ec;
+    if (!fs::is_directory(folder, ec)) continue;
+    for (const auto& entry : fs::directory_iterator(folder)) {
+      if (entry.path().filename().string().find(".tmp-") != std::string::npos) {
+        fs::remove(entry.path(), ec);
+      }
+    }
+  }
+  fs::create_directories(dir / "frames");
+  Session s = Session::Load(dir);
+  SessionWriter w;
+  w.dir_ = dir;
+  w.info_ = s.info();
+  w.frames_ = s.frames();
+  for (const auto& f : w.frames_) w.next_id_ = std::max(w.next_id_, f.id + 1);
+  w.journal_fd_ = OpenJournal(dir);
+  return w;
+}
+
+SessionWriter::~SessionWriter() {
+  if (journal_fd_ >= 0) ::close(journal_fd_);
+}
+
+SessionWriter::SessionWriter(SessionWriter&& o) noexcept
+    : dir_(std::move(o.dir_)),
+      info_(std::move(o.info_)),
+      frames_(std::move(o.frames_)),
+      journal_fd_(o.journal_fd_),
+      next_id_(o.next_id_) {
+  o.journal_fd_ = -1;
+}
+
+SessionWriter& SessionWriter::operator=(SessionWriter&& o) noexcept {
+  if (this != &o) {
+    if (journal_fd_ >= 0) ::close(journal_fd_);
+    dir_ = std::move(o.dir_);
+    info_ = std::move(o.info_);
+    frames_ = std::move(o.frames_);
+    journal_fd_ = o.journal_fd_;
+    next_id_ = o.next_id_;
+    o.journal_fd_ = -1;
+  }
+  return *this;
+}
+
+FrameRecord SessionWriter::Append(FrameRecord meta, const Image& pixels) {
+  if (journal_fd_ < 0) throw Error(dir_.string() + ": session writer is closed");
+  CheckFrameFinite(meta);
+  if (pixels.empty()) throw Error(dir_.string() + ": refusing to append an empty image");
+  meta.id = next_id_;
+  char name[64];
+  std::snprintf(name, sizeof(name), "frames/%06lld.%s", static_cast<long long>(meta.id),
+                meta.hdr ? "exr" : "png");
+  meta.file = name;
+  const fs::path path = dir_ / meta.file;
+  StoredType type = StoredType::kUint8;
+  if (meta.hdr) {
+    type = StoredType::kHalf;
+    for (float v : pixels.data) {
+      if (std::abs(v) > kHalfMax) {
+        type = StoredType::kFloat;  // beyond half range: keep full precision
+        break;
+      }
+    }
+  }
+  WriteImage(path.string(), pixels, type);
+  meta.sha256 = Sha256File(path);
+  const std::string line = json(meta).dump() + "\n";
+  const off_t before = ::lseek(journal_fd_, 0, SEEK_END);
+  const ssize_t n = ::write(journal_fd_, line.data(), line.size());
+  if (n != static_cast<ssize_t>(line.size())) {
+    const std::string e = n < 0 ? Errno() : "short write";
+    if (before >= 0 && ::ftruncate(journal_fd_, before) != 0) {
+      // The journal may end in a partial line; Load and Resume tolerate that.
+    }
+    throw Error(JournalPath(dir_) + ": cannot append frame " + std::to_string(meta.id) + ": " +
+                e);
+  }
+  if (::fsync(journal_fd_) != 0) throw Error(JournalPath(dir_) + ": fsync failed: " + Errno());
+  ++next_id_;
+  frames_.push_back(meta);
+  return meta;
+}
+
+void SessionWriter::UpdateInfo(const SessionInfo& info) {
+  WriteFileAtomic(dir_ / "session.json", json(info).dump(2) + "\n");
+  info_ = info;
+}
+
+}  // namespace rouen

@@ -1,0 +1,121 @@
+// The session folder (DESIGN.md): session.json + append-only frames.jsonl + frames/.
+// A frame is written under a temporary name, fsynced, renamed and only then journalled.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "core/camera.h"
+#include "core/image.h"
+#include "core/solar.h"
+#include "core/time.h"
+
+namespace rouen {
+
+enum class Target { kSun, kAureole, kSky, kLandscape, kArchitecture, kCalibration };
+const char* TargetName(Target t);
+Target ParseTarget(const std::string& s);  // throws rouen::Error
+
+struct GpsFix {
+  UtcTime utc;
+  double lat_deg = 0, lon_deg = 0, height_m = 0;
+  int mode = 0;  // 0 none, 2 = 2D, 3 = 3D
+  int satellites = 0;
+  double hdop = 99;
+  bool valid() const { return mode >= 2; }
+};
+
+struct FrameRecord {
+  int64_t id = 0;
+  std::string device;
+  Target target = Target::kArchitecture;
+  std::string group;  // bracket this frame belongs to, e.g. "slot2/architecture/view1"
+  int slot = 0;       // index of the time-of-day slot in the capture plan
+  UtcTime utc;
+  bool hdr = false;         // true: linear radiance EXR; false: 8-bit LDR digital numbers
+  double exposure_s = 0;    // LDR only
+  double gain = 1;          // linear gain (ISO / base ISO)
+  double aperture_f = 0;    // 0 = unknown / fixed
+  double nd_density = 0;    // optical density of the ND filter in front (0 = none)
+  std::optional<GpsFix> gps;
+  double sun_azimuth_deg = 0, sun_elevation_deg = 0;  // at `utc` for the session site
+  std::optional<Intrinsics> intrinsics;
+  std::optional<Pose> pose;
+  std::string file;  // relative to the session folder
+  std::string sha256;
+};
+
+struct SessionInfo {
+  int format_version = 1;
+  Site site;
+  std::string site_source = "rig";  // "gps" or "rig" (fallback, stated)
+  std::string rig;                  // rig file name
+  std::string created_utc;
+  double clock_offset_s = 0;        // GPS time minus laptop clock, applied to frame times
+  std::string model;                // optional relative path to the building model (OBJ)
+  std::string notes;
+  nlohmann::json extra = nlohmann::json::object();
+};
+
+void to_json(nlohmann::json& j, const FrameRecord& f);
+// Throws rouen::Error naming the missing or mistyped key.
+void from_json(const nlohmann::json& j, FrameRecord& f);
+void to_json(nlohmann::json& j, const SessionInfo& s);
+void from_json(const nlohmann::json& j, SessionInfo& s);
+
+// Reads a session. Validates session.json, every journal line (JSON, keys, relative paths
+// that stay inside the folder, files that exist). A last line cut short by a crash is
+// ignored (reported in `warnings`); any other malformed line is an error naming the line.
+class Session {
+ public:
+  static Session Load(const std::filesystem::path& dir);
+
+  const std::filesystem::path& dir() const { return dir_; }
+  const SessionInfo& info() const { return info_; }
+  const std::vector<FrameRecord>& frames() const { return frames_; }
+  const std::vector<std::string>& warnings() const { return warnings_; }
+  std::filesystem::path PathOf(const FrameRecord& f) const;  // checked to stay inside
+  // Reads a frame's pixels; verifies the sha256 when `verify` is set.
+  Image LoadFrame(const FrameRecord& f, bool verify = false) const;
+
+ private:
+  std::filesystem::path dir_;
+  SessionInfo info_;
+  std::vector<FrameRecord> frames_;
+  std::vector<std::string> warnings_;
+};
+
+// Appends frames to a session folder. Create() makes a new folder (refusing a non-empty
+// one); Resume() reopens an existing one and continues its ids.
+class SessionWriter {
+ public:
+  static SessionWriter Create(const std::filesystem::path& dir, const SessionInfo& info);
+  static SessionWriter Resume(const std::filesystem::path& dir);
+  ~SessionWriter();
+  SessionWriter(SessionWriter&&) noexcept;
+  SessionWriter& operator=(SessionWriter&&) noexcept;
+
+  const std::filesystem::path& dir() const { return dir_; }
+  const std::vector<FrameRecord>& frames() const { return frames_; }
+  // Writes the pixels (LDR -> 8-bit PNG, HDR -> half EXR) durably, then journals `meta`
+  // with id, file and sha256 filled in. Returns the journalled record.
+  FrameRecord Append(FrameRecord meta, const Image& pixels);
+  // Rewrites session.json atomically (e.g. after the GPS fix arrived).
+  void UpdateInfo(const SessionInfo& info);
+  const SessionInfo& info() const { return info_; }
+
+ private:
+  SessionWriter() = default;
+  std::filesystem::path dir_;
+  SessionInfo info_;
+  std::vector<FrameRecord> frames_;
+  int journal_fd_ = -1;
+  int64_t next_id_ = 1;
+};
+
+}  // namespace rouen

@@ -1,0 +1,344 @@
+#include "core/session.h"
+
+#include <unistd.h>
+
+#include <filesystem>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "core/error.h"
+#include "core/files.h"
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace rouen {
+namespace {
+
+class SessionTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    root_ = fs::temp_directory_path() / ("rouen_core_session_" + std::to_string(::getpid()));
+    fs::remove_all(root_);
+    fs::create_directories(root_);
+    dir_ = root_ / "s1";
+  }
+  void TearDown() override { fs::remove_all(root_); }
+
+  static SessionInfo Info() {
+    SessionInfo info;
+    info.site = Site{48.4431, 1.0892, 140.5};
+    info.site_source = "gps";
+    info.rig = "rigs/field.toml";
+    info.created_utc = "2024-06-21T05:00:00.000Z";
+    info.clock_offset_s = -0.25;
+    info.model = "model/cathedral.obj";
+    info.notes = "west front";
+    info.extra = json{{"operator", "cm"}};
+    return info;
+  }
+  static FrameRecord Meta(Target target, bool hdr, double exposure) {
+    FrameRecord f;
+    f.device = "sim0";
+    f.target = target;
+    f.group = "slot1/architecture/view1";
+    f.slot = 1;
+    f.utc = ParseIso8601("2024-06-21T09:15:00.123456789Z");
+    f.hdr = hdr;
+    f.exposure_s = exposure;
+    f.gain = 2.0;
+    f.aperture_f = 8.0;
+    f.nd_density = hdr ? 0.0 : 3.0;
+    f.sun_azimuth_deg = 101.5;
+    f.sun_elevation_deg = 38.25;
+    return f;
+  }
+  static Image Pixels(bool hdr, float scale) {
+    Image img(6, 4, 3, hdr ? PixelUnits::kRadiance : PixelUnits::kDigital);
+    for (size_t i = 0; i < img.data.size(); ++i) {
+      img.data[i] = hdr ? scale * (1 + i) : static_cast<float>((i * 11) % 256);
+    }
+    return img;
+  }
+  // Writes three frames: LDR with gps/pose/intrinsics, HDR in half range, HDR beyond it.
+  void WriteThree() {
+    SessionWriter w = SessionWriter::Create(dir_, Info());
+    FrameRecord a = Meta(Target::kArchitecture, false, 1.0 / 250);
+    GpsFix fix;
+    fix.utc = ParseIso8601("2024-06-21T09:14:59.5Z");
+    fix.lat_deg = 48.44312;
+    fix.lon_deg = 1.08921;
+    fix.height_m = 141.2;
+    fix.mode = 3;
+    fix.satellites = 9;
+    fix.hdop = 0.8;
+    a.gps = fix;
+    a.intrinsics = Intrinsics::PinholeFov(6, 4, 60);
+    a.intrinsics->k1 = -0.1;
+    a.pose = Pose::Level(Eigen::Vector3d(1, 2, 1.6), 80, 10);
+    w.Append(a, Pixels(false, 1));
+    w.Append(Meta(Target::kSky, true, 0), Pixels(true, 0.5f));
+    w.Append(Meta(Target::kSun, true, 0), Pixels(true, 1e5f));
+  }
+  std::string Journal() const { return ReadFileToString(dir_ / "frames.jsonl"); }
+  void SetJournal(const std::string& s) const { WriteFileAtomic(dir_ / "frames.jsonl", s); }
+  std::vector<std::string> Lines() const {
+    std::vector<std::string> out;
+    const std::string j = Journal();
+    size_t pos = 0;
+    while (pos < j.size()) {
+      const size_t nl = j.find('\n', pos);
+      out.push_back(j.substr(pos, nl - pos));
+      pos = nl + 1;
+    }
+    return out;
+  }
+  void ExpectLoadError(const std::string& phrase) const {
+    try {
+      Session::Load(dir_);
+      ADD_FAILURE() << "loaded; wanted " << phrase;
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(phrase), std::string::npos) << e.what();
+    }
+  }
+
+  fs::path root_, dir_;
+};
+
+TEST_F(SessionTest, RoundTrip) {
+  WriteThree();
+  EXPECT_TRUE(fs::exists(dir_ / "frames" / "000001.png"));
+  EXPECT_TRUE(fs::exists(dir_ / "frames" / "000002.exr"));
+  EXPECT_TRUE(fs::exists(dir_ / "frames" / "000003.exr"));
+  const Session s = Session::Load(dir_);
+  EXPECT_TRUE(s.warnings().empty());
+  const SessionInfo& info = s.info();
+  EXPECT_EQ(info.site.lat_deg, 48.4431);
+  EXPECT_EQ(info.site.height_m, 140.5);
+  EXPECT_EQ(info.site_source, "gps");
+  EXPECT_EQ(info.rig, "rigs/field.toml");
+  EXPECT_EQ(info.clock_offset_s, -0.25);
+  EXPECT_EQ(info.model, "model/cathedral.obj");
+  EXPECT_EQ(info.notes, "west front");
+  EXPECT_EQ(info.extra["operator"], "cm");
+  ASSERT_EQ(s.frames().size(), 3u);
+  const FrameRecord& a = s.frames()[0];
+  EXPECT_EQ(a.id, 1);
+  EXPECT_EQ(a.file, "frames/000001.png");
+  EXPECT_EQ(a.target, Target::kArchitecture);
+  EXPECT_EQ(a.group, "slot1/architecture/view1");
+  EXPECT_EQ(a.slot, 1);
+  EXPECT_EQ(a.utc, ParseIso8601("2024-06-21T09:15:00.123456789Z"));
+  EXPECT_EQ(a.exposure_s, 1.0 / 250);
+  EXPECT_EQ(a.gain, 2.0);
+  EXPECT_EQ(a.aperture_f, 8.0);
+  EXPECT_EQ(a.nd_density, 3.0);
+  EXPECT_EQ(a.sun_azimuth_deg, 101.5);
+  ASSERT_TRUE(a.gps.has_value());
+  EXPECT_EQ(a.gps->utc, ParseIso8601("2024-06-21T09:14:59.5Z"));
+  EXPECT_EQ(a.gps->satellites, 9);
+  EXPECT_EQ(a.gps->lat_deg, 48.44312);
+  EXPECT_TRUE(a.gps->valid());
+  ASSERT_TRUE(a.intrinsics.has_value());
+  EXPECT_EQ(a.intrinsics->k1, -0.1);
+  ASSERT_TRUE(a.pose.has_value());
+  EXPECT_EQ(a.pose->rotation, Pose::Level(Eigen::Vector3d(1, 2, 1.6), 80, 10).rotation);
+  EXPECT_EQ(a.sha256, Sha256File(dir_ / a.file));
+  EXPECT_FALSE(s.frames()[1].gps.has_value());
+  EXPECT_FALSE(s.frames()[1].pose.has_value());
+  EXPECT_TRUE(s.frames()[1].hdr);
+  EXPECT_EQ(s.frames()[2].target, Target::kSun);
+
+  // Pixels: LDR exactly, HDR within half precision, beyond-half HDR stored as float.
+  const Image ldr = s.LoadFrame(a, true);
+  EXPECT_EQ(ldr.units, PixelUnits::kDigital);
+  EXPECT_EQ(ldr.data, Pixels(false, 1).data);
+  const Image sky = s.LoadFrame(s.frames()[1], true);
+  EXPECT_EQ(sky.units, PixelUnits::kRadiance);
+  const Image want = Pixels(true, 0.5f);
+  for (size_t i = 0; i < want.data.size(); ++i) {
+    EXPECT_NEAR(sky.data[i], want.data[i], want.data[i] / 2048);
+  }
+  EXPECT_EQ(s.LoadFrame(s.frames()[2], true).data, Pixels(true, 1e5f).data);
+
+  // The journal: one compact object per line with the documented keys.
+  const auto lines = Lines();
+  ASSERT_EQ(lines.size(), 3u);
+  const json j = json::parse(lines[0]);
+  for (const char* key : {"id", "device", "target", "group", "slot", "utc", "hdr", "exposure_s",
+                          "gain", "aperture_f", "nd_density", "gps", "sun", "intrinsics", "pose",
+                          "file", "sha256"}) {
+    EXPECT_TRUE(j.contains(key)) << key;
+  }
+  EXPECT_EQ(j["utc"], "2024-06-21T09:15:00.123456789Z");
+  EXPECT_EQ(j["target"], "architecture");
+  EXPECT_TRUE(json::parse(lines[1])["gps"].is_null());
+  const json info_json = json::parse(ReadFileToString(dir_ / "session.json"));
+  for (const char* key : {"format_version", "site", "site_source", "rig", "created_utc",
+                          "clock_offset_s", "model", "notes", "extra"}) {
+    EXPECT_TRUE(info_json.contains(key)) << key;
+  }
+}
+
+TEST_F(SessionTest, ResumeContinuesIdsAndCleansUp) {
+  WriteThree();
+  WriteFileAtomic(dir_ / "frames" / "000004.png.tmp-99-0.png", "partial");
+  {
+    SessionWriter w = SessionWriter::Resume(dir_);
+    EXPECT_EQ(w.frames().size(), 3u);
+    EXPECT_EQ(w.info().notes, "west front");
+    const FrameRecord r = w.Append(Meta(Target::kLandscape, false, 0.01), Pixels(false, 1));
+    EXPECT_EQ(r.id, 4);
+    EXPECT_EQ(r.file, "frames/000004.png");
+    SessionInfo info = w.info();
+    info.site_source = "rig";
+    w.UpdateInfo(info);
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "frames" / "000004.png.tmp-99-0.png"));
+  const Session s = Session::Load(dir_);
+  ASSERT_EQ(s.frames().size(), 4u);
+  EXPECT_EQ(s.frames()[3].id, 4);
+  EXPECT_EQ(s.frames()[3].target, Target::kLandscape);
+  EXPECT_EQ(s.info().site_source, "rig");
+}
+
+TEST_F(SessionTest, TruncatedLastLineIsToleratedAndRepaired) {
+  WriteThree();
+  const std::string full = Journal();
+  const std::string cut = full.substr(0, full.size() - 40);  // crash mid-line 3
+  SetJournal(cut);
+  const Session s = Session::Load(dir_);
+  EXPECT_EQ(s.frames().size(), 2u);
+  ASSERT_EQ(s.warnings().size(), 1u);
+  EXPECT_NE(s.warnings()[0].find("frames.jsonl:3"), std::string::npos) << s.warnings()[0];
+  SessionWriter w = SessionWriter::Resume(dir_);
+  EXPECT_EQ(w.frames().size(), 2u);
+  // The partial line was cut away and the id of the lost frame is used again.
+  EXPECT_EQ(Journal(), full.substr(0, full.rfind('\n', full.size() - 2) + 1));
+  EXPECT_EQ(w.Append(Meta(Target::kSky, false, 0.1), Pixels(false, 1)).id, 3);
+  EXPECT_EQ(Session::Load(dir_).frames().size(), 3u);
+  EXPECT_TRUE(Session::Load(dir_).warnings().empty());
+}
+
+TEST_F(SessionTest, LastLineMissingOnlyItsNewlineIsKept) {
+  WriteThree();
+  const std::string full = Journal();
+  SetJournal(full.substr(0, full.size() - 1));
+  EXPECT_EQ(Session::Load(dir_).frames().size(), 3u);
+  SessionWriter w = SessionWriter::Resume(dir_);
+  EXPECT_EQ(Journal(), full);
+  EXPECT_EQ(w.Append(Meta(Target::kSky, false, 0.1), Pixels(false, 1)).id, 4);
+}
+
+TEST_F(SessionTest, MalformedMiddleLineIsAnErrorWithItsLine) {
+  WriteThree();
+  auto lines = Lines();
+  SetJournal(lines[0] + "\n{\"id\": 2, \"device\": \n" + lines[2] + "\n");
+  ExpectLoadError("frames.jsonl:2:");
+  // A missing key is named.
+  json j = json::parse(lines[1]);
+  j.erase("exposure_s");
+  SetJournal(lines[0] + "\n" + j.dump() + "\n" + lines[2] + "\n");
+  ExpectLoadError("frames.jsonl:2: frame record: missing key \"exposure_s\"");
+  j = json::parse(lines[1]);
+  j["target"] = "moon";
+  SetJournal(lines[0] + "\n" + j.dump() + "\n");
+  ExpectLoadError("moon");
+  j = json::parse(lines[1]);
+  j["utc"] = "2024-06-21T09:15:00";  // no zone
+  SetJournal(j.dump() + "\n");
+  ExpectLoadError("frames.jsonl:1:");
+  SetJournal(lines[0] + "\n" + lines[0] + "\n");
+  ExpectLoadError("duplicate");
+}
+
+TEST_F(SessionTest, PathsLeavingTheFolderAreRefused) {
+  WriteThree();
+  auto lines = Lines();
+  fs::copy_file(dir_ / "frames" / "000001.png", root_ / "x.png");
+  for (const char* bad : {"../x.png", "/etc/passwd", "frames/../../x.png"}) {
+    json j = json::parse(lines[0]);
+    j["file"] = bad;
+    SetJournal(j.dump() + "\n" + lines[1] + "\n");
+    ExpectLoadError("frames.jsonl:1:");
+    ExpectLoadError(bad);
+  }
+  const Session s = [&] {
+    SetJournal(lines[0] + "\n");
+    return Session::Load(dir_);
+  }();
+  FrameRecord f = s.frames()[0];
+  f.file = "../x.png";
+  EXPECT_THROW(s.PathOf(f), Error);
+  EXPECT_THROW(s.LoadFrame(f), Error);
+}
+
+TEST_F(SessionTest, MissingFileAndShaMismatch) {
+  WriteThree();
+  {
+    const Session s = Session::Load(dir_);
+    // Flip the pixels of frame 1 behind the journal's back.
+    Image other = Pixels(false, 1);
+    other.data[0] = 200;
+    WriteImage((dir_ / "frames" / "000001.png").string(), other, StoredType::kUint8);
+    EXPECT_NO_THROW(s.LoadFrame(s.frames()[0], false));
+    try {
+      s.LoadFrame(s.frames()[0], true);
+      ADD_FAILURE();
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("sha256"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("000001.png"), std::string::npos) << e.what();
+    }
+  }
+  fs::remove(dir_ / "frames" / "000002.exr");
+  ExpectLoadError("frames.jsonl:2:");
+  ExpectLoadError("missing");
+}
+
+TEST_F(SessionTest, CreateRefusesNonEmptyFolder) {
+  fs::create_directories(dir_);
+  WriteFileAtomic(dir_ / "something.txt", "x");
+  try {
+    SessionWriter::Create(dir_, Info());
+    ADD_FAILURE();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find(dir_.string()), std::string::npos);
+  }
+  // An existing empty folder is fine, and a second Create on it is refused.
+  const fs::path empty = root_ / "empty";
+  fs::create_directories(empty);
+  { SessionWriter w = SessionWriter::Create(empty, Info()); }
+  EXPECT_THROW(SessionWriter::Create(empty, Info()), Error);
+  EXPECT_TRUE(Session::Load(empty).frames().empty());
+}
+
+TEST_F(SessionTest, BadInputsAreRefused) {
+  SessionWriter w = SessionWriter::Create(dir_, Info());
+  FrameRecord f = Meta(Target::kSky, false, NAN);
+  EXPECT_THROW(w.Append(f, Pixels(false, 1)), Error);
+  EXPECT_THROW(w.Append(Meta(Target::kSky, false, 1), Image()), Error);
+  Image nan = Pixels(true, 1);
+  nan.data[3] = NAN;
+  EXPECT_THROW(w.Append(Meta(Target::kSky, true, 0), nan), Error);
+  EXPECT_TRUE(Session::Load(dir_).frames().empty());
+  EXPECT_THROW(SessionWriter::Resume(root_ / "nope"), Error);
+  EXPECT_THROW(Session::Load(root_ / "nope"), Error);
+  EXPECT_THROW(ParseTarget("Sun"), Error);
+  EXPECT_EQ(ParseTarget("aureole"), Target::kAureole);
+  for (Target t : {Target::kSun, Target::kAureole, Target::kSky, Target::kLandscape,
+                   Target::kArchitecture, Target::kCalibration}) {
+    EXPECT_EQ(ParseTarget(TargetName(t)), t);
+  }
+  // session.json problems name the file.
+  json info = json::parse(ReadFileToString(dir_ / "session.json"));
+  info["format_version"] = 99;
+  WriteFileAtomic(dir_ / "session.json", info.dump());
+  ExpectLoadError("session.json");
+  info.erase("format_version");
+  WriteFileAtomic(dir_ / "session.json", info.dump());
+  ExpectLoadError("\"format_version\"");
+}
+
+}  // namespace
+}  // namespace rouen

@@ -1,0 +1,153 @@
+#include "render/render.h"
+
+#include <chrono>
+#include <cmath>
+#include <string>
+
+#include <Eigen/Geometry>
+#include <tbb/parallel_for.h>
+
+#include "core/error.h"
+
+namespace rouen {
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+void CheckSizes(const SurfaceGrid& grid, const AlbedoResult& albedo, const SlotIrradiance& irr) {
+  const size_t n = grid.points.size();
+  if (albedo.rho_sun.size() != n || albedo.rho_se.size() != n || irr.se.size() != n) {
+    throw Error("render: albedo (" + std::to_string(albedo.rho_sun.size()) + "), irradiance (" +
+                std::to_string(irr.se.size()) + ") and grid (" + std::to_string(n) +
+                ") sizes differ");
+  }
+}
+
+}  // namespace
+
+void RenderOptions::Validate() const {
+  if (supersample < 1 || supersample > 16) throw Error("RenderOptions: supersample must be 1..16");
+}
+
+// §6: re-rendering with the recovered pseudo-albedos.
+Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& model,
+                 const AlbedoResult& albedo, const Lighting& lighting, const SlotIrradiance& irr,
+                 const Intrinsics& intrinsics, const Pose& pose, const RenderOptions& options,
+                 RenderStats* stats) {
+  const auto start = std::chrono::steady_clock::now();
+  options.Validate();
+  intrinsics.Validate();
+  CheckSizes(grid, albedo, irr);
+  if (grid.triangle_n.size() != mesh.triangles.size()) {
+    throw Error("render: the grid was built for " + std::to_string(grid.triangle_n.size()) +
+                " triangles, the mesh has " + std::to_string(mesh.triangles.size()));
+  }
+  const int w = intrinsics.width, h = intrinsics.height, ss = options.supersample;
+  Image out(w, h, 3, PixelUnits::kRadiance, 0.f);
+  const Eigen::Vector3d s = lighting.sun_dir.normalized();
+  const Eigen::Vector3d sun_e = lighting.sun_radiance * lighting.sun_solid_angle_sr;
+  const double cos_sun_radius = std::cos(lighting.SunAngularRadius());
+  const double offset = model.surface_offset();
+  const bool env_ok = lighting.env.num_regions() > 0 &&
+                      static_cast<int>(lighting.env.radiance.size()) == lighting.env.num_regions();
+
+  auto shade = [&](const Eigen::Vector3d& dir) -> Eigen::Vector3d {
+    const RayHit hit = model.Intersect(pose.position, dir, 0.0);
+    if (!hit.hit) {
+      if (!options.draw_background) return Eigen::Vector3d::Zero();
+      if (dir.dot(s) >= cos_sun_radius) return lighting.sun_radiance;
+      if (dir.z() >= 0) return lighting.sky.Radiance(dir);
+      return env_ok ? lighting.env.Radiance(dir) : Eigen::Vector3d::Zero();
+    }
+    Eigen::Vector3d rho_sun, rho_se, e_se;
+    if (options.interpolate) {
+      const GridStencil st = grid.Stencil(hit.triangle, hit.u, hit.v);
+      if (st.count == 0) return Eigen::Vector3d::Zero();
+      rho_sun.setZero();
+      rho_se.setZero();
+      e_se.setZero();
+      for (int k = 0; k < st.count; ++k) {
+        const int j = st.index[k];
+        rho_sun += st.weight[k] * albedo.rho_sun[j];
+        rho_se += st.weight[k] * albedo.rho_se[j];
+        e_se += st.weight[k] * irr.se[j];
+      }
+    } else {
+      const int j = grid.NearestPoint(hit.triangle, hit.u, hit.v);
+      if (j < 0) return Eigen::Vector3d::Zero();
+      rho_sun = albedo.rho_sun[j];
+      rho_se = albedo.rho_se[j];
+      e_se = irr.se[j];
+    }
+    Eigen::Vector3d n = mesh.Normal(hit.triangle);
+    if (n.dot(dir) > 0) n = -n;  // seen from behind: light the side facing the camera
+    const Eigen::Vector3d p = pose.position + hit.t * dir + offset * n;
+    Eigen::Vector3d e_sun = Eigen::Vector3d::Zero();
+    const double cosi = n.dot(s);
+    if (cosi > 0 && !model.Occluded(p, s, 0.0)) e_sun = sun_e * cosi;
+    return (rho_sun.cwiseProduct(e_sun) + rho_se.cwiseProduct(e_se)) / kPi;
+  };
+
+  tbb::parallel_for(0, h, [&](int y) {
+    for (int x = 0; x < w; ++x) {
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      for (int a = 0; a < ss; ++a) {
+        for (int b = 0; b < ss; ++b) {
+          const Eigen::Vector2d px(x + (b + 0.5) / ss, y + (a + 0.5) / ss);
+          const Eigen::Vector3d d = pose.rotation * Unproject(intrinsics, px);
+          if (!d.allFinite() || d.squaredNorm() == 0) continue;
+          sum += shade(d.normalized());
+        }
+      }
+      sum /= ss * ss;
+      if (!sum.allFinite()) {
+        throw Error("render: non-finite radiance at pixel (" + std::to_string(x) + ", " +
+                    std::to_string(y) + ")");
+      }
+      for (int c = 0; c < 3; ++c) out.at(x, y, c) = static_cast<float>(sum[c]);
+    }
+  });
+  if (stats) {
+    stats->rays = static_cast<int64_t>(w) * h * ss * ss * 2;
+    stats->seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  }
+  return out;
+}
+
+Image RenderBlockIds(const Mesh& mesh, const RayCaster& model, const Intrinsics& intrinsics,
+                     const Pose& pose) {
+  intrinsics.Validate();
+  Image out(intrinsics.width, intrinsics.height, 1, PixelUnits::kOther, -1.f);
+  tbb::parallel_for(0, intrinsics.height, [&](int y) {
+    for (int x = 0; x < intrinsics.width; ++x) {
+      const Eigen::Vector3d d =
+          pose.rotation * Unproject(intrinsics, Eigen::Vector2d(x + 0.5, y + 0.5));
+      if (!d.allFinite() || d.squaredNorm() == 0) continue;
+      const RayHit hit = model.Intersect(pose.position, d.normalized(), 0.0);
+      if (hit.hit && hit.triangle < static_cast<int>(mesh.triangle_block.size())) {
+        out.at(x, y) = static_cast<float>(mesh.triangle_block[hit.triangle]);
+      }
+    }
+  });
+  return out;
+}
+
+std::vector<uint8_t> BlockMask(const Image& block_ids, const std::vector<int>& blocks) {
+  std::vector<uint8_t> mask(static_cast<size_t>(block_ids.width) * block_ids.height, 0);
+  for (int y = 0; y < block_ids.height; ++y) {
+    for (int x = 0; x < block_ids.width; ++x) {
+      const int b = static_cast<int>(std::lround(block_ids.at(x, y, 0)));
+      bool in = b >= 0;
+      if (in && !blocks.empty()) {
+        in = false;
+        for (int k : blocks) in = in || k == b;
+      }
+      mask[static_cast<size_t>(y) * block_ids.width + x] = in ? 1 : 0;
+    }
+  }
+  return mask;
+}
+
+}  // namespace rouen

@@ -1,0 +1,48 @@
+// Re-rendering the model under given lighting (Yu & Malik 1998, §6): radiance images of the
+// Lambertian model from the two pseudo-albedos and the irradiance, with the sky, environment
+// and sun disc where rays escape.
+#pragma once
+
+#include <vector>
+
+#include "core/camera.h"
+#include "core/image.h"
+#include "core/mesh.h"
+#include "solve/albedo.h"
+#include "solve/grid.h"
+#include "solve/irradiance.h"
+#include "solve/raycast.h"
+
+namespace rouen {
+
+struct RenderOptions {
+  int supersample = 1;      // samples per pixel along each axis (1 or more, regular grid)
+  bool interpolate = true;  // smooth albedo / E_se between grid points; false: nearest point
+  bool draw_background = true;  // sky, environment and sun where rays escape; false: 0
+  void Validate() const;        // throws rouen::Error
+};
+
+struct RenderStats {
+  int64_t rays = 0;
+  double seconds = 0;
+};
+
+// Per pixel: a ray into the model; on a hit L = (rho_sun E_sun + rho_se E_se) / pi with E_sun
+// computed at the hit with its own shadow ray (crisp shadows) and rho, E_se interpolated from
+// the grid; on escape the sun disc (sun_radiance) within the sun's radius, the sky model above
+// the horizon and the environment map below. `irr` is the irradiance of `lighting` on the grid
+// (with the interreflection added). Returns a kRadiance image.
+Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& model,
+                 const AlbedoResult& albedo, const Lighting& lighting, const SlotIrradiance& irr,
+                 const Intrinsics& intrinsics, const Pose& pose,
+                 const RenderOptions& options = {}, RenderStats* stats = nullptr);
+
+// One channel, pixel centres: model block index of the first hit, -1 where the ray escapes.
+Image RenderBlockIds(const Mesh& mesh, const RayCaster& model, const Intrinsics& intrinsics,
+                     const Pose& pose);
+
+// Mask (nonzero = building) from a block-id image: pixels with block >= 0, or only the
+// listed blocks when `blocks` is not empty.
+std::vector<uint8_t> BlockMask(const Image& block_ids, const std::vector<int>& blocks = {});
+
+}  // namespace rouen

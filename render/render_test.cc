@@ -1,0 +1,124 @@
+#include "render/render.h"
+
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+#include "core/error.h"
+#include "solve/test_scenes.h"
+
+namespace rouen {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+struct Fixture {
+  Mesh mesh;
+  SurfaceGrid grid;
+  std::unique_ptr<RayCaster> rc;
+  HemisphereCache cache;
+  Lighting lighting;
+  SlotIrradiance irr;
+  AlbedoResult albedo;
+};
+
+// A plaza under a uniform unit sky with the sun at the zenith and a small slab floating 8 m
+// above the origin: its shadow is the square |x|, |y| < 0.5 on the plaza.
+Fixture Make() {
+  Fixture f;
+  const int plaza = f.mesh.AddBlock("plaza");
+  const int slab = f.mesh.AddBlock("slab");
+  testing::AddHorizontalRect(&f.mesh, -40, 40, -40, 40, 0, true, plaza);
+  testing::AddBox(&f.mesh, {-0.5, -0.5, 8}, {0.5, 0.5, 8.5}, slab, true);
+  GridOptions go;
+  go.block_spacing_m["plaza"] = 2.0;
+  f.grid = BuildSurfaceGrid(f.mesh, go);
+  f.rc = std::make_unique<RayCaster>(f.mesh);
+  HemisphereOptions ho;
+  ho.directions = 64;
+  f.cache = BuildHemisphereCache(f.grid, *f.rc, ho);
+  f.lighting.sun_dir = Eigen::Vector3d::UnitZ();
+  f.lighting.sun_radiance = Eigen::Vector3d(1e4, 1e4, 1e4);
+  f.lighting.sun_solid_angle_sr = 6.8e-5;
+  f.lighting.sky = SkyModel();  // Lz = 1, flat
+  f.lighting.env = EnvironmentMap::Constant(EnvOptions(), {1, 1, 1}, {0, 0, 0});
+  f.irr = ComputeIrradiance(f.grid, f.cache, *f.rc, f.lighting);
+  f.albedo.rho_sun.assign(f.grid.size(), Eigen::Vector3d(0.5, 0.5, 0.5));
+  f.albedo.rho_se.assign(f.grid.size(), Eigen::Vector3d(0.3, 0.2, 0.1));
+  return f;
+}
+
+TEST(RenderTest, LitShadowedSkyAndSun) {
+  const Fixture f = Make();
+  const Intrinsics k = Intrinsics::PinholeFov(160, 120, 60);
+  const Pose pose = Pose::LookAt({0, -15, 10}, {0, 0, 0});
+  RenderStats stats;
+  const Image img = RenderView(f.mesh, f.grid, *f.rc, f.albedo, f.lighting, f.irr, k, pose,
+                               RenderOptions(), &stats);
+  EXPECT_EQ(img.units, PixelUnits::kRadiance);
+  EXPECT_GT(stats.rays, 0);
+  const Image ids = RenderBlockIds(f.mesh, *f.rc, k, pose);
+  const double e_sun = 1e4 * 6.8e-5;
+  int lit = 0, shadow = 0;
+  for (int y = 0; y < 120; ++y) {
+    for (int x = 0; x < 160; ++x) {
+      const Eigen::Vector3d d = (pose.rotation * Unproject(k, {x + 0.5, y + 0.5})).normalized();
+      const RayHit h = f.rc->Intersect(pose.position, d);
+      ASSERT_TRUE(h.hit);  // the camera looks down at the plaza only
+      EXPECT_EQ(static_cast<int>(ids.at(x, y)), f.mesh.triangle_block[h.triangle]);
+      if (f.mesh.triangle_block[h.triangle] != 0) continue;
+      const Eigen::Vector3d p = pose.position + h.t * d;
+      // Unoccluded plaza: E_se = pi (less the slab's < 0.5% of the sky, which 64 directions
+      // see as 0 or 1/64).
+      if (std::abs(p.x()) > 3 || std::abs(p.y()) > 3) {
+        for (int c = 0; c < 3; ++c) {
+          const double expect = (0.5 * e_sun + f.albedo.rho_se[0][c] * kPi) / kPi;
+          EXPECT_NEAR(img.at(x, y, c), expect, 0.02 * expect);
+        }
+        ++lit;
+      } else if (std::abs(p.x()) < 0.4 && std::abs(p.y()) < 0.4) {
+        for (int c = 0; c < 3; ++c) {
+          const double expect = f.albedo.rho_se[0][c];  // no sun, E_se ~ pi (slab: -1.6%)
+          EXPECT_NEAR(img.at(x, y, c), expect, 0.03 * expect);
+        }
+        ++shadow;
+      }
+    }
+  }
+  EXPECT_GT(lit, 1000);
+  EXPECT_GT(shadow, 5);
+  // Supersampling keeps flat regions unchanged.
+  RenderOptions ss;
+  ss.supersample = 2;
+  ss.interpolate = false;
+  const Image img2 = RenderView(f.mesh, f.grid, *f.rc, f.albedo, f.lighting, f.irr, k, pose, ss);
+  EXPECT_NEAR(img2.at(5, 110, 1), img.at(5, 110, 1), 0.01 * img.at(5, 110, 1));
+  // Looking straight up: the sun disc in the centre, the unit sky around it.
+  const Intrinsics up_k = Intrinsics::PinholeFov(101, 101, 20);
+  const Pose up = Pose::LookAt({5, 5, 1}, {5, 5, 100});
+  const Image sky = RenderView(f.mesh, f.grid, *f.rc, f.albedo, f.lighting, f.irr, up_k, up);
+  EXPECT_NEAR(sky.at(50, 50, 0), 1e4, 1e-6);
+  EXPECT_NEAR(sky.at(5, 5, 0), 1.0, 1e-9);
+  const Image up_ids = RenderBlockIds(f.mesh, *f.rc, up_k, up);
+  EXPECT_EQ(up_ids.at(5, 5), -1);
+  const std::vector<uint8_t> mask = BlockMask(ids, {0});
+  EXPECT_EQ(mask[(119) * 160 + 80], 1);
+}
+
+TEST(RenderTest, BadInputThrows) {
+  Fixture f = Make();
+  const Intrinsics k = Intrinsics::PinholeFov(16, 12, 60);
+  const Pose pose = Pose::LookAt({0, -15, 10}, {0, 0, 0});
+  AlbedoResult a = f.albedo;
+  a.rho_se.pop_back();
+  EXPECT_THROW(RenderView(f.mesh, f.grid, *f.rc, a, f.lighting, f.irr, k, pose), Error);
+  RenderOptions o;
+  o.supersample = 0;
+  EXPECT_THROW(RenderView(f.mesh, f.grid, *f.rc, f.albedo, f.lighting, f.irr, k, pose, o), Error);
+  Intrinsics bad = k;
+  bad.width = 0;
+  EXPECT_THROW(RenderView(f.mesh, f.grid, *f.rc, f.albedo, f.lighting, f.irr, bad, pose), Error);
+}
+
+}  // namespace
+}  // namespace rouen

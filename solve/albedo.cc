@@ -1,0 +1,669 @@
+#include "solve/albedo.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <numeric>
+#include <string>
+#include <unordered_map>
+
+#include <Eigen/Geometry>
+#include <tbb/parallel_for.h>
+
+#include "core/error.h"
+
+namespace rouen {
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+double Seconds(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  const size_t mid = v.size() / 2;
+  std::nth_element(v.begin(), v.begin() + mid, v.end());
+  double m = v[mid];
+  if (v.size() % 2 == 0) {
+    m = 0.5 * (m + *std::max_element(v.begin(), v.begin() + mid));
+  }
+  return m;
+}
+
+// One equation of eqs. 11-12 for a point: y = pi I = rho_se e_se + rho_sun e_sun, per channel.
+struct Equation {
+  Eigen::Vector3d y, e_se, e_sun;
+};
+
+enum class Mode { kBoth, kSeOnly };
+
+struct PointFit {
+  Eigen::Vector3d rho_se = Eigen::Vector3d::Zero(), rho_sun = Eigen::Vector3d::Zero();
+  bool clamped = false;
+  std::vector<double> weights;
+};
+
+double RobustWeight(RobustLoss loss, double u, double huber_k) {
+  const double a = std::abs(u);
+  switch (loss) {
+    case RobustLoss::kNone:
+      return 1.0;
+    case RobustLoss::kHuber:
+      return a <= huber_k ? 1.0 : huber_k / a;
+    case RobustLoss::kPaper: {
+      // rho(u) = (1 - e^{-|u|/2}) / (1 + e^{-|u|/2}) = tanh(|u|/4); w = rho'(u) / u, with the
+      // L1-like core capped at |u| = 1 and normalised to 1 there.
+      const double sech = 1.0 / std::cosh(a / 4);
+      return sech * sech / std::max(a, 1.0);
+    }
+  }
+  return 1.0;
+}
+
+// Minimises x^T A x - 2 x^T b over x >= 0 (2 unknowns).
+Eigen::Vector2d Nnls2(const Eigen::Matrix2d& A, const Eigen::Vector2d& b, bool* clamped) {
+  const double det = A.determinant();
+  const double scale = std::max(A(0, 0) * A(1, 1), 1e-300);
+  if (det > 1e-12 * scale) {
+    const Eigen::Vector2d x = A.inverse() * b;
+    if (x.minCoeff() >= 0) return x;
+  }
+  auto cost = [&](const Eigen::Vector2d& x) { return x.dot(A * x) - 2 * x.dot(b); };
+  Eigen::Vector2d best = Eigen::Vector2d::Zero();
+  double best_cost = 0;
+  for (int k = 0; k < 2; ++k) {
+    if (A(k, k) <= 0) continue;
+    Eigen::Vector2d x = Eigen::Vector2d::Zero();
+    x[k] = std::max(0.0, b[k] / A(k, k));
+    const double c = cost(x);
+    if (c < best_cost) {
+      best_cost = c;
+      best = x;
+    }
+  }
+  *clamped = true;
+  return best;
+}
+
+// Eqs. 11-12 for one point by IRLS on relative residuals. `ratio` fixes rho_sun = ratio x
+// rho_se in kSeOnly mode; with prior_weight > 0 it is a soft prior in kBoth mode.
+PointFit FitPoint(const std::vector<Equation>& eqs, Mode mode, const Eigen::Vector3d& ratio,
+                  double prior_weight, const AlbedoOptions& o) {
+  const int n = static_cast<int>(eqs.size());
+  PointFit fit;
+  fit.weights.assign(n, 1.0);
+  // Relative errors: sigma_k = pi I_k, floored at 5% of the channel mean.
+  Eigen::Vector3d mean_y = Eigen::Vector3d::Zero(), mean_e = Eigen::Vector3d::Zero();
+  for (const auto& q : eqs) {
+    mean_y += q.y;
+    mean_e += q.e_se + q.e_sun;
+  }
+  mean_y /= n;
+  mean_e /= n;
+  std::vector<Eigen::Vector3d> inv_sigma(n);
+  for (int k = 0; k < n; ++k) {
+    for (int c = 0; c < 3; ++c) {
+      inv_sigma[k][c] = 1.0 / std::max({eqs[k].y[c], 0.05 * mean_y[c], 1e-30});
+    }
+  }
+  const int unknowns = mode == Mode::kBoth ? 2 : 1;
+  for (int it = 0; it < std::max(1, o.irls_iterations); ++it) {
+    for (int c = 0; c < 3; ++c) {
+      if (mode == Mode::kSeOnly) {
+        double num = 0, den = 0;
+        for (int k = 0; k < n; ++k) {
+          const double w = fit.weights[k] * inv_sigma[k][c] * inv_sigma[k][c];
+          const double x = eqs[k].e_se[c] + ratio[c] * eqs[k].e_sun[c];
+          num += w * x * eqs[k].y[c];
+          den += w * x * x;
+        }
+        const double a = den > 0 ? num / den : 0;
+        fit.clamped = fit.clamped || a < 0;
+        fit.rho_se[c] = std::max(0.0, a);
+        fit.rho_sun[c] = ratio[c] * fit.rho_se[c];
+        continue;
+      }
+      Eigen::Matrix2d A = Eigen::Matrix2d::Zero();
+      Eigen::Vector2d b = Eigen::Vector2d::Zero();
+      double wsum = 0;
+      for (int k = 0; k < n; ++k) {
+        const double w = fit.weights[k] * inv_sigma[k][c] * inv_sigma[k][c];
+        const Eigen::Vector2d x(eqs[k].e_se[c], eqs[k].e_sun[c]);
+        A += w * x * x.transpose();
+        b += w * x * eqs[k].y[c];
+        wsum += fit.weights[k];
+      }
+      if (prior_weight > 0) {
+        // Row (-ratio, 1) / rho_ref: a relative deviation from the block ratio.
+        const double rho_ref = std::max(mean_y[c] / std::max(mean_e[c], 1e-300), 1e-6);
+        const Eigen::Vector2d r(-ratio[c] / rho_ref, 1.0 / rho_ref);
+        A += prior_weight * wsum * r * r.transpose();
+      }
+      bool clamped = false;
+      const Eigen::Vector2d x = Nnls2(A, b, &clamped);
+      fit.clamped = fit.clamped || clamped;
+      fit.rho_se[c] = x[0];
+      fit.rho_sun[c] = x[1];
+    }
+    if (o.loss == RobustLoss::kNone || n <= unknowns + 1) break;
+    std::vector<double> z(n), az(n);
+    for (int k = 0; k < n; ++k) {
+      double s2 = 0;
+      for (int c = 0; c < 3; ++c) {
+        const double pred = fit.rho_se[c] * eqs[k].e_se[c] + fit.rho_sun[c] * eqs[k].e_sun[c];
+        const double r = (eqs[k].y[c] - pred) * inv_sigma[k][c];
+        s2 += r * r;
+      }
+      z[k] = std::sqrt(s2 / 3);
+      az[k] = z[k];
+    }
+    const double scale = std::max(1.4826 * Median(az), o.min_scale);
+    double change = 0;
+    for (int k = 0; k < n; ++k) {
+      const double w = RobustWeight(o.loss, z[k] / scale, o.huber_k);
+      change = std::max(change, std::abs(w - fit.weights[k]));
+      fit.weights[k] = w;
+    }
+    if (change < 1e-4) break;
+  }
+  return fit;
+}
+
+bool IsSunlit(const Equation& q, double threshold) {
+  return q.e_sun[1] > threshold * std::max(q.e_se[1], 1e-300);
+}
+
+}  // namespace
+
+void ObservationOptions::Validate() const {
+  if (!(margin_px >= 0)) throw Error("ObservationOptions: margin_px must be >= 0");
+  if (!(occlusion_tolerance >= 0 && occlusion_tolerance < 0.5)) {
+    throw Error("ObservationOptions: occlusion_tolerance must be in [0, 0.5)");
+  }
+  if (!(min_cos_view >= 0 && min_cos_view < 1)) {
+    throw Error("ObservationOptions: min_cos_view must be in [0, 1)");
+  }
+  if (!(plane_tolerance_m > 0)) throw Error("ObservationOptions: plane_tolerance_m must be > 0");
+}
+
+void AlbedoOptions::Validate() const {
+  if (!(huber_k > 0)) throw Error("AlbedoOptions: huber_k must be > 0");
+  if (!(min_scale > 0)) throw Error("AlbedoOptions: min_scale must be > 0");
+  if (irls_iterations < 1) throw Error("AlbedoOptions: irls_iterations must be >= 1");
+  if (outer_iterations < 1) throw Error("AlbedoOptions: outer_iterations must be >= 1");
+  if (bounces < 1) throw Error("AlbedoOptions: bounces must be >= 1");
+  if (!(sunlit_threshold > 0)) throw Error("AlbedoOptions: sunlit_threshold must be > 0");
+  if (!(never_shadowed_prior >= 0)) throw Error("AlbedoOptions: never_shadowed_prior must be >= 0");
+  if (!(ratio_prior >= 0)) throw Error("AlbedoOptions: ratio_prior must be >= 0");
+  if (!(fill_radius_m >= 0)) throw Error("AlbedoOptions: fill_radius_m must be >= 0");
+  observation.Validate();
+  irradiance.Validate();
+}
+
+std::string AlbedoSummary::BriefReport() const {
+  char buf[512];
+  std::snprintf(buf, sizeof(buf),
+                "albedo: %d/%d points observed (%lld obs, %d filled from neighbours), "
+                "sun-unobserved %d, never-shadowed %d, clamped %d, residual rms %.2f%% median %.2f%%, downweighted %.1f%%, "
+                "%d outer iterations, last change %.3f%%, %.2f s",
+                points_observed, points, static_cast<long long>(observations),
+                points_filled_neighbours, points_sun_unobserved, points_never_shadowed, points_clamped,
+                100 * residual_rms_rel, 100 * residual_median_rel, 100 * downweighted_fraction,
+                outer_iterations,
+                change_per_iteration.empty() ? 0.0 : 100 * change_per_iteration.back(), seconds);
+  return buf;
+}
+
+// App. B by ray casting, then a bilinear radiance sample per visible point and photo.
+std::vector<Observation> CollectObservations(const SurfaceGrid& grid, const RayCaster& model,
+                                             const std::vector<ArchitecturePhoto>& photos,
+                                             const ObservationOptions& options,
+                                             ObservationSummary* summary,
+                                             const std::vector<Eigen::Vector3d>* sun_dirs) {
+  const auto start = std::chrono::steady_clock::now();
+  options.Validate();
+  if (sun_dirs) {
+    for (const auto& s : *sun_dirs) {
+      if (!s.allFinite() || std::abs(s.norm() - 1) > 1e-3) {
+        throw Error("observations: a sun direction is not a unit vector");
+      }
+    }
+  }
+  for (size_t p = 0; p < photos.size(); ++p) {
+    const ArchitecturePhoto& ph = photos[p];
+    const std::string name = ph.name.empty() ? "photo " + std::to_string(p) : ph.name;
+    ph.intrinsics.Validate();
+    if (ph.image.empty() || ph.image.channels < 3) {
+      throw Error(name + ": empty image or fewer than 3 channels");
+    }
+    if (ph.image.width != ph.intrinsics.width || ph.image.height != ph.intrinsics.height) {
+      throw Error(name + ": image is " + std::to_string(ph.image.width) + "x" +
+                  std::to_string(ph.image.height) + " but the intrinsics say " +
+                  std::to_string(ph.intrinsics.width) + "x" + std::to_string(ph.intrinsics.height));
+    }
+    if (ph.image.units != PixelUnits::kRadiance) {
+      throw Error(name + ": architecture photos must hold radiance (HDR)");
+    }
+    if (!ph.mask.empty() &&
+        ph.mask.size() != static_cast<size_t>(ph.image.width) * ph.image.height) {
+      throw Error(name + ": mask has " + std::to_string(ph.mask.size()) + " entries, expected " +
+                  std::to_string(static_cast<size_t>(ph.image.width) * ph.image.height));
+    }
+    if (ph.slot < 0) throw Error(name + ": negative slot index");
+    if (sun_dirs && ph.slot >= static_cast<int>(sun_dirs->size())) {
+      throw Error(name + ": slot " + std::to_string(ph.slot) + " has no sun direction");
+    }
+  }
+  const int n = grid.size();
+  std::vector<std::vector<Observation>> per_point(n);
+  std::vector<int64_t> projected(n, 0), occluded(n, 0), invalid(n, 0), mixed(n, 0), edge(n, 0);
+  const double offset = model.surface_offset();
+  tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& range) {
+    for (int i = range.begin(); i < range.end(); ++i) {
+      const GridPoint& gp = grid.points[i];
+      for (size_t p = 0; p < photos.size(); ++p) {
+        const ArchitecturePhoto& ph = photos[p];
+        const Eigen::Vector3d to_cam = ph.pose.position - gp.position;
+        const double dist = to_cam.norm();
+        if (!(dist > 0) || gp.normal.dot(to_cam) < options.min_cos_view * dist) continue;
+        const auto px = Project(ph.intrinsics, ph.pose.WorldToCamera(gp.position));
+        if (!px) continue;
+        const double x = px->x(), y = px->y(), m = options.margin_px;
+        if (!(x >= m && y >= m && x <= ph.image.width - m && y <= ph.image.height - m)) continue;
+        ++projected[i];
+        const Eigen::Vector3d dir = -to_cam / dist;
+        if (model.Occluded(ph.pose.position, dir, 0.0, dist * (1 - options.occlusion_tolerance))) {
+          ++occluded[i];
+          continue;
+        }
+        // The bilinear footprint: the four pixel centres around (x, y).
+        const int x0 = std::clamp(static_cast<int>(std::floor(x - 0.5)), 0, ph.image.width - 1);
+        const int y0 = std::clamp(static_cast<int>(std::floor(y - 0.5)), 0, ph.image.height - 1);
+        const int x1 = std::min(x0 + 1, ph.image.width - 1);
+        const int y1 = std::min(y0 + 1, ph.image.height - 1);
+        bool ok = true;
+        for (int yy : {y0, y1}) {
+          for (int xx : {x0, x1}) {
+            if (!ph.mask.empty() && ph.mask[static_cast<size_t>(yy) * ph.image.width + xx] == 0) {
+              ok = false;
+            }
+            for (int c = 0; c < 3; ++c) {
+              const float v = ph.image.at(xx, yy, c);
+              ok = ok && std::isfinite(v) && v >= 0;
+            }
+          }
+        }
+        if (!ok) {
+          ++invalid[i];
+          continue;
+        }
+        if (options.check_footprint || sun_dirs) {
+          // Corners of the 2x2 pixel block, slightly inset.
+          const double cx[2] = {x0 + 0.05, x1 + 0.95}, cy[2] = {y0 + 0.05, y1 + 0.95};
+          bool same_plane = true;
+          int lit = 0, corners = 0;
+          for (double yy : cy) {
+            for (double xx : cx) {
+              const Eigen::Vector3d d =
+                  (ph.pose.rotation * Unproject(ph.intrinsics, Eigen::Vector2d(xx, yy))).normalized();
+              const RayHit h = model.Intersect(ph.pose.position, d, 0.0);
+              if (!h.hit) {
+                same_plane = false;
+                continue;
+              }
+              const Eigen::Vector3d q = ph.pose.position + h.t * d;
+              if (grid.triangle_n[h.triangle] == 0 || std::abs(gp.normal.dot(q - gp.position)) > options.plane_tolerance_m ||
+                  grid.points[grid.triangle_first[h.triangle]].normal.dot(gp.normal) < 0.999) {
+                same_plane = false;
+              }
+              if (sun_dirs) {
+                const Eigen::Vector3d& s = (*sun_dirs)[ph.slot];
+                lit += gp.normal.dot(s) > 0 && !model.Occluded(q + offset * gp.normal, s, 0.0);
+                ++corners;
+              }
+            }
+          }
+          if (options.check_footprint && !same_plane) {
+            ++mixed[i];
+            continue;
+          }
+          if (sun_dirs && lit != 0 && lit != corners) {
+            ++edge[i];
+            continue;
+          }
+        }
+        Observation ob;
+        ob.point = i;
+        ob.slot = ph.slot;
+        ob.photo = static_cast<int>(p);
+        for (int c = 0; c < 3; ++c) ob.radiance[c] = ph.image.Sample(x, y, c);
+        per_point[i].push_back(ob);
+      }
+    }
+  });
+  std::vector<Observation> out;
+  ObservationSummary s;
+  for (int i = 0; i < n; ++i) {
+    s.projected += projected[i];
+    s.occluded += occluded[i];
+    s.invalid_pixels += invalid[i];
+    s.mixed_footprint += mixed[i];
+    s.shadow_edge += edge[i];
+    s.points_observed += !per_point[i].empty();
+    out.insert(out.end(), per_point[i].begin(), per_point[i].end());
+  }
+  s.observations = static_cast<int64_t>(out.size());
+  s.seconds = Seconds(start);
+  if (summary) *summary = s;
+  return out;
+}
+
+// Eqs. 11-12 per grid point with fixed irradiance.
+AlbedoResult SolveAlbedoFixedIrradiance(const SurfaceGrid& grid,
+                                        const std::vector<Observation>& observations,
+                                        const std::vector<SlotIrradiance>& irradiance,
+                                        const AlbedoOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  options.Validate();
+  const int n = grid.size();
+  if (observations.empty()) throw Error("albedo: no observations of the model in any photo");
+  for (size_t s = 0; s < irradiance.size(); ++s) {
+    const SlotIrradiance& irr = irradiance[s];
+    if (static_cast<int>(irr.sun.size()) != n || static_cast<int>(irr.se.size()) != n) {
+      throw Error("albedo: irradiance of slot " + std::to_string(s) + " has " +
+                  std::to_string(irr.sun.size()) + " points, the grid " + std::to_string(n));
+    }
+  }
+  // Group by point (stable), validating indices.
+  std::vector<int> order(observations.size());
+  std::iota(order.begin(), order.end(), 0);
+  for (const Observation& ob : observations) {
+    if (ob.point < 0 || ob.point >= n) {
+      throw Error("albedo: observation of grid point " + std::to_string(ob.point) +
+                  " outside the grid (" + std::to_string(n) + " points)");
+    }
+    if (ob.slot < 0 || ob.slot >= static_cast<int>(irradiance.size())) {
+      throw Error("albedo: observation in slot " + std::to_string(ob.slot) + " but only " +
+                  std::to_string(irradiance.size()) + " slots have irradiance");
+    }
+    if (!ob.radiance.allFinite() || ob.radiance.minCoeff() < 0) {
+      throw Error("albedo: observation of grid point " + std::to_string(ob.point) +
+                  " has a negative or non-finite radiance");
+    }
+  }
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    return observations[a].point < observations[b].point;
+  });
+  std::vector<int> first(n + 1, 0);
+  for (const Observation& ob : observations) ++first[ob.point + 1];
+  for (int i = 0; i < n; ++i) first[i + 1] += first[i];
+
+  auto equations = [&](int i) {
+    std::vector<Equation> eqs;
+    for (int k = first[i]; k < first[i + 1]; ++k) {
+      const Observation& ob = observations[order[k]];
+      const SlotIrradiance& irr = irradiance[ob.slot];
+      // A point that receives no light in this slot tells nothing about its albedo.
+      if (!((irr.se[ob.point] + irr.sun[ob.point]).maxCoeff() > 0)) continue;
+      eqs.push_back({kPi * ob.radiance.cast<double>(), irr.se[ob.point], irr.sun[ob.point]});
+    }
+    return eqs;
+  };
+
+  AlbedoResult res;
+  res.rho_sun.assign(n, Eigen::Vector3d::Zero());
+  res.rho_se.assign(n, Eigen::Vector3d::Zero());
+  res.observations.assign(n, 0);
+  res.flags.assign(n, 0);
+  std::vector<uint8_t> category(n, 0);  // 0 none, 1 good, 2 sun unobserved, 3 never shadowed
+  for (int i = 0; i < n; ++i) {
+    res.observations[i] = first[i + 1] - first[i];
+    if (res.observations[i] == 0) continue;
+    int sunlit = 0;
+    const auto eqs = equations(i);
+    if (eqs.empty()) continue;  // only observed when unlit: as if never observed
+    for (const auto& q : eqs) sunlit += IsSunlit(q, options.sunlit_threshold);
+    const int shadowed = static_cast<int>(eqs.size()) - sunlit;
+    category[i] = sunlit == 0 ? 2 : (shadowed == 0 ? 3 : 1);
+  }
+  std::vector<std::vector<double>> weights(n);
+  auto solve = [&](int i, Mode mode, const Eigen::Vector3d& ratio, double prior) {
+    const PointFit fit = FitPoint(equations(i), mode, ratio, prior, options);
+    res.rho_se[i] = fit.rho_se;
+    res.rho_sun[i] = fit.rho_sun;
+    if (fit.clamped) res.flags[i] |= kAlbedoClamped;
+    weights[i] = fit.weights;
+  };
+  // Pass 1: points seen both sunlit and in shadow (eqs. 11 and 12 both present).
+  tbb::parallel_for(0, n, [&](int i) {
+    if (category[i] == 1) solve(i, Mode::kBoth, Eigen::Vector3d::Ones(), 0.0);
+  });
+  // Block ratios rho_sun / rho_se from those points (global median as a fallback, else 1).
+  const int nblocks = [&] {
+    int m = 0;
+    for (const auto& p : grid.points) m = std::max(m, p.block + 1);
+    return m;
+  }();
+  // Index block + 1 (block -1: triangles without a block); all_ratio pools every point.
+  std::vector<std::array<std::vector<double>, 3>> block_ratio(nblocks + 1);
+  std::array<std::vector<double>, 3> all_ratio;
+  for (int i = 0; i < n; ++i) {
+    if (category[i] != 1) continue;
+    for (int c = 0; c < 3; ++c) {
+      if (res.rho_se[i][c] > 1e-9) {
+        const double r = res.rho_sun[i][c] / res.rho_se[i][c];
+        block_ratio[grid.points[i].block + 1][c].push_back(r);
+        all_ratio[c].push_back(r);
+      }
+    }
+  }
+  Eigen::Vector3d global_ratio = Eigen::Vector3d::Ones();
+  for (int c = 0; c < 3; ++c) {
+    if (!all_ratio[c].empty()) global_ratio[c] = Median(all_ratio[c]);
+  }
+  auto ratio_for = [&](int block) {
+    Eigen::Vector3d r = global_ratio;
+    for (int c = 0; c < 3; ++c) {
+      const auto& v = block_ratio[block + 1][c];
+      if (v.size() >= 3) r[c] = Median(v);
+    }
+    return r;
+  };
+  std::vector<Eigen::Vector3d> ratios(nblocks + 1);
+  for (int b = -1; b < nblocks; ++b) ratios[b + 1] = ratio_for(b);
+  // Pass 2: points lacking one of the two equations (and, with ratio_prior, all the others
+  // again with the block ratio as a weak prior).
+  tbb::parallel_for(0, n, [&](int i) {
+    const Eigen::Vector3d& r = ratios[grid.points[i].block + 1];
+    if (category[i] == 1 && options.ratio_prior > 0) {
+      solve(i, Mode::kBoth, r, options.ratio_prior);
+    } else if (category[i] == 2) {
+      solve(i, Mode::kSeOnly, r, 0.0);
+      res.flags[i] |= kAlbedoSunUnobserved;
+    } else if (category[i] == 3) {
+      solve(i, Mode::kBoth, r, options.never_shadowed_prior);
+      res.flags[i] |= kAlbedoNeverShadowed;
+    }
+  });
+  // Never-observed points: from the nearest observed points of the same face, when close.
+  if (options.fill_radius_m > 0) {
+    const double R = options.fill_radius_m;
+    auto key = [&](const Eigen::Vector3d& p) {
+      return Eigen::Vector3i(static_cast<int>(std::floor(p.x() / R)),
+                             static_cast<int>(std::floor(p.y() / R)),
+                             static_cast<int>(std::floor(p.z() / R)));
+    };
+    auto hash = [](const Eigen::Vector3i& k) {
+      return (static_cast<int64_t>(k.x()) * 73856093) ^ (static_cast<int64_t>(k.y()) * 19349663) ^
+             (static_cast<int64_t>(k.z()) * 83492791);
+    };
+    std::unordered_map<int64_t, std::vector<int>> cells;
+    for (int i = 0; i < n; ++i) {
+      if (category[i] != 0) cells[hash(key(grid.points[i].position))].push_back(i);
+    }
+    std::vector<int> filled(n, 0);
+    tbb::parallel_for(0, n, [&](int i) {
+      if (category[i] != 0) return;
+      const GridPoint& p = grid.points[i];
+      const Eigen::Vector3i k = key(p.position);
+      std::vector<std::pair<double, int>> near;
+      for (int dx = -1; dx <= 1; ++dx) {
+        for (int dy = -1; dy <= 1; ++dy) {
+          for (int dz = -1; dz <= 1; ++dz) {
+            auto it = cells.find(hash(k + Eigen::Vector3i(dx, dy, dz)));
+            if (it == cells.end()) continue;
+            for (int j : it->second) {
+              const GridPoint& q = grid.points[j];
+              if (q.block != p.block || q.normal.dot(p.normal) < 0.999 ||
+                  std::abs(p.normal.dot(q.position - p.position)) > 0.05) {
+                continue;
+              }
+              const double d = (q.position - p.position).norm();
+              if (d <= R) near.emplace_back(d, j);
+            }
+          }
+        }
+      }
+      if (near.empty()) return;
+      const size_t m = std::min<size_t>(near.size(), 6);
+      std::partial_sort(near.begin(), near.begin() + m, near.end());
+      Eigen::Vector3d se = Eigen::Vector3d::Zero(), sun = Eigen::Vector3d::Zero();
+      double wsum = 0;
+      for (size_t a = 0; a < m; ++a) {
+        const double w = 1.0 / (near[a].first * near[a].first + 1e-6);
+        se += w * res.rho_se[near[a].second];
+        sun += w * res.rho_sun[near[a].second];
+        wsum += w;
+      }
+      res.rho_se[i] = se / wsum;
+      res.rho_sun[i] = sun / wsum;
+      res.flags[i] |= kAlbedoNoObservations | kAlbedoFilled;
+      filled[i] = 1;
+    });
+    for (int i = 0; i < n; ++i) {
+      if (filled[i]) category[i] = 4;  // filled from neighbours
+    }
+  }
+  // The rest: the block median (global median as a fallback).
+  std::vector<std::array<std::vector<double>, 6>> block_vals(nblocks + 1);
+  std::array<std::vector<double>, 6> all_vals;
+  for (int i = 0; i < n; ++i) {
+    if (category[i] == 0 || category[i] == 4) continue;
+    for (int c = 0; c < 3; ++c) {
+      block_vals[grid.points[i].block + 1][c].push_back(res.rho_se[i][c]);
+      block_vals[grid.points[i].block + 1][c + 3].push_back(res.rho_sun[i][c]);
+      all_vals[c].push_back(res.rho_se[i][c]);
+      all_vals[c + 3].push_back(res.rho_sun[i][c]);
+    }
+  }
+  for (int b = -1; b < nblocks; ++b) {
+    auto& vals = block_vals[b + 1];
+    bool any = false;
+    for (int i = 0; i < n && !any; ++i) any = category[i] == 0 && grid.points[i].block == b;
+    if (!any) continue;
+    Eigen::Vector3d se, sun;
+    for (int c = 0; c < 3; ++c) {
+      const auto& vs = vals[c].empty() ? all_vals[c] : vals[c];
+      const auto& vu = vals[c + 3].empty() ? all_vals[c + 3] : vals[c + 3];
+      se[c] = Median(vs);
+      sun[c] = Median(vu);
+    }
+    for (int i = 0; i < n; ++i) {
+      if (category[i] != 0 || grid.points[i].block != b) continue;
+      res.rho_se[i] = se;
+      res.rho_sun[i] = sun;
+      res.flags[i] |= kAlbedoNoObservations | kAlbedoFilled;
+    }
+  }
+  // Summary: residuals over every observation.
+  AlbedoSummary& s = res.summary;
+  s.points = n;
+  s.observations = static_cast<int64_t>(observations.size());
+  std::vector<double> rel;
+  rel.reserve(observations.size() * 3);
+  int64_t down = 0;
+  double sum2 = 0;
+  for (int i = 0; i < n; ++i) {
+    if (category[i] == 4) {
+      ++s.points_filled_neighbours;
+      category[i] = 0;
+    }
+    s.points_observed += category[i] != 0;
+    s.points_sun_unobserved += category[i] == 2;
+    s.points_never_shadowed += category[i] == 3;
+    s.points_clamped += (res.flags[i] & kAlbedoClamped) != 0;
+    if (category[i] == 0) continue;
+    const auto eqs = equations(i);
+    for (size_t k = 0; k < eqs.size(); ++k) {
+      if (k < weights[i].size() && weights[i][k] < 0.5) ++down;
+      for (int c = 0; c < 3; ++c) {
+        const double pred =
+            res.rho_se[i][c] * eqs[k].e_se[c] + res.rho_sun[i][c] * eqs[k].e_sun[c];
+        const double r = (eqs[k].y[c] - pred) / std::max(eqs[k].y[c], 1e-30);
+        rel.push_back(std::abs(r));
+        sum2 += r * r;
+      }
+    }
+  }
+  s.residual_rms_rel = rel.empty() ? 0 : std::sqrt(sum2 / rel.size());
+  s.residual_median_rel = Median(rel);
+  s.downweighted_fraction = static_cast<double>(down) / observations.size();
+  s.outer_iterations = 1;
+  for (int i = 0; i < n; ++i) {
+    if (!res.rho_se[i].allFinite() || !res.rho_sun[i].allFinite()) {
+      throw Error("albedo: non-finite albedo at grid point " + std::to_string(i) +
+                  " (degenerate irradiance?)");
+    }
+  }
+  s.seconds = Seconds(start);
+  return res;
+}
+
+// §4.1: albedos, then the one-bounce interreflection from them, then albedos again.
+AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
+                         const RayCaster& model, const std::vector<Lighting>& slots,
+                         const std::vector<Observation>& observations,
+                         const AlbedoOptions& options, std::vector<SlotIrradiance>* irradiance) {
+  const auto start = std::chrono::steady_clock::now();
+  options.Validate();
+  if (slots.empty()) throw Error("albedo: no time-of-day slots");
+  std::vector<SlotIrradiance> irr(slots.size());
+  tbb::parallel_for(0, static_cast<int>(slots.size()), [&](int s) {
+    irr[s] = ComputeIrradiance(grid, cache, model, slots[s], options.irradiance);
+  });
+  AlbedoResult res = SolveAlbedoFixedIrradiance(grid, observations, irr, options);
+  std::vector<double> changes;
+  for (int it = 1; it < options.outer_iterations; ++it) {
+    for (auto& slot_irr : irr) {
+      AddInterreflection(grid, cache, res.rho_sun, res.rho_se, &slot_irr, options.bounces);
+    }
+    AlbedoResult next = SolveAlbedoFixedIrradiance(grid, observations, irr, options);
+    double change = 0;
+    int count = 0;
+    for (int i = 0; i < grid.size(); ++i) {
+      if (next.observations[i] == 0) continue;
+      for (int c = 0; c < 3; ++c) {
+        const double a = next.rho_se[i][c] + next.rho_sun[i][c];
+        const double b = res.rho_se[i][c] + res.rho_sun[i][c];
+        if (a + b > 0) {
+          change += std::abs(a - b) / (0.5 * (a + b));
+          ++count;
+        }
+      }
+    }
+    changes.push_back(count ? change / count : 0);
+    res = std::move(next);
+  }
+  res.summary.change_per_iteration = changes;
+  res.summary.outer_iterations = options.outer_iterations;
+  res.summary.seconds = Seconds(start);
+  if (irradiance) *irradiance = std::move(irr);
+  return res;
+}
+
+}  // namespace rouen

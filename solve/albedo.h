@@ -1,0 +1,150 @@
+// Diffuse pseudo-albedos per grid point and channel (Yu & Malik 1998, §4.1, eqs. 11-12):
+// one for the sun's spectrum (rho_sun) and one for the sky and environment (rho_se), from
+// radiance observed in HDR architecture photos at several times of day:
+//   pi I_k = rho_se E_se,k + rho_sun E_sun,k   for every observation k of a point.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/camera.h"
+#include "core/image.h"
+#include "solve/grid.h"
+#include "solve/irradiance.h"
+#include "solve/raycast.h"
+
+namespace rouen {
+
+// An HDR photo of the architecture with known camera and time-of-day slot.
+struct ArchitecturePhoto {
+  Image image;  // kRadiance, >= 3 channels
+  Intrinsics intrinsics;
+  Pose pose;
+  int slot = 0;  // index into the per-slot lighting / irradiance
+  std::vector<uint8_t> mask;  // empty: all valid; else width*height, nonzero = valid pixel
+  std::string name;           // for messages
+};
+
+struct Observation {
+  int point = 0;
+  int slot = 0;
+  int photo = 0;
+  Eigen::Vector3f radiance = Eigen::Vector3f::Zero();  // I, relative radiance
+};
+
+struct ObservationOptions {
+  double margin_px = 2;               // the projection must lie this far inside the image
+  double occlusion_tolerance = 0.005; // visibility ray stops this fraction short of the point
+  double min_cos_view = 0.05;         // skip views more grazing than this (cos of angle)
+  // The bilinear footprint (2x2 pixels) must see the point's own plane at all four corners:
+  // no silhouette, occluding edge or other face mixes into the sample.
+  bool check_footprint = true;
+  double plane_tolerance_m = 0.05;    // distance of a corner's hit from the point's plane
+  void Validate() const;
+};
+
+struct ObservationSummary {
+  int64_t projected = 0;       // point-photo pairs in front of the camera and in the image
+  int64_t occluded = 0;        // of those, hidden by the model (App. B)
+  int64_t mixed_footprint = 0;  // footprint crosses an edge of the face (check_footprint)
+  int64_t shadow_edge = 0;      // footprint crosses a cast-shadow edge (sun_dirs given)
+  int64_t invalid_pixels = 0;  // masked or non-finite
+  int64_t observations = 0;
+  int points_observed = 0;
+  double seconds = 0;
+};
+
+// App. B visibility by ray casting: for every photo and grid point, project, check the image
+// bounds (margin), that the face looks at the camera and that the ray from the camera reaches
+// the point; then take the bilinear radiance. With `sun_dirs` (unit ENU per slot), samples
+// whose footprint straddles a cast-shadow edge are dropped too (the grid point's single sun
+// visibility would not describe them). Sorted by point, then photo.
+std::vector<Observation> CollectObservations(const SurfaceGrid& grid, const RayCaster& model,
+                                             const std::vector<ArchitecturePhoto>& photos,
+                                             const ObservationOptions& options = {},
+                                             ObservationSummary* summary = nullptr,
+                                             const std::vector<Eigen::Vector3d>* sun_dirs = nullptr);
+
+enum class RobustLoss {
+  kNone,
+  kHuber,  // weight min(1, k / |z|)
+  kPaper,  // the paper's rho(z) = (1 - e^{-|z|/2}) / (1 + e^{-|z|/2}) as IRLS weights
+};
+
+// Per-point flags (bits).
+enum AlbedoFlag : uint8_t {
+  kAlbedoNoObservations = 1,  // never seen while lit: filled from neighbours or the block
+  kAlbedoSunUnobserved = 2,   // never sunlit when seen: rho_sun = rho_se x block ratio
+  kAlbedoNeverShadowed = 4,   // never in shadow when seen: eq. 11 missing, weak ratio prior used
+  kAlbedoClamped = 8,         // the rho >= 0 constraint was active in some channel
+  kAlbedoFilled = 16,         // value not from this point's own data
+};
+
+struct AlbedoOptions {
+  RobustLoss loss = RobustLoss::kHuber;
+  double huber_k = 1.345;       // in units of the robust scale
+  double min_scale = 0.01;      // floor on the relative residual scale (1%)
+  int irls_iterations = 8;
+  int outer_iterations = 3;     // albedo -> interreflection -> albedo ... (§4.1)
+  int bounces = 1;              // radiosity passes in each interreflection update
+  // An observation counts as sunlit when E_sun > sunlit_threshold x E_se (green).
+  double sunlit_threshold = 0.05;
+  // Weight of the prior rho_sun = ratio x rho_se for never-shadowed points, relative to one
+  // observation's relative residual squared (0 disables).
+  double never_shadowed_prior = 1e-3;
+  // The same prior for points seen both sunlit and shadowed (0: none; their own data decide).
+  double ratio_prior = 0;
+  // Never-observed points take the inverse-distance mean of up to 6 observed points of the same
+  // block and plane within this radius (0: off); beyond it, the block median.
+  double fill_radius_m = 3.0;
+  ObservationOptions observation;
+  IrradianceOptions irradiance;
+
+  void Validate() const;  // throws rouen::Error
+};
+
+struct AlbedoSummary {
+  int points = 0;
+  int points_observed = 0;
+  int points_sun_unobserved = 0;
+  int points_never_shadowed = 0;
+  int points_clamped = 0;
+  int points_filled_neighbours = 0;  // never observed, filled from observed neighbours
+  int64_t observations = 0;
+  int outer_iterations = 0;
+  // Mean relative change of the albedos at each outer iteration after the first.
+  std::vector<double> change_per_iteration;
+  double residual_rms_rel = 0;     // relative residual (pi I - model) / (pi I), all obs
+  double residual_median_rel = 0;  // median |relative residual|
+  double downweighted_fraction = 0;  // observations with robust weight < 0.5
+  double seconds = 0;
+  std::string BriefReport() const;
+};
+
+struct AlbedoResult {
+  std::vector<Eigen::Vector3d> rho_sun, rho_se;  // per grid point, RGB
+  std::vector<int> observations;                 // per grid point
+  std::vector<uint8_t> flags;                    // AlbedoFlag bits per grid point
+  AlbedoSummary summary;
+};
+
+// Eqs. 11-12 per point with fixed irradiance (irradiance[slot] per slot); IRLS, rho >= 0.
+// Never-observed points are filled with their block's median.
+AlbedoResult SolveAlbedoFixedIrradiance(const SurfaceGrid& grid,
+                                        const std::vector<Observation>& observations,
+                                        const std::vector<SlotIrradiance>& irradiance,
+                                        const AlbedoOptions& options = {});
+
+// §4.1 with the outer iteration: irradiance without bounce -> albedos -> irradiance with the
+// one-bounce interreflection from the current albedos -> albedos ... `irradiance` receives
+// the per-slot irradiance of the last solve (with the bounce when outer_iterations > 1).
+AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
+                         const RayCaster& model, const std::vector<Lighting>& slots,
+                         const std::vector<Observation>& observations,
+                         const AlbedoOptions& options = {},
+                         std::vector<SlotIrradiance>* irradiance = nullptr);
+
+}  // namespace rouen

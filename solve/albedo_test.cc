@@ -1,0 +1,306 @@
+#include "solve/albedo.h"
+
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+#include "core/error.h"
+#include "solve/test_scenes.h"
+
+namespace rouen {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// A plaza with a box on it: faces in sun and shadow at different times.
+struct World {
+  Mesh mesh;
+  SurfaceGrid grid;
+  std::unique_ptr<RayCaster> rc;
+  HemisphereCache cache;
+  std::vector<Lighting> slots;
+  std::vector<Eigen::Vector3d> rho_sun, rho_se;
+};
+
+World MakeWorld() {
+  World w;
+  const int plaza = w.mesh.AddBlock("plaza");
+  const int box = w.mesh.AddBlock("box");
+  testing::AddHorizontalRect(&w.mesh, -6, 6, -6, 6, 0, true, plaza);
+  testing::AddBox(&w.mesh, {-1, -1, 0}, {1, 1, 3}, box);
+  GridOptions go;
+  go.spacing_m = 0.8;
+  go.block_spacing_m["plaza"] = 2.0;
+  w.grid = BuildSurfaceGrid(w.mesh, go);
+  w.rc = std::make_unique<RayCaster>(w.mesh);
+  HemisphereOptions ho;
+  ho.directions = 64;
+  w.cache = BuildHemisphereCache(w.grid, *w.rc, ho);
+  const double az_deg[] = {100, 160, 220, 260};
+  for (double az : az_deg) {
+    Lighting l;
+    const double a = az * kPi / 180, el = 35 * kPi / 180;
+    l.sun_dir = Eigen::Vector3d(std::cos(el) * std::sin(a), std::cos(el) * std::cos(a), std::sin(el));
+    l.sun_radiance = Eigen::Vector3d(3e4, 2.8e4, 2.5e4);
+    l.sun_solid_angle_sr = 6.8e-5;
+    l.env = EnvironmentMap::Constant(EnvOptions(), {0.25, 0.35, 0.6}, {0.1, 0.1, 0.08});
+    w.slots.push_back(l);
+  }
+  // Smoothly varying true albedos; rho_sun differs from rho_se (pseudo-BRDFs differ).
+  for (const auto& p : w.grid.points) {
+    const Eigen::Vector3d base(0.3 + 0.1 * std::sin(p.position.x()), 0.4 + 0.05 * p.position.z() / 3,
+                               0.5 + 0.1 * std::cos(p.position.y()));
+    w.rho_se.push_back(base);
+    w.rho_sun.push_back(base.cwiseProduct(Eigen::Vector3d(1.1, 1.0, 0.9)));
+  }
+  return w;
+}
+
+// Plaza points under the box receive no light at all (and no camera sees them).
+bool Buried(const World& w, int i) {
+  const Eigen::Vector3d& p = w.grid.points[i].position;
+  return std::abs(p.x()) < 1 && std::abs(p.y()) < 1 && p.z() < 0.01;
+}
+
+// Observations consistent with eqs. 11-12 for the given irradiance: every point in every slot.
+std::vector<Observation> Observe(const World& w, const std::vector<SlotIrradiance>& irr,
+                                 bool include_buried = false) {
+  std::vector<Observation> obs;
+  for (int i = 0; i < w.grid.size(); ++i) {
+    if (Buried(w, i) && !include_buried) continue;
+    for (size_t s = 0; s < irr.size(); ++s) {
+      Observation o;
+      o.point = i;
+      o.slot = static_cast<int>(s);
+      o.photo = static_cast<int>(s);
+      const Eigen::Vector3d I =
+          (w.rho_se[i].cwiseProduct(irr[s].se[i]) + w.rho_sun[i].cwiseProduct(irr[s].sun[i])) / kPi;
+      o.radiance = I.cast<float>();
+      obs.push_back(o);
+    }
+  }
+  return obs;
+}
+
+std::vector<SlotIrradiance> Irradiance(const World& w) {
+  std::vector<SlotIrradiance> irr;
+  for (const auto& l : w.slots) irr.push_back(ComputeIrradiance(w.grid, w.cache, *w.rc, l));
+  return irr;
+}
+
+TEST(AlbedoTest, RecoversBothPseudoAlbedosFromConsistentData) {
+  const World w = MakeWorld();
+  const auto irr = Irradiance(w);
+  const auto obs = Observe(w, irr);
+  const AlbedoResult r = SolveAlbedoFixedIrradiance(w.grid, obs, irr);
+  ASSERT_EQ(r.rho_se.size(), static_cast<size_t>(w.grid.size()));
+  int good = 0, buried = 0;
+  for (int i = 0; i < w.grid.size(); ++i) {
+    if (Buried(w, i)) {
+      ++buried;
+      EXPECT_EQ(r.observations[i], 0);
+      continue;
+    }
+    EXPECT_EQ(r.observations[i], 4);
+    // rho_se is determined (eq. 11 or diverse sun ratios) except when the point is never in
+    // the sun; then rho_sun comes from the block ratio.
+    EXPECT_NEAR((r.rho_se[i] - w.rho_se[i]).norm(), 0, 1e-4 * w.rho_se[i].norm()) << i;
+    if (!(r.flags[i] & (kAlbedoSunUnobserved | kAlbedoNeverShadowed))) {
+      EXPECT_NEAR((r.rho_sun[i] - w.rho_sun[i]).norm(), 0, 1e-4 * w.rho_sun[i].norm()) << i;
+      ++good;
+    }
+  }
+  EXPECT_GT(good, w.grid.size() / 3);
+  EXPECT_LT(r.summary.residual_rms_rel, 1e-4);
+  EXPECT_GT(buried, 0);
+  EXPECT_EQ(r.summary.points_observed, w.grid.size() - buried);
+  // Observations of points that receive no light at all carry no information: unobserved.
+  const AlbedoResult r2 = SolveAlbedoFixedIrradiance(w.grid, Observe(w, irr, true), irr);
+  for (int i = 0; i < w.grid.size(); ++i) {
+    if (Buried(w, i)) {
+      EXPECT_TRUE(r2.flags[i] & kAlbedoNoObservations);
+    }
+  }
+  // Block ratio for never-sunlit points: 1.1, 1.0, 0.9 per channel.
+  for (int i = 0; i < w.grid.size(); ++i) {
+    if (r.flags[i] & kAlbedoSunUnobserved) {
+      EXPECT_NEAR(r.rho_sun[i].x() / r.rho_se[i].x(), 1.1, 1e-3);
+      EXPECT_NEAR(r.rho_sun[i].z() / r.rho_se[i].z(), 0.9, 1e-3);
+    }
+  }
+}
+
+TEST(AlbedoTest, RobustAgainstAShadowBoundaryOutlier) {
+  World w = MakeWorld();
+  // More slots so that one wrong observation per point is a minority.
+  const std::vector<Lighting> base = w.slots;
+  for (double az : {130.0, 190.0, 240.0}) {
+    Lighting l = base[0];
+    const double a = az * kPi / 180, el = 50 * kPi / 180;
+    l.sun_dir = Eigen::Vector3d(std::cos(el) * std::sin(a), std::cos(el) * std::cos(a), std::sin(el));
+    w.slots.push_back(l);
+  }
+  const auto irr = Irradiance(w);
+  auto obs = Observe(w, irr);
+  // Corrupt one observation of every 5th point: its pixel shows shadow although the grid
+  // point is lit (or the reverse), as at a shadow edge.
+  for (size_t k = 0; k < obs.size(); k += 5 * 7) {
+    const auto& o = obs[k];
+    obs[k].radiance = (w.rho_se[o.point].cwiseProduct(irr[o.slot].se[o.point]) / kPi +
+                       w.rho_sun[o.point].cwiseProduct(Eigen::Vector3d::Constant(300)) / kPi)
+                          .cast<float>();
+  }
+  AlbedoOptions opt;
+  const AlbedoResult r = SolveAlbedoFixedIrradiance(w.grid, obs, irr, opt);
+  opt.loss = RobustLoss::kNone;
+  const AlbedoResult plain = SolveAlbedoFixedIrradiance(w.grid, obs, irr, opt);
+  opt.loss = RobustLoss::kPaper;
+  const AlbedoResult paper = SolveAlbedoFixedIrradiance(w.grid, obs, irr, opt);
+  double err = 0, err_plain = 0, err_paper = 0;
+  int n = 0;
+  for (size_t k = 0; k < obs.size(); k += 5 * 7) {
+    const int i = obs[k].point;
+    err += (r.rho_se[i] - w.rho_se[i]).norm() / w.rho_se[i].norm();
+    err_plain += (plain.rho_se[i] - w.rho_se[i]).norm() / w.rho_se[i].norm();
+    err_paper += (paper.rho_se[i] - w.rho_se[i]).norm() / w.rho_se[i].norm();
+    ++n;
+  }
+  EXPECT_LT(err / n, 0.25 * err_plain / n);
+  EXPECT_LT(err_paper / n, 0.25 * err_plain / n);
+  EXPECT_GT(r.summary.downweighted_fraction, 0);
+}
+
+TEST(AlbedoTest, OuterIterationConvergesToTheBounceConsistentAlbedo) {
+  const World w = MakeWorld();
+  // Photos generated with one bounce from the true albedos.
+  auto irr = Irradiance(w);
+  for (auto& s : irr) AddInterreflection(w.grid, w.cache, w.rho_sun, w.rho_se, &s, 1);
+  const auto obs = Observe(w, irr);
+  AlbedoOptions opt;
+  opt.outer_iterations = 1;
+  const AlbedoResult first = SolveAlbedo(w.grid, w.cache, *w.rc, w.slots, obs, opt);
+  opt.outer_iterations = 4;
+  std::vector<SlotIrradiance> final_irr;
+  const AlbedoResult last = SolveAlbedo(w.grid, w.cache, *w.rc, w.slots, obs, opt, &final_irr);
+  ASSERT_EQ(last.summary.change_per_iteration.size(), 3u);
+  EXPECT_LT(last.summary.change_per_iteration[2], last.summary.change_per_iteration[0]);
+  ASSERT_EQ(final_irr.size(), w.slots.size());
+  EXPECT_TRUE(final_irr[0].has_bounce);
+  double e_first = 0, e_last = 0;
+  for (int i = 0; i < w.grid.size(); ++i) {
+    if (Buried(w, i)) continue;
+    e_first += (first.rho_se[i] - w.rho_se[i]).norm() / w.rho_se[i].norm() / w.grid.size();
+    e_last += (last.rho_se[i] - w.rho_se[i]).norm() / w.rho_se[i].norm() / w.grid.size();
+  }
+  EXPECT_GT(e_first, 0.005);  // ignoring the bounce biases the albedo
+  EXPECT_LT(e_last, 0.1 * e_first);
+  EXPECT_LT(e_last, 1e-3);
+}
+
+TEST(AlbedoTest, UnobservedPointsAreFilledAndFlagged) {
+  const World w = MakeWorld();
+  const auto irr = Irradiance(w);
+  auto obs = Observe(w, irr);
+  // Drop every observation of the box's top face.
+  std::vector<Observation> kept;
+  for (const auto& o : obs) {
+    if (w.grid.points[o.point].normal.z() > 0.9 && w.grid.points[o.point].block == 1) continue;
+    kept.push_back(o);
+  }
+  const AlbedoResult r = SolveAlbedoFixedIrradiance(w.grid, kept, irr);
+  int filled = 0;
+  for (int i = 0; i < w.grid.size(); ++i) {
+    if (r.observations[i] == 0) {
+      EXPECT_TRUE(r.flags[i] & kAlbedoNoObservations);
+      EXPECT_TRUE(r.rho_se[i].allFinite());
+      EXPECT_GT(r.rho_se[i].minCoeff(), 0.2);
+      ++filled;
+    }
+  }
+  EXPECT_GT(filled, 0);
+  EXPECT_EQ(r.summary.points_observed, w.grid.size() - filled);
+}
+
+TEST(AlbedoTest, BadInputThrows) {
+  const World w = MakeWorld();
+  const auto irr = Irradiance(w);
+  EXPECT_THROW(SolveAlbedoFixedIrradiance(w.grid, {}, irr), Error);
+  auto obs = Observe(w, irr);
+  auto bad = obs;
+  bad[0].slot = 9;
+  EXPECT_THROW(SolveAlbedoFixedIrradiance(w.grid, bad, irr), Error);
+  bad = obs;
+  bad[0].point = -1;
+  EXPECT_THROW(SolveAlbedoFixedIrradiance(w.grid, bad, irr), Error);
+  bad = obs;
+  bad[0].radiance.x() = NAN;
+  EXPECT_THROW(SolveAlbedoFixedIrradiance(w.grid, bad, irr), Error);
+  auto short_irr = irr;
+  short_irr[1].sun.pop_back();
+  EXPECT_THROW(SolveAlbedoFixedIrradiance(w.grid, obs, short_irr), Error);
+  AlbedoOptions opt;
+  opt.outer_iterations = 0;
+  EXPECT_THROW(SolveAlbedoFixedIrradiance(w.grid, obs, irr, opt), Error);
+  EXPECT_THROW(SolveAlbedo(w.grid, w.cache, *w.rc, {}, obs), Error);
+}
+
+// Photos: a wall seen by a pinhole camera; a post in front hides part of it.
+TEST(CollectObservationsTest, ProjectsChecksVisibilityMaskAndSamples) {
+  Mesh m;
+  const int wall = m.AddBlock("wall");
+  const int post = m.AddBlock("post");
+  m.AddPolygon({{-4, 0, 0}, {4, 0, 0}, {4, 0, 4}, {-4, 0, 4}}, wall);  // normal -y
+  testing::AddBox(&m, {-0.5, -3.5, 0}, {0.5, -2.5, 5}, post);
+  const SurfaceGrid g = BuildSurfaceGrid(m, GridOptions());
+  const RayCaster rc(m);
+  ArchitecturePhoto ph;
+  ph.intrinsics = Intrinsics::PinholeFov(320, 240, 70);
+  ph.pose = Pose::LookAt({0, -12, 2}, {0, 0, 2});
+  ph.image = Image(320, 240, 3, PixelUnits::kRadiance, 0.f);
+  // Radiance on the wall: a linear function of the world point (bilinear sampling of a linear
+  // field along a plane is exact only up to perspective: tolerance below).
+  auto f = [](const Eigen::Vector3d& p) { return Eigen::Vector3d(1 + 0.1 * p.x(), 2 + 0.2 * p.z(), 3); };
+  for (int y = 0; y < 240; ++y) {
+    for (int x = 0; x < 320; ++x) {
+      const Eigen::Vector3d d = ph.pose.rotation * Unproject(ph.intrinsics, {x + 0.5, y + 0.5});
+      const RayHit h = rc.Intersect(ph.pose.position, d.normalized());
+      if (!h.hit) continue;
+      const Eigen::Vector3d v = f(ph.pose.position + h.t * d.normalized());
+      for (int c = 0; c < 3; ++c) ph.image.at(x, y, c) = static_cast<float>(v[c]);
+    }
+  }
+  ph.mask.assign(320 * 240, 1);
+  for (int y = 0; y < 240; ++y) {
+    for (int x = 90; x < 110; ++x) ph.mask[y * 320 + x] = 0;  // a strip on the wall's left
+  }
+  ObservationSummary s;
+  const auto obs = CollectObservations(g, rc, {ph}, ObservationOptions(), &s);
+  EXPECT_GT(s.occluded, 0);
+  EXPECT_GT(s.invalid_pixels, 0);
+  EXPECT_EQ(s.observations, static_cast<int64_t>(obs.size()));
+  ASSERT_GT(obs.size(), 20u);
+  int wall_points = 0;
+  for (const auto& o : obs) {
+    const GridPoint& p = g.points[o.point];
+    EXPECT_GT(p.normal.dot(ph.pose.position - p.position), 0);  // faces the camera
+    EXPECT_NEAR((o.radiance.cast<double>() - f(p.position)).norm(), 0, 0.03);
+    if (p.block != wall) continue;
+    ++wall_points;
+    // The post hides |x| < 0.59..0.71 m of the wall from this camera.
+    EXPECT_GT(std::abs(p.position.x()), 0.55);
+  }
+  EXPECT_GT(wall_points, 20);
+  // Bad input.
+  ArchitecturePhoto wrong = ph;
+  wrong.mask.pop_back();
+  EXPECT_THROW(CollectObservations(g, rc, {wrong}), Error);
+  wrong = ph;
+  wrong.image = Image(100, 100, 3, PixelUnits::kRadiance);
+  EXPECT_THROW(CollectObservations(g, rc, {wrong}), Error);
+  wrong = ph;
+  wrong.image.units = PixelUnits::kDigital;
+  EXPECT_THROW(CollectObservations(g, rc, {wrong}), Error);
+}
+
+}  // namespace
+}  // namespace rouen

@@ -1,0 +1,89 @@
+// Coarse environment radiance map (Yu & Malik 1998, §3.3): the sphere of directions divided
+// into latitude-longitude regions, each holding the average radiance of the panorama pixels
+// that fall into it. Directions are unit ENU vectors; azimuth from north eastward.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+#include <nlohmann/json_fwd.hpp>
+
+#include "core/camera.h"
+#include "core/image.h"
+#include "solve/raycast.h"
+#include "solve/sky_model.h"
+
+namespace rouen {
+
+struct EnvOptions {
+  int bands_below = 9;   // elevation bands in [-90, 0] deg
+  int bands_above = 9;   // elevation bands in [0, 90] deg
+  int sectors = 24;      // azimuth sectors over 360 deg
+  double sun_exclusion_deg = 2.0;  // panorama pixels this close to the sun are skipped
+  int pixel_stride = 1;            // use every stride-th panorama pixel in x and y
+  int sky_fill_samples = 8;        // per axis, to average the sky model over a region
+
+  void Validate() const;  // throws rouen::Error
+};
+
+enum class EnvRegionSource : uint8_t {
+  kObserved = 0,   // mean of panorama pixels
+  kSkyModel = 1,   // above the horizon, never observed: sky model mean over the region
+  kNeighbour = 2,  // below the horizon, never observed: nearest observed region
+  kConstant = 3,   // set by hand (tests, defaults)
+};
+
+struct EnvironmentMap {
+  int bands_below = 9, bands_above = 9, sectors = 24;
+  // Per region, band-major from the nadir band upwards, sector from azimuth 0 eastwards.
+  std::vector<Eigen::Vector3d> radiance;  // relative radiance, RGB
+  std::vector<int> pixel_count;           // panorama pixels averaged (0 when filled)
+  std::vector<EnvRegionSource> source;
+
+  int num_bands() const { return bands_below + bands_above; }
+  int num_regions() const { return num_bands() * sectors; }
+  int Region(const Eigen::Vector3d& dir) const;  // `dir` need not be unit
+  Eigen::Vector3d Radiance(const Eigen::Vector3d& dir) const {
+    return radiance[Region(dir)];
+  }
+  // Region bounds in radians: elevation [lo, hi], azimuth [lo, hi].
+  void RegionBounds(int region, double* el_lo, double* el_hi, double* az_lo,
+                    double* az_hi) const;
+  // Fraction of regions that were observed.
+  double ObservedFraction() const;
+  // Throws rouen::Error when the sizes disagree or a radiance is negative or not finite.
+  void Validate() const;
+
+  // A map with one radiance above the horizon and another below (tests, fallbacks).
+  static EnvironmentMap Constant(const EnvOptions& options, const Eigen::Vector3d& above,
+                                 const Eigen::Vector3d& below);
+  // The sky model averaged per region above the horizon, `ground` below.
+  static EnvironmentMap FromSky(const EnvOptions& options, const SkyModel& sky,
+                                const Eigen::Vector3d& ground);
+};
+
+void to_json(nlohmann::json& j, const EnvironmentMap& m);
+void from_json(const nlohmann::json& j, EnvironmentMap& m);  // validates
+
+struct EnvSummary {
+  int pixels_used = 0;
+  int pixels_model = 0;    // rays that hit the model (building, plaza): skipped
+  int pixels_sun = 0;      // within sun_exclusion_deg of the sun: skipped
+  int pixels_invalid = 0;  // non-finite or negative: skipped
+  int regions_observed = 0, regions_sky = 0, regions_neighbour = 0;
+  double seconds = 0;
+};
+
+// §3.3: averages an HDR panorama (kRadiance) over the regions. Pixels whose ray from the
+// panorama position hits the model are skipped (the model is lit by interreflection), as are
+// pixels near the sun and invalid ones. Unobserved regions above the horizon take the sky
+// model's mean over the region; below, the nearest observed region in the same band, else
+// the nearest band with observations (towards the horizon first).
+EnvironmentMap BuildEnvironmentMap(const Image& hdr_pano, const Intrinsics& intrinsics,
+                                   const Pose& pose, const RayCaster& model,
+                                   const Eigen::Vector3d& sun_dir, double sun_angular_radius_rad,
+                                   const SkyModel& sky, const EnvOptions& options,
+                                   EnvSummary* summary = nullptr);
+
+}  // namespace rouen

@@ -1,0 +1,82 @@
+// Internal to solve/: the eq. 10 cost of the seven-parameter sky model with analytic
+// derivatives (used by sky_fit.cc; exposed here for the gradient-check test only).
+#pragma once
+
+#include <ceres/cost_function.h>
+
+#include <Eigen/Core>
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+namespace rouen::internal {
+
+// Parameter block order.
+enum SkyParamIndex { kLz = 0, kA, kB, kC, kD, kE, kH, kNumSkyParams };
+
+// One sample, with the geometry precomputed.
+struct SkyPoint {
+  double inv_cos_xi;  // 1 / max(cos xi, 0.01)
+  double log_gamma;   // ln max(gamma, 1e-6), gamma in radians
+  double cos2_gamma;  // cos^2 gamma
+  double y;           // normalised radiance (>= 2)
+  double s;           // 1 / sigma = log(y) / y (eq. 10)
+};
+
+inline SkyPoint MakeSkyPoint(const Eigen::Vector3d& dir, const Eigen::Vector3d& sun, double y) {
+  const double cos_xi = std::max(dir.z(), 0.01);
+  const double cos_g = std::clamp(dir.dot(sun), -1.0, 1.0);
+  const double gamma = std::max(std::acos(cos_g), 1e-6);
+  return {1.0 / cos_xi, std::log(gamma), cos_g * cos_g, y, std::log(y) / y};
+}
+
+// Eq. 9 at a precomputed point, and optionally its gradient with respect to the parameters.
+inline double SkyModelAt(const double* p, const SkyPoint& q, double* grad) {
+  const double e1 = std::exp(p[kB] * q.inv_cos_xi);
+  const double g = 1 + p[kA] * e1;
+  const double gh = std::exp(p[kH] * q.log_gamma);  // gamma^h
+  const double e2 = std::exp(p[kD] * gh);
+  const double f = 1 + p[kC] * e2 + p[kE] * q.cos2_gamma;
+  if (grad) {
+    grad[kLz] = g * f;
+    grad[kA] = p[kLz] * e1 * f;
+    grad[kB] = p[kLz] * p[kA] * e1 * q.inv_cos_xi * f;
+    grad[kC] = p[kLz] * g * e2;
+    grad[kD] = p[kLz] * g * p[kC] * e2 * gh;
+    grad[kE] = p[kLz] * g * q.cos2_gamma;
+    grad[kH] = p[kLz] * g * p[kC] * e2 * p[kD] * gh * q.log_gamma;
+  }
+  return p[kLz] * g * f;
+}
+
+// Residual i = (y_i - Ls_i) / sigma_i with sigma_i = y_i / log y_i (eq. 10); one block of
+// seven parameters {Lz, a, b, c, d, e, h}.
+class SkyCost : public ceres::CostFunction {
+ public:
+  explicit SkyCost(std::vector<SkyPoint> points) : points_(std::move(points)) {
+    set_num_residuals(static_cast<int>(points_.size()));
+    mutable_parameter_block_sizes()->push_back(kNumSkyParams);
+  }
+
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override {
+    const double* p = parameters[0];
+    double* jac = jacobians ? jacobians[0] : nullptr;
+    double grad[kNumSkyParams];
+    for (size_t i = 0; i < points_.size(); ++i) {
+      const SkyPoint& q = points_[i];
+      const double l = SkyModelAt(p, q, jac ? grad : nullptr);
+      residuals[i] = q.s * (q.y - l);
+      if (!std::isfinite(residuals[i])) return false;
+      if (jac) {
+        for (int k = 0; k < kNumSkyParams; ++k) jac[i * kNumSkyParams + k] = -q.s * grad[k];
+      }
+    }
+    return true;
+  }
+
+ private:
+  std::vector<SkyPoint> points_;
+};
+
+}  // namespace rouen::internal

@@ -1,0 +1,92 @@
+// Irradiance at the surface grid points from the sun, the sky and the environment, with
+// one-bounce interreflection between model faces (Yu & Malik 1998, §4.1 and App. A; this
+// first version integrates numerically over cosine-distributed directions with ray-cast
+// visibility instead of clipping spherical polygons).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/time.h"
+#include "solve/environment.h"
+#include "solve/grid.h"
+#include "solve/raycast.h"
+#include "solve/sky_model.h"
+
+namespace rouen {
+
+// Illumination at one time: sun (parallel source, §3.1), sky model (§3.2), environment (§3.3).
+struct Lighting {
+  UtcTime utc;
+  Eigen::Vector3d sun_dir = Eigen::Vector3d::UnitZ();  // unit ENU, towards the sun
+  Eigen::Vector3d sun_radiance = Eigen::Vector3d::Zero();  // relative radiance, RGB
+  double sun_solid_angle_sr = 6.8e-5;
+  SkyModel sky;
+  EnvironmentMap env;
+  // true: escaped directions take env.Radiance (which holds the observed sky and landscape);
+  // false: the sky model above the horizon and nothing below.
+  bool use_env = true;
+
+  double SunAngularRadius() const;  // radians, from the solid angle
+  // Radiance arriving from direction `dir` when nothing of the model is in the way (no sun).
+  Eigen::Vector3d EscapedRadiance(const Eigen::Vector3d& dir) const;
+};
+
+struct HemisphereOptions {
+  int directions = 256;  // per grid point; rounded up to a square number of strata
+  uint64_t seed = 1;     // per-point rotations and shifts (deterministic)
+  void Validate() const;
+};
+
+// Geometry-only gathering pattern, built once per model and reused for every time. For grid
+// point i and direction k: dir(i, k) is a stratified cosine-distributed direction about the
+// point's normal; hit(i, k) is -1 when the ray escapes the model, -2 when it hits the back of
+// a face, else the grid point it hits. A cosine-weighted estimate of the irradiance is
+// E = (pi / K) sum_k L(dir(i, k)).
+struct HemisphereCache {
+  int directions = 0;  // K
+  int strata = 0;      // K = strata^2
+  uint64_t seed = 1;
+  std::vector<int32_t> hit;  // size points * K
+  std::vector<float> escaped_fraction;  // per point: cosine-weighted sky view factor
+  double seconds = 0;
+  int64_t rays = 0;
+
+  Eigen::Vector3d Direction(const GridPoint& p, int point_index, int k) const;
+  int Hit(int point, int k) const { return hit[static_cast<size_t>(point) * directions + k]; }
+};
+
+HemisphereCache BuildHemisphereCache(const SurfaceGrid& grid, const RayCaster& model,
+                                     const HemisphereOptions& options = {});
+
+// Irradiance per grid point, RGB, in the lighting's relative radiance units x sr.
+struct SlotIrradiance {
+  std::vector<Eigen::Vector3d> sun;        // E_sun: solar disc, with cast shadows
+  std::vector<Eigen::Vector3d> direct_se;  // sky + environment reaching the point directly
+  std::vector<Eigen::Vector3d> se;         // E_se = direct_se + interreflection (when added)
+  std::vector<float> sun_visibility;       // fraction of the sun disc samples unoccluded
+  bool has_bounce = false;
+  double seconds = 0;
+};
+
+struct IrradianceOptions {
+  int sun_samples = 1;  // shadow rays per point over the sun disc (1: centre only)
+  void Validate() const;
+};
+
+// E_sun[i] = L_sun Omega max(0, n.s) V and E_se[i] = (pi/K) sum over escaped directions of L.
+SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache& cache,
+                                 const RayCaster& model, const Lighting& lighting,
+                                 const IrradianceOptions& options = {});
+
+// One-bounce interreflection (§4.1): E_se[i] = E_direct_se[i] + (pi/K) sum over directions
+// hitting point j of B_j / pi, with B_j = rho_sun_j E_sun_j + rho_se_j E_direct_se_j. With
+// bounces > 1 the radiosity is iterated (B_j uses the previous E_se). Overwrites irr->se.
+void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
+                        const std::vector<Eigen::Vector3d>& rho_sun,
+                        const std::vector<Eigen::Vector3d>& rho_se, SlotIrradiance* irr,
+                        int bounces = 1);
+
+}  // namespace rouen

@@ -1,0 +1,228 @@
+#include "solve/irradiance.h"
+
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+#include "core/error.h"
+#include "solve/test_scenes.h"
+
+namespace rouen {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+Lighting UniformSky(const Eigen::Vector3d& sky, const Eigen::Vector3d& ground) {
+  Lighting l;
+  l.env = EnvironmentMap::Constant(EnvOptions(), sky, ground);
+  l.sun_radiance.setZero();
+  return l;
+}
+
+TEST(HemisphereTest, DirectionsAreStratifiedCosineDistributed) {
+  SurfaceGrid g;
+  GridPoint p;
+  p.position.setZero();
+  p.normal = Eigen::Vector3d(0.3, -0.4, 0.866).normalized();
+  g.points.push_back(p);
+  HemisphereCache c;
+  c.strata = 16;
+  c.directions = 256;
+  // Moments of the cosine-weighted distribution: E[cos] = 2/3, E[cos^2] = 1/2.
+  double m1 = 0, m2 = 0;
+  for (int k = 0; k < 256; ++k) {
+    const Eigen::Vector3d d = c.Direction(p, 0, k);
+    EXPECT_NEAR(d.norm(), 1, 1e-12);
+    const double ct = d.dot(p.normal);
+    EXPECT_GT(ct, 0);
+    m1 += ct;
+    m2 += ct * ct;
+  }
+  // Stratified: each u1 stratum holds 16 samples, so the cos^2 = 1 - u1 moment is exact up
+  // to the shift inside a stratum: |error| <= 1/(2 * 16).
+  EXPECT_NEAR(m2 / 256, 0.5, 1.0 / 32);
+  EXPECT_NEAR(m1 / 256, 2.0 / 3.0, 1.0 / 32);
+  // Different points get different patterns.
+  EXPECT_GT((c.Direction(p, 0, 5) - c.Direction(p, 1, 5)).norm(), 1e-6);
+}
+
+TEST(IrradianceTest, HorizontalPlaneUnderUniformSkyIsPiL) {
+  Mesh m;
+  const int b = m.AddBlock("plane");
+  testing::AddHorizontalRect(&m, -5, 5, -5, 5, 0, true, b);
+  const SurfaceGrid g = BuildSurfaceGrid(m, GridOptions());
+  const RayCaster rc(m);
+  const HemisphereCache cache = BuildHemisphereCache(g, rc);
+  EXPECT_EQ(cache.directions, 256);
+  const Eigen::Vector3d L(1, 2, 3);
+  const SlotIrradiance irr = ComputeIrradiance(g, cache, rc, UniformSky(L, {9, 9, 9}));
+  for (int i = 0; i < g.size(); ++i) {
+    // Every cosine-weighted sample escapes upwards: the estimate is exact.
+    EXPECT_NEAR((irr.direct_se[i] - kPi * L).norm(), 0, 1e-9);
+    EXPECT_EQ(irr.se[i], irr.direct_se[i]);
+    EXPECT_FLOAT_EQ(cache.escaped_fraction[i], 1.f);
+  }
+}
+
+TEST(IrradianceTest, VerticalPlaneSeesHalfTheSky) {
+  Mesh m;
+  const int b = m.AddBlock("wall");
+  m.AddPolygon({{0, 0, 0}, {4, 0, 0}, {4, 0, 3}, {0, 0, 3}}, b);  // normal -y
+  const SurfaceGrid g = BuildSurfaceGrid(m, GridOptions());
+  const RayCaster rc(m);
+  const HemisphereCache cache = BuildHemisphereCache(g, rc);
+  const Eigen::Vector3d L(2, 2, 2);
+  const SlotIrradiance irr = ComputeIrradiance(g, cache, rc, UniformSky(L, {0, 0, 0}));
+  for (int i = 0; i < g.size(); ++i) {
+    // The horizon splits the projected disc through its centre: with 16 equally spaced
+    // azimuth strata per ring, exactly half the samples of each ring lie above (up to a
+    // sample falling exactly on the boundary: 1/16 of a ring).
+    EXPECT_NEAR(irr.direct_se[i].x(), kPi * L.x() / 2, kPi * L.x() / 16) << i;
+  }
+  double mean = 0;
+  for (int i = 0; i < g.size(); ++i) mean += irr.direct_se[i].x() / g.size();
+  EXPECT_NEAR(mean, kPi * L.x() / 2, 1e-3 * kPi * L.x());
+}
+
+TEST(IrradianceTest, SunOnPlaneAndBoxShadow) {
+  Mesh m;
+  const int ground = m.AddBlock("plaza");
+  const int box = m.AddBlock("box");
+  testing::AddHorizontalRect(&m, -10, 10, -10, 10, 0, true, ground);
+  testing::AddBox(&m, {-1, -1, 0}, {1, 1, 2}, box);
+  GridOptions go;
+  go.spacing_m = 0.4;
+  const SurfaceGrid g = BuildSurfaceGrid(m, go);
+  const RayCaster rc(m);
+  HemisphereOptions ho;
+  ho.directions = 16;
+  const HemisphereCache cache = BuildHemisphereCache(g, rc, ho);
+  Lighting l = UniformSky({0, 0, 0}, {0, 0, 0});
+  // Sun in the south at 45 deg elevation: the box's shadow covers x in [-1, 1], y in [1, 3].
+  l.sun_dir = Eigen::Vector3d(0, -1, 1).normalized();
+  l.sun_radiance = Eigen::Vector3d(1e4, 2e4, 3e4);
+  l.sun_solid_angle_sr = 6.8e-5;
+  const SlotIrradiance irr = ComputeIrradiance(g, cache, rc, l);
+  const Eigen::Vector3d full = l.sun_radiance * l.sun_solid_angle_sr * std::sqrt(0.5);
+  int in_shadow = 0, lit = 0;
+  for (int i = 0; i < g.size(); ++i) {
+    const GridPoint& p = g.points[i];
+    if (p.block != ground) {
+      // Box faces: the north face never sees the sun; the south face is at 45 deg.
+      if (p.normal.y() > 0.9) {
+        EXPECT_EQ(irr.sun[i].norm(), 0);
+      }
+      if (p.normal.y() < -0.9) {
+        EXPECT_NEAR((irr.sun[i] - full).norm(), 0, 1e-9);
+      }
+      continue;
+    }
+    const double x = p.position.x(), y = p.position.y();
+    const bool inside = std::abs(x) < 0.8 && y > 1.2 && y < 2.8;
+    const bool outside = std::abs(x) > 1.2 || y < 0.8 || y > 3.2;
+    if (inside) {
+      EXPECT_EQ(irr.sun[i].norm(), 0) << x << " " << y;
+      ++in_shadow;
+    } else if (outside && !(std::abs(x) < 1 && std::abs(y) < 1)) {
+      EXPECT_NEAR((irr.sun[i] - full).norm(), 0, 1e-9) << x << " " << y;
+      ++lit;
+    }
+  }
+  EXPECT_GT(in_shadow, 10);
+  EXPECT_GT(lit, 1000);
+}
+
+// Form factor from a differential area to a parallel rectangle [0, a] x [0, b] at distance c
+// with the normal through one corner (Howell's catalogue, C-11).
+double CornerFormFactor(double a, double b, double c) {
+  const double X = a / c, Y = b / c;
+  const double sx = std::sqrt(1 + X * X), sy = std::sqrt(1 + Y * Y);
+  return (X / sx * std::atan(Y / sx) + Y / sy * std::atan(X / sy)) / (2 * kPi);
+}
+
+TEST(IrradianceTest, BounceBetweenFacingPlanesMatchesFormFactor) {
+  Mesh m;
+  const int lower = m.AddBlock("lower");
+  const int upper = m.AddBlock("upper");
+  const double half = 2, c = 2;
+  testing::AddHorizontalRect(&m, -half, half, -half, half, 0, true, lower);
+  testing::AddHorizontalRect(&m, -half, half, -half, half, c, false, upper);
+  GridOptions go;
+  go.spacing_m = 0.5;
+  const SurfaceGrid g = BuildSurfaceGrid(m, go);
+  const RayCaster rc(m);
+  const HemisphereCache cache = BuildHemisphereCache(g, rc);
+  const int K = cache.directions;
+  // The upper plane emits B = 1 (rho_se = 1, E_direct_se = 1); nothing else is lit.
+  SlotIrradiance irr;
+  irr.sun.assign(g.size(), Eigen::Vector3d::Zero());
+  irr.direct_se.assign(g.size(), Eigen::Vector3d::Zero());
+  std::vector<Eigen::Vector3d> rho_sun(g.size(), Eigen::Vector3d::Zero()), rho_se = rho_sun;
+  for (int i = 0; i < g.size(); ++i) {
+    if (g.points[i].block == upper) {
+      irr.direct_se[i].setOnes();
+      rho_se[i].setOnes();
+    }
+  }
+  AddInterreflection(g, cache, rho_sun, rho_se, &irr, 1);
+  EXPECT_TRUE(irr.has_bounce);
+  double err_sum = 0;
+  int n = 0;
+  for (int i = 0; i < g.size(); ++i) {
+    const GridPoint& p = g.points[i];
+    if (p.block != lower) continue;
+    const double x = p.position.x(), y = p.position.y();
+    double F = 0;
+    for (double a : {half - x, half + x}) {
+      for (double b : {half - y, half + y}) F += CornerFormFactor(a, b, c);
+    }
+    // Binomial sampling error of K cosine-weighted directions (stratification only helps).
+    const double sigma = std::sqrt(F * (1 - F) / K);
+    EXPECT_NEAR(irr.se[i].x(), F, 5 * sigma) << x << " " << y;
+    err_sum += irr.se[i].x() - F;
+    ++n;
+  }
+  ASSERT_GT(n, 50);
+  // The mean error over n independent points shrinks as 1/sqrt(n) (sigma <= 0.5/sqrt(K)).
+  EXPECT_LT(std::abs(err_sum / n), 4 * 0.5 / std::sqrt(K * static_cast<double>(n)));
+  // Two bounces add the lower plane's reflection back to the upper one.
+  std::vector<Eigen::Vector3d> rho_all(g.size(), Eigen::Vector3d::Constant(0.5));
+  SlotIrradiance irr2 = irr;
+  AddInterreflection(g, cache, rho_sun, rho_all, &irr2, 1);
+  SlotIrradiance irr3 = irr;
+  AddInterreflection(g, cache, rho_sun, rho_all, &irr3, 2);
+  for (int i = 0; i < g.size(); ++i) {
+    if (g.points[i].block == upper) {
+      EXPECT_GE(irr3.se[i].x(), irr2.se[i].x());
+    }
+  }
+}
+
+TEST(IrradianceTest, BadInputThrows) {
+  Mesh m;
+  const int b = m.AddBlock("plane");
+  testing::AddHorizontalRect(&m, -1, 1, -1, 1, 0, true, b);
+  const SurfaceGrid g = BuildSurfaceGrid(m, GridOptions());
+  const RayCaster rc(m);
+  HemisphereOptions ho;
+  ho.directions = 0;
+  EXPECT_THROW(BuildHemisphereCache(g, rc, ho), Error);
+  const HemisphereCache cache = BuildHemisphereCache(g, rc);
+  Lighting l = UniformSky({1, 1, 1}, {1, 1, 1});
+  l.sun_dir = Eigen::Vector3d(0, 0, 2);
+  EXPECT_THROW(ComputeIrradiance(g, cache, rc, l), Error);
+  l.sun_dir = Eigen::Vector3d::UnitZ();
+  l.sun_radiance = Eigen::Vector3d(NAN, 0, 0);
+  EXPECT_THROW(ComputeIrradiance(g, cache, rc, l), Error);
+  l.sun_radiance.setZero();
+  HemisphereCache wrong = cache;
+  wrong.hit.pop_back();
+  EXPECT_THROW(ComputeIrradiance(g, wrong, rc, l), Error);
+  SlotIrradiance irr = ComputeIrradiance(g, cache, rc, l);
+  std::vector<Eigen::Vector3d> short_rho(g.size() - 1, Eigen::Vector3d::Ones());
+  std::vector<Eigen::Vector3d> rho(g.size(), Eigen::Vector3d::Ones());
+  EXPECT_THROW(AddInterreflection(g, cache, short_rho, rho, &irr), Error);
+}
+
+}  // namespace
+}  // namespace rouen

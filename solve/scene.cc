@@ -1,0 +1,250 @@
+#include "solve/scene.h"
+
+#include <cmath>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "core/camera.h"
+#include "core/error.h"
+#include "core/files.h"
+#include "core/image.h"
+
+namespace rouen {
+
+namespace {
+
+nlohmann::json Vec(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
+
+Eigen::Vector3d ReadVec(const nlohmann::json& j, const char* key) {
+  const auto& a = j.at(key);
+  if (!a.is_array() || a.size() != 3) throw Error(std::string("'") + key + "' is not 3 numbers");
+  Eigen::Vector3d v(a[0].get<double>(), a[1].get<double>(), a[2].get<double>());
+  if (!v.allFinite()) throw Error(std::string("'") + key + "' is not finite");
+  return v;
+}
+
+nlohmann::json SummaryJson(const AlbedoSummary& s) {
+  return {{"points", s.points},
+          {"points_observed", s.points_observed},
+          {"points_sun_unobserved", s.points_sun_unobserved},
+          {"points_never_shadowed", s.points_never_shadowed},
+          {"points_clamped", s.points_clamped},
+          {"observations", s.observations},
+          {"outer_iterations", s.outer_iterations},
+          {"change_per_iteration", s.change_per_iteration},
+          {"residual_rms_rel", s.residual_rms_rel},
+          {"residual_median_rel", s.residual_median_rel},
+          {"downweighted_fraction", s.downweighted_fraction},
+          {"seconds", s.seconds}};
+}
+
+AlbedoSummary ReadSummary(const nlohmann::json& j) {
+  AlbedoSummary s;
+  s.points = j.value("points", 0);
+  s.points_observed = j.value("points_observed", 0);
+  s.points_sun_unobserved = j.value("points_sun_unobserved", 0);
+  s.points_never_shadowed = j.value("points_never_shadowed", 0);
+  s.points_clamped = j.value("points_clamped", 0);
+  s.observations = j.value("observations", int64_t{0});
+  s.outer_iterations = j.value("outer_iterations", 0);
+  s.change_per_iteration = j.value("change_per_iteration", std::vector<double>{});
+  s.residual_rms_rel = j.value("residual_rms_rel", 0.0);
+  s.residual_median_rel = j.value("residual_median_rel", 0.0);
+  s.downweighted_fraction = j.value("downweighted_fraction", 0.0);
+  s.seconds = j.value("seconds", 0.0);
+  return s;
+}
+
+}  // namespace
+
+Lighting SlotModel::ToLighting() const {
+  Lighting l;
+  l.utc = utc;
+  l.sun_dir = sun_dir;
+  l.sun_radiance = sun_radiance;
+  l.sun_solid_angle_sr = sun_solid_angle_sr;
+  l.sky = sky;
+  l.env = env;
+  l.use_env = true;
+  return l;
+}
+
+SlotModel SlotModel::FromLighting(const Lighting& l) {
+  SlotModel s;
+  s.utc = l.utc;
+  s.sun_dir = l.sun_dir;
+  s.sun_radiance = l.sun_radiance;
+  s.sun_solid_angle_sr = l.sun_solid_angle_sr;
+  s.sky = l.sky;
+  s.env = l.env;
+  return s;
+}
+
+Image PackPointValues(const std::vector<Eigen::Vector3d>& values, int width) {
+  const int n = static_cast<int>(values.size());
+  const int rows = std::max(1, (n + width - 1) / width);
+  Image img(width, rows, 3, PixelUnits::kOther, 0.f);
+  for (int i = 0; i < n; ++i) {
+    for (int c = 0; c < 3; ++c) img.at(i % width, i / width, c) = static_cast<float>(values[i][c]);
+  }
+  return img;
+}
+
+std::vector<Eigen::Vector3d> UnpackPointValues(const Image& image, int count) {
+  if (image.channels < 3 || static_cast<int64_t>(image.width) * image.height < count) {
+    throw Error("point values: image " + std::to_string(image.width) + "x" +
+                std::to_string(image.height) + "x" + std::to_string(image.channels) +
+                " cannot hold " + std::to_string(count) + " RGB values");
+  }
+  std::vector<Eigen::Vector3d> out(count);
+  for (int i = 0; i < count; ++i) {
+    for (int c = 0; c < 3; ++c) out[i][c] = image.at(i % image.width, i / image.width, c);
+  }
+  return out;
+}
+
+void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const Mesh* mesh) {
+  if (scene.model_file.empty()) throw Error(dir.string() + ": scene has no model_file");
+  std::filesystem::create_directories(dir);
+  const std::filesystem::path model_path = ResolveInside(dir, scene.model_file);
+  if (mesh) {
+    std::filesystem::create_directories(model_path.parent_path());
+    WriteObj(model_path.string(), *mesh);
+  }
+  const AlbedoResult& a = scene.albedo;
+  const size_t n = a.rho_sun.size();
+  if (a.rho_se.size() != n || a.observations.size() != n || a.flags.size() != n) {
+    throw Error(dir.string() + ": albedo arrays have different sizes");
+  }
+  for (size_t i = 0; i < n; ++i) {
+    if (!a.rho_sun[i].allFinite() || !a.rho_se[i].allFinite()) {
+      throw Error(dir.string() + ": albedo of grid point " + std::to_string(i) + " is not finite");
+    }
+  }
+  nlohmann::json j;
+  j["format_version"] = scene.format_version;
+  j["site"] = {{"lat_deg", scene.site.lat_deg},
+               {"lon_deg", scene.site.lon_deg},
+               {"height_m", scene.site.height_m}};
+  if (scene.response.valid()) {
+    j["response"] = scene.response;
+  } else {
+    j["response"] = nullptr;
+  }
+  j["grid"] = scene.grid_options;
+  j["model_file"] = scene.model_file;
+  j["points"] = n;
+  nlohmann::json slots = nlohmann::json::array();
+  for (const SlotModel& s : scene.slots) {
+    slots.push_back({{"utc", s.utc.Iso8601(9)},
+                     {"sun_dir", Vec(s.sun_dir)},
+                     {"sun_radiance", Vec(s.sun_radiance)},
+                     {"sun_solid_angle_sr", s.sun_solid_angle_sr},
+                     {"sky", s.sky},
+                     {"env", s.env}});
+  }
+  j["slots"] = slots;
+  j["albedo"] = {{"sun", "albedo_sun.exr"},
+                 {"se", "albedo_se.exr"},
+                 {"info", "albedo_info.exr"},
+                 {"width", kAlbedoImageWidth},
+                 {"summary", SummaryJson(a.summary)}};
+  WriteImage((dir / "albedo_sun.exr").string(), PackPointValues(a.rho_sun), StoredType::kFloat);
+  WriteImage((dir / "albedo_se.exr").string(), PackPointValues(a.rho_se), StoredType::kFloat);
+  std::vector<Eigen::Vector3d> info(n);
+  for (size_t i = 0; i < n; ++i) info[i] = Eigen::Vector3d(a.observations[i], a.flags[i], 0);
+  WriteImage((dir / "albedo_info.exr").string(), PackPointValues(info), StoredType::kFloat);
+  WriteFileAtomic(dir / "scene.json", j.dump(1));
+}
+
+SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGrid* grid_out) {
+  const std::filesystem::path json_path = dir / "scene.json";
+  SceneModel scene;
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(ReadFileToString(json_path));
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(json_path.string() + ": not valid JSON: " + e.what());
+  }
+  size_t points = 0;
+  std::string files[3];
+  try {
+    scene.format_version = j.at("format_version").get<int>();
+    if (scene.format_version != 1) {
+      throw Error("unsupported format_version " + std::to_string(scene.format_version));
+    }
+    const auto& site = j.at("site");
+    scene.site.lat_deg = site.at("lat_deg").get<double>();
+    scene.site.lon_deg = site.at("lon_deg").get<double>();
+    scene.site.height_m = site.at("height_m").get<double>();
+    if (!j.at("response").is_null()) scene.response = j.at("response").get<ResponseCurve>();
+    scene.grid_options = j.at("grid").get<GridOptions>();
+    scene.model_file = j.at("model_file").get<std::string>();
+    points = j.at("points").get<size_t>();
+    for (const auto& s : j.at("slots")) {
+      SlotModel m;
+      m.utc = ParseIso8601(s.at("utc").get<std::string>());
+      m.sun_dir = ReadVec(s, "sun_dir");
+      m.sun_radiance = ReadVec(s, "sun_radiance");
+      m.sun_solid_angle_sr = s.at("sun_solid_angle_sr").get<double>();
+      m.sky = s.at("sky").get<SkyModel>();
+      m.env = s.at("env").get<EnvironmentMap>();
+      if (std::abs(m.sun_dir.norm() - 1) > 1e-6 || m.sun_radiance.minCoeff() < 0 ||
+          !(m.sun_solid_angle_sr > 0 && m.sun_solid_angle_sr < 1)) {
+        throw Error("slot at " + m.utc.Iso8601() + ": invalid sun direction, radiance or size");
+      }
+      scene.slots.push_back(std::move(m));
+    }
+    const auto& a = j.at("albedo");
+    files[0] = a.at("sun").get<std::string>();
+    files[1] = a.at("se").get<std::string>();
+    files[2] = a.at("info").get<std::string>();
+    scene.albedo.summary = ReadSummary(a.value("summary", nlohmann::json::object()));
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(json_path.string() + ": " + e.what());
+  } catch (const Error& e) {
+    throw Error(json_path.string() + ": " + e.what());
+  }
+  const std::filesystem::path model_path = ResolveInside(dir, scene.model_file);
+  Mesh mesh = ReadObj(model_path.string());
+  SurfaceGrid grid = BuildSurfaceGrid(mesh, scene.grid_options);
+  if (static_cast<size_t>(grid.size()) != points) {
+    throw Error(json_path.string() + ": says " + std::to_string(points) + " grid points but " +
+                model_path.string() + " with the stored grid options gives " +
+                std::to_string(grid.size()));
+  }
+  std::vector<Eigen::Vector3d> vals[3];
+  for (int f = 0; f < 3; ++f) {
+    const std::filesystem::path p = ResolveInside(dir, files[f]);
+    const Image img = ReadImage(p.string());
+    if (img.channels < 3 || img.width != kAlbedoImageWidth ||
+        img.height != std::max<int>(1, (points + kAlbedoImageWidth - 1) / kAlbedoImageWidth)) {
+      throw Error(p.string() + ": expected " + std::to_string(kAlbedoImageWidth) + " x " +
+                  std::to_string((points + kAlbedoImageWidth - 1) / kAlbedoImageWidth) +
+                  " RGB for " + std::to_string(points) + " grid points, got " +
+                  std::to_string(img.width) + "x" + std::to_string(img.height) + "x" +
+                  std::to_string(img.channels));
+    }
+    vals[f] = UnpackPointValues(img, static_cast<int>(points));
+    for (size_t i = 0; i < points; ++i) {
+      if (!vals[f][i].allFinite() || vals[f][i].minCoeff() < 0) {
+        throw Error(p.string() + ": value of grid point " + std::to_string(i) +
+                    " is negative or not finite");
+      }
+    }
+  }
+  scene.albedo.rho_sun = std::move(vals[0]);
+  scene.albedo.rho_se = std::move(vals[1]);
+  scene.albedo.observations.resize(points);
+  scene.albedo.flags.resize(points);
+  for (size_t i = 0; i < points; ++i) {
+    scene.albedo.observations[i] = static_cast<int>(std::lround(vals[2][i][0]));
+    scene.albedo.flags[i] = static_cast<uint8_t>(std::lround(vals[2][i][1]));
+  }
+  if (mesh_out) *mesh_out = std::move(mesh);
+  if (grid_out) *grid_out = std::move(grid);
+  return scene;
+}
+
+}  // namespace rouen

@@ -1,0 +1,63 @@
+// The scene folder written by solve and read by render (DESIGN.md): scene.json with the site,
+// response curve, grid options, per-slot sun/sky/environment and the albedo summary;
+// albedo_sun.exr, albedo_se.exr (RGB) and albedo_info.exr (observations, flags) hold one grid
+// point per pixel, row-major, 1024 wide. The grid itself is rebuilt from the model OBJ.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/mesh.h"
+#include "core/response_curve.h"
+#include "core/solar.h"
+#include "core/time.h"
+#include "solve/albedo.h"
+#include "solve/environment.h"
+#include "solve/grid.h"
+#include "solve/irradiance.h"
+#include "solve/sky_model.h"
+
+namespace rouen {
+
+// Recovered illumination at one capture time (§3).
+struct SlotModel {
+  UtcTime utc;
+  Eigen::Vector3d sun_dir = Eigen::Vector3d::UnitZ();      // unit ENU
+  Eigen::Vector3d sun_radiance = Eigen::Vector3d::Zero();  // relative radiance, RGB
+  double sun_solid_angle_sr = 6.8e-5;
+  SkyModel sky;
+  EnvironmentMap env;
+
+  Lighting ToLighting() const;
+  static SlotModel FromLighting(const Lighting& l);
+};
+
+struct SceneModel {
+  int format_version = 1;
+  Site site;
+  ResponseCurve response;  // may be empty (not valid()) when photos came in as HDR
+  GridOptions grid_options;
+  std::vector<SlotModel> slots;
+  AlbedoResult albedo;
+  std::string model_file;  // OBJ, relative to the scene folder
+};
+
+constexpr int kAlbedoImageWidth = 1024;
+
+// Writes scene.json and the albedo EXRs (atomically, through core). The model OBJ must
+// already be at dir/model_file (or be given as `mesh`, which is then written there).
+void WriteScene(const std::filesystem::path& dir, const SceneModel& scene,
+                const Mesh* mesh = nullptr);
+// Reads and validates a scene folder; rebuilds the grid from the OBJ and checks that the
+// albedo images hold exactly one value per grid point. Throws rouen::Error naming the file.
+SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh = nullptr,
+                     SurfaceGrid* grid = nullptr);
+
+// Per-point values <-> a float image `width` wide (rows padded with zeros).
+Image PackPointValues(const std::vector<Eigen::Vector3d>& values, int width = kAlbedoImageWidth);
+std::vector<Eigen::Vector3d> UnpackPointValues(const Image& image, int count);
+
+}  // namespace rouen

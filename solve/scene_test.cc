@@ -1,0 +1,129 @@
+#include "solve/scene.h"
+
+#include <filesystem>
+
+#include <gtest/gtest.h>
+
+#include "core/error.h"
+#include "core/image.h"
+#include "solve/test_scenes.h"
+
+namespace rouen {
+namespace {
+
+std::filesystem::path TempDir(const std::string& name) {
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("rouen_scene_test_" + name + "_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  return dir;
+}
+
+SceneModel MakeScene(const Mesh& mesh, SurfaceGrid* grid_out) {
+  SceneModel s;
+  s.site.lat_deg = 37.87;
+  s.site.lon_deg = -122.26;
+  s.grid_options.spacing_m = 0.5;
+  s.grid_options.block_spacing_m["plaza"] = 1.5;
+  s.model_file = "model.obj";
+  const SurfaceGrid grid = BuildSurfaceGrid(mesh, s.grid_options);
+  SlotModel slot;
+  slot.utc = ParseIso8601("2024-08-28T20:15:00.123456789Z");
+  slot.sun_dir = Eigen::Vector3d(0.3, -0.5, 0.8).normalized();
+  slot.sun_radiance = Eigen::Vector3d(1.5e4, 1.4e4, 1.2e4);
+  slot.sun_solid_angle_sr = 6.79e-5;
+  slot.sky.channel[0].Lz = 0.7;
+  slot.sky.channel[2].c = 3.5;
+  slot.sky.sun_dir = slot.sun_dir;
+  slot.env = EnvironmentMap::Constant(EnvOptions(), {1, 2, 3}, {0.5, 0.4, 0.3});
+  s.slots = {slot, slot};
+  for (int i = 0; i < grid.size(); ++i) {
+    s.albedo.rho_sun.emplace_back(0.1 + 1e-4 * i, 0.2, 0.3);
+    s.albedo.rho_se.emplace_back(0.4, 0.5 + 1e-5 * i, 0.6);
+    s.albedo.observations.push_back(i % 7);
+    s.albedo.flags.push_back(static_cast<uint8_t>(i % 5));
+  }
+  s.albedo.summary.points = grid.size();
+  s.albedo.summary.residual_rms_rel = 0.0123;
+  if (grid_out) *grid_out = grid;
+  return s;
+}
+
+Mesh MakeMesh() {
+  Mesh m;
+  const int plaza = m.AddBlock("plaza");
+  const int shaft = m.AddBlock("shaft");
+  testing::AddHorizontalRect(&m, -20, 20, -20, 20, 0, true, plaza);
+  testing::AddBox(&m, {-2, -2, 0}, {2, 2, 30}, shaft);
+  return m;
+}
+
+TEST(SceneTest, RoundTrip) {
+  const auto dir = TempDir("roundtrip");
+  const Mesh mesh = MakeMesh();
+  SurfaceGrid grid;
+  const SceneModel s = MakeScene(mesh, &grid);
+  ASSERT_GT(grid.size(), kAlbedoImageWidth);  // more than one image row
+  WriteScene(dir, s, &mesh);
+  Mesh mesh2;
+  SurfaceGrid grid2;
+  const SceneModel r = ReadScene(dir, &mesh2, &grid2);
+  EXPECT_EQ(grid2.size(), grid.size());
+  EXPECT_EQ(mesh2.triangles.size(), mesh.triangles.size());
+  EXPECT_EQ(r.site.lat_deg, s.site.lat_deg);
+  EXPECT_EQ(r.grid_options.SpacingFor("plaza"), 1.5);
+  ASSERT_EQ(r.slots.size(), 2u);
+  EXPECT_EQ(r.slots[0].utc, s.slots[0].utc);
+  EXPECT_NEAR((r.slots[0].sun_dir - s.slots[0].sun_dir).norm(), 0, 1e-15);
+  EXPECT_EQ(r.slots[1].sun_radiance, s.slots[1].sun_radiance);
+  EXPECT_EQ(r.slots[0].sky.channel[2].c, 3.5);
+  EXPECT_EQ(r.slots[0].env.radiance, s.slots[0].env.radiance);
+  ASSERT_EQ(r.albedo.rho_sun.size(), s.albedo.rho_sun.size());
+  for (size_t i = 0; i < s.albedo.rho_sun.size(); ++i) {
+    // Stored as 32-bit floats.
+    EXPECT_NEAR((r.albedo.rho_sun[i] - s.albedo.rho_sun[i]).norm(), 0, 1e-6);
+    EXPECT_NEAR((r.albedo.rho_se[i] - s.albedo.rho_se[i]).norm(), 0, 1e-6);
+    EXPECT_EQ(r.albedo.observations[i], s.albedo.observations[i]);
+    EXPECT_EQ(r.albedo.flags[i], s.albedo.flags[i]);
+  }
+  EXPECT_EQ(r.albedo.summary.residual_rms_rel, 0.0123);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(SceneTest, MismatchedModelOrImagesAreRefused) {
+  const auto dir = TempDir("mismatch");
+  const Mesh mesh = MakeMesh();
+  SceneModel s = MakeScene(mesh, nullptr);
+  WriteScene(dir, s, &mesh);
+  // A different model: the grid no longer matches the stored count.
+  Mesh other = MakeMesh();
+  testing::AddBox(&other, {5, 5, 0}, {6, 6, 1}, 1);
+  WriteObj((dir / "model.obj").string(), other);
+  try {
+    ReadScene(dir);
+    FAIL() << "expected rouen::Error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("scene.json"), std::string::npos) << e.what();
+  }
+  WriteObj((dir / "model.obj").string(), mesh);
+  EXPECT_NO_THROW(ReadScene(dir));
+  // A truncated albedo image.
+  WriteImage((dir / "albedo_se.exr").string(), Image(kAlbedoImageWidth, 1, 3, PixelUnits::kOther),
+             StoredType::kFloat);
+  try {
+    ReadScene(dir);
+    FAIL() << "expected rouen::Error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("albedo_se.exr"), std::string::npos) << e.what();
+  }
+  // Mismatched albedo arrays are refused on write; paths may not leave the folder.
+  s.albedo.flags.pop_back();
+  EXPECT_THROW(WriteScene(dir, s), Error);
+  s = MakeScene(mesh, nullptr);
+  s.model_file = "../outside.obj";
+  EXPECT_THROW(WriteScene(dir, s), Error);
+  std::filesystem::remove_all(dir);
+  EXPECT_THROW(ReadScene(dir), Error);
+}
+
+}  // namespace
+}  // namespace rouen

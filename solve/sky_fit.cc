@@ -1,0 +1,376 @@
+#include "solve/sky_fit.h"
+
+#include <ceres/ceres.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cassert>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <random>
+#include <string>
+
+#include "core/error.h"
+#include "solve/internal/sky_cost.h"
+
+namespace rouen {
+namespace {
+
+using internal::SkyCost;
+using internal::SkyPoint;
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kDeg = kPi / 180.0;
+
+// Bounds per parameter {Lz, a, b, c, d, e, h}; Lz's upper bound is open.
+constexpr double kLower[7] = {1e-12, -3.0, -10.0, 0.0, -20.0, -0.9, 0.3};
+constexpr double kUpper[7] = {
+    std::numeric_limits<double>::infinity(), 30.0, -0.01, 200.0, -0.01, 20.0, 3.0};
+
+// Starting shapes {a, b, c, d, e, h}: CIE general skies (NOTES.md groups) and Perez-like
+// luminance skies of Preetham et al. for turbidity 3 and 6.
+constexpr double kStarts[][6] = {
+    {-1.0, -0.32, 10.0, -3.0, 0.45, 1.0},          // CIE clear, V.4 (type 12)
+    {-1.0, -0.32, 16.0, -3.0, 0.30, 1.0},          // V.5
+    {-1.0, -0.55, 5.0, -2.5, 0.30, 1.0},           // IV.3
+    {0.0, -1.0, 2.0, -1.5, 0.15, 1.0},             // III.2
+    {1.1, -0.8, 0.0, -1.0, 0.0, 1.0},              // II.1, overcast-like
+    {-0.927, -0.639, 5.257, -2.215, 0.169, 1.0},   // Perez (Preetham) T = 3
+    {-0.391, -1.705, 5.189, -1.853, -0.032, 1.0},  // Perez (Preetham) T = 6
+    {-1.0, -0.32, 10.0, -3.0, 0.45, 0.6},          // clear with a wider aureole
+};
+
+// Screening: every start on about this many samples, for this many iterations; the best
+// kRefined continue on all samples.
+constexpr size_t kScreenSamples = 2000;
+constexpr int kScreenIterations = 60;
+constexpr size_t kRefined = 2;
+
+double Seconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+double Percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0;
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * (v.size() - 1) + 0.5));
+  std::nth_element(v.begin(), v.begin() + k, v.end());
+  return v[k];
+}
+
+struct StartResult {
+  double params[7] = {1, 0, -1, 0, -1, 0, 1};
+  double initial_cost = 0, final_cost = std::numeric_limits<double>::infinity();
+  int iterations = 0;
+};
+
+// Gradation factor 1 + a exp(b / cos xi) at the zenith, where it is smallest (b < 0).
+double ZenithGradation(const double* p) { return 1 + p[1] * std::exp(p[2]); }
+
+// Levenberg-Marquardt from `p` (modified in place), with the box bounds; `a_lower` replaces
+// the lower bound of a.
+StartResult Solve(const std::vector<SkyPoint>& points, const double* start, double a_lower,
+                  int max_iterations, const SkyFitOptions& options) {
+  StartResult r;
+  double* p = r.params;
+  std::copy(start, start + 7, p);
+  p[1] = std::max(p[1], a_lower);
+  ceres::Problem::Options po;
+  po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
+  ceres::Problem problem(po);
+  problem.AddResidualBlock(new SkyCost(points), nullptr, p);
+  for (int k = 0; k < 7; ++k) {
+    problem.SetParameterLowerBound(p, k, k == 1 ? a_lower : kLower[k]);
+    if (std::isfinite(kUpper[k])) problem.SetParameterUpperBound(p, k, kUpper[k]);
+  }
+  ceres::Solver::Options so;
+  so.minimizer_type = ceres::TRUST_REGION;
+  so.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+  so.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
+  so.max_num_iterations = max_iterations;
+  so.function_tolerance = options.function_tolerance;
+  so.gradient_tolerance = 1e-12;
+  so.parameter_tolerance = 1e-10;
+  so.num_threads = 1;
+  so.logging_type = ceres::SILENT;
+  so.minimizer_progress_to_stdout = false;
+  ceres::Solver::Summary summary;
+  ceres::Solve(so, &problem, &summary);
+  r.initial_cost = summary.initial_cost;
+  r.final_cost = summary.final_cost;
+  r.iterations = std::max(0, static_cast<int>(summary.iterations.size()) - 1);
+  bool finite = std::isfinite(r.final_cost);
+  for (int k = 0; k < 7; ++k) finite = finite && std::isfinite(p[k]);
+  if (!finite) r.final_cost = std::numeric_limits<double>::infinity();
+  return r;
+}
+
+// One start: a lower bound of -3 on a lets the zenith darken more than a = -1 allows, but a
+// result whose zenith gradation is not positive is refitted with a >= -0.999 (then
+// exp(b / cos xi) < 1 keeps it positive everywhere).
+StartResult RunStart(const std::vector<SkyPoint>& points, const double* start, int max_iterations,
+                     const SkyFitOptions& options) {
+  StartResult r = Solve(points, start, kLower[1], max_iterations, options);
+  if (std::isfinite(r.final_cost) && ZenithGradation(r.params) < 1e-3) {
+    const int used = r.iterations;
+    const double initial = r.initial_cost;
+    r = Solve(points, r.params, -0.999, max_iterations, options);
+    r.iterations += used;
+    r.initial_cost = initial;
+  }
+  if (ZenithGradation(r.params) <= 0) r.final_cost = std::numeric_limits<double>::infinity();
+  return r;
+}
+
+// A start vector for a shape, with Lz in closed form (weighted linear least squares).
+void MakeStart(const std::vector<SkyPoint>& points, const double shape[6], double* p) {
+  p[0] = 1.0;
+  for (int k = 0; k < 6; ++k) p[k + 1] = std::clamp(shape[k], kLower[k + 1], kUpper[k + 1]);
+  double num = 0, den = 0;
+  for (const SkyPoint& q : points) {
+    const double f = internal::SkyModelAt(p, q, nullptr);
+    num += q.s * q.s * q.y * f;
+    den += q.s * q.s * f * f;
+  }
+  p[0] = den > 0 && num > 0 ? num / den : 1.0;
+}
+
+}  // namespace
+
+void SkySampleOptions::Validate() const {
+  if (!std::isfinite(min_elevation_deg) || min_elevation_deg < 0 || min_elevation_deg >= 89) {
+    throw Error("SkySampleOptions: min_elevation_deg must be in [0, 89), got " +
+                std::to_string(min_elevation_deg));
+  }
+  if (!std::isfinite(min_sun_distance_deg) || min_sun_distance_deg < 0 ||
+      min_sun_distance_deg > 90) {
+    throw Error("SkySampleOptions: min_sun_distance_deg must be in [0, 90], got " +
+                std::to_string(min_sun_distance_deg));
+  }
+  if (max_samples < 1) {
+    throw Error("SkySampleOptions: max_samples must be positive, got " +
+                std::to_string(max_samples));
+  }
+}
+
+void SkyFitOptions::Validate() const {
+  if (max_iterations < 1) {
+    throw Error("SkyFitOptions: max_iterations must be positive, got " +
+                std::to_string(max_iterations));
+  }
+  if (min_samples < 7) {
+    throw Error("SkyFitOptions: min_samples must be at least 7 (the parameter count), got " +
+                std::to_string(min_samples));
+  }
+  if (!std::isfinite(function_tolerance) || function_tolerance <= 0) {
+    throw Error("SkyFitOptions: function_tolerance must be positive");
+  }
+}
+
+std::vector<SkySample> ExtractSkySamples(const Image& hdr, const std::vector<uint8_t>* valid_mask,
+                                         const Intrinsics& intrinsics, const Pose& pose,
+                                         const Eigen::Vector3d& sun_dir,
+                                         const SkySampleOptions& options) {
+  options.Validate();
+  intrinsics.Validate();
+  if (hdr.units != PixelUnits::kRadiance) {
+    throw Error("sky samples: the image is not a radiance image (kRadiance)");
+  }
+  if (hdr.channels != 3 && hdr.channels != 1) {
+    throw Error("sky samples: the image must have 1 or 3 channels, has " +
+                std::to_string(hdr.channels));
+  }
+  if (hdr.width != intrinsics.width || hdr.height != intrinsics.height) {
+    throw Error("sky samples: image " + std::to_string(hdr.width) + "x" +
+                std::to_string(hdr.height) + " does not match the intrinsics " +
+                std::to_string(intrinsics.width) + "x" + std::to_string(intrinsics.height));
+  }
+  const size_t np = static_cast<size_t>(hdr.width) * hdr.height;
+  if (hdr.data.size() != np * hdr.channels) {
+    throw Error("sky samples: pixel buffer size does not match the image dimensions");
+  }
+  if (valid_mask && !valid_mask->empty() && valid_mask->size() != np) {
+    throw Error("sky samples: valid mask has " + std::to_string(valid_mask->size()) +
+                " entries, expected " + std::to_string(np));
+  }
+  if (!sun_dir.allFinite() || sun_dir.norm() < 1e-9) {
+    throw Error("sky samples: the sun direction is not a direction");
+  }
+  const Eigen::Vector3d sun = sun_dir.normalized();
+  const double z0 = std::sin(options.min_elevation_deg * kDeg);
+  const double cos_sun = std::cos(options.min_sun_distance_deg * kDeg);
+
+  // Equal-area cells: azimuth x z (z = sin elevation is uniform in solid angle).
+  const double cells = std::max(64.0, static_cast<double>(options.max_samples));
+  const double step = std::sqrt(2 * kPi * (1 - z0) / cells);
+  const int n_az = std::max(1, static_cast<int>(std::ceil(2 * kPi / step)));
+  const int n_z = std::max(1, static_cast<int>(std::ceil((1 - z0) / step)));
+  std::vector<std::vector<SkySample>> bins(static_cast<size_t>(n_az) * n_z);
+
+  // Visit a pixel lattice with about 8 candidates per requested sample.
+  const double oversample = 8.0 * options.max_samples;
+  const int stride =
+      std::max(1, static_cast<int>(std::floor(std::sqrt(static_cast<double>(np) / oversample))));
+  for (int y = stride / 2; y < hdr.height; y += stride) {
+    for (int x = stride / 2; x < hdr.width; x += stride) {
+      const size_t p = static_cast<size_t>(y) * hdr.width + x;
+      if (valid_mask && !valid_mask->empty() && (*valid_mask)[p] == 0) continue;
+      Eigen::Vector3d rad;
+      bool ok = true;
+      for (int c = 0; c < 3; ++c) {
+        rad[c] = hdr.data[p * hdr.channels + (hdr.channels == 1 ? 0 : c)];
+        ok = ok && std::isfinite(rad[c]) && rad[c] > 0;
+      }
+      if (!ok) continue;
+      const Eigen::Vector3d d =
+          (pose.rotation * Unproject(intrinsics, Eigen::Vector2d(x + 0.5, y + 0.5))).normalized();
+      if (!d.allFinite() || d.z() < z0 || d.dot(sun) > cos_sun) continue;
+      double az = std::atan2(d.x(), d.y());
+      if (az < 0) az += 2 * kPi;
+      const int ia = std::min(n_az - 1, static_cast<int>(az / (2 * kPi) * n_az));
+      const int iz = std::min(n_z - 1, static_cast<int>((d.z() - z0) / (1 - z0) * n_z));
+      bins[static_cast<size_t>(iz) * n_az + ia].push_back({d, rad});
+    }
+  }
+
+  // Round-robin over the occupied cells, in a random cell order, random order within cells.
+  std::mt19937_64 rng(options.seed);
+  std::vector<size_t> occupied;
+  for (size_t i = 0; i < bins.size(); ++i) {
+    if (!bins[i].empty()) {
+      occupied.push_back(i);
+      std::shuffle(bins[i].begin(), bins[i].end(), rng);
+    }
+  }
+  std::shuffle(occupied.begin(), occupied.end(), rng);
+  std::vector<SkySample> out;
+  const size_t want = static_cast<size_t>(options.max_samples);
+  for (size_t round = 0; out.size() < want; ++round) {
+    bool any = false;
+    for (size_t i : occupied) {
+      if (round < bins[i].size()) {
+        out.push_back(bins[i][round]);
+        any = true;
+        if (out.size() == want) break;
+      }
+    }
+    if (!any) break;
+  }
+  return out;
+}
+
+SkyFitSummary FitSky(const std::vector<SkySample>& samples, const Eigen::Vector3d& sun_dir,
+                     const SkyFitOptions& options, SkyModel* out) {
+  const auto start = std::chrono::steady_clock::now();
+  options.Validate();
+  assert(out != nullptr);
+  if (static_cast<int>(samples.size()) < options.min_samples) {
+    throw Error("sky fit: " + std::to_string(samples.size()) + " samples, need at least " +
+                std::to_string(options.min_samples));
+  }
+  if (!sun_dir.allFinite() || sun_dir.norm() < 1e-9) {
+    throw Error("sky fit: the sun direction is not a direction");
+  }
+  const Eigen::Vector3d sun = sun_dir.normalized();
+  Eigen::Vector3d min_y = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
+  for (size_t i = 0; i < samples.size(); ++i) {
+    const SkySample& s = samples[i];
+    if (!s.dir.allFinite() || std::abs(s.dir.norm() - 1) > 1e-6) {
+      throw Error("sky fit: sample " + std::to_string(i) + " direction is not a unit vector");
+    }
+    if (s.dir.z() < -1e-9) {
+      throw Error("sky fit: sample " + std::to_string(i) + " lies below the horizon");
+    }
+    for (int c = 0; c < 3; ++c) {
+      if (!std::isfinite(s.radiance[c]) || s.radiance[c] <= 0) {
+        throw Error("sky fit: sample " + std::to_string(i) + " channel " + std::to_string(c) +
+                    " radiance " + std::to_string(s.radiance[c]) + " is not positive and finite");
+      }
+      min_y[c] = std::min(min_y[c], s.radiance[c]);
+    }
+  }
+
+  SkyFitSummary summary;
+  summary.samples = static_cast<int>(samples.size());
+  SkyModel model;
+  model.sun_dir = sun;
+  const int n_starts = options.multiple_starts ? static_cast<int>(std::size(kStarts)) : 1;
+
+  tbb::parallel_for(0, 3, [&](int c) {
+    const auto t0 = std::chrono::steady_clock::now();
+    // Normalised radiance y' = y / (0.5 min y) >= 2, so log y' >= log 2 > 0 (eq. 10 weights).
+    const double ref = 0.5 * min_y[c];
+    std::vector<SkyPoint> points;
+    points.reserve(samples.size());
+    for (const SkySample& s : samples) {
+      points.push_back(internal::MakeSkyPoint(s.dir, sun, s.radiance[c] / ref));
+    }
+    // Every start on an evenly thinned subset, then the best two on all samples.
+    const size_t stride = std::max<size_t>(1, points.size() / kScreenSamples);
+    std::vector<SkyPoint> subset;
+    for (size_t i = 0; i < points.size(); i += stride) subset.push_back(points[i]);
+    std::vector<StartResult> screened;
+    for (int k = 0; k < n_starts; ++k) {
+      double p0[7];
+      MakeStart(subset, kStarts[k], p0);
+      screened.push_back(stride > 1 ? RunStart(subset, p0, kScreenIterations, options)
+                                    : RunStart(points, p0, options.max_iterations, options));
+    }
+    std::sort(screened.begin(), screened.end(), [](const StartResult& a, const StartResult& b) {
+      return a.final_cost < b.final_cost;
+    });
+    StartResult best;
+    if (stride == 1) {
+      best = screened.front();
+    } else {
+      for (size_t k = 0; k < std::min<size_t>(kRefined, screened.size()); ++k) {
+        if (!std::isfinite(screened[k].final_cost)) break;
+        StartResult r = RunStart(points, screened[k].params, options.max_iterations, options);
+        r.iterations += screened[k].iterations;
+        if (r.final_cost < best.final_cost) best = r;
+      }
+    }
+    SkyChannelSummary& cs = summary.channel[c];
+    cs.starts = n_starts;
+    cs.final_cost = best.final_cost;
+    if (!std::isfinite(best.final_cost)) return;  // reported after the loop
+    SkyParams& p = model.channel[c];
+    p.Lz = best.params[0] * ref;
+    p.a = best.params[1];
+    p.b = best.params[2];
+    p.c = best.params[3];
+    p.d = best.params[4];
+    p.e = best.params[5];
+    p.h = best.params[6];
+    std::vector<double> rel(points.size());
+    for (size_t i = 0; i < points.size(); ++i) {
+      const double l = internal::SkyModelAt(best.params, points[i], nullptr);
+      rel[i] = std::abs(l - points[i].y) / points[i].y;
+    }
+    cs.iterations = best.iterations;
+    cs.initial_cost = best.initial_cost;
+    cs.final_cost = best.final_cost;
+    cs.rel_error_median = Percentile(rel, 0.5);
+    cs.rel_error_p90 = Percentile(rel, 0.9);
+    cs.rel_error_max = *std::max_element(rel.begin(), rel.end());
+    cs.seconds = Seconds(t0);
+  });
+
+  for (int c = 0; c < 3; ++c) {
+    const SkyParams& p = model.channel[c];
+    for (double v : {p.Lz, p.a, p.b, p.c, p.d, p.e, p.h}) {
+      if (!std::isfinite(v)) {
+        throw Error("sky fit: channel " + std::to_string(c) +
+                    " did not converge to a finite model");
+      }
+    }
+    if (!std::isfinite(summary.channel[c].final_cost) || summary.channel[c].starts == 0) {
+      throw Error("sky fit: channel " + std::to_string(c) + " failed from every starting point");
+    }
+  }
+  *out = model;
+  summary.seconds = Seconds(start);
+  return summary;
+}
+
+}  // namespace rouen

@@ -1,0 +1,80 @@
+// Fitting the seven-parameter sky model (Yu & Malik 1998 §3.2, eq. 9) to sky pixels of
+// radiance images, per colour channel, by Levenberg-Marquardt on eq. 10.
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "core/camera.h"
+#include "core/image.h"
+#include "solve/sky_model.h"
+
+namespace rouen {
+
+struct SkySample {
+  Eigen::Vector3d dir;       // unit, ENU, above the horizon
+  Eigen::Vector3d radiance;  // per channel, > 0
+};
+
+struct SkySampleOptions {
+  double min_elevation_deg = 3.0;     // skip the horizon (buildings, haze)
+  double min_sun_distance_deg = 3.0;  // skip the sun and its immediate aureole
+  int max_samples = 20000;            // spread evenly over the visible sky
+  uint64_t seed = 1;
+
+  void Validate() const;  // throws rouen::Error explaining the bad field
+};
+
+// Sky samples from one radiance image: pixels above the minimum elevation, away from the sun,
+// valid in `valid_mask` (width x height, nonzero = valid; may be null), with finite positive
+// radiance in every channel; subsampled to at most max_samples spread evenly over solid angle
+// (equal-area cells in azimuth x sin(elevation), round-robin). Concatenate the results of
+// several photos to fit them together. Throws rouen::Error for a wrong image or mask.
+std::vector<SkySample> ExtractSkySamples(const Image& hdr, const std::vector<uint8_t>* valid_mask,
+                                         const Intrinsics& intrinsics, const Pose& pose,
+                                         const Eigen::Vector3d& sun_dir,
+                                         const SkySampleOptions& options);
+
+struct SkyFitOptions {
+  int max_iterations = 200;  // Levenberg-Marquardt iterations per start
+  int min_samples = 20;
+  // Try the eight starting shapes (CIE general skies, Perez-like); false: CIE clear only.
+  bool multiple_starts = true;
+  double function_tolerance = 1e-10;
+
+  void Validate() const;  // throws rouen::Error explaining the bad field
+};
+
+struct SkyChannelSummary {
+  int iterations = 0;           // of the winning start (screening + refinement)
+  int starts = 0;               // starting points tried
+  double initial_cost = 0;      // eq. 10 on all samples where the final refinement began
+  double final_cost = 0;        // eq. 10 (half the sum of squares, normalised radiance units)
+  double rel_error_median = 0;  // |model - y| / y over the samples
+  double rel_error_p90 = 0;
+  double rel_error_max = 0;
+  double seconds = 0;
+};
+
+struct SkyFitSummary {
+  int samples = 0;
+  std::array<SkyChannelSummary, 3> channel;
+  double seconds = 0;
+};
+
+// Fits eq. 9 per channel, minimising eq. 10 with sigma_i = y_i / log y_i. The radiance is first
+// divided by half its minimum, so every log y is at least log 2 and the weights are positive
+// and finite (the weight's unit dependence is fixed this way); Lz is scaled back. Parameters
+// are bounded so the model stays finite and positive: a in [-3, 30] with 1 + a e^b > 0 (the
+// zenith, where the gradation is smallest), b in [-10, -0.01], c in [0, 200],
+// d in [-20, -0.01], e in [-0.9, 20], h in [0.3, 3], Lz > 0. Eight starting shapes (CIE
+// general skies, Perez-like) are screened on ~2000 evenly thinned samples; the best two are
+// refined on all samples and the lower cost wins.
+// Throws rouen::Error for too few samples, non-positive or non-finite radiance, directions
+// that are not unit or below the horizon, or a bad sun direction.
+SkyFitSummary FitSky(const std::vector<SkySample>& samples, const Eigen::Vector3d& sun_dir,
+                     const SkyFitOptions& options, SkyModel* out);
+
+}  // namespace rouen

@@ -1,0 +1,150 @@
+// End-to-end tests of the rouen CLI: run the binary as a user would and check its output,
+// its files and its errors.
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+#include <sys/wait.h>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Result {
+  int code = -1;
+  std::string out;  // stdout and stderr together
+};
+
+Result RunRouen(const std::string& args) {
+  std::string cmd = std::string(ROUEN_BINARY) + " " + args + " 2>&1";
+  Result r;
+  FILE* p = popen(cmd.c_str(), "r");
+  if (!p) return r;
+  char buf[4096];
+  size_t n;
+  while ((n = fread(buf, 1, sizeof buf, p)) > 0) r.out.append(buf, n);
+  int status = pclose(p);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+fs::path TempDir(const std::string& name) {
+  fs::path p = fs::temp_directory_path() / ("rouen_cli_test_" + name + "_" + std::to_string(getpid()));
+  fs::remove_all(p);
+  fs::create_directories(p);
+  return p;
+}
+
+void WriteText(const fs::path& p, const std::string& s) { std::ofstream(p) << s; }
+
+std::vector<std::string> Split(const std::string& s, char sep) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, sep)) out.push_back(item);
+  return out;
+}
+
+TEST(CliTest, HelpExplainsEveryCommand) {
+  Result r = RunRouen("--help");
+  EXPECT_EQ(r.code, 0);
+  for (const char* c : {"demo", "capture", "calib", "hdr", "sun"})
+    EXPECT_NE(r.out.find(c), std::string::npos) << c;
+  Result c = RunRouen("capture --help");
+  EXPECT_EQ(c.code, 0);
+  EXPECT_NE(c.out.find("--resume"), std::string::npos);
+}
+
+TEST(CliTest, SunSingleAndJson) {
+  // SPA's worked example (NREL): zenith 50.111622 deg, azimuth 194.340241 deg.
+  Result r = RunRouen("sun --lat 39.742476 --lon -105.1786 --height 1830.14 "
+                      "--time 2003-10-17T12:30:30-07:00 --pressure 820 --temperature 11 --json");
+  ASSERT_EQ(r.code, 0) << r.out;
+  nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_NEAR(j["azimuth_deg"].get<double>(), 194.340241, 3e-4);
+  EXPECT_NEAR(j["zenith_deg"].get<double>(), 50.111622, 3e-4);
+}
+
+TEST(CliTest, SunBatchCsv) {
+  fs::path dir = TempDir("sun");
+  WriteText(dir / "in.csv",
+            "utc,lat,lon,elev_m\n"
+            "2026-08-25T20:30:00Z,37.8722,-122.2578,60\n"
+            "2026-08-25T13:30:00-07:00,37.8722,-122.2578,60\n");
+  Result r = RunRouen("sun --batch " + (dir / "in.csv").string());
+  ASSERT_EQ(r.code, 0) << r.out;
+  std::vector<std::string> lines = Split(r.out, '\n');
+  ASSERT_GE(lines.size(), 3u);
+  EXPECT_EQ(lines[0], "utc,lat,lon,elev_m,azimuth_deg,elevation_deg,elevation_true_deg");
+  std::vector<std::string> a = Split(lines[1], ','), b = Split(lines[2], ',');
+  ASSERT_EQ(a.size(), 7u);
+  ASSERT_EQ(b.size(), 7u);
+  // The same instant written two ways gives the same sun.
+  EXPECT_EQ(a[4], b[4]);
+  EXPECT_EQ(a[5], b[5]);
+  // Refraction lifts the sun: apparent elevation above the airless one.
+  EXPECT_GT(std::stod(a[5]), std::stod(a[6]));
+  fs::remove_all(dir);
+}
+
+TEST(CliTest, SunBadInputNamesTheProblem) {
+  fs::path dir = TempDir("sunbad");
+  WriteText(dir / "bad.csv", "utc,lat,lon,elev_m\n2026-08-25T20:30:00Z,37.8,-122.2,60\n"
+                             "2026-13-25T20:30:00Z,37.8,-122.2,60\n");
+  Result r = RunRouen("sun --batch " + (dir / "bad.csv").string());
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.out.find("bad.csv:3"), std::string::npos) << r.out;
+  Result t = RunRouen("sun --lat 37 --lon -122 --time yesterday");
+  EXPECT_NE(t.code, 0);
+  EXPECT_NE(t.out.find("yesterday"), std::string::npos) << t.out;
+  Result z = RunRouen("sun --lat 37 --lon -122 --time 2026-08-25T12:00:00");  // no zone
+  EXPECT_NE(z.code, 0);
+  fs::remove_all(dir);
+}
+
+TEST(CliTest, CalibResponseBadInput) {
+  fs::path dir = TempDir("calibbad");
+  // A corrupt image.
+  WriteText(dir / "a.png", "this is not a png");
+  WriteText(dir / "list.txt", "a.png 0.1\na.png 0.2\n");
+  Result r = RunRouen("calib response --list " + (dir / "list.txt").string() + " --out " +
+                      (dir / "r.json").string());
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.out.find("a.png"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(dir / "r.json"));
+  // A list line without seconds, and a negative exposure.
+  WriteText(dir / "list2.txt", "a.png\n");
+  r = RunRouen("calib response --list " + (dir / "list2.txt").string() + " --out x.json");
+  EXPECT_NE(r.out.find("list2.txt:1"), std::string::npos) << r.out;
+  WriteText(dir / "list3.txt", "a.png -1\n");
+  r = RunRouen("calib response --list " + (dir / "list3.txt").string() + " --out x.json");
+  EXPECT_NE(r.out.find("positive"), std::string::npos) << r.out;
+  fs::remove_all(dir);
+}
+
+TEST(CliTest, CalibResponseAndHdrOnMemorial) {
+  fs::path mem = fs::path(ROUEN_SHARED_DIR) / "data/hdr/memorial";
+  if (!fs::exists(mem / "exposures.txt"))
+    GTEST_SKIP() << "real data absent: " << mem << " (needs ../shared beside the checkout)";
+  fs::path dir = TempDir("memorial");
+  Result r = RunRouen("calib response --list " + (mem / "exposures.txt").string() + " --out " +
+                      (dir / "response.json").string());
+  ASSERT_EQ(r.code, 0) << r.out;
+  nlohmann::json j = nlohmann::json::parse(std::ifstream(dir / "response.json"));
+  ASSERT_EQ(j["g"].size(), 3u);
+  for (const auto& ch : j["g"]) {
+    ASSERT_EQ(ch.size(), 256u);
+    for (size_t z = 1; z < 256; ++z) EXPECT_GE(ch[z].get<double>(), ch[z - 1].get<double>());
+  }
+  r = RunRouen("hdr --list " + (mem / "exposures.txt").string() + " --response " +
+               (dir / "response.json").string() + " --out " + (dir / "m.exr").string());
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_GT(fs::file_size(dir / "m.exr"), 100000u);
+  fs::remove_all(dir);
+}
+
+}  // namespace
