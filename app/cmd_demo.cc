@@ -29,6 +29,7 @@ const char* kSimRig =
 struct DemoArgs {
   std::string out = "rouen-demo";
   bool quick = false;
+  bool true_response = false;
   uint64_t seed = 1;
 };
 
@@ -96,6 +97,7 @@ void Run(const DemoArgs& a) {
   po.log = say;
   const int heldout = rig.heldout_slot;
   if (heldout >= 0) po.exclude_albedo_slots = {heldout};
+  if (a.true_response) po.response = sim_cam->sensor().TrueResponse();
   CalibResult calib = CalibrateSession(session, po);
   SolveResult solved = SolveSession(session, calib, po);
 
@@ -259,6 +261,9 @@ void RegisterDemo(CLI::App& app) {
       "DIR/heldout_truth.png, the session (DIR/session) and intermediate files (DIR/work).");
   c->add_option("--out", a->out, "Output folder")->capture_default_str();
   c->add_flag("--quick", a->quick, "Smaller images and fewer samples (about a minute)");
+  c->add_flag("--true-response", a->true_response,
+              "Diagnostic: give the solver the simulator's true response curve, to separate "
+              "calibration error from the rest");
   c->add_option("--seed", a->seed, "Sensor/GPS noise seed")->capture_default_str();
   c->callback([a] { Run(*a); });
 }

@@ -17,6 +17,7 @@ struct SunArgs {
   std::string time, batch;
   bool json = false;
   double pressure = 1010, temperature = 10;
+  bool have_lat = false, have_lon = false;
 };
 
 std::string Trim(const std::string& s) {
@@ -70,7 +71,8 @@ void RunBatch(const SunArgs& a) {
 
 void Run(const SunArgs& a) {
   if (!a.batch.empty()) return RunBatch(a);
-  if (a.time.empty()) throw Error("sun: give --time (or --batch FILE.csv)");
+  if (a.time.empty() || !a.have_lat || !a.have_lon)
+    throw Error("sun: give --lat, --lon and --time (or --batch FILE.csv)");
   if (std::abs(a.lat) > 90 || std::abs(a.lon) > 180)
     throw Error("sun: latitude/longitude out of range");
   UtcTime t = ParseIso8601(a.time);
@@ -112,8 +114,8 @@ void RegisterSun(CLI::App& app) {
       "  rouen sun --lat 37.8722 --lon -122.2578 --height 60 --time 2026-08-25T13:30:00-07:00\n"
       "  rouen sun --batch fixes.csv      (columns utc,lat,lon,elev_m; prints CSV with\n"
       "                                    azimuth_deg,elevation_deg,elevation_true_deg)");
-  c->add_option("--lat", a->lat, "Latitude, degrees north");
-  c->add_option("--lon", a->lon, "Longitude, degrees east (west is negative)");
+  CLI::Option* lat = c->add_option("--lat", a->lat, "Latitude, degrees north");
+  CLI::Option* lon = c->add_option("--lon", a->lon, "Longitude, degrees east (west is negative)");
   c->add_option("--height", a->height, "Height above the WGS84 ellipsoid, metres");
   c->add_option("--time", a->time, "ISO 8601 time with a zone, e.g. 2026-08-25T13:30:00Z");
   c->add_option("--batch", a->batch, "CSV file with columns utc,lat,lon,elev_m");
@@ -122,7 +124,11 @@ void RegisterSun(CLI::App& app) {
       ->capture_default_str();
   c->add_option("--temperature", a->temperature, "Air temperature for refraction, Celsius")
       ->capture_default_str();
-  c->callback([a] { Run(*a); });
+  c->callback([a, lat, lon] {
+    a->have_lat = lat->count() > 0;
+    a->have_lon = lon->count() > 0;
+    Run(*a);
+  });
 }
 
 }  // namespace rouen

@@ -78,13 +78,18 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
     }
     brackets.push_back(std::move(b));
   }
-  if (brackets.empty())
+  if (options.response) {
+    out.response = *options.response;
+    brackets.clear();
+    Log(options, "response curve given");
+  } else if (brackets.empty()) {
     throw Error(session.dir().string() +
                 ": no bracket with two or more exposures to recover the response curve from");
-  Log(options, "response curve from " + std::to_string(brackets.size()) + " brackets");
-  ResponseOptions ropts;
-  out.response = RecoverResponse(brackets, ropts, &out.response_summary);
-  brackets.clear();
+  } else {
+    Log(options, "response curve from " + std::to_string(brackets.size()) + " brackets");
+    out.response = RecoverResponse(brackets, ResponseOptions{}, &out.response_summary);
+    brackets.clear();
+  }
   std::filesystem::create_directories(options.work_dir / "calib" / "hdr");
   WriteResponseCurve((options.work_dir / "calib" / "response.json").string(), out.response);
 

@@ -7,6 +7,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -27,6 +28,8 @@ struct PipelineOptions {
   std::filesystem::path work_dir;        // calib/ and scene/ are written here
   std::vector<int> exclude_albedo_slots;  // held-out slots: their architecture photos unused
   bool quick = false;
+  // A response curve known from an earlier calibration: used instead of recovering one.
+  std::optional<ResponseCurve> response;
   std::function<void(const std::string&)> log;  // progress lines
 };
 

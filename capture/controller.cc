@@ -112,11 +112,19 @@ void CaptureController::Meter(const CapturedFrame& frame, Target target, double*
     SunPosition sp = ComputeSunPosition(frame.utc, site);
     sun_cam = frame.pose->rotation.transpose() * sp.DirectionEnu();
   }
+  // A fisheye's image circle (inscribed): outside it the sensor sees the lens barrel.
+  const bool fisheye = frame.intrinsics && frame.intrinsics->projection == Projection::kFisheye;
+  const double circle_r2 =
+      fisheye ? std::pow(std::min(frame.intrinsics->cx, frame.intrinsics->cy), 2) : 0;
   size_t n = 0, nsat = 0, ndark = 0;
   float mx = 0;
   const int stride = std::max(1, std::min(im.width, im.height) / 160);  // metering subsample
   for (int y = 0; y < im.height; y += stride) {
     for (int x = 0; x < im.width; x += stride) {
+      if (fisheye) {
+        double dx = x + 0.5 - frame.intrinsics->cx, dy = y + 0.5 - frame.intrinsics->cy;
+        if (dx * dx + dy * dy > circle_r2) continue;
+      }
       if (exclude_sun) {
         Eigen::Vector3d d = Unproject(*frame.intrinsics, Eigen::Vector2d(x + 0.5, y + 0.5));
         if (d.dot(sun_cam) > cos_excl) continue;

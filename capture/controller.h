@@ -21,7 +21,7 @@ struct BracketOptions {
   double max_exposure_s = 30.0;
   int max_frames = 8;                 // per view
   double saturation_dn = 250;         // a pixel at or above this is saturated
-  double noise_floor_dn = 6;          // a pixel at or below this is under the noise floor
+  double noise_floor_dn = 16;         // a pixel at or below this is too noisy to measure
   double max_saturated_fraction = 2e-4;  // of the pixels of interest
   double max_dark_fraction = 2e-3;
   void Validate() const;  // throws rouen::Error

@@ -163,6 +163,26 @@ SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache&
       disc.push_back((s + rr * (std::cos(phi) * t + std::sin(phi) * b)).normalized());
     }
   }
+  // Ground beyond the model (see IrradianceOptions::ground_shadow): its level, and the
+  // shadowed/sunlit radiance ratio of horizontal Lambertian ground.
+  const bool ground_shadow = options.ground_shadow && lighting.use_env && s.z() > 0 && n > 0 &&
+                             sun_e.maxCoeff() > 0;
+  double ground_z = 0;
+  Eigen::Vector3d shadow_ratio = Eigen::Vector3d::Ones();
+  if (ground_shadow) {
+    ground_z = grid.points[0].position.z();
+    for (const auto& p : grid.points) ground_z = std::min(ground_z, p.position.z());
+    Eigen::Vector3d e_sky = Eigen::Vector3d::Zero();
+    const EnvironmentMap& env = lighting.env;
+    for (int r = env.bands_below * env.sectors; r < env.num_regions(); ++r) {
+      double el0, el1, az0, az1;
+      env.RegionBounds(r, &el0, &el1, &az0, &az1);
+      const double s0 = std::sin(el0), s1 = std::sin(el1);
+      e_sky += env.radiance[r] * (az1 - az0) * (s1 * s1 - s0 * s0) / 2;  // projected solid angle
+    }
+    const Eigen::Vector3d e_total = e_sky + sun_e * s.z();
+    for (int c = 0; c < 3; ++c) shadow_ratio[c] = e_total[c] > 0 ? e_sky[c] / e_total[c] : 1.0;
+  }
   tbb::parallel_for(tbb::blocked_range<int>(0, n, 32), [&](const tbb::blocked_range<int>& range) {
     for (int i = range.begin(); i < range.end(); ++i) {
       const GridPoint& p = grid.points[i];
@@ -178,7 +198,15 @@ SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache&
       Eigen::Vector3d sum = Eigen::Vector3d::Zero();
       for (int k = 0; k < K; ++k) {
         if (cache.Hit(i, k) != -1) continue;
-        sum += lighting.EscapedRadiance(cache.Direction(p, i, k));
+        const Eigen::Vector3d d = cache.Direction(p, i, k);
+        Eigen::Vector3d l = lighting.EscapedRadiance(d);
+        if (ground_shadow && d.z() < -1e-3 && origin.z() > ground_z) {
+          const Eigen::Vector3d q = origin + ((origin.z() - ground_z) / -d.z()) * d;
+          if (model.Occluded(q + Eigen::Vector3d(0, 0, offset), s, 0.0)) {
+            l = l.cwiseProduct(shadow_ratio);
+          }
+        }
+        sum += l;
       }
       irr.direct_se[i] = sum * (kPi / K);
     }
