@@ -188,11 +188,11 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
 
   // Surface grid and geometry-only visibility, computed once.
   GridOptions go;
-  go.spacing_m = options.quick ? 1.0 : 0.6;
-  go.block_spacing_m["plaza"] = options.quick ? 3.0 : 1.5;
+  go.spacing_m = 0.6;
+  go.block_spacing_m["plaza"] = 1.5;
   r.grid = BuildSurfaceGrid(r.mesh, go);
   HemisphereOptions ho;
-  ho.directions = options.quick ? 128 : 256;
+  ho.directions = 256;
   r.hemisphere = BuildHemisphereCache(r.grid, *r.caster, ho);
   Log(options, "surface grid: " + std::to_string(r.grid.size()) + " points");
 
@@ -213,7 +213,11 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
     photos.push_back(std::move(ph));
   }
   ObservationSummary os;
-  std::vector<Observation> obs = CollectObservations(r.grid, *r.caster, photos, {}, &os);
+  // Sun directions per slot let footprints that straddle a shadow edge be dropped.
+  std::vector<Eigen::Vector3d> sun_dirs;
+  for (const SlotSolve& ss : r.slots) sun_dirs.push_back(ss.lighting.sun_dir);
+  std::vector<Observation> obs =
+      CollectObservations(r.grid, *r.caster, photos, {}, &os, &sun_dirs);
   Log(options, std::to_string(obs.size()) + " observations of " +
                    std::to_string(os.points_observed) + " grid points in " +
                    std::to_string(photos.size()) + " photos");

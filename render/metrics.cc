@@ -79,6 +79,30 @@ RenderMetrics CompareRadiance(const Image& rendered, const Image& truth,
   return m;
 }
 
+std::vector<uint8_t> ErodeMask(const std::vector<uint8_t>& mask, int width, int height,
+                               int radius) {
+  if (width < 0 || height < 0 || mask.size() != static_cast<size_t>(width) * height) {
+    throw Error("metrics: mask has " + std::to_string(mask.size()) + " entries for a " +
+                std::to_string(width) + "x" + std::to_string(height) + " image");
+  }
+  if (radius < 0) throw Error("metrics: erosion radius must be >= 0");
+  std::vector<uint8_t> out(mask.size(), 0);
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      bool keep = true;
+      for (int dy = -radius; dy <= radius && keep; ++dy) {
+        for (int dx = -radius; dx <= radius && keep; ++dx) {
+          const int xx = x + dx, yy = y + dy;
+          keep = xx >= 0 && yy >= 0 && xx < width && yy < height &&
+                 mask[static_cast<size_t>(yy) * width + xx] != 0;
+        }
+      }
+      out[static_cast<size_t>(y) * width + x] = keep ? 1 : 0;
+    }
+  }
+  return out;
+}
+
 double FitScale(const Image& rendered, const Image& truth, const std::vector<uint8_t>& mask) {
   Check(rendered, truth, mask);
   double rt = 0, rr = 0;

@@ -24,6 +24,11 @@ RenderMetrics CompareRadiance(const Image& rendered, const Image& truth,
                               const std::vector<uint8_t>& mask,
                               double scale_rendered_to_truth = 1.0);
 
+// Keeps the pixels whose (2 radius + 1)^2 neighbourhood lies entirely in the mask: drops
+// silhouette and block-edge pixels, whose value in a photograph mixes two surfaces.
+std::vector<uint8_t> ErodeMask(const std::vector<uint8_t>& mask, int width, int height,
+                               int radius = 1);
+
 // Least-squares scale s minimising |s R - T|^2 over the mask (e.g. an unknown exposure).
 double FitScale(const Image& rendered, const Image& truth, const std::vector<uint8_t>& mask);
 

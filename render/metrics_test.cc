@@ -1,8 +1,8 @@
 #include "render/metrics.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "core/error.h"
 
@@ -52,6 +52,22 @@ TEST(MetricsTest, IdenticalScaledAndMasked) {
   // Masked truth: rows 0-2 (x + 2y + c + 1 up to 28); its 99th percentile is near the top.
   EXPECT_GT(m.psnr_db, 20 * std::log10(20 / 0.5));
   EXPECT_LT(m.psnr_db, 20 * std::log10(30 / 0.5) + 0.1);
+}
+
+TEST(MetricsTest, ErodeMaskDropsEdgePixels) {
+  // A 4x3 block inside a 6x5 image: erosion by 1 keeps its 2x1 interior.
+  std::vector<uint8_t> mask(30, 0);
+  for (int y = 1; y <= 3; ++y) {
+    for (int x = 1; x <= 4; ++x) mask[y * 6 + x] = 1;
+  }
+  const auto e = ErodeMask(mask, 6, 5, 1);
+  int kept = 0;
+  for (int i = 0; i < 30; ++i) kept += e[i];
+  EXPECT_EQ(kept, 2);
+  EXPECT_EQ(e[2 * 6 + 2], 1);
+  EXPECT_EQ(e[2 * 6 + 3], 1);
+  EXPECT_EQ(ErodeMask(mask, 6, 5, 0), mask);
+  EXPECT_THROW(ErodeMask(mask, 5, 5, 1), Error);
 }
 
 TEST(MetricsTest, BadInputThrows) {

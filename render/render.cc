@@ -1,11 +1,11 @@
 #include "render/render.h"
 
+#include <tbb/parallel_for.h>
+
+#include <Eigen/Geometry>
 #include <chrono>
 #include <cmath>
 #include <string>
-
-#include <Eigen/Geometry>
-#include <tbb/parallel_for.h>
 
 #include "core/error.h"
 
@@ -49,8 +49,10 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
   const Eigen::Vector3d sun_e = lighting.sun_radiance * lighting.sun_solid_angle_sr;
   const double cos_sun_radius = std::cos(lighting.SunAngularRadius());
   const double offset = model.surface_offset();
-  const bool env_ok = lighting.env.num_regions() > 0 &&
-                      static_cast<int>(lighting.env.radiance.size()) == lighting.env.num_regions();
+  const bool env_ok =
+      lighting.env.num_regions() > 0 && !lighting.env.layer_z.empty() &&
+      lighting.env.radiance.size() ==
+          static_cast<size_t>(lighting.env.num_regions()) * lighting.env.layer_z.size();
 
   auto shade = [&](const Eigen::Vector3d& dir) -> Eigen::Vector3d {
     const RayHit hit = model.Intersect(pose.position, dir, 0.0);
@@ -58,7 +60,7 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
       if (!options.draw_background) return Eigen::Vector3d::Zero();
       if (dir.dot(s) >= cos_sun_radius) return lighting.sun_radiance;
       if (dir.z() >= 0) return lighting.sky.Radiance(dir);
-      return env_ok ? lighting.env.Radiance(dir) : Eigen::Vector3d::Zero();
+      return env_ok ? lighting.env.Radiance(dir, pose.position.z()) : Eigen::Vector3d::Zero();
     }
     Eigen::Vector3d rho_sun, rho_se, e_se;
     if (options.interpolate) {

@@ -1,8 +1,8 @@
 #include "render/render.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "core/error.h"
 #include "solve/test_scenes.h"

@@ -15,7 +15,7 @@ Image ToDigital(const Image& radiance, const ResponseCurve& response, double exp
 
 // The exposure factor that maps the given percentile of the radiance (all channels) to the
 // digital number `target_dn` (e.g. 99th percentile -> 230): an auto exposure for previews.
-double AutoExposure(const Image& radiance, const ResponseCurve& response,
-                    double percentile = 0.99, double target_dn = 230);
+double AutoExposure(const Image& radiance, const ResponseCurve& response, double percentile = 0.99,
+                    double target_dn = 230);
 
 }  // namespace rouen

@@ -1,8 +1,8 @@
 #include "render/tonemap.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "core/error.h"
 
@@ -22,9 +22,9 @@ ResponseCurve LinearResponse() {
 TEST(TonemapTest, MapsThroughTheResponse) {
   const ResponseCurve r = LinearResponse();
   Image rad(3, 1, 3, PixelUnits::kRadiance);
-  rad.at(0, 0, 0) = 0.5f;    // 256 * 0.5 * 1 - 1 = 127
-  rad.at(1, 0, 1) = 0.25f;   // x 2 below: 127
-  rad.at(2, 0, 2) = 100.f;   // saturates
+  rad.at(0, 0, 0) = 0.5f;   // 256 * 0.5 * 1 - 1 = 127
+  rad.at(1, 0, 1) = 0.25f;  // x 2 below: 127
+  rad.at(2, 0, 2) = 100.f;  // saturates
   const Image dn = ToDigital(rad, r, 1.0);
   EXPECT_EQ(dn.units, PixelUnits::kDigital);
   EXPECT_EQ(dn.at(0, 0, 0), 127);

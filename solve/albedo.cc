@@ -1,5 +1,8 @@
 #include "solve/albedo.h"
 
+#include <tbb/parallel_for.h>
+
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -8,9 +11,6 @@
 #include <numeric>
 #include <string>
 #include <unordered_map>
-
-#include <Eigen/Geometry>
-#include <tbb/parallel_for.h>
 
 #include "core/error.h"
 
@@ -38,6 +38,7 @@ double Median(std::vector<double> v) {
 // One equation of eqs. 11-12 for a point: y = pi I = rho_se e_se + rho_sun e_sun, per channel.
 struct Equation {
   Eigen::Vector3d y, e_se, e_sun;
+  double weight = 1;  // slot reliability (1 = full)
 };
 
 enum class Mode { kBoth, kSeOnly };
@@ -108,7 +109,7 @@ PointFit FitPoint(const std::vector<Equation>& eqs, Mode mode, const Eigen::Vect
   std::vector<Eigen::Vector3d> inv_sigma(n);
   for (int k = 0; k < n; ++k) {
     for (int c = 0; c < 3; ++c) {
-      inv_sigma[k][c] = 1.0 / std::max({eqs[k].y[c], 0.05 * mean_y[c], 1e-30});
+      inv_sigma[k][c] = std::sqrt(eqs[k].weight) / std::max({eqs[k].y[c], 0.05 * mean_y[c], 1e-30});
     }
   }
   const int unknowns = mode == Mode::kBoth ? 2 : 1;
@@ -178,6 +179,72 @@ bool IsSunlit(const Equation& q, double threshold) {
   return q.e_sun[1] > threshold * std::max(q.e_se[1], 1e-300);
 }
 
+// Fills points of category 0 (never observed) with the inverse-distance mean of up to 6
+// observed points (category 1..3) of the same block within `radius` (and in the same plane
+// when `coplanar`); filled points get category 4.
+void FillFromNeighbours(const SurfaceGrid& grid, double radius, bool coplanar,
+                        std::vector<uint8_t>* category, AlbedoResult* res) {
+  const int n = grid.size();
+  const double R = radius;
+  auto key = [&](const Eigen::Vector3d& p) {
+    return Eigen::Vector3i(static_cast<int>(std::floor(p.x() / R)),
+                           static_cast<int>(std::floor(p.y() / R)),
+                           static_cast<int>(std::floor(p.z() / R)));
+  };
+  auto hash = [](const Eigen::Vector3i& k) {
+    return (static_cast<int64_t>(k.x()) * 73856093) ^ (static_cast<int64_t>(k.y()) * 19349663) ^
+           (static_cast<int64_t>(k.z()) * 83492791);
+  };
+  const std::vector<uint8_t>& cat = *category;
+  std::unordered_map<int64_t, std::vector<int>> cells;
+  for (int i = 0; i < n; ++i) {
+    if (cat[i] >= 1 && cat[i] <= 3) cells[hash(key(grid.points[i].position))].push_back(i);
+  }
+  std::vector<uint8_t> filled(n, 0);
+  tbb::parallel_for(0, n, [&](int i) {
+    if (cat[i] != 0) return;
+    const GridPoint& p = grid.points[i];
+    const Eigen::Vector3i k = key(p.position);
+    std::vector<std::pair<double, int>> near;
+    for (int dx = -1; dx <= 1; ++dx) {
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dz = -1; dz <= 1; ++dz) {
+          auto it = cells.find(hash(k + Eigen::Vector3i(dx, dy, dz)));
+          if (it == cells.end()) continue;
+          for (int j : it->second) {
+            const GridPoint& q = grid.points[j];
+            if (q.block != p.block) continue;
+            if (coplanar && (q.normal.dot(p.normal) < 0.999 ||
+                             std::abs(p.normal.dot(q.position - p.position)) > 0.05)) {
+              continue;
+            }
+            const double d = (q.position - p.position).norm();
+            if (d <= R) near.emplace_back(d, j);
+          }
+        }
+      }
+    }
+    if (near.empty()) return;
+    const size_t m = std::min<size_t>(near.size(), 6);
+    std::partial_sort(near.begin(), near.begin() + m, near.end());
+    Eigen::Vector3d se = Eigen::Vector3d::Zero(), sun = Eigen::Vector3d::Zero();
+    double wsum = 0;
+    for (size_t a = 0; a < m; ++a) {
+      const double w = 1.0 / (near[a].first * near[a].first + 1e-6);
+      se += w * res->rho_se[near[a].second];
+      sun += w * res->rho_sun[near[a].second];
+      wsum += w;
+    }
+    res->rho_se[i] = se / wsum;
+    res->rho_sun[i] = sun / wsum;
+    res->flags[i] |= kAlbedoNoObservations | kAlbedoFilled;
+    filled[i] = 1;
+  });
+  for (int i = 0; i < n; ++i) {
+    if (filled[i]) (*category)[i] = 4;
+  }
+}
+
 }  // namespace
 
 void ObservationOptions::Validate() const {
@@ -209,12 +276,13 @@ std::string AlbedoSummary::BriefReport() const {
   char buf[512];
   std::snprintf(buf, sizeof(buf),
                 "albedo: %d/%d points observed (%lld obs, %d filled from neighbours), "
-                "sun-unobserved %d, never-shadowed %d, clamped %d, residual rms %.2f%% median %.2f%%, downweighted %.1f%%, "
+                "sun-unobserved %d, never-shadowed %d, clamped %d, residual rms %.2f%% median "
+                "%.2f%%, downweighted %.1f%%, "
                 "%d outer iterations, last change %.3f%%, %.2f s",
                 points_observed, points, static_cast<long long>(observations),
-                points_filled_neighbours, points_sun_unobserved, points_never_shadowed, points_clamped,
-                100 * residual_rms_rel, 100 * residual_median_rel, 100 * downweighted_fraction,
-                outer_iterations,
+                points_filled_neighbours, points_sun_unobserved, points_never_shadowed,
+                points_clamped, 100 * residual_rms_rel, 100 * residual_median_rel,
+                100 * downweighted_fraction, outer_iterations,
                 change_per_iteration.empty() ? 0.0 : 100 * change_per_iteration.back(), seconds);
   return buf;
 }
@@ -302,46 +370,76 @@ std::vector<Observation> CollectObservations(const SurfaceGrid& grid, const RayC
           ++invalid[i];
           continue;
         }
+        // Footprint: a 3x3 lattice over the 2x2 pixel block (pixel corners, the outer ones
+        // slightly inset). The bilinear sample needs the whole block on the point's plane (and
+        // on one side of any shadow edge); failing that, the nearest pixel alone may qualify.
+        bool use_nearest = false;
         if (options.check_footprint || sun_dirs) {
-          // Corners of the 2x2 pixel block, slightly inset.
-          const double cx[2] = {x0 + 0.05, x1 + 0.95}, cy[2] = {y0 + 0.05, y1 + 0.95};
-          bool same_plane = true;
-          int lit = 0, corners = 0;
-          for (double yy : cy) {
-            for (double xx : cx) {
+          bool on_plane[3][3];
+          int lit[3][3];
+          const Eigen::Vector3d* sun = sun_dirs ? &(*sun_dirs)[ph.slot] : nullptr;
+          for (int b = 0; b < 3; ++b) {
+            for (int a = 0; a < 3; ++a) {
+              on_plane[b][a] = true;
+              lit[b][a] = 0;
+              // The middle lattice lines only matter for the nearest-pixel fallback.
+              if ((a == 1 || b == 1) && !options.nearest_pixel_fallback) continue;
+              const double xx = x0 + (a == 0 ? 0.05 : (a == 1 ? 1.0 : 1.95));
+              const double yy = y0 + (b == 0 ? 0.05 : (b == 1 ? 1.0 : 1.95));
               const Eigen::Vector3d d =
-                  (ph.pose.rotation * Unproject(ph.intrinsics, Eigen::Vector2d(xx, yy))).normalized();
+                  (ph.pose.rotation * Unproject(ph.intrinsics, Eigen::Vector2d(xx, yy)))
+                      .normalized();
               const RayHit h = model.Intersect(ph.pose.position, d, 0.0);
-              if (!h.hit) {
-                same_plane = false;
-                continue;
-              }
+              on_plane[b][a] = h.hit && grid.triangle_n[h.triangle] > 0;
+              if (!on_plane[b][a]) continue;
               const Eigen::Vector3d q = ph.pose.position + h.t * d;
-              if (grid.triangle_n[h.triangle] == 0 || std::abs(gp.normal.dot(q - gp.position)) > options.plane_tolerance_m ||
-                  grid.points[grid.triangle_first[h.triangle]].normal.dot(gp.normal) < 0.999) {
-                same_plane = false;
-              }
-              if (sun_dirs) {
-                const Eigen::Vector3d& s = (*sun_dirs)[ph.slot];
-                lit += gp.normal.dot(s) > 0 && !model.Occluded(q + offset * gp.normal, s, 0.0);
-                ++corners;
+              on_plane[b][a] =
+                  std::abs(gp.normal.dot(q - gp.position)) <= options.plane_tolerance_m &&
+                  grid.points[grid.triangle_first[h.triangle]].normal.dot(gp.normal) >= 0.999;
+              if (sun) {
+                lit[b][a] =
+                    gp.normal.dot(*sun) > 0 && !model.Occluded(q + offset * gp.normal, *sun, 0.0);
               }
             }
           }
-          if (options.check_footprint && !same_plane) {
-            ++mixed[i];
-            continue;
-          }
-          if (sun_dirs && lit != 0 && lit != corners) {
-            ++edge[i];
-            continue;
+          // Is the footprint with lattice corners [a0, a0 + span] x [b0, b0 + span] clean?
+          auto clean = [&](int a0, int b0, int span, bool* plane_ok) {
+            bool plane = true;
+            int n_lit = 0;
+            for (int b : {b0, b0 + span}) {
+              for (int a : {a0, a0 + span}) {
+                plane = plane && on_plane[b][a];
+                n_lit += lit[b][a];
+              }
+            }
+            *plane_ok = plane || !options.check_footprint;
+            return *plane_ok && (!sun || n_lit == 0 || n_lit == 4);
+          };
+          bool plane_ok = false;
+          if (!clean(0, 0, 2, &plane_ok)) {
+            // The pixel containing (x, y): x0 or x0 + 1, i.e. lattice columns [0, 1] or [1, 2].
+            const int a0 = std::clamp(static_cast<int>(std::floor(x)) - x0, 0, 1);
+            const int b0 = std::clamp(static_cast<int>(std::floor(y)) - y0, 0, 1);
+            bool plane1 = false;
+            if (!options.nearest_pixel_fallback || !clean(a0, b0, 1, &plane1)) {
+              // Counted by the footprint that decided: shadow edge when it lay on the plane.
+              const bool plane = options.nearest_pixel_fallback ? plane1 : plane_ok;
+              ++(plane ? edge[i] : mixed[i]);
+              continue;
+            }
+            use_nearest = true;
           }
         }
         Observation ob;
         ob.point = i;
         ob.slot = ph.slot;
         ob.photo = static_cast<int>(p);
-        for (int c = 0; c < 3; ++c) ob.radiance[c] = ph.image.Sample(x, y, c);
+        for (int c = 0; c < 3; ++c) {
+          ob.radiance[c] = use_nearest
+                               ? ph.image.at(std::clamp(static_cast<int>(std::floor(x)), x0, x1),
+                                             std::clamp(static_cast<int>(std::floor(y)), y0, y1), c)
+                               : ph.image.Sample(x, y, c);
+        }
         per_point[i].push_back(ob);
       }
     }
@@ -363,11 +461,59 @@ std::vector<Observation> CollectObservations(const SurfaceGrid& grid, const RayC
   return out;
 }
 
+// Eqs. 11-12 with per-slot weights (empty: all 1); defined below.
+static AlbedoResult SolveWeighted(const SurfaceGrid& grid,
+                                  const std::vector<Observation>& observations,
+                                  const std::vector<SlotIrradiance>& irradiance,
+                                  const AlbedoOptions& options,
+                                  const std::vector<double>& slot_weight);
+
 // Eqs. 11-12 per grid point with fixed irradiance.
 AlbedoResult SolveAlbedoFixedIrradiance(const SurfaceGrid& grid,
                                         const std::vector<Observation>& observations,
                                         const std::vector<SlotIrradiance>& irradiance,
                                         const AlbedoOptions& options) {
+  return SolveWeighted(grid, observations, irradiance, options, {});
+}
+
+namespace {
+
+// Per-slot weights from the residuals of a solution: (median over all slots / slot's median
+// |relative residual|)^2, at most 1. A slot whose lighting model fits the photos worse than
+// the others (e.g. a low sun, where the environment is least certain) counts less.
+std::vector<double> SlotWeights(const std::vector<Observation>& observations,
+                                const std::vector<SlotIrradiance>& irradiance,
+                                const AlbedoResult& res) {
+  std::vector<std::vector<double>> per(irradiance.size());
+  std::vector<double> all;
+  for (const Observation& ob : observations) {
+    if (res.flags[ob.point] & kAlbedoNoObservations) continue;
+    const SlotIrradiance& irr = irradiance[ob.slot];
+    const double y = kPi * ob.radiance[1];
+    const double pred = res.rho_se[ob.point][1] * irr.se[ob.point][1] +
+                        res.rho_sun[ob.point][1] * irr.sun[ob.point][1];
+    if (!(y > 0)) continue;
+    const double r = std::abs(y - pred) / y;
+    per[ob.slot].push_back(r);
+    all.push_back(r);
+  }
+  const double m_all = Median(all);
+  std::vector<double> w(irradiance.size(), 1.0);
+  for (size_t s = 0; s < per.size(); ++s) {
+    if (per[s].size() < 10 || !(m_all > 0)) continue;
+    const double m = Median(per[s]);
+    if (m > m_all) w[s] = (m_all / m) * (m_all / m);
+  }
+  return w;
+}
+
+}  // namespace
+
+static AlbedoResult SolveWeighted(const SurfaceGrid& grid,
+                                  const std::vector<Observation>& observations,
+                                  const std::vector<SlotIrradiance>& irradiance,
+                                  const AlbedoOptions& options,
+                                  const std::vector<double>& slot_weight) {
   const auto start = std::chrono::steady_clock::now();
   options.Validate();
   const int n = grid.size();
@@ -396,9 +542,8 @@ AlbedoResult SolveAlbedoFixedIrradiance(const SurfaceGrid& grid,
                   " has a negative or non-finite radiance");
     }
   }
-  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
-    return observations[a].point < observations[b].point;
-  });
+  std::stable_sort(order.begin(), order.end(),
+                   [&](int a, int b) { return observations[a].point < observations[b].point; });
   std::vector<int> first(n + 1, 0);
   for (const Observation& ob : observations) ++first[ob.point + 1];
   for (int i = 0; i < n; ++i) first[i + 1] += first[i];
@@ -410,7 +555,8 @@ AlbedoResult SolveAlbedoFixedIrradiance(const SurfaceGrid& grid,
       const SlotIrradiance& irr = irradiance[ob.slot];
       // A point that receives no light in this slot tells nothing about its albedo.
       if (!((irr.se[ob.point] + irr.sun[ob.point]).maxCoeff() > 0)) continue;
-      eqs.push_back({kPi * ob.radiance.cast<double>(), irr.se[ob.point], irr.sun[ob.point]});
+      eqs.push_back({kPi * ob.radiance.cast<double>(), irr.se[ob.point], irr.sun[ob.point],
+                     slot_weight.empty() ? 1.0 : slot_weight[ob.slot]});
     }
     return eqs;
   };
@@ -490,64 +636,11 @@ AlbedoResult SolveAlbedoFixedIrradiance(const SurfaceGrid& grid,
       res.flags[i] |= kAlbedoNeverShadowed;
     }
   });
-  // Never-observed points: from the nearest observed points of the same face, when close.
+  // Never-observed points: from the nearest observed points of the same face when close, then
+  // of the same block (the paper's "fill in reflectance values from adjacent faces", §4.1).
   if (options.fill_radius_m > 0) {
-    const double R = options.fill_radius_m;
-    auto key = [&](const Eigen::Vector3d& p) {
-      return Eigen::Vector3i(static_cast<int>(std::floor(p.x() / R)),
-                             static_cast<int>(std::floor(p.y() / R)),
-                             static_cast<int>(std::floor(p.z() / R)));
-    };
-    auto hash = [](const Eigen::Vector3i& k) {
-      return (static_cast<int64_t>(k.x()) * 73856093) ^ (static_cast<int64_t>(k.y()) * 19349663) ^
-             (static_cast<int64_t>(k.z()) * 83492791);
-    };
-    std::unordered_map<int64_t, std::vector<int>> cells;
-    for (int i = 0; i < n; ++i) {
-      if (category[i] != 0) cells[hash(key(grid.points[i].position))].push_back(i);
-    }
-    std::vector<int> filled(n, 0);
-    tbb::parallel_for(0, n, [&](int i) {
-      if (category[i] != 0) return;
-      const GridPoint& p = grid.points[i];
-      const Eigen::Vector3i k = key(p.position);
-      std::vector<std::pair<double, int>> near;
-      for (int dx = -1; dx <= 1; ++dx) {
-        for (int dy = -1; dy <= 1; ++dy) {
-          for (int dz = -1; dz <= 1; ++dz) {
-            auto it = cells.find(hash(k + Eigen::Vector3i(dx, dy, dz)));
-            if (it == cells.end()) continue;
-            for (int j : it->second) {
-              const GridPoint& q = grid.points[j];
-              if (q.block != p.block || q.normal.dot(p.normal) < 0.999 ||
-                  std::abs(p.normal.dot(q.position - p.position)) > 0.05) {
-                continue;
-              }
-              const double d = (q.position - p.position).norm();
-              if (d <= R) near.emplace_back(d, j);
-            }
-          }
-        }
-      }
-      if (near.empty()) return;
-      const size_t m = std::min<size_t>(near.size(), 6);
-      std::partial_sort(near.begin(), near.begin() + m, near.end());
-      Eigen::Vector3d se = Eigen::Vector3d::Zero(), sun = Eigen::Vector3d::Zero();
-      double wsum = 0;
-      for (size_t a = 0; a < m; ++a) {
-        const double w = 1.0 / (near[a].first * near[a].first + 1e-6);
-        se += w * res.rho_se[near[a].second];
-        sun += w * res.rho_sun[near[a].second];
-        wsum += w;
-      }
-      res.rho_se[i] = se / wsum;
-      res.rho_sun[i] = sun / wsum;
-      res.flags[i] |= kAlbedoNoObservations | kAlbedoFilled;
-      filled[i] = 1;
-    });
-    for (int i = 0; i < n; ++i) {
-      if (filled[i]) category[i] = 4;  // filled from neighbours
-    }
+    FillFromNeighbours(grid, options.fill_radius_m, true, &category, &res);
+    FillFromNeighbours(grid, 4 * options.fill_radius_m, false, &category, &res);
   }
   // The rest: the block median (global median as a fallback).
   std::vector<std::array<std::vector<double>, 6>> block_vals(nblocks + 1);
@@ -602,8 +695,7 @@ AlbedoResult SolveAlbedoFixedIrradiance(const SurfaceGrid& grid,
     for (size_t k = 0; k < eqs.size(); ++k) {
       if (k < weights[i].size() && weights[i][k] < 0.5) ++down;
       for (int c = 0; c < 3; ++c) {
-        const double pred =
-            res.rho_se[i][c] * eqs[k].e_se[c] + res.rho_sun[i][c] * eqs[k].e_sun[c];
+        const double pred = res.rho_se[i][c] * eqs[k].e_se[c] + res.rho_sun[i][c] * eqs[k].e_sun[c];
         const double r = (eqs[k].y[c] - pred) / std::max(eqs[k].y[c], 1e-30);
         rel.push_back(std::abs(r));
         sum2 += r * r;
@@ -627,8 +719,8 @@ AlbedoResult SolveAlbedoFixedIrradiance(const SurfaceGrid& grid,
 // §4.1: albedos, then the one-bounce interreflection from them, then albedos again.
 AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
                          const RayCaster& model, const std::vector<Lighting>& slots,
-                         const std::vector<Observation>& observations,
-                         const AlbedoOptions& options, std::vector<SlotIrradiance>* irradiance) {
+                         const std::vector<Observation>& observations, const AlbedoOptions& options,
+                         std::vector<SlotIrradiance>* irradiance) {
   const auto start = std::chrono::steady_clock::now();
   options.Validate();
   if (slots.empty()) throw Error("albedo: no time-of-day slots");
@@ -636,13 +728,15 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   tbb::parallel_for(0, static_cast<int>(slots.size()), [&](int s) {
     irr[s] = ComputeIrradiance(grid, cache, model, slots[s], options.irradiance);
   });
-  AlbedoResult res = SolveAlbedoFixedIrradiance(grid, observations, irr, options);
+  AlbedoResult res = SolveWeighted(grid, observations, irr, options, {});
   std::vector<double> changes;
+  std::vector<double> slot_weight;
   for (int it = 1; it < options.outer_iterations; ++it) {
     for (auto& slot_irr : irr) {
       AddInterreflection(grid, cache, res.rho_sun, res.rho_se, &slot_irr, options.bounces);
     }
-    AlbedoResult next = SolveAlbedoFixedIrradiance(grid, observations, irr, options);
+    if (options.slot_weighting) slot_weight = SlotWeights(observations, irr, res);
+    AlbedoResult next = SolveWeighted(grid, observations, irr, options, slot_weight);
     double change = 0;
     int count = 0;
     for (int i = 0; i < grid.size(); ++i) {
@@ -661,8 +755,17 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   }
   res.summary.change_per_iteration = changes;
   res.summary.outer_iterations = options.outer_iterations;
+  res.summary.slot_weights =
+      slot_weight.empty() ? std::vector<double>(slots.size(), 1.0) : slot_weight;
+  if (irradiance) {
+    // Hand back the irradiance with the interreflection from the returned albedos (ready for
+    // rendering these slots).
+    for (auto& slot_irr : irr) {
+      AddInterreflection(grid, cache, res.rho_sun, res.rho_se, &slot_irr, options.bounces);
+    }
+    *irradiance = std::move(irr);
+  }
   res.summary.seconds = Seconds(start);
-  if (irradiance) *irradiance = std::move(irr);
   return res;
 }
 

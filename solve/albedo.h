@@ -4,11 +4,10 @@
 //   pi I_k = rho_se E_se,k + rho_sun E_sun,k   for every observation k of a point.
 #pragma once
 
+#include <Eigen/Core>
 #include <cstdint>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "core/camera.h"
 #include "core/image.h"
@@ -23,7 +22,7 @@ struct ArchitecturePhoto {
   Image image;  // kRadiance, >= 3 channels
   Intrinsics intrinsics;
   Pose pose;
-  int slot = 0;  // index into the per-slot lighting / irradiance
+  int slot = 0;               // index into the per-slot lighting / irradiance
   std::vector<uint8_t> mask;  // empty: all valid; else width*height, nonzero = valid pixel
   std::string name;           // for messages
 };
@@ -36,22 +35,25 @@ struct Observation {
 };
 
 struct ObservationOptions {
-  double margin_px = 2;               // the projection must lie this far inside the image
-  double occlusion_tolerance = 0.005; // visibility ray stops this fraction short of the point
-  double min_cos_view = 0.05;         // skip views more grazing than this (cos of angle)
+  double margin_px = 2;                // the projection must lie this far inside the image
+  double occlusion_tolerance = 0.005;  // visibility ray stops this fraction short of the point
+  double min_cos_view = 0.05;          // skip views more grazing than this (cos of angle)
   // The bilinear footprint (2x2 pixels) must see the point's own plane at all four corners:
   // no silhouette, occluding edge or other face mixes into the sample.
   bool check_footprint = true;
-  double plane_tolerance_m = 0.05;    // distance of a corner's hit from the point's plane
+  // When the 2x2 footprint fails, use the nearest pixel alone if its own corners pass (more
+  // points observed near edges, but noisier there: off by default).
+  bool nearest_pixel_fallback = false;
+  double plane_tolerance_m = 0.05;  // distance of a corner's hit from the point's plane
   void Validate() const;
 };
 
 struct ObservationSummary {
-  int64_t projected = 0;       // point-photo pairs in front of the camera and in the image
-  int64_t occluded = 0;        // of those, hidden by the model (App. B)
+  int64_t projected = 0;        // point-photo pairs in front of the camera and in the image
+  int64_t occluded = 0;         // of those, hidden by the model (App. B)
   int64_t mixed_footprint = 0;  // footprint crosses an edge of the face (check_footprint)
   int64_t shadow_edge = 0;      // footprint crosses a cast-shadow edge (sun_dirs given)
-  int64_t invalid_pixels = 0;  // masked or non-finite
+  int64_t invalid_pixels = 0;   // masked or non-finite
   int64_t observations = 0;
   int points_observed = 0;
   double seconds = 0;
@@ -62,11 +64,10 @@ struct ObservationSummary {
 // the point; then take the bilinear radiance. With `sun_dirs` (unit ENU per slot), samples
 // whose footprint straddles a cast-shadow edge are dropped too (the grid point's single sun
 // visibility would not describe them). Sorted by point, then photo.
-std::vector<Observation> CollectObservations(const SurfaceGrid& grid, const RayCaster& model,
-                                             const std::vector<ArchitecturePhoto>& photos,
-                                             const ObservationOptions& options = {},
-                                             ObservationSummary* summary = nullptr,
-                                             const std::vector<Eigen::Vector3d>* sun_dirs = nullptr);
+std::vector<Observation> CollectObservations(
+    const SurfaceGrid& grid, const RayCaster& model, const std::vector<ArchitecturePhoto>& photos,
+    const ObservationOptions& options = {}, ObservationSummary* summary = nullptr,
+    const std::vector<Eigen::Vector3d>* sun_dirs = nullptr);
 
 enum class RobustLoss {
   kNone,
@@ -85,21 +86,29 @@ enum AlbedoFlag : uint8_t {
 
 struct AlbedoOptions {
   RobustLoss loss = RobustLoss::kHuber;
-  double huber_k = 1.345;       // in units of the robust scale
-  double min_scale = 0.01;      // floor on the relative residual scale (1%)
+  double huber_k = 1.345;   // in units of the robust scale
+  double min_scale = 0.01;  // floor on the relative residual scale (1%)
   int irls_iterations = 8;
-  int outer_iterations = 3;     // albedo -> interreflection -> albedo ... (§4.1)
-  int bounces = 1;              // radiosity passes in each interreflection update
+  int outer_iterations = 3;  // albedo -> interreflection -> albedo ... (§4.1)
+  // Radiosity passes in each interreflection update: 1 is the paper's one-bounce reflection;
+  // 2 (default) also carries light bounced twice (belfry interiors, re-entrant corners).
+  int bounces = 2;
   // An observation counts as sunlit when E_sun > sunlit_threshold x E_se (green).
   double sunlit_threshold = 0.05;
   // Weight of the prior rho_sun = ratio x rho_se for never-shadowed points, relative to one
   // observation's relative residual squared (0 disables).
-  double never_shadowed_prior = 1e-3;
+  double never_shadowed_prior = 0.1;
   // The same prior for points seen both sunlit and shadowed (0: none; their own data decide).
-  double ratio_prior = 0;
+  // Small errors in E_se otherwise split unevenly between the two albedos.
+  double ratio_prior = 0.1;
   // Never-observed points take the inverse-distance mean of up to 6 observed points of the same
-  // block and plane within this radius (0: off); beyond it, the block median.
+  // block and plane within this radius, else of the same block within 4x the radius (0: off);
+  // beyond that, the block median.
   double fill_radius_m = 3.0;
+  // Beyond the paper: from the second outer iteration on, each time-of-day slot is weighted by
+  // (median relative residual of all slots / its own)^2, at most 1, so a slot whose lighting
+  // model fits worse (typically a low sun) pulls the albedos less.
+  bool slot_weighting = true;
   ObservationOptions observation;
   IrradianceOptions irradiance;
 
@@ -117,9 +126,10 @@ struct AlbedoSummary {
   int outer_iterations = 0;
   // Mean relative change of the albedos at each outer iteration after the first.
   std::vector<double> change_per_iteration;
-  double residual_rms_rel = 0;     // relative residual (pi I - model) / (pi I), all obs
-  double residual_median_rel = 0;  // median |relative residual|
+  double residual_rms_rel = 0;       // relative residual (pi I - model) / (pi I), all obs
+  double residual_median_rel = 0;    // median |relative residual|
   double downweighted_fraction = 0;  // observations with robust weight < 0.5
+  std::vector<double> slot_weights;  // per slot, as used in the last solve (SolveAlbedo)
   double seconds = 0;
   std::string BriefReport() const;
 };
@@ -140,7 +150,7 @@ AlbedoResult SolveAlbedoFixedIrradiance(const SurfaceGrid& grid,
 
 // §4.1 with the outer iteration: irradiance without bounce -> albedos -> irradiance with the
 // one-bounce interreflection from the current albedos -> albedos ... `irradiance` receives
-// the per-slot irradiance of the last solve (with the bounce when outer_iterations > 1).
+// the per-slot irradiance with the interreflection from the returned albedos.
 AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
                          const RayCaster& model, const std::vector<Lighting>& slots,
                          const std::vector<Observation>& observations,

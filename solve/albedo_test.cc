@@ -1,8 +1,8 @@
 #include "solve/albedo.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "core/error.h"
 #include "solve/test_scenes.h"
@@ -40,7 +40,8 @@ World MakeWorld() {
   for (double az : az_deg) {
     Lighting l;
     const double a = az * kPi / 180, el = 35 * kPi / 180;
-    l.sun_dir = Eigen::Vector3d(std::cos(el) * std::sin(a), std::cos(el) * std::cos(a), std::sin(el));
+    l.sun_dir =
+        Eigen::Vector3d(std::cos(el) * std::sin(a), std::cos(el) * std::cos(a), std::sin(el));
     l.sun_radiance = Eigen::Vector3d(3e4, 2.8e4, 2.5e4);
     l.sun_solid_angle_sr = 6.8e-5;
     l.env = EnvironmentMap::Constant(EnvOptions(), {0.25, 0.35, 0.6}, {0.1, 0.1, 0.08});
@@ -48,7 +49,8 @@ World MakeWorld() {
   }
   // Smoothly varying true albedos; rho_sun differs from rho_se (pseudo-BRDFs differ).
   for (const auto& p : w.grid.points) {
-    const Eigen::Vector3d base(0.3 + 0.1 * std::sin(p.position.x()), 0.4 + 0.05 * p.position.z() / 3,
+    const Eigen::Vector3d base(0.3 + 0.1 * std::sin(p.position.x()),
+                               0.4 + 0.05 * p.position.z() / 3,
                                0.5 + 0.1 * std::cos(p.position.y()));
     w.rho_se.push_back(base);
     w.rho_sun.push_back(base.cwiseProduct(Eigen::Vector3d(1.1, 1.0, 0.9)));
@@ -137,7 +139,8 @@ TEST(AlbedoTest, RobustAgainstAShadowBoundaryOutlier) {
   for (double az : {130.0, 190.0, 240.0}) {
     Lighting l = base[0];
     const double a = az * kPi / 180, el = 50 * kPi / 180;
-    l.sun_dir = Eigen::Vector3d(std::cos(el) * std::sin(a), std::cos(el) * std::cos(a), std::sin(el));
+    l.sun_dir =
+        Eigen::Vector3d(std::cos(el) * std::sin(a), std::cos(el) * std::cos(a), std::sin(el));
     w.slots.push_back(l);
   }
   const auto irr = Irradiance(w);
@@ -177,6 +180,7 @@ TEST(AlbedoTest, OuterIterationConvergesToTheBounceConsistentAlbedo) {
   for (auto& s : irr) AddInterreflection(w.grid, w.cache, w.rho_sun, w.rho_se, &s, 1);
   const auto obs = Observe(w, irr);
   AlbedoOptions opt;
+  opt.bounces = 1;  // as the photos were made
   opt.outer_iterations = 1;
   const AlbedoResult first = SolveAlbedo(w.grid, w.cache, *w.rc, w.slots, obs, opt);
   opt.outer_iterations = 4;
@@ -221,6 +225,32 @@ TEST(AlbedoTest, UnobservedPointsAreFilledAndFlagged) {
   EXPECT_EQ(r.summary.points_observed, w.grid.size() - filled);
 }
 
+TEST(AlbedoTest, GapsAreFilledFromTheSameFace) {
+  const World w = MakeWorld();
+  const auto irr = Irradiance(w);
+  const auto obs = Observe(w, irr);
+  // Hide a strip of the box's south face (normal -y, x in [-0.3, 0.3]).
+  auto hidden = [&](int i) {
+    const GridPoint& p = w.grid.points[i];
+    return p.block == 1 && p.normal.y() < -0.9 && std::abs(p.position.x()) < 0.3;
+  };
+  std::vector<Observation> kept;
+  for (const auto& o : obs) {
+    if (!hidden(o.point)) kept.push_back(o);
+  }
+  const AlbedoResult r = SolveAlbedoFixedIrradiance(w.grid, kept, irr);
+  int n = 0;
+  for (int i = 0; i < w.grid.size(); ++i) {
+    if (!hidden(i)) continue;
+    ++n;
+    EXPECT_TRUE(r.flags[i] & kAlbedoFilled);
+    // The true field varies by at most ~0.1 * 0.6 m over the fill distance (sin x slope <= 0.1).
+    EXPECT_NEAR((r.rho_se[i] - w.rho_se[i]).norm() / w.rho_se[i].norm(), 0, 0.1);
+  }
+  EXPECT_GT(n, 0);
+  EXPECT_GE(r.summary.points_filled_neighbours, n);  // (and the plaza under the box)
+}
+
 TEST(AlbedoTest, BadInputThrows) {
   const World w = MakeWorld();
   const auto irr = Irradiance(w);
@@ -253,22 +283,28 @@ TEST(CollectObservationsTest, ProjectsChecksVisibilityMaskAndSamples) {
   testing::AddBox(&m, {-0.5, -3.5, 0}, {0.5, -2.5, 5}, post);
   const SurfaceGrid g = BuildSurfaceGrid(m, GridOptions());
   const RayCaster rc(m);
-  ArchitecturePhoto ph;
-  ph.intrinsics = Intrinsics::PinholeFov(320, 240, 70);
-  ph.pose = Pose::LookAt({0, -12, 2}, {0, 0, 2});
-  ph.image = Image(320, 240, 3, PixelUnits::kRadiance, 0.f);
-  // Radiance on the wall: a linear function of the world point (bilinear sampling of a linear
-  // field along a plane is exact only up to perspective: tolerance below).
-  auto f = [](const Eigen::Vector3d& p) { return Eigen::Vector3d(1 + 0.1 * p.x(), 2 + 0.2 * p.z(), 3); };
-  for (int y = 0; y < 240; ++y) {
-    for (int x = 0; x < 320; ++x) {
-      const Eigen::Vector3d d = ph.pose.rotation * Unproject(ph.intrinsics, {x + 0.5, y + 0.5});
-      const RayHit h = rc.Intersect(ph.pose.position, d.normalized());
-      if (!h.hit) continue;
-      const Eigen::Vector3d v = f(ph.pose.position + h.t * d.normalized());
-      for (int c = 0; c < 3; ++c) ph.image.at(x, y, c) = static_cast<float>(v[c]);
+  auto f = [](const Eigen::Vector3d& p) {
+    return Eigen::Vector3d(1 + 0.1 * p.x(), 2 + 0.2 * p.z(), 3);
+  };
+  auto make_photo = [&](int w, int h) {
+    ArchitecturePhoto ph;
+    ph.intrinsics = Intrinsics::PinholeFov(w, h, 70);
+    ph.pose = Pose::LookAt({0, -12, 2}, {0, 0, 2});
+    ph.image = Image(w, h, 3, PixelUnits::kRadiance, 0.f);
+    // Radiance on the wall: a linear function of the world point (bilinear sampling of a
+    // linear field along a plane is exact only up to perspective: tolerance below).
+    for (int y = 0; y < h; ++y) {
+      for (int x = 0; x < w; ++x) {
+        const Eigen::Vector3d d = ph.pose.rotation * Unproject(ph.intrinsics, {x + 0.5, y + 0.5});
+        const RayHit hit = rc.Intersect(ph.pose.position, d.normalized());
+        if (!hit.hit) continue;
+        const Eigen::Vector3d v = f(ph.pose.position + hit.t * d.normalized());
+        for (int c = 0; c < 3; ++c) ph.image.at(x, y, c) = static_cast<float>(v[c]);
+      }
     }
-  }
+    return ph;
+  };
+  ArchitecturePhoto ph = make_photo(320, 240);
   ph.mask.assign(320 * 240, 1);
   for (int y = 0; y < 240; ++y) {
     for (int x = 90; x < 110; ++x) ph.mask[y * 320 + x] = 0;  // a strip on the wall's left
@@ -290,6 +326,35 @@ TEST(CollectObservationsTest, ProjectsChecksVisibilityMaskAndSamples) {
     EXPECT_GT(std::abs(p.position.x()), 0.55);
   }
   EXPECT_GT(wall_points, 20);
+  // A coarse photo (25 cm pixels on the wall): 2x2-pixel footprints near the post's
+  // silhouette and the wall's edges see other surfaces and are dropped.
+  const ArchitecturePhoto coarse = make_photo(64, 48);
+  ObservationSummary s1;
+  const auto obs1 = CollectObservations(g, rc, {coarse}, ObservationOptions(), &s1);
+  EXPECT_GT(s1.mixed_footprint, 0);
+  ObservationOptions loose;
+  loose.check_footprint = false;
+  const auto all = CollectObservations(g, rc, {coarse}, loose);
+  EXPECT_EQ(all.size(), obs1.size() + s1.mixed_footprint);
+  // The nearest-pixel fallback takes back part of them (single clean pixels).
+  ObservationOptions fallback;
+  fallback.nearest_pixel_fallback = true;
+  ObservationSummary s3;
+  const auto near = CollectObservations(g, rc, {coarse}, fallback, &s3);
+  EXPECT_GT(near.size(), obs1.size());
+  EXPECT_LT(s3.mixed_footprint, s1.mixed_footprint);
+  for (const auto& o : near) {
+    EXPECT_NEAR((o.radiance.cast<double>() - f(g.points[o.point].position)).norm(), 0, 0.1);
+  }
+  // A sun in the south-east casts the post's shadow onto the wall: samples straddling the
+  // shadow's edges are dropped when the slot's sun direction is given.
+  const std::vector<Eigen::Vector3d> suns = {Eigen::Vector3d(0.3, -1, 0.4).normalized()};
+  ObservationSummary s2;
+  const auto lit = CollectObservations(g, rc, {coarse}, ObservationOptions(), &s2, &suns);
+  EXPECT_GT(s2.shadow_edge, 0);
+  EXPECT_EQ(lit.size() + s2.shadow_edge, obs1.size());
+  const std::vector<Eigen::Vector3d> no_suns;
+  EXPECT_THROW(CollectObservations(g, rc, {ph}, ObservationOptions(), nullptr, &no_suns), Error);
   // Bad input.
   ArchitecturePhoto wrong = ph;
   wrong.mask.pop_back();

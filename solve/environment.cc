@@ -1,13 +1,14 @@
 #include "solve/environment.h"
 
+#include <tbb/parallel_for.h>
+
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <string>
-
-#include <Eigen/Geometry>
+#include <limits>
 #include <nlohmann/json.hpp>
-#include <tbb/parallel_for.h>
+#include <string>
 
 #include "core/error.h"
 
@@ -17,23 +18,19 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-struct Accum {
-  std::vector<Eigen::Vector3d> sum;  // solid-angle weighted radiance
-  std::vector<double> weight;
-  std::vector<int> count;
-  int used = 0, model = 0, sun = 0, invalid = 0;
-  explicit Accum(int n) : sum(n, Eigen::Vector3d::Zero()), weight(n, 0), count(n, 0) {}
-  void Add(const Accum& o) {
-    for (size_t i = 0; i < sum.size(); ++i) {
-      sum[i] += o.sum[i];
-      weight[i] += o.weight[i];
-      count[i] += o.count[i];
-    }
-    used += o.used;
-    model += o.model;
-    sun += o.sun;
-    invalid += o.invalid;
-  }
+// A panorama pixel kept for the map: direction from the panorama, solid angle, radiance and
+// what it shows.
+enum class PixelKind : uint8_t { kSky, kGround, kLandscape };
+struct UsedPixel {
+  Eigen::Vector3d dir;
+  double weight;  // solid angle, sr
+  Eigen::Vector3d radiance;
+  PixelKind kind;
+};
+
+struct Chunk {
+  std::vector<UsedPixel> pixels;
+  int model = 0, sun = 0, invalid = 0;
 };
 
 Eigen::Vector3d SkyMean(const SkyModel& sky, const EnvironmentMap& m, int region, int samples) {
@@ -55,27 +52,92 @@ Eigen::Vector3d SkyMean(const SkyModel& sky, const EnvironmentMap& m, int region
   return sum / wsum;
 }
 
-void InitMap(const EnvOptions& o, EnvironmentMap* m) {
+void InitMap(const EnvOptions& o, int layers, EnvironmentMap* m) {
   m->bands_below = o.bands_below;
   m->bands_above = o.bands_above;
   m->sectors = o.sectors;
-  m->radiance.assign(m->num_regions(), Eigen::Vector3d::Zero());
-  m->pixel_count.assign(m->num_regions(), 0);
-  m->source.assign(m->num_regions(), EnvRegionSource::kConstant);
+  m->layer_z.assign(layers, 0.0);
+  const size_t n = static_cast<size_t>(m->num_regions()) * layers;
+  m->radiance.assign(n, Eigen::Vector3d::Zero());
+  m->pixel_count.assign(n, 0);
+  m->source.assign(n, EnvRegionSource::kConstant);
+}
+
+// Fills the unobserved regions of one layer (starting at `base`): sky model above the
+// horizon; below, the nearest observed sector in the band, else the nearest band with any
+// observation (towards the horizon first).
+void FillLayer(const SkyModel& sky, int sky_samples, int base, EnvironmentMap* m) {
+  const int S = m->sectors, nreg = m->num_regions();
+  for (int r = m->bands_below * S; r < nreg; ++r) {
+    if (m->source[base + r] == EnvRegionSource::kObserved) continue;
+    m->radiance[base + r] = SkyMean(sky, *m, r, sky_samples);
+    m->source[base + r] = EnvRegionSource::kSkyModel;
+  }
+  auto observed = [&](int r) { return m->source[base + r] == EnvRegionSource::kObserved; };
+  std::vector<bool> band_has(m->bands_below, false);
+  for (int b = 0; b < m->bands_below; ++b) {
+    for (int k = 0; k < S; ++k) band_has[b] = band_has[b] || observed(b * S + k);
+  }
+  for (int b = 0; b < m->bands_below; ++b) {
+    if (!band_has[b]) continue;
+    for (int k = 0; k < S; ++k) {
+      const int r = b * S + k;
+      if (observed(r)) continue;
+      for (int dist = 1; dist <= S / 2; ++dist) {
+        const int r1 = b * S + (k + dist) % S, r2 = b * S + (k - dist + S) % S;
+        const bool o1 = observed(r1), o2 = observed(r2);
+        if (!o1 && !o2) continue;
+        m->radiance[base + r] = o1 && o2 ? 0.5 * (m->radiance[base + r1] + m->radiance[base + r2])
+                                         : (o1 ? m->radiance[base + r1] : m->radiance[base + r2]);
+        break;
+      }
+      m->source[base + r] = EnvRegionSource::kNeighbour;
+    }
+  }
+  for (int b = m->bands_below - 1; b >= 0; --b) {
+    if (band_has[b]) continue;
+    int from = -1;
+    for (int dist = 1; dist < m->bands_below && from < 0; ++dist) {
+      if (b + dist < m->bands_below && band_has[b + dist]) {
+        from = b + dist;
+      } else if (b - dist >= 0 && band_has[b - dist]) {
+        from = b - dist;
+      }
+    }
+    for (int k = 0; k < S; ++k) {
+      const int r = b * S + k;
+      if (from >= 0) {
+        m->radiance[base + r] = m->radiance[base + from * S + k];
+        m->source[base + r] = EnvRegionSource::kNeighbour;
+      } else {
+        m->radiance[base + r] = Eigen::Vector3d::Zero();  // nothing below the horizon seen
+        m->source[base + r] = EnvRegionSource::kConstant;
+      }
+    }
+  }
 }
 
 }  // namespace
 
 void EnvOptions::Validate() const {
-  if (bands_below < 1 || bands_above < 1 || sectors < 1 || bands_below > 180 ||
-      bands_above > 180 || sectors > 720) {
+  if (bands_below < 1 || bands_above < 1 || sectors < 1 || bands_below > 180 || bands_above > 180 ||
+      sectors > 720) {
     throw Error("EnvOptions: bands_below, bands_above must be in 1..180 and sectors in 1..720");
   }
   if (!(sun_exclusion_deg >= 0 && sun_exclusion_deg < 90)) {
     throw Error("EnvOptions: sun_exclusion_deg must be in [0, 90)");
   }
   if (pixel_stride < 1) throw Error("EnvOptions: pixel_stride must be >= 1");
+  if (min_region_pixels < 1) throw Error("EnvOptions: min_region_pixels must be >= 1");
   if (sky_fill_samples < 1) throw Error("EnvOptions: sky_fill_samples must be >= 1");
+  if (parallax_layers < 1 || parallax_layers > 64) {
+    throw Error("EnvOptions: parallax_layers must be in 1..64");
+  }
+  if (!(landscape_margin_m >= 0)) throw Error("EnvOptions: landscape_margin_m must be >= 0");
+  if (!(sky_tolerance > 0)) throw Error("EnvOptions: sky_tolerance must be > 0");
+  if (!(max_landscape_elevation_deg >= 0 && max_landscape_elevation_deg <= 90)) {
+    throw Error("EnvOptions: max_landscape_elevation_deg must be in [0, 90]");
+  }
 }
 
 int EnvironmentMap::Region(const Eigen::Vector3d& d) const {
@@ -88,8 +150,8 @@ int EnvironmentMap::Region(const Eigen::Vector3d& d) const {
     band = static_cast<int>(std::floor((el + kPi / 2) / (kPi / 2) * bands_below));
     band = std::clamp(band, 0, bands_below - 1);
   } else {
-    band = bands_below + std::clamp(static_cast<int>(std::floor(el / (kPi / 2) * bands_above)),
-                                    0, bands_above - 1);
+    band = bands_below + std::clamp(static_cast<int>(std::floor(el / (kPi / 2) * bands_above)), 0,
+                                    bands_above - 1);
   }
   const int sector =
       std::clamp(static_cast<int>(std::floor(az / (2 * kPi) * sectors)), 0, sectors - 1);
@@ -110,20 +172,50 @@ void EnvironmentMap::RegionBounds(int region, double* el_lo, double* el_hi, doub
   *az_hi = (sector + 1) * 2 * kPi / sectors;
 }
 
+Eigen::Vector3d EnvironmentMap::Radiance(const Eigen::Vector3d& dir, double z) const {
+  const int r = Region(dir);
+  const int L = num_layers();
+  if (L == 1 || z <= layer_z.front()) return radiance[r];
+  const int nreg = num_regions();
+  if (z >= layer_z.back()) return radiance[static_cast<size_t>(L - 1) * nreg + r];
+  int k = 0;
+  while (k + 2 < L && z > layer_z[k + 1]) ++k;
+  const double a = (z - layer_z[k]) / (layer_z[k + 1] - layer_z[k]);
+  return (1 - a) * radiance[static_cast<size_t>(k) * nreg + r] +
+         a * radiance[static_cast<size_t>(k + 1) * nreg + r];
+}
+
 double EnvironmentMap::ObservedFraction() const {
   if (source.empty()) return 0;
   int n = 0;
-  for (auto s : source) n += s == EnvRegionSource::kObserved;
-  return static_cast<double>(n) / source.size();
+  for (int r = 0; r < num_regions(); ++r) n += source[r] == EnvRegionSource::kObserved;
+  return static_cast<double>(n) / num_regions();
+}
+
+Eigen::Vector3d EnvironmentMap::HorizontalSkyIrradiance() const {
+  Eigen::Vector3d e = Eigen::Vector3d::Zero();
+  for (int r = bands_below * sectors; r < num_regions(); ++r) {
+    double el0, el1, az0, az1;
+    RegionBounds(r, &el0, &el1, &az0, &az1);
+    const double s0 = std::sin(el0), s1 = std::sin(el1);
+    e += radiance[r] * (az1 - az0) * (s1 * s1 - s0 * s0) / 2;  // projected solid angle
+  }
+  return e;
 }
 
 void EnvironmentMap::Validate() const {
   if (bands_below < 1 || bands_above < 1 || sectors < 1) {
     throw Error("environment map: bands and sectors must be >= 1");
   }
-  const size_t n = static_cast<size_t>(num_regions());
+  if (layer_z.empty()) throw Error("environment map: no layers");
+  for (size_t k = 0; k < layer_z.size(); ++k) {
+    if (!std::isfinite(layer_z[k]) || (k > 0 && !(layer_z[k] > layer_z[k - 1]))) {
+      throw Error("environment map: layer heights must be finite and increasing");
+    }
+  }
+  const size_t n = static_cast<size_t>(num_regions()) * layer_z.size();
   if (radiance.size() != n || pixel_count.size() != n || source.size() != n) {
-    throw Error("environment map: expected " + std::to_string(n) + " regions, got " +
+    throw Error("environment map: expected " + std::to_string(n) + " region values, got " +
                 std::to_string(radiance.size()));
   }
   for (size_t i = 0; i < n; ++i) {
@@ -138,7 +230,7 @@ EnvironmentMap EnvironmentMap::Constant(const EnvOptions& options, const Eigen::
                                         const Eigen::Vector3d& below) {
   options.Validate();
   EnvironmentMap m;
-  InitMap(options, &m);
+  InitMap(options, 1, &m);
   for (int r = 0; r < m.num_regions(); ++r) {
     m.radiance[r] = r / m.sectors < m.bands_below ? below : above;
   }
@@ -159,14 +251,18 @@ void to_json(nlohmann::json& j, const EnvironmentMap& m) {
   nlohmann::json rad = nlohmann::json::array();
   nlohmann::json cnt = nlohmann::json::array();
   nlohmann::json src = nlohmann::json::array();
-  for (int r = 0; r < m.num_regions(); ++r) {
+  for (size_t r = 0; r < m.radiance.size(); ++r) {
     rad.push_back({m.radiance[r].x(), m.radiance[r].y(), m.radiance[r].z()});
     cnt.push_back(m.pixel_count[r]);
     src.push_back(static_cast<int>(m.source[r]));
   }
-  j = nlohmann::json{{"bands_below", m.bands_below}, {"bands_above", m.bands_above},
-                     {"sectors", m.sectors},         {"radiance", rad},
-                     {"pixel_count", cnt},           {"source", src}};
+  j = nlohmann::json{{"bands_below", m.bands_below},
+                     {"bands_above", m.bands_above},
+                     {"sectors", m.sectors},
+                     {"layer_z", m.layer_z},
+                     {"radiance", rad},
+                     {"pixel_count", cnt},
+                     {"source", src}};
 }
 
 void from_json(const nlohmann::json& j, EnvironmentMap& m) {
@@ -175,6 +271,7 @@ void from_json(const nlohmann::json& j, EnvironmentMap& m) {
     m.bands_below = j.at("bands_below").get<int>();
     m.bands_above = j.at("bands_above").get<int>();
     m.sectors = j.at("sectors").get<int>();
+    if (j.contains("layer_z")) m.layer_z = j.at("layer_z").get<std::vector<double>>();
     for (const auto& r : j.at("radiance")) {
       if (r.size() != 3) throw Error("environment map: a radiance is not 3 numbers");
       m.radiance.emplace_back(r[0].get<double>(), r[1].get<double>(), r[2].get<double>());
@@ -182,7 +279,8 @@ void from_json(const nlohmann::json& j, EnvironmentMap& m) {
     m.pixel_count = j.at("pixel_count").get<std::vector<int>>();
     for (const auto& s : j.at("source")) {
       const int v = s.get<int>();
-      if (v < 0 || v > 3) throw Error("environment map: unknown region source " + std::to_string(v));
+      if (v < 0 || v > 3)
+        throw Error("environment map: unknown region source " + std::to_string(v));
       m.source.push_back(static_cast<EnvRegionSource>(v));
     }
   } catch (const nlohmann::json::exception& e) {
@@ -214,23 +312,21 @@ EnvironmentMap BuildEnvironmentMap(const Image& pano, const Intrinsics& intrinsi
   if (!sun_dir.allFinite() || sun_dir.norm() < 0.5) {
     throw Error("environment map: sun direction is not a unit vector");
   }
-  EnvironmentMap m;
-  InitMap(options, &m);
-  const int nreg = m.num_regions();
   const Eigen::Vector3d sun = sun_dir.normalized();
   const double cos_excl =
       std::cos(std::max(options.sun_exclusion_deg * kPi / 180.0, sun_angular_radius_rad));
   const double offset = model.surface_offset();
   const int stride = options.pixel_stride;
+  const Eigen::Vector3d c = pose.position;
 
-  // Fixed chunks of rows, summed in order: deterministic for any thread count.
+  // Pass 1: classify the pixels (fixed chunks of rows, concatenated in order: deterministic).
   const int rows = (pano.height + stride - 1) / stride;
   const int chunk_rows = 8;
   const int nchunks = (rows + chunk_rows - 1) / chunk_rows;
-  std::vector<Accum> chunks(nchunks, Accum(0));
-  tbb::parallel_for(0, nchunks, [&](int c) {
-    Accum acc(nreg);
-    for (int r = c * chunk_rows; r < std::min(rows, (c + 1) * chunk_rows); ++r) {
+  std::vector<Chunk> chunks(nchunks);
+  tbb::parallel_for(0, nchunks, [&](int ci) {
+    Chunk& ch = chunks[ci];
+    for (int r = ci * chunk_rows; r < std::min(rows, (ci + 1) * chunk_rows); ++r) {
       const int y = r * stride;
       for (int x = 0; x < pano.width; x += stride) {
         const Eigen::Vector2d px(x + 0.5, y + 0.5);
@@ -241,20 +337,20 @@ EnvironmentMap BuildEnvironmentMap(const Image& pano, const Intrinsics& intrinsi
           finite = finite && std::isfinite(rad[k]) && rad[k] >= 0;
         }
         if (!finite) {
-          ++acc.invalid;
+          ++ch.invalid;
           continue;
         }
         const Eigen::Vector3d d = (pose.rotation * Unproject(intrinsics, px)).normalized();
         if (!d.allFinite()) {
-          ++acc.invalid;
+          ++ch.invalid;
           continue;
         }
         if (d.dot(sun) > cos_excl) {
-          ++acc.sun;
+          ++ch.sun;
           continue;
         }
-        if (model.Occluded(pose.position, d, offset)) {
-          ++acc.model;
+        if (model.Occluded(c, d, offset)) {
+          ++ch.model;
           continue;
         }
         // Solid angle of the pixel from the unprojected footprint (any projection).
@@ -264,82 +360,108 @@ EnvironmentMap BuildEnvironmentMap(const Image& pano, const Intrinsics& intrinsi
                                    Unproject(intrinsics, px - Eigen::Vector2d(0, 0.5 * stride));
         double w = dx.cross(dy).norm();
         if (!std::isfinite(w) || w <= 0) w = 1e-12;
-        const int region = m.Region(d);
-        acc.sum[region] += w * rad;
-        acc.weight[region] += w;
-        acc.count[region] += 1;
-        ++acc.used;
+        PixelKind kind = PixelKind::kGround;
+        if (d.z() >= 0) {
+          const Eigen::Vector3d ls = sky.Radiance(d);
+          // Landscape stands low on the horizon and never near the sun (the aureole, where
+          // the sky model fits worst, stays sky).
+          bool is_sky = d.z() > std::sin(options.max_landscape_elevation_deg * kPi / 180) ||
+                        d.dot(sun) > std::cos(10 * kPi / 180);
+          bool agrees = true;
+          for (int k = 0; k < 3; ++k) {
+            agrees = agrees && std::abs(rad[k] - ls[k]) <= options.sky_tolerance * ls[k];
+          }
+          is_sky = is_sky || agrees;
+          kind = is_sky ? PixelKind::kSky : PixelKind::kLandscape;
+        }
+        ch.pixels.push_back({d, w, rad, kind});
       }
     }
-    chunks[c] = std::move(acc);
   });
-  Accum total(nreg);
-  for (const Accum& a : chunks) total.Add(a);
-
+  std::vector<UsedPixel> used;
   EnvSummary s;
-  s.pixels_used = total.used;
-  s.pixels_model = total.model;
-  s.pixels_sun = total.sun;
-  s.pixels_invalid = total.invalid;
+  for (const Chunk& ch : chunks) {
+    used.insert(used.end(), ch.pixels.begin(), ch.pixels.end());
+    s.pixels_model += ch.model;
+    s.pixels_sun += ch.sun;
+    s.pixels_invalid += ch.invalid;
+  }
+  s.pixels_used = static_cast<int>(used.size());
+  for (const auto& u : used) s.pixels_sky += u.kind == PixelKind::kSky;
+
+  // Layers: from the panorama's height to the model's top.
+  const Eigen::AlignedBox3d& box = model.bounds();
+  const bool have_box = !box.isEmpty();
+  const double top = have_box ? box.max().z() : c.z();
+  const int layers =
+      options.parallax_layers > 1 && have_box && top > c.z() + 1.0 ? options.parallax_layers : 1;
+  const double ground_z = have_box ? std::min(box.min().z(), c.z() - 0.01) : c.z() - 1.0;
+  EnvironmentMap m;
+  InitMap(options, layers, &m);
+  const int nreg = m.num_regions();
+  for (int k = 0; k < layers; ++k) {
+    m.layer_z[k] = layers == 1 ? c.z() : c.z() + (top - c.z()) * k / (layers - 1);
+  }
+  // Horizontal distance from the panorama to where a direction leaves the model's box.
+  auto exit_distance = [&](const Eigen::Vector3d& d) {
+    const Eigen::Vector2d o = c.head<2>(), v = d.head<2>().normalized();
+    double t = std::numeric_limits<double>::infinity();
+    for (int a = 0; a < 2; ++a) {
+      if (std::abs(v[a]) < 1e-12) continue;
+      const double bound = v[a] > 0 ? box.max()[a] : box.min()[a];
+      t = std::min(t, (bound - o[a]) / v[a]);
+    }
+    return std::isfinite(t) ? std::max(t, 0.0) : 0.0;
+  };
+  for (int k = 0; k < layers; ++k) {
+    const Eigen::Vector3d v(c.x(), c.y(), m.layer_z[k]);
+    const size_t base = static_cast<size_t>(k) * nreg;
+    std::vector<Eigen::Vector3d> sum(nreg, Eigen::Vector3d::Zero());
+    std::vector<double> wsum(nreg, 0.0);
+    std::vector<int> count(nreg, 0);
+    for (const UsedPixel& u : used) {
+      Eigen::Vector3d dk = u.dir;
+      double w = u.weight;
+      if (k > 0 && u.kind != PixelKind::kSky) {
+        // Re-project through the proxy: the ground plane, or a wall beyond the model's box.
+        Eigen::Vector3d X;
+        double cos_c = 1, cos_k = 1;
+        if (u.kind == PixelKind::kGround) {
+          const double t = std::min((c.z() - ground_z) / std::max(-u.dir.z(), 1e-9), 5000.0);
+          X = c + t * u.dir;
+          cos_c = std::max(-u.dir.z(), 1e-9);
+        } else {
+          const double horiz = std::max(u.dir.head<2>().norm(), 1e-9);
+          const double D = exit_distance(u.dir) + options.landscape_margin_m;
+          X = c + (D / horiz) * u.dir;
+        }
+        const Eigen::Vector3d to = X - v;
+        const double dist_k = to.norm();
+        if (!(dist_k > 1e-6)) continue;
+        dk = to / dist_k;
+        if (u.kind == PixelKind::kGround) cos_k = std::max(-dk.z(), 0.0);
+        if (cos_k <= 0) continue;  // the ground seen from above only
+        const double dist_c = (X - c).norm();
+        w *= std::min((dist_c * dist_c) / (dist_k * dist_k) * (cos_k / cos_c), 100.0);
+      }
+      const int r = m.Region(dk);
+      sum[r] += w * u.radiance;
+      wsum[r] += w;
+      count[r] += 1;
+    }
+    for (int r = 0; r < nreg; ++r) {
+      if (count[r] >= options.min_region_pixels && wsum[r] > 0) {
+        m.radiance[base + r] = sum[r] / wsum[r];
+        m.pixel_count[base + r] = count[r];
+        m.source[base + r] = EnvRegionSource::kObserved;
+      }
+    }
+    FillLayer(sky, options.sky_fill_samples, static_cast<int>(base), &m);
+  }
   for (int r = 0; r < nreg; ++r) {
-    if (total.count[r] > 0 && total.weight[r] > 0) {
-      m.radiance[r] = total.sum[r] / total.weight[r];
-      m.pixel_count[r] = total.count[r];
-      m.source[r] = EnvRegionSource::kObserved;
-      ++s.regions_observed;
-    }
-  }
-  // Above the horizon: the sky model's mean over unobserved regions.
-  for (int r = m.bands_below * m.sectors; r < nreg; ++r) {
-    if (m.source[r] == EnvRegionSource::kObserved) continue;
-    m.radiance[r] = SkyMean(sky, m, r, options.sky_fill_samples);
-    m.source[r] = EnvRegionSource::kSkyModel;
-    ++s.regions_sky;
-  }
-  // Below: nearest observed sector in the same band (ties averaged) ...
-  const int S = m.sectors;
-  std::vector<bool> band_has(m.bands_below, false);
-  for (int b = 0; b < m.bands_below; ++b) {
-    for (int k = 0; k < S; ++k) band_has[b] = band_has[b] || total.count[b * S + k] > 0;
-  }
-  for (int b = 0; b < m.bands_below; ++b) {
-    if (!band_has[b]) continue;
-    for (int k = 0; k < S; ++k) {
-      const int r = b * S + k;
-      if (m.source[r] == EnvRegionSource::kObserved) continue;
-      for (int dist = 1; dist <= S / 2; ++dist) {
-        const int r1 = b * S + (k + dist) % S, r2 = b * S + (k - dist + S) % S;
-        const bool o1 = m.source[r1] == EnvRegionSource::kObserved;
-        const bool o2 = m.source[r2] == EnvRegionSource::kObserved;
-        if (!o1 && !o2) continue;
-        m.radiance[r] = o1 && o2 ? 0.5 * (m.radiance[r1] + m.radiance[r2])
-                                 : (o1 ? m.radiance[r1] : m.radiance[r2]);
-        break;
-      }
-      m.source[r] = EnvRegionSource::kNeighbour;
-      ++s.regions_neighbour;
-    }
-  }
-  // ... and for bands without any observation, the nearest band that has some (the band
-  // towards the horizon first), sector by sector.
-  for (int b = m.bands_below - 1; b >= 0; --b) {
-    if (band_has[b]) continue;
-    int from = -1;
-    for (int dist = 1; dist < m.bands_below && from < 0; ++dist) {
-      if (b + dist < m.bands_below && band_has[b + dist]) from = b + dist;
-      else if (b - dist >= 0 && band_has[b - dist]) from = b - dist;
-    }
-    for (int k = 0; k < S; ++k) {
-      const int r = b * S + k;
-      if (from >= 0) {
-        m.radiance[r] = m.radiance[from * S + k];
-        m.source[r] = EnvRegionSource::kNeighbour;
-        ++s.regions_neighbour;
-      } else {
-        m.radiance[r] = Eigen::Vector3d::Zero();  // nothing below the horizon was observed
-        m.source[r] = EnvRegionSource::kConstant;
-      }
-    }
+    s.regions_observed += m.source[r] == EnvRegionSource::kObserved;
+    s.regions_sky += m.source[r] == EnvRegionSource::kSkyModel;
+    s.regions_neighbour += m.source[r] == EnvRegionSource::kNeighbour;
   }
   s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (summary) *summary = s;

@@ -1,8 +1,8 @@
 #include "solve/environment.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
@@ -76,7 +76,8 @@ TEST(BuildEnvironmentMapTest, AveragesSkipsModelAndSunAndFills) {
   SkyModel sky;  // uniform Lz = 1 per channel with the default parameters
   for (auto& ch : sky.channel) ch.Lz = 7;
   EnvSummary s;
-  const EnvironmentMap env = BuildEnvironmentMap(pano, k, pose, rc, sun, 0.0047, sky, EnvOptions(), &s);
+  const EnvironmentMap env =
+      BuildEnvironmentMap(pano, k, pose, rc, sun, 0.0047, sky, EnvOptions(), &s);
   EXPECT_EQ(s.pixels_invalid, 2);
   EXPECT_GT(s.pixels_sun, 0);
   EXPECT_GT(s.pixels_model, 0);
@@ -106,14 +107,63 @@ TEST(BuildEnvironmentMapTest, AveragesSkipsModelAndSunAndFills) {
   EXPECT_LT(env.ObservedFraction(), 1.0);
 }
 
+// Ground with radiance 1 within 100 m of the panorama and 5 beyond: seen from higher up the
+// far ground drops below the horizon, which the parallax layers reproduce.
+TEST(BuildEnvironmentMapTest, ParallaxLayersReprojectTheGround) {
+  const Intrinsics k = Intrinsics::Equirect(720, 360);
+  const Pose pose = Pose::Level({0, 0, 1.6}, 0, 0);
+  Image pano(k.width, k.height, 3, PixelUnits::kRadiance);
+  for (int y = 0; y < k.height; ++y) {
+    for (int x = 0; x < k.width; ++x) {
+      const Eigen::Vector3d d = pose.rotation * Unproject(k, {x + 0.5, y + 0.5});
+      double v = 2;  // sky
+      if (d.z() < 0) v = 1.6 / -d.z() * std::hypot(d.x(), d.y()) > 100 ? 5 : 1;
+      for (int c = 0; c < 3; ++c) pano.at(x, y, c) = static_cast<float>(v);
+    }
+  }
+  // The model: a thin pole far away, 50 m tall (sets the layers' range and the ground level).
+  Mesh m;
+  const int b = m.AddBlock("pole");
+  m.AddPolygon({{300, 0, 0}, {300.1, 0, 0}, {300.1, 0, 50}, {300, 0, 50}}, b);
+  const RayCaster rc(m);
+  SkyModel sky;
+  for (auto& ch : sky.channel) ch.Lz = 2;
+  EnvOptions o;
+  o.parallax_layers = 3;
+  const EnvironmentMap env = BuildEnvironmentMap(pano, k, pose, rc, Dir(90, 45), 0.0047, sky, o);
+  ASSERT_EQ(env.num_layers(), 3);
+  EXPECT_NEAR(env.layer_z[0], 1.6, 1e-12);
+  EXPECT_NEAR(env.layer_z[2], 50, 1e-12);
+  const Eigen::Vector3d steep = Dir(200, -55), shallow = Dir(200, -15);
+  // From 1.6 m both directions meet near ground (radiance 1) ...
+  EXPECT_NEAR(env.Radiance(steep, 1.6).x(), 1, 1e-5);
+  EXPECT_NEAR(env.Radiance(shallow, 1.6).x(), 1, 1e-5);
+  EXPECT_EQ(env.Radiance(steep), env.Radiance(steep, 1.6));
+  // ... from 50 m the shallow one (ground 137..284 m away) sees the far ground.
+  EXPECT_NEAR(env.Radiance(steep, 50).x(), 1, 1e-5);
+  EXPECT_NEAR(env.Radiance(shallow, 50).x(), 5, 1e-5);
+  EXPECT_NEAR(env.Radiance(shallow, 500).x(), 5, 1e-5);  // clamped above the top layer
+  // Linear between layers.
+  const double l0 = env.Radiance(shallow, env.layer_z[0]).x();
+  const double l1 = env.Radiance(shallow, env.layer_z[1]).x();
+  EXPECT_EQ(l1, env.radiance[env.num_regions() + env.Region(shallow)].x());
+  EXPECT_NEAR(env.Radiance(shallow, 0.25 * env.layer_z[0] + 0.75 * env.layer_z[1]).x(),
+              0.25 * l0 + 0.75 * l1, 1e-9);
+  // The sky is at infinity: the same in every layer.
+  EXPECT_NEAR(env.Radiance(Dir(10, 20), 50).x(), 2, 1e-5);
+  // Layers survive JSON.
+  const EnvironmentMap back = nlohmann::json(env).get<EnvironmentMap>();
+  EXPECT_EQ(back.layer_z, env.layer_z);
+  EXPECT_EQ(back.Radiance(shallow, 50), env.Radiance(shallow, 50));
+}
+
 TEST(BuildEnvironmentMapTest, BadInputThrows) {
   const Intrinsics k = Intrinsics::Equirect(64, 32);
   const Pose pose;
   const RayCaster rc{Mesh()};
   const SkyModel sky;
   Image small(32, 32, 3, PixelUnits::kRadiance);
-  EXPECT_THROW(BuildEnvironmentMap(small, k, pose, rc, {0, 0, 1}, 0.005, sky, EnvOptions()),
-               Error);
+  EXPECT_THROW(BuildEnvironmentMap(small, k, pose, rc, {0, 0, 1}, 0.005, sky, EnvOptions()), Error);
   Image ldr(64, 32, 3, PixelUnits::kDigital);
   EXPECT_THROW(BuildEnvironmentMap(ldr, k, pose, rc, {0, 0, 1}, 0.005, sky, EnvOptions()), Error);
   Image ok(64, 32, 3, PixelUnits::kRadiance, 1.f);

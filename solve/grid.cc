@@ -1,11 +1,10 @@
 #include "solve/grid.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
-#include <string>
-
-#include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "core/error.h"
 
@@ -34,7 +33,10 @@ void Locate(int n, double u, double v, int* i, int* j, bool* down, double* fx, d
   int a = std::clamp(static_cast<int>(std::floor(x)), 0, n - 1);
   int b = std::clamp(static_cast<int>(std::floor(y)), 0, n - 1);
   if (a + b > n - 1) {  // on the far edge after rounding: step back into the triangle
-    if (a >= b) a = n - 1 - b; else b = n - 1 - a;
+    if (a >= b)
+      a = n - 1 - b;
+    else
+      b = n - 1 - a;
   }
   double ffx = x - a, ffy = y - b;
   bool d = ffx + ffy > 1.0 && CellValid(n, a, b, true);
@@ -54,8 +56,8 @@ void GridOptions::Validate() const {
   }
   for (const auto& [name, s] : block_spacing_m) {
     if (!(std::isfinite(s) && s > 0)) {
-      throw Error("GridOptions: spacing for block '" + name + "' must be positive and finite, got " +
-                  std::to_string(s));
+      throw Error("GridOptions: spacing for block '" + name +
+                  "' must be positive and finite, got " + std::to_string(s));
     }
   }
   if (max_subdivision < 1) throw Error("GridOptions: max_subdivision must be >= 1");
@@ -67,12 +69,12 @@ double GridOptions::SpacingFor(const std::string& block) const {
 }
 
 void to_json(nlohmann::json& j, const GridOptions& o) {
-  j = nlohmann::json{{"spacing_m", o.spacing_m},
-                     {"subdivision", o.subdivision == GridSubdivision::kLongestEdge
-                                         ? "longest_edge"
-                                         : "equivalent_area"},
-                     {"block_spacing_m", o.block_spacing_m},
-                     {"max_subdivision", o.max_subdivision}};
+  j = nlohmann::json{
+      {"spacing_m", o.spacing_m},
+      {"subdivision",
+       o.subdivision == GridSubdivision::kLongestEdge ? "longest_edge" : "equivalent_area"},
+      {"block_spacing_m", o.block_spacing_m},
+      {"max_subdivision", o.max_subdivision}};
 }
 
 void from_json(const nlohmann::json& j, GridOptions& o) {
@@ -123,15 +125,17 @@ SurfaceGrid BuildSurfaceGrid(const Mesh& mesh, const GridOptions& options) {
       ++grid.skipped_triangles;
       continue;
     }
-    const int block = t < static_cast<int>(mesh.triangle_block.size()) ? mesh.triangle_block[t] : -1;
-    const std::string name =
-        block >= 0 && block < static_cast<int>(mesh.block_names.size()) ? mesh.block_names[block] : "";
+    const int block =
+        t < static_cast<int>(mesh.triangle_block.size()) ? mesh.triangle_block[t] : -1;
+    const std::string name = block >= 0 && block < static_cast<int>(mesh.block_names.size())
+                                 ? mesh.block_names[block]
+                                 : "";
     const double spacing = options.SpacingFor(name);
     const double size = options.subdivision == GridSubdivision::kLongestEdge
                             ? longest
                             : std::sqrt(4.0 * area / std::sqrt(3.0));
-    const int n = std::clamp(static_cast<int>(std::ceil(size / spacing - 1e-9)), 1,
-                             options.max_subdivision);
+    const int n =
+        std::clamp(static_cast<int>(std::ceil(size / spacing - 1e-9)), 1, options.max_subdivision);
     grid.triangle_n[t] = n;
     const Eigen::Vector3d normal = cross.normalized();
     const double cell_area = area / (static_cast<double>(n) * n);
@@ -198,12 +202,8 @@ GridStencil SurfaceGrid::Stencil(int triangle, double u, double v) const {
     if (w[k] <= 0) continue;
     const int a = verts[k][0], b = verts[k][1];
     // Cells around lattice vertex (a, b).
-    const std::array<std::array<int, 3>, 6> cells = {{{a, b, 0},
-                                                       {a - 1, b, 0},
-                                                       {a, b - 1, 0},
-                                                       {a - 1, b, 1},
-                                                       {a, b - 1, 1},
-                                                       {a - 1, b - 1, 1}}};
+    const std::array<std::array<int, 3>, 6> cells = {
+        {{a, b, 0}, {a - 1, b, 0}, {a, b - 1, 0}, {a - 1, b, 1}, {a, b - 1, 1}, {a - 1, b - 1, 1}}};
     int valid[6];
     int nvalid = 0;
     for (int c = 0; c < 6; ++c) {

@@ -3,13 +3,12 @@
 // centroid. Pseudo-albedos and irradiances live on these points.
 #pragma once
 
+#include <Eigen/Core>
 #include <array>
 #include <map>
+#include <nlohmann/json_fwd.hpp>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
-#include <nlohmann/json_fwd.hpp>
 
 #include "core/mesh.h"
 

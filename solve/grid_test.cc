@@ -1,9 +1,9 @@
 #include "solve/grid.h"
 
-#include <cmath>
+#include <gtest/gtest.h>
 
 #include <Eigen/QR>
-#include <gtest/gtest.h>
+#include <cmath>
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
@@ -85,7 +85,9 @@ TEST(GridTest, StencilIsAPartitionOfUnityAndLinearInside) {
   const SurfaceGrid g = BuildSurfaceGrid(m, o);
   const int n = g.triangle_n[0];
   std::vector<Eigen::Vector3d> f(g.size());
-  auto lin = [](const Eigen::Vector3d& p) { return Eigen::Vector3d(2 * p.x() - p.y() + 1, 3, p.y()); };
+  auto lin = [](const Eigen::Vector3d& p) {
+    return Eigen::Vector3d(2 * p.x() - p.y() + 1, 3, p.y());
+  };
   for (int i = 0; i < g.size(); ++i) f[i] = lin(g.points[i].position);
   for (double u = 0.0; u <= 1.0; u += 0.037) {
     for (double v = 0.0; u + v <= 1.0; v += 0.041) {

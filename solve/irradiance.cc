@@ -1,12 +1,12 @@
 #include "solve/irradiance.h"
 
+#include <tbb/parallel_for.h>
+
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <string>
-
-#include <Eigen/Geometry>
-#include <tbb/parallel_for.h>
 
 #include "core/error.h"
 
@@ -46,8 +46,8 @@ double Lighting::SunAngularRadius() const {
   return std::acos(std::clamp(c, -1.0, 1.0));
 }
 
-Eigen::Vector3d Lighting::EscapedRadiance(const Eigen::Vector3d& dir) const {
-  if (use_env) return env.Radiance(dir);
+Eigen::Vector3d Lighting::EscapedRadiance(const Eigen::Vector3d& dir, double z) const {
+  if (use_env) return env.Radiance(dir, z);
   return dir.z() >= 0 ? sky.Radiance(dir) : Eigen::Vector3d::Zero();
 }
 
@@ -85,7 +85,8 @@ HemisphereCache BuildHemisphereCache(const SurfaceGrid& grid, const RayCaster& m
   const auto start = std::chrono::steady_clock::now();
   options.Validate();
   HemisphereCache cache;
-  cache.strata = static_cast<int>(std::ceil(std::sqrt(static_cast<double>(options.directions)) - 1e-9));
+  cache.strata =
+      static_cast<int>(std::ceil(std::sqrt(static_cast<double>(options.directions)) - 1e-9));
   cache.directions = cache.strata * cache.strata;
   cache.seed = options.seed;
   const int n = grid.size();
@@ -165,21 +166,14 @@ SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache&
   }
   // Ground beyond the model (see IrradianceOptions::ground_shadow): its level, and the
   // shadowed/sunlit radiance ratio of horizontal Lambertian ground.
-  const bool ground_shadow = options.ground_shadow && lighting.use_env && s.z() > 0 && n > 0 &&
-                             sun_e.maxCoeff() > 0;
+  const bool ground_shadow =
+      options.ground_shadow && lighting.use_env && s.z() > 0 && n > 0 && sun_e.maxCoeff() > 0;
   double ground_z = 0;
   Eigen::Vector3d shadow_ratio = Eigen::Vector3d::Ones();
   if (ground_shadow) {
     ground_z = grid.points[0].position.z();
     for (const auto& p : grid.points) ground_z = std::min(ground_z, p.position.z());
-    Eigen::Vector3d e_sky = Eigen::Vector3d::Zero();
-    const EnvironmentMap& env = lighting.env;
-    for (int r = env.bands_below * env.sectors; r < env.num_regions(); ++r) {
-      double el0, el1, az0, az1;
-      env.RegionBounds(r, &el0, &el1, &az0, &az1);
-      const double s0 = std::sin(el0), s1 = std::sin(el1);
-      e_sky += env.radiance[r] * (az1 - az0) * (s1 * s1 - s0 * s0) / 2;  // projected solid angle
-    }
+    const Eigen::Vector3d e_sky = lighting.env.HorizontalSkyIrradiance();
     const Eigen::Vector3d e_total = e_sky + sun_e * s.z();
     for (int c = 0; c < 3; ++c) shadow_ratio[c] = e_total[c] > 0 ? e_sky[c] / e_total[c] : 1.0;
   }
@@ -199,7 +193,7 @@ SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache&
       for (int k = 0; k < K; ++k) {
         if (cache.Hit(i, k) != -1) continue;
         const Eigen::Vector3d d = cache.Direction(p, i, k);
-        Eigen::Vector3d l = lighting.EscapedRadiance(d);
+        Eigen::Vector3d l = lighting.EscapedRadiance(d, p.position.z());
         if (ground_shadow && d.z() < -1e-3 && origin.z() > ground_z) {
           const Eigen::Vector3d q = origin + ((origin.z() - ground_z) / -d.z()) * d;
           if (model.Occluded(q + Eigen::Vector3d(0, 0, offset), s, 0.0)) {
@@ -211,6 +205,12 @@ SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache&
       irr.direct_se[i] = sum * (kPi / K);
     }
   });
+  for (int i = 0; i < n; ++i) {
+    if (!irr.sun[i].allFinite() || !irr.direct_se[i].allFinite()) {
+      throw Error("irradiance: non-finite irradiance at grid point " + std::to_string(i) +
+                  " (check the sky model and environment map)");
+    }
+  }
   irr.se = irr.direct_se;
   irr.seconds = Seconds(start);
   return irr;
@@ -236,19 +236,24 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
     for (int j = 0; j < n; ++j) {
       radiosity[j] = rho_sun[j].cwiseProduct(irr->sun[j]) + rho_se[j].cwiseProduct(se_prev[j]);
     }
-    tbb::parallel_for(tbb::blocked_range<int>(0, n, 64),
-                      [&](const tbb::blocked_range<int>& range) {
-                        for (int i = range.begin(); i < range.end(); ++i) {
-                          Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-                          for (int k = 0; k < K; ++k) {
-                            const int j = cache.Hit(i, k);
-                            if (j >= 0) sum += radiosity[j];
-                          }
-                          // (B_j / pi) (pi / K)
-                          se[i] = irr->direct_se[i] + sum / K;
-                        }
-                      });
+    tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& range) {
+      for (int i = range.begin(); i < range.end(); ++i) {
+        Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+        for (int k = 0; k < K; ++k) {
+          const int j = cache.Hit(i, k);
+          if (j >= 0) sum += radiosity[j];
+        }
+        // (B_j / pi) (pi / K)
+        se[i] = irr->direct_se[i] + sum / K;
+      }
+    });
     se_prev = se;
+  }
+  for (int i = 0; i < n; ++i) {
+    if (!se[i].allFinite()) {
+      throw Error("interreflection: non-finite irradiance at grid point " + std::to_string(i) +
+                  " (non-finite albedo?)");
+    }
   }
   irr->se = se;
   irr->has_bounce = true;

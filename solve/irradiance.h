@@ -4,10 +4,9 @@
 // visibility instead of clipping spherical polygons).
 #pragma once
 
+#include <Eigen/Core>
 #include <cstdint>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "core/time.h"
 #include "solve/environment.h"
@@ -20,7 +19,7 @@ namespace rouen {
 // Illumination at one time: sun (parallel source, §3.1), sky model (§3.2), environment (§3.3).
 struct Lighting {
   UtcTime utc;
-  Eigen::Vector3d sun_dir = Eigen::Vector3d::UnitZ();  // unit ENU, towards the sun
+  Eigen::Vector3d sun_dir = Eigen::Vector3d::UnitZ();      // unit ENU, towards the sun
   Eigen::Vector3d sun_radiance = Eigen::Vector3d::Zero();  // relative radiance, RGB
   double sun_solid_angle_sr = 6.8e-5;
   SkyModel sky;
@@ -30,8 +29,9 @@ struct Lighting {
   bool use_env = true;
 
   double SunAngularRadius() const;  // radians, from the solid angle
-  // Radiance arriving from direction `dir` when nothing of the model is in the way (no sun).
-  Eigen::Vector3d EscapedRadiance(const Eigen::Vector3d& dir) const;
+  // Radiance arriving at height z (ENU metres) from direction `dir` when nothing of the model
+  // is in the way (no sun).
+  Eigen::Vector3d EscapedRadiance(const Eigen::Vector3d& dir, double z) const;
 };
 
 struct HemisphereOptions {
@@ -49,7 +49,7 @@ struct HemisphereCache {
   int directions = 0;  // K
   int strata = 0;      // K = strata^2
   uint64_t seed = 1;
-  std::vector<int32_t> hit;  // size points * K
+  std::vector<int32_t> hit;             // size points * K
   std::vector<float> escaped_fraction;  // per point: cosine-weighted sky view factor
   double seconds = 0;
   int64_t rays = 0;

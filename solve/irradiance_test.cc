@@ -1,8 +1,8 @@
 #include "solve/irradiance.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "core/error.h"
 #include "solve/test_scenes.h"
@@ -196,6 +196,46 @@ TEST(IrradianceTest, BounceBetweenFacingPlanesMatchesFormFactor) {
       EXPECT_GE(irr3.se[i].x(), irr2.se[i].x());
     }
   }
+}
+
+// A tall tower's own shadow on the unmodelled ground darkens what its shaded side sees.
+TEST(IrradianceTest, GroundShadowDarkensTheEnvironmentBehindTheTower) {
+  Mesh m;
+  const int ground = m.AddBlock("plaza");
+  const int tower = m.AddBlock("tower");
+  testing::AddHorizontalRect(&m, -5, 5, -5, 5, 0, true, ground);
+  testing::AddBox(&m, {-1, -1, 0}, {1, 1, 40}, tower);
+  GridOptions go;
+  go.spacing_m = 2.0;
+  const SurfaceGrid g = BuildSurfaceGrid(m, go);
+  const RayCaster rc(m);
+  const HemisphereCache cache = BuildHemisphereCache(g, rc);
+  Lighting l = UniformSky({1, 1, 1}, {1, 1, 1});
+  l.sun_dir = Eigen::Vector3d(0, -std::cos(0.5), std::sin(0.5));  // south, 28.6 deg up
+  l.sun_radiance = Eigen::Vector3d::Constant(1e5);
+  IrradianceOptions on, off;
+  off.ground_shadow = false;
+  const SlotIrradiance a = ComputeIrradiance(g, cache, rc, l, on);
+  const SlotIrradiance b = ComputeIrradiance(g, cache, rc, l, off);
+  // Shadowed/sunlit ground ratio: E_sky / (E_sky + E_sun), with E_sky = pi.
+  const double e_sun = 1e5 * l.sun_solid_angle_sr * std::sin(0.5);
+  const double ratio = kPi / (kPi + e_sun);
+  int darker = 0;
+  for (int i = 0; i < g.size(); ++i) {
+    const GridPoint& p = g.points[i];
+    if (p.block != tower || std::abs(p.normal.z()) > 0.5) continue;
+    if (p.normal.y() < -0.9) {
+      // The south face looks away from the shadow: unchanged.
+      EXPECT_NEAR(a.direct_se[i].x(), b.direct_se[i].x(), 1e-12);
+    } else if (p.normal.y() > 0.9 && p.position.z() > 10) {
+      // The north face: some downward rays meet the shadow; at most the whole ground part
+      // (pi/2 of the irradiance, from below the horizon) is scaled by the ratio.
+      EXPECT_LE(a.direct_se[i].x(), b.direct_se[i].x() + 1e-12);
+      EXPECT_GE(a.direct_se[i].x(), b.direct_se[i].x() - (1 - ratio) * kPi / 2 - 1e-9);
+      darker += a.direct_se[i].x() < b.direct_se[i].x() - 1e-9;
+    }
+  }
+  EXPECT_GT(darker, 5);
 }
 
 TEST(IrradianceTest, BadInputThrows) {

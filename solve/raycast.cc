@@ -1,12 +1,12 @@
 #include "solve/raycast.h"
 
+#include <embree3/rtcore.h>
+
+#include <Eigen/Geometry>
 #include <cmath>
 #include <limits>
 #include <string>
 #include <vector>
-
-#include <Eigen/Geometry>
-#include <embree3/rtcore.h>
 
 #include "core/error.h"
 
@@ -44,6 +44,7 @@ RayCaster::RayCaster(const Mesh& mesh) : impl_(std::make_unique<Impl>()) {
     lo = lo.cwiseMin(p);
     hi = hi.cwiseMax(p);
   }
+  if (lo.allFinite() && hi.allFinite()) bounds_ = Eigen::AlignedBox3d(lo, hi);
   scale_ = mesh.vertices.empty() || !(hi - lo).allFinite() ? 1.0 : std::max((hi - lo).norm(), 1e-6);
 
   impl_->device = rtcNewDevice("threads=0");
@@ -96,8 +97,8 @@ RayCaster::~RayCaster() = default;
 RayCaster::RayCaster(RayCaster&&) noexcept = default;
 RayCaster& RayCaster::operator=(RayCaster&&) noexcept = default;
 
-RayHit RayCaster::Intersect(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir,
-                            double tmin, double tmax) const {
+RayHit RayCaster::Intersect(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir, double tmin,
+                            double tmax) const {
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   RTCRayHit rh;

@@ -2,9 +2,9 @@
 // irradiance gathering (App. A) and the renderer. World frame: local ENU metres.
 #pragma once
 
-#include <memory>
-
 #include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <memory>
 
 #include "core/mesh.h"
 
@@ -12,8 +12,8 @@ namespace rouen {
 
 struct RayHit {
   bool hit = false;
-  double t = 0;      // distance along the (unit) ray direction, metres
-  int triangle = -1; // index into Mesh::triangles
+  double t = 0;       // distance along the (unit) ray direction, metres
+  int triangle = -1;  // index into Mesh::triangles
   // Barycentric coordinates of the hit: p = (1 - u - v) a + u b + v c for triangle (a, b, c).
   double u = 0, v = 0;
 };
@@ -37,6 +37,8 @@ class RayCaster {
 
   // Diagonal of the mesh bounding box, metres (>= 1e-6).
   double scene_scale() const { return scale_; }
+  // Bounding box of the mesh vertices (empty box for an empty mesh).
+  const Eigen::AlignedBox3d& bounds() const { return bounds_; }
   // Offset applied along the normal to ray origins leaving a surface: 1e-4 x scene scale
   // (about 1.4 cm on a 100 m plaza; far above float precision there).
   double surface_offset() const { return 1e-4 * scale_; }
@@ -48,6 +50,7 @@ class RayCaster {
   struct Impl;
   std::unique_ptr<Impl> impl_;
   double scale_ = 1;
+  Eigen::AlignedBox3d bounds_;
   int num_triangles_ = 0;
   int num_degenerate_ = 0;
 };

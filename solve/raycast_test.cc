@@ -23,7 +23,7 @@ TEST(RayCasterTest, HitsMissesAndBarycentrics) {
   EXPECT_NEAR(h.v, 0.5, 1e-6);
   // Two-sided.
   EXPECT_TRUE(rc.Intersect({1, 2, -5}, {0, 0, 1}).hit);
-  EXPECT_FALSE(rc.Intersect({3, 3, 5}, {0, 0, -1}).hit);  // outside the triangle
+  EXPECT_FALSE(rc.Intersect({3, 3, 5}, {0, 0, -1}).hit);          // outside the triangle
   EXPECT_FALSE(rc.Intersect({1, 2, 5}, {0, 0, -1}, 0, 3.9).hit);  // tmax
   EXPECT_TRUE(rc.Occluded({1, 2, 5}, {0, 0, -1}));
   EXPECT_FALSE(rc.Occluded({1, 2, 5}, {0, 0, -1}, 0, 3.9));

@@ -1,9 +1,8 @@
 #include "solve/scene.h"
 
 #include <cmath>
-#include <string>
-
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "core/camera.h"
 #include "core/error.h"
@@ -36,6 +35,8 @@ nlohmann::json SummaryJson(const AlbedoSummary& s) {
           {"residual_rms_rel", s.residual_rms_rel},
           {"residual_median_rel", s.residual_median_rel},
           {"downweighted_fraction", s.downweighted_fraction},
+          {"slot_weights", s.slot_weights},
+          {"points_filled_neighbours", s.points_filled_neighbours},
           {"seconds", s.seconds}};
 }
 
@@ -52,6 +53,8 @@ AlbedoSummary ReadSummary(const nlohmann::json& j) {
   s.residual_rms_rel = j.value("residual_rms_rel", 0.0);
   s.residual_median_rel = j.value("residual_median_rel", 0.0);
   s.downweighted_fraction = j.value("downweighted_fraction", 0.0);
+  s.slot_weights = j.value("slot_weights", std::vector<double>{});
+  s.points_filled_neighbours = j.value("points_filled_neighbours", 0);
   s.seconds = j.value("seconds", 0.0);
   return s;
 }

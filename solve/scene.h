@@ -4,11 +4,10 @@
 // point per pixel, row-major, 1024 wide. The grid itself is rebuilt from the model OBJ.
 #pragma once
 
+#include <Eigen/Core>
 #include <filesystem>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "core/mesh.h"
 #include "core/response_curve.h"

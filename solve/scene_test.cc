@@ -1,8 +1,8 @@
 #include "solve/scene.h"
 
-#include <filesystem>
-
 #include <gtest/gtest.h>
+
+#include <filesystem>
 
 #include "core/error.h"
 #include "core/image.h"
