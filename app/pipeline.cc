@@ -57,38 +57,36 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
   }
   if (groups.empty()) throw Error(session.dir().string() + ": the session has no frames");
 
-  // Response curve (Debevec-Malik) from the architecture and landscape brackets.
-  std::vector<Bracket> brackets;
-  std::vector<std::string> names;
-  for (const auto& [name, frames] : groups) {
-    Target t = frames.front()->target;
-    if (t != Target::kArchitecture && t != Target::kLandscape) continue;
-    std::vector<double> exps;
-    for (const FrameRecord* f : frames) exps.push_back(EffectiveExposure(*f));
-    if (std::set<double>(exps.begin(), exps.end()).size() < 2) continue;
-    names.push_back(name);
-  }
-  const size_t max_brackets = options.quick ? 6 : 12;
-  for (size_t i = 0; i < names.size() && brackets.size() < max_brackets;
-       i += std::max<size_t>(1, names.size() / max_brackets)) {
-    Bracket b;
-    for (const FrameRecord* f : groups[names[i]]) {
-      b.frames.push_back(session.LoadFrame(*f));
-      b.exposures.push_back(EffectiveExposure(*f));
-    }
-    brackets.push_back(std::move(b));
-  }
+  // Response curve (Debevec-Malik) from the architecture and landscape brackets, unless one
+  // is given.
   if (options.response) {
     out.response = *options.response;
-    brackets.clear();
     Log(options, "response curve given");
-  } else if (brackets.empty()) {
-    throw Error(session.dir().string() +
-                ": no bracket with two or more exposures to recover the response curve from");
   } else {
+    std::vector<Bracket> brackets;
+    std::vector<std::string> names;
+    for (const auto& [name, frames] : groups) {
+      Target t = frames.front()->target;
+      if (t != Target::kArchitecture && t != Target::kLandscape) continue;
+      std::set<double> exps;
+      for (const FrameRecord* f : frames) exps.insert(EffectiveExposure(*f));
+      if (exps.size() >= 2) names.push_back(name);
+    }
+    const size_t max_brackets = options.quick ? 6 : 12;
+    for (size_t i = 0; i < names.size() && brackets.size() < max_brackets;
+         i += std::max<size_t>(1, names.size() / max_brackets)) {
+      Bracket br;
+      for (const FrameRecord* f : groups[names[i]]) {
+        br.frames.push_back(session.LoadFrame(*f));
+        br.exposures.push_back(EffectiveExposure(*f));
+      }
+      brackets.push_back(std::move(br));
+    }
+    if (brackets.empty())
+      throw Error(session.dir().string() +
+                  ": no bracket with two or more exposures to recover the response curve from");
     Log(options, "response curve from " + std::to_string(brackets.size()) + " brackets");
     out.response = RecoverResponse(brackets, ResponseOptions{}, &out.response_summary);
-    brackets.clear();
   }
   std::filesystem::create_directories(options.work_dir / "calib" / "hdr");
   WriteResponseCurve((options.work_dir / "calib" / "response.json").string(), out.response);

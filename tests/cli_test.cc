@@ -103,6 +103,9 @@ TEST(CliTest, SunBadInputNamesTheProblem) {
   EXPECT_NE(t.out.find("yesterday"), std::string::npos) << t.out;
   Result z = RunRouen("sun --lat 37 --lon -122 --time 2026-08-25T12:00:00");  // no zone
   EXPECT_NE(z.code, 0);
+  Result nolon = RunRouen("sun --lat 37 --time 2026-08-25T12:00:00Z");  // --lon forgotten
+  EXPECT_NE(nolon.code, 0);
+  EXPECT_NE(nolon.out.find("--lon"), std::string::npos) << nolon.out;
   fs::remove_all(dir);
 }
 
