@@ -148,8 +148,11 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
     ss.slot = s;
     const HdrGroup* sun_g = group(s, "sun", 0);
     const HdrGroup* sky_g = group(s, "sky", 0);
-    const HdrGroup* land_g = group(s, "landscape", 0);
-    if (!sun_g || !sky_g || !land_g)
+    std::vector<EnvPanorama> panoramas;
+    for (int v = 0; const HdrGroup* g = group(s, "landscape", v); ++v) {
+      panoramas.push_back({&g->radiance, g->intrinsics, g->pose});
+    }
+    if (!sun_g || !sky_g || panoramas.empty())
       throw Error(session.dir().string() + ": slot " + std::to_string(s) +
                   " lacks a sun, sky or landscape bracket");
     ss.utc = sky_g->utc;
@@ -166,12 +169,12 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
                                                        sky_g->intrinsics, sky_g->pose, sun_dir, so);
     SkyModel sky;
     ss.sky_summary = FitSky(samples, sun_dir, SkyFitOptions{}, &sky);
-    // §3.3: the environment from the landscape panorama.
+    // §3.3: the environment from the landscape panoramas, one layer per height (e.g. from the
+    // ground and from a mast at the top of the building).
     EnvOptions eo;
     if (options.quick) eo.pixel_stride = 2;
-    EnvironmentMap env =
-        BuildEnvironmentMap(land_g->radiance, land_g->intrinsics, land_g->pose, *r.caster, sun_dir,
-                            ss.sun.angular_radius_deg * M_PI / 180, sky, eo);
+    EnvironmentMap env = BuildEnvironmentMap(panoramas, *r.caster, sun_dir,
+                                             ss.sun.angular_radius_deg * M_PI / 180, sky, eo);
     ss.lighting.utc = ss.utc;
     ss.lighting.sun_dir = sun_dir;
     ss.lighting.sun_radiance = ss.sun_measured.radiance;

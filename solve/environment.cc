@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <limits>
 #include <nlohmann/json.hpp>
 #include <string>
 
@@ -18,14 +17,11 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-// A panorama pixel kept for the map: direction from the panorama, solid angle, radiance and
-// what it shows.
-enum class PixelKind : uint8_t { kSky, kGround, kLandscape };
+// A panorama pixel kept for the map: direction from the panorama, solid angle, radiance.
 struct UsedPixel {
   Eigen::Vector3d dir;
   double weight;  // solid angle, sr
   Eigen::Vector3d radiance;
-  PixelKind kind;
 };
 
 struct Chunk {
@@ -130,14 +126,7 @@ void EnvOptions::Validate() const {
   if (pixel_stride < 1) throw Error("EnvOptions: pixel_stride must be >= 1");
   if (min_region_pixels < 1) throw Error("EnvOptions: min_region_pixels must be >= 1");
   if (sky_fill_samples < 1) throw Error("EnvOptions: sky_fill_samples must be >= 1");
-  if (parallax_layers < 1 || parallax_layers > 64) {
-    throw Error("EnvOptions: parallax_layers must be in 1..64");
-  }
-  if (!(landscape_margin_m >= 0)) throw Error("EnvOptions: landscape_margin_m must be >= 0");
-  if (!(sky_tolerance > 0)) throw Error("EnvOptions: sky_tolerance must be > 0");
-  if (!(max_landscape_elevation_deg >= 0 && max_landscape_elevation_deg <= 90)) {
-    throw Error("EnvOptions: max_landscape_elevation_deg must be in [0, 90]");
-  }
+  if (!(layer_merge_m > 0)) throw Error("EnvOptions: layer_merge_m must be > 0 (metres)");
 }
 
 int EnvironmentMap::Region(const Eigen::Vector3d& d) const {
@@ -289,37 +278,36 @@ void from_json(const nlohmann::json& j, EnvironmentMap& m) {
   m.Validate();
 }
 
-// §3.3: average the panorama's pixels over coarse lat-long regions.
-EnvironmentMap BuildEnvironmentMap(const Image& pano, const Intrinsics& intrinsics,
-                                   const Pose& pose, const RayCaster& model,
-                                   const Eigen::Vector3d& sun_dir, double sun_angular_radius_rad,
-                                   const SkyModel& sky, const EnvOptions& options,
-                                   EnvSummary* summary) {
-  const auto start = std::chrono::steady_clock::now();
-  options.Validate();
-  intrinsics.Validate();
+namespace {
+
+void CheckPanorama(const EnvPanorama& p, int index) {
+  const std::string what = "environment map: panorama " + std::to_string(index);
+  if (!p.radiance) throw Error(what + " has no image");
+  const Image& pano = *p.radiance;
+  p.intrinsics.Validate();
   if (pano.empty() || pano.channels < 3) {
-    throw Error("environment map: the panorama is empty or has fewer than 3 channels");
+    throw Error(what + " is empty or has fewer than 3 channels");
   }
-  if (pano.width != intrinsics.width || pano.height != intrinsics.height) {
-    throw Error("environment map: panorama is " + std::to_string(pano.width) + "x" +
-                std::to_string(pano.height) + " but its intrinsics say " +
-                std::to_string(intrinsics.width) + "x" + std::to_string(intrinsics.height));
+  if (pano.width != p.intrinsics.width || pano.height != p.intrinsics.height) {
+    throw Error(what + " is " + std::to_string(pano.width) + "x" + std::to_string(pano.height) +
+                " but its intrinsics say " + std::to_string(p.intrinsics.width) + "x" +
+                std::to_string(p.intrinsics.height));
   }
   if (pano.units != PixelUnits::kRadiance) {
-    throw Error("environment map: the panorama must hold radiance (HDR), not digital numbers");
+    throw Error(what + " must hold radiance (HDR), not digital numbers");
   }
-  if (!sun_dir.allFinite() || sun_dir.norm() < 0.5) {
-    throw Error("environment map: sun direction is not a unit vector");
+  if (!p.pose.position.allFinite() || !p.pose.rotation.allFinite()) {
+    throw Error(what + " has a non-finite pose");
   }
-  const Eigen::Vector3d sun = sun_dir.normalized();
-  const double cos_excl =
-      std::cos(std::max(options.sun_exclusion_deg * kPi / 180.0, sun_angular_radius_rad));
-  const double offset = model.surface_offset();
-  const int stride = options.pixel_stride;
-  const Eigen::Vector3d c = pose.position;
+}
 
-  // Pass 1: classify the pixels (fixed chunks of rows, concatenated in order: deterministic).
+// The panorama's usable pixels (fixed chunks of rows, concatenated in order: deterministic).
+void CollectPixels(const EnvPanorama& p, const RayCaster& model, const Eigen::Vector3d& sun,
+                   double cos_excl, int stride, std::vector<UsedPixel>* used, EnvSummary* s) {
+  const Image& pano = *p.radiance;
+  const Intrinsics& intrinsics = p.intrinsics;
+  const Eigen::Vector3d c = p.pose.position;
+  const double offset = model.surface_offset();
   const int rows = (pano.height + stride - 1) / stride;
   const int chunk_rows = 8;
   const int nchunks = (rows + chunk_rows - 1) / chunk_rows;
@@ -340,7 +328,7 @@ EnvironmentMap BuildEnvironmentMap(const Image& pano, const Intrinsics& intrinsi
           ++ch.invalid;
           continue;
         }
-        const Eigen::Vector3d d = (pose.rotation * Unproject(intrinsics, px)).normalized();
+        const Eigen::Vector3d d = (p.pose.rotation * Unproject(intrinsics, px)).normalized();
         if (!d.allFinite()) {
           ++ch.invalid;
           continue;
@@ -360,93 +348,73 @@ EnvironmentMap BuildEnvironmentMap(const Image& pano, const Intrinsics& intrinsi
                                    Unproject(intrinsics, px - Eigen::Vector2d(0, 0.5 * stride));
         double w = dx.cross(dy).norm();
         if (!std::isfinite(w) || w <= 0) w = 1e-12;
-        PixelKind kind = PixelKind::kGround;
-        if (d.z() >= 0) {
-          const Eigen::Vector3d ls = sky.Radiance(d);
-          // Landscape stands low on the horizon and never near the sun (the aureole, where
-          // the sky model fits worst, stays sky).
-          bool is_sky = d.z() > std::sin(options.max_landscape_elevation_deg * kPi / 180) ||
-                        d.dot(sun) > std::cos(10 * kPi / 180);
-          bool agrees = true;
-          for (int k = 0; k < 3; ++k) {
-            agrees = agrees && std::abs(rad[k] - ls[k]) <= options.sky_tolerance * ls[k];
-          }
-          is_sky = is_sky || agrees;
-          kind = is_sky ? PixelKind::kSky : PixelKind::kLandscape;
-        }
-        ch.pixels.push_back({d, w, rad, kind});
+        ch.pixels.push_back({d, w, rad});
       }
     }
   });
-  std::vector<UsedPixel> used;
-  EnvSummary s;
   for (const Chunk& ch : chunks) {
-    used.insert(used.end(), ch.pixels.begin(), ch.pixels.end());
-    s.pixels_model += ch.model;
-    s.pixels_sun += ch.sun;
-    s.pixels_invalid += ch.invalid;
+    used->insert(used->end(), ch.pixels.begin(), ch.pixels.end());
+    s->pixels_used += static_cast<int>(ch.pixels.size());
+    s->pixels_model += ch.model;
+    s->pixels_sun += ch.sun;
+    s->pixels_invalid += ch.invalid;
   }
-  s.pixels_used = static_cast<int>(used.size());
-  for (const auto& u : used) s.pixels_sky += u.kind == PixelKind::kSky;
+}
 
-  // Layers: from the panorama's height to the model's top.
-  const Eigen::AlignedBox3d& box = model.bounds();
-  const bool have_box = !box.isEmpty();
-  const double top = have_box ? box.max().z() : c.z();
-  const int layers =
-      options.parallax_layers > 1 && have_box && top > c.z() + 1.0 ? options.parallax_layers : 1;
-  const double ground_z = have_box ? std::min(box.min().z(), c.z() - 0.01) : c.z() - 1.0;
+}  // namespace
+
+// §3.3: average the panoramas' pixels over coarse lat-long regions, one layer per height.
+EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
+                                   const RayCaster& model, const Eigen::Vector3d& sun_dir,
+                                   double sun_angular_radius_rad, const SkyModel& sky,
+                                   const EnvOptions& options, EnvSummary* summary) {
+  const auto start = std::chrono::steady_clock::now();
+  options.Validate();
+  if (panoramas.empty()) throw Error("environment map: no landscape panorama given");
+  for (size_t i = 0; i < panoramas.size(); ++i) CheckPanorama(panoramas[i], static_cast<int>(i));
+  if (!sun_dir.allFinite() || sun_dir.norm() < 0.5) {
+    throw Error("environment map: sun direction is not a unit vector");
+  }
+  const Eigen::Vector3d sun = sun_dir.normalized();
+  const double cos_excl =
+      std::cos(std::max(options.sun_exclusion_deg * kPi / 180.0, sun_angular_radius_rad));
+
+  // Layers: the panoramas by height; those within layer_merge_m of the layer's lowest join it.
+  std::vector<int> order(panoramas.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    return panoramas[a].pose.position.z() < panoramas[b].pose.position.z();
+  });
+  std::vector<std::vector<int>> layer_panos;
+  for (int i : order) {
+    const double z = panoramas[i].pose.position.z();
+    if (layer_panos.empty() ||
+        z - panoramas[layer_panos.back().front()].pose.position.z() >= options.layer_merge_m) {
+      layer_panos.emplace_back();
+    }
+    layer_panos.back().push_back(i);
+  }
+  const int layers = static_cast<int>(layer_panos.size());
   EnvironmentMap m;
   InitMap(options, layers, &m);
   const int nreg = m.num_regions();
+  EnvSummary s;
   for (int k = 0; k < layers; ++k) {
-    m.layer_z[k] = layers == 1 ? c.z() : c.z() + (top - c.z()) * k / (layers - 1);
-  }
-  // Horizontal distance from the panorama to where a direction leaves the model's box.
-  auto exit_distance = [&](const Eigen::Vector3d& d) {
-    const Eigen::Vector2d o = c.head<2>(), v = d.head<2>().normalized();
-    double t = std::numeric_limits<double>::infinity();
-    for (int a = 0; a < 2; ++a) {
-      if (std::abs(v[a]) < 1e-12) continue;
-      const double bound = v[a] > 0 ? box.max()[a] : box.min()[a];
-      t = std::min(t, (bound - o[a]) / v[a]);
+    double zsum = 0;
+    std::vector<UsedPixel> used;
+    for (int i : layer_panos[k]) {
+      zsum += panoramas[i].pose.position.z();
+      CollectPixels(panoramas[i], model, sun, cos_excl, options.pixel_stride, &used, &s);
     }
-    return std::isfinite(t) ? std::max(t, 0.0) : 0.0;
-  };
-  for (int k = 0; k < layers; ++k) {
-    const Eigen::Vector3d v(c.x(), c.y(), m.layer_z[k]);
+    m.layer_z[k] = zsum / layer_panos[k].size();
     const size_t base = static_cast<size_t>(k) * nreg;
     std::vector<Eigen::Vector3d> sum(nreg, Eigen::Vector3d::Zero());
     std::vector<double> wsum(nreg, 0.0);
     std::vector<int> count(nreg, 0);
     for (const UsedPixel& u : used) {
-      Eigen::Vector3d dk = u.dir;
-      double w = u.weight;
-      if (k > 0 && u.kind != PixelKind::kSky) {
-        // Re-project through the proxy: the ground plane, or a wall beyond the model's box.
-        Eigen::Vector3d X;
-        double cos_c = 1, cos_k = 1;
-        if (u.kind == PixelKind::kGround) {
-          const double t = std::min((c.z() - ground_z) / std::max(-u.dir.z(), 1e-9), 5000.0);
-          X = c + t * u.dir;
-          cos_c = std::max(-u.dir.z(), 1e-9);
-        } else {
-          const double horiz = std::max(u.dir.head<2>().norm(), 1e-9);
-          const double D = exit_distance(u.dir) + options.landscape_margin_m;
-          X = c + (D / horiz) * u.dir;
-        }
-        const Eigen::Vector3d to = X - v;
-        const double dist_k = to.norm();
-        if (!(dist_k > 1e-6)) continue;
-        dk = to / dist_k;
-        if (u.kind == PixelKind::kGround) cos_k = std::max(-dk.z(), 0.0);
-        if (cos_k <= 0) continue;  // the ground seen from above only
-        const double dist_c = (X - c).norm();
-        w *= std::min((dist_c * dist_c) / (dist_k * dist_k) * (cos_k / cos_c), 100.0);
-      }
-      const int r = m.Region(dk);
-      sum[r] += w * u.radiance;
-      wsum[r] += w;
+      const int r = m.Region(u.dir);
+      sum[r] += u.weight * u.radiance;
+      wsum[r] += u.weight;
       count[r] += 1;
     }
     for (int r = 0; r < nreg; ++r) {
@@ -458,7 +426,7 @@ EnvironmentMap BuildEnvironmentMap(const Image& pano, const Intrinsics& intrinsi
     }
     FillLayer(sky, options.sky_fill_samples, static_cast<int>(base), &m);
   }
-  for (int r = 0; r < nreg; ++r) {
+  for (size_t r = 0; r < m.source.size(); ++r) {
     s.regions_observed += m.source[r] == EnvRegionSource::kObserved;
     s.regions_sky += m.source[r] == EnvRegionSource::kSkyModel;
     s.regions_neighbour += m.source[r] == EnvRegionSource::kNeighbour;

@@ -2,12 +2,10 @@
 // into latitude-longitude regions, each holding the average radiance of the panorama pixels
 // that fall into it. Directions are unit ENU vectors; azimuth from north eastward.
 //
-// Beyond the paper (§3.3 notes that a large building may need environment maps from several
-// places): the map can hold several height layers, synthesised from the one panorama by
-// parallax with a crude proxy of the surroundings: ground pixels lie on the plane of the
-// model's lowest level, landscape pixels above the horizon (those that disagree with the sky
-// model) stand just beyond the model's bounding box, sky pixels are at infinity. A point of
-// the building looks the environment up at its own height.
+// §3.3 notes that a large building may need environment maps from several places: the map
+// holds one layer per panorama height (e.g. one from the ground and one from a mast at the
+// top of the building), and a point of the building looks the environment up at its own
+// height, linearly between the layers.
 #pragma once
 
 #include <Eigen/Core>
@@ -30,16 +28,9 @@ struct EnvOptions {
   int pixel_stride = 1;            // use every stride-th panorama pixel in x and y
   int min_region_pixels = 4;       // fewer pixels than this: the region counts as unobserved
   int sky_fill_samples = 8;        // per axis, to average the sky model over a region
-  // Height layers from the panorama's height to the model's top (1: the paper's single map).
-  // Experimental: with a low sun the proxy's sunlit facades brighten the lower hemisphere of
-  // high points too much; off by default.
-  int parallax_layers = 1;
-  // Landscape objects are placed this far beyond the model's bounding box (metres).
-  double landscape_margin_m = 15.0;
-  // Above the horizon a pixel within this relative difference of the sky model is sky; so is
-  // every pixel above max_landscape_elevation_deg or within 10 deg of the sun.
-  double sky_tolerance = 0.2;
-  double max_landscape_elevation_deg = 30.0;
+  // Panoramas taken less than this far apart in height share one layer (their pixels are
+  // pooled; the layer sits at their mean height), metres.
+  double layer_merge_m = 2.0;
 
   void Validate() const;  // throws rouen::Error
 };
@@ -53,7 +44,8 @@ enum class EnvRegionSource : uint8_t {
 
 struct EnvironmentMap {
   int bands_below = 9, bands_above = 9, sectors = 24;
-  std::vector<double> layer_z = {0.0};  // heights of the layers (ENU z, metres), increasing
+  // Heights of the layers (ENU z, metres; the panoramas' camera heights), increasing.
+  std::vector<double> layer_z = {0.0};
   // Per layer, then per region: band-major from the nadir band upwards, sector from azimuth 0
   // eastwards.
   std::vector<Eigen::Vector3d> radiance;  // relative radiance, RGB
@@ -64,7 +56,7 @@ struct EnvironmentMap {
   int num_regions() const { return num_bands() * sectors; }
   int num_layers() const { return static_cast<int>(layer_z.size()); }
   int Region(const Eigen::Vector3d& dir) const;  // `dir` need not be unit
-  // The lowest layer (the panorama's own height).
+  // The lowest layer (the lowest panorama's height).
   Eigen::Vector3d Radiance(const Eigen::Vector3d& dir) const { return radiance[Region(dir)]; }
   // Seen from height z: linear between the layers, clamped at the ends.
   Eigen::Vector3d Radiance(const Eigen::Vector3d& dir, double z) const;
@@ -94,22 +86,27 @@ struct EnvSummary {
   int pixels_model = 0;    // rays that hit the model (building, plaza): skipped
   int pixels_sun = 0;      // within sun_exclusion_deg of the sun: skipped
   int pixels_invalid = 0;  // non-finite or negative: skipped
-  int pixels_sky = 0;      // of the used ones above the horizon: agree with the sky model
-  // Regions of the lowest layer by source.
+  // Regions of all layers by source.
   int regions_observed = 0, regions_sky = 0, regions_neighbour = 0;
   double seconds = 0;
 };
 
-// §3.3: averages an HDR panorama (kRadiance) over the regions. Pixels whose ray from the
-// panorama position hits the model are skipped (the model is lit by interreflection), as are
-// pixels near the sun and invalid ones. Unobserved regions above the horizon take the sky
-// model's mean over the region; below, the nearest observed region in the same band, else
-// the nearest band with observations (towards the horizon first). With parallax_layers > 1
-// the pixels are also re-projected to heights up to the model's top (see above).
-EnvironmentMap BuildEnvironmentMap(const Image& hdr_pano, const Intrinsics& intrinsics,
-                                   const Pose& pose, const RayCaster& model,
-                                   const Eigen::Vector3d& sun_dir, double sun_angular_radius_rad,
-                                   const SkyModel& sky, const EnvOptions& options,
-                                   EnvSummary* summary = nullptr);
+// One HDR landscape panorama (any projection) and where it was taken.
+struct EnvPanorama {
+  const Image* radiance = nullptr;  // kRadiance, >= 3 channels; not owned
+  Intrinsics intrinsics;
+  Pose pose;
+};
+
+// §3.3: averages HDR panoramas over the regions, one layer per panorama height (see
+// EnvOptions::layer_merge_m). Pixels whose ray from the panorama position hits the model are
+// skipped (the model is lit by interreflection), as are pixels near the sun and invalid ones.
+// In each layer, unobserved regions above the horizon take the sky model's mean over the
+// region; below, the nearest observed region in the same band, else the nearest band with
+// observations (towards the horizon first). Throws rouen::Error for no panorama or bad input.
+EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
+                                   const RayCaster& model, const Eigen::Vector3d& sun_dir,
+                                   double sun_angular_radius_rad, const SkyModel& sky,
+                                   const EnvOptions& options, EnvSummary* summary = nullptr);
 
 }  // namespace rouen

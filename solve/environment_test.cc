@@ -77,7 +77,7 @@ TEST(BuildEnvironmentMapTest, AveragesSkipsModelAndSunAndFills) {
   for (auto& ch : sky.channel) ch.Lz = 7;
   EnvSummary s;
   const EnvironmentMap env =
-      BuildEnvironmentMap(pano, k, pose, rc, sun, 0.0047, sky, EnvOptions(), &s);
+      BuildEnvironmentMap({{&pano, k, pose}}, rc, sun, 0.0047, sky, EnvOptions(), &s);
   EXPECT_EQ(s.pixels_invalid, 2);
   EXPECT_GT(s.pixels_sun, 0);
   EXPECT_GT(s.pixels_model, 0);
@@ -105,56 +105,89 @@ TEST(BuildEnvironmentMapTest, AveragesSkipsModelAndSunAndFills) {
   EXPECT_NEAR((env.radiance[behind] - Eigen::Vector3d(3, 3, 2)).norm(), 0, 1e-5);
   EXPECT_GT(env.ObservedFraction(), 0.5);
   EXPECT_LT(env.ObservedFraction(), 1.0);
+  EXPECT_EQ(env.num_layers(), 1);
+  EXPECT_NEAR(env.layer_z[0], 1.6, 1e-12);
+  EXPECT_EQ(s.regions_observed + s.regions_sky + s.regions_neighbour, env.num_regions());
 }
 
-// Ground with radiance 1 within 100 m of the panorama and 5 beyond: seen from higher up the
-// far ground drops below the horizon, which the parallax layers reproduce.
-TEST(BuildEnvironmentMapTest, ParallaxLayersReprojectTheGround) {
-  const Intrinsics k = Intrinsics::Equirect(720, 360);
-  const Pose pose = Pose::Level({0, 0, 1.6}, 0, 0);
+// Ground with radiance 1 within 100 m of the site and 5 beyond, seen from panoramas at
+// 1.6 m and 50 m: from higher up the far ground reaches further below the horizon. Each
+// panorama makes one layer; panoramas at nearly the same height share one.
+Image GroundPanorama(const Intrinsics& k, const Pose& pose) {
   Image pano(k.width, k.height, 3, PixelUnits::kRadiance);
+  const Eigen::Vector3d c = pose.position;
   for (int y = 0; y < k.height; ++y) {
     for (int x = 0; x < k.width; ++x) {
       const Eigen::Vector3d d = pose.rotation * Unproject(k, {x + 0.5, y + 0.5});
       double v = 2;  // sky
-      if (d.z() < 0) v = 1.6 / -d.z() * std::hypot(d.x(), d.y()) > 100 ? 5 : 1;
-      for (int c = 0; c < 3; ++c) pano.at(x, y, c) = static_cast<float>(v);
+      if (d.z() < 0) {
+        const Eigen::Vector3d g = c + (c.z() / -d.z()) * d;
+        v = g.head<2>().norm() > 100 ? 5 : 1;
+      }
+      for (int ch = 0; ch < 3; ++ch) pano.at(x, y, ch) = static_cast<float>(v);
     }
   }
-  // The model: a thin pole far away, 50 m tall (sets the layers' range and the ground level).
+  return pano;
+}
+
+TEST(BuildEnvironmentMapTest, OneLayerPerPanoramaHeight) {
+  const Intrinsics k = Intrinsics::Equirect(720, 360);
+  const Pose low = Pose::Level({0, 0, 1.6}, 0, 0), high = Pose::Level({0, 0, 50}, 0, 0);
+  const Pose low2 = Pose::Level({20, 0, 2.1}, 0, 0);  // within layer_merge_m of `low`
+  const Image pano_low = GroundPanorama(k, low), pano_high = GroundPanorama(k, high);
+  const Image pano_low2 = GroundPanorama(k, low2);
+  // The model: a thin pole far away (only so that the caster has something).
   Mesh m;
   const int b = m.AddBlock("pole");
   m.AddPolygon({{300, 0, 0}, {300.1, 0, 0}, {300.1, 0, 50}, {300, 0, 50}}, b);
   const RayCaster rc(m);
   SkyModel sky;
   for (auto& ch : sky.channel) ch.Lz = 2;
-  EnvOptions o;
-  o.parallax_layers = 3;
-  const EnvironmentMap env = BuildEnvironmentMap(pano, k, pose, rc, Dir(90, 45), 0.0047, sky, o);
-  ASSERT_EQ(env.num_layers(), 3);
+  // Given in any order: sorted by height.
+  EnvSummary s;
+  const EnvironmentMap env = BuildEnvironmentMap(
+      {{&pano_high, k, high}, {&pano_low, k, low}}, rc, Dir(90, 45), 0.0047, sky, EnvOptions(), &s);
+  ASSERT_EQ(env.num_layers(), 2);
   EXPECT_NEAR(env.layer_z[0], 1.6, 1e-12);
-  EXPECT_NEAR(env.layer_z[2], 50, 1e-12);
+  EXPECT_NEAR(env.layer_z[1], 50, 1e-12);
+  EXPECT_EQ(s.regions_observed + s.regions_sky + s.regions_neighbour, 2 * env.num_regions());
+  // -55 deg meets the ground 1.1 m (from 1.6 m) and 35 m (from 50 m) away; -15 deg meets it
+  // 6 m and 187 m away.
   const Eigen::Vector3d steep = Dir(200, -55), shallow = Dir(200, -15);
-  // From 1.6 m both directions meet near ground (radiance 1) ...
   EXPECT_NEAR(env.Radiance(steep, 1.6).x(), 1, 1e-5);
   EXPECT_NEAR(env.Radiance(shallow, 1.6).x(), 1, 1e-5);
   EXPECT_EQ(env.Radiance(steep), env.Radiance(steep, 1.6));
-  // ... from 50 m the shallow one (ground 137..284 m away) sees the far ground.
   EXPECT_NEAR(env.Radiance(steep, 50).x(), 1, 1e-5);
   EXPECT_NEAR(env.Radiance(shallow, 50).x(), 5, 1e-5);
-  EXPECT_NEAR(env.Radiance(shallow, 500).x(), 5, 1e-5);  // clamped above the top layer
-  // Linear between layers.
-  const double l0 = env.Radiance(shallow, env.layer_z[0]).x();
-  const double l1 = env.Radiance(shallow, env.layer_z[1]).x();
-  EXPECT_EQ(l1, env.radiance[env.num_regions() + env.Region(shallow)].x());
-  EXPECT_NEAR(env.Radiance(shallow, 0.25 * env.layer_z[0] + 0.75 * env.layer_z[1]).x(),
-              0.25 * l0 + 0.75 * l1, 1e-9);
-  // The sky is at infinity: the same in every layer.
+  // Clamped outside the layers, linear between them.
+  EXPECT_NEAR(env.Radiance(shallow, 500).x(), 5, 1e-5);
+  EXPECT_NEAR(env.Radiance(shallow, -3).x(), 1, 1e-5);
+  EXPECT_NEAR(env.Radiance(shallow, 0.25 * 1.6 + 0.75 * 50).x(), 0.25 * 1 + 0.75 * 5, 1e-5);
+  // The sky is the same in both layers.
   EXPECT_NEAR(env.Radiance(Dir(10, 20), 50).x(), 2, 1e-5);
+  EXPECT_NEAR(env.Radiance(Dir(10, 20), 1.6).x(), 2, 1e-5);
   // Layers survive JSON.
   const EnvironmentMap back = nlohmann::json(env).get<EnvironmentMap>();
   EXPECT_EQ(back.layer_z, env.layer_z);
-  EXPECT_EQ(back.Radiance(shallow, 50), env.Radiance(shallow, 50));
+  EXPECT_EQ(back.Radiance(shallow, 30), env.Radiance(shallow, 30));
+
+  // Two panoramas 0.5 m apart in height (less than layer_merge_m): one layer at their mean
+  // height, pooling their pixels; a third one high up makes a second layer.
+  const EnvironmentMap merged =
+      BuildEnvironmentMap({{&pano_low, k, low}, {&pano_high, k, high}, {&pano_low2, k, low2}},
+                          rc, Dir(90, 45), 0.0047, sky, EnvOptions());
+  ASSERT_EQ(merged.num_layers(), 2);
+  EXPECT_NEAR(merged.layer_z[0], 0.5 * (1.6 + 2.1), 1e-12);
+  EXPECT_NEAR(merged.layer_z[1], 50, 1e-12);
+  const int r = merged.Region(steep);
+  EXPECT_EQ(merged.pixel_count[r], 2 * env.pixel_count[r]);
+  // With a smaller merge distance they stay apart.
+  EnvOptions apart;
+  apart.layer_merge_m = 0.25;
+  EXPECT_EQ(BuildEnvironmentMap({{&pano_low, k, low}, {&pano_low2, k, low2}}, rc, Dir(90, 45),
+                                0.0047, sky, apart)
+                .num_layers(),
+            2);
 }
 
 TEST(BuildEnvironmentMapTest, BadInputThrows) {
@@ -162,15 +195,26 @@ TEST(BuildEnvironmentMapTest, BadInputThrows) {
   const Pose pose;
   const RayCaster rc{Mesh()};
   const SkyModel sky;
+  const Eigen::Vector3d up(0, 0, 1);
   Image small(32, 32, 3, PixelUnits::kRadiance);
-  EXPECT_THROW(BuildEnvironmentMap(small, k, pose, rc, {0, 0, 1}, 0.005, sky, EnvOptions()), Error);
+  EXPECT_THROW(BuildEnvironmentMap({{&small, k, pose}}, rc, up, 0.005, sky, EnvOptions()), Error);
   Image ldr(64, 32, 3, PixelUnits::kDigital);
-  EXPECT_THROW(BuildEnvironmentMap(ldr, k, pose, rc, {0, 0, 1}, 0.005, sky, EnvOptions()), Error);
+  EXPECT_THROW(BuildEnvironmentMap({{&ldr, k, pose}}, rc, up, 0.005, sky, EnvOptions()), Error);
   Image ok(64, 32, 3, PixelUnits::kRadiance, 1.f);
   EnvOptions bad;
   bad.sectors = 0;
-  EXPECT_THROW(BuildEnvironmentMap(ok, k, pose, rc, {0, 0, 1}, 0.005, sky, bad), Error);
-  EXPECT_THROW(BuildEnvironmentMap(ok, k, pose, rc, {0, 0, 0}, 0.005, sky, EnvOptions()), Error);
+  EXPECT_THROW(BuildEnvironmentMap({{&ok, k, pose}}, rc, up, 0.005, sky, bad), Error);
+  EnvOptions bad_merge;
+  bad_merge.layer_merge_m = 0;
+  EXPECT_THROW(BuildEnvironmentMap({{&ok, k, pose}}, rc, up, 0.005, sky, bad_merge), Error);
+  EXPECT_THROW(BuildEnvironmentMap({{&ok, k, pose}}, rc, {0, 0, 0}, 0.005, sky, EnvOptions()),
+               Error);
+  // No panorama, a missing image, one bad panorama among good ones.
+  EXPECT_THROW(BuildEnvironmentMap({}, rc, up, 0.005, sky, EnvOptions()), Error);
+  EXPECT_THROW(BuildEnvironmentMap({{nullptr, k, pose}}, rc, up, 0.005, sky, EnvOptions()), Error);
+  EXPECT_THROW(
+      BuildEnvironmentMap({{&ok, k, pose}, {&ldr, k, pose}}, rc, up, 0.005, sky, EnvOptions()),
+      Error);
 }
 
 }  // namespace

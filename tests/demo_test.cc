@@ -48,10 +48,11 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
   EXPECT_LE(m["sky_rel_error_p90"].get<double>(), 0.08);
   EXPECT_LE(m["heldout_render_rel_rmse"].get<double>(), 0.10);
   EXPECT_LE(m["albedo_sun_rel_error_mean"].get<double>(), 0.05);
-  // Issue 2 asks for <= 5% here too; measured 5.2% (quick) and 5.5% (full): the environment
-  // below the horizon comes from one panorama at 1.6 m and is too bright for high points
-  // (paper §3.3). Until that is solved the test holds the line reached, not the target.
-  EXPECT_LE(m["albedo_skyenv_rel_error_mean"].get<double>(), 0.06);
+  // With one landscape panorama (1.6 m) this was 5.2% (quick) / 5.5% (full): seen from the
+  // belfry and the roof the environment differs (paper §3.3). The session now holds a second
+  // panorama from the mast at the top, and the environment interpolates between the two by
+  // height.
+  EXPECT_LE(m["albedo_skyenv_rel_error_mean"].get<double>(), 0.05);
   // The sun direction comes from GPS + UTC through ERFA; the simulator computes its own with
   // an independent low-precision almanac (~0.01 deg) and GPS noise of metres (~1e-5 deg).
   EXPECT_LT(m["sun_direction_error_deg"].get<double>(), 0.05);

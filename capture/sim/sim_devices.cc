@@ -76,7 +76,16 @@ void SimCamera::SetNdFilter(double density) {
   nd_ = density;
 }
 
-int SimCamera::ViewCount(Target target) const { return target == Target::kArchitecture ? 4 : 1; }
+int SimCamera::ViewCount(Target target) const {
+  switch (target) {
+    case Target::kArchitecture:
+      return 4;
+    case Target::kLandscape:
+      return 2;
+    default:
+      return 1;
+  }
+}
 
 void SimCamera::Aim(Target target, int view) {
   if (view < 0 || view >= ViewCount(target)) {
@@ -96,7 +105,7 @@ SimView SimCamera::CurrentView() {
     case Target::kSky:
       return world_->SkyView();
     case Target::kLandscape:
-      return world_->LandscapeView();
+      return world_->LandscapeViews()[view_];
     case Target::kArchitecture:
       return world_->ArchitectureViews(quick_)[view_];
     case Target::kCalibration:

@@ -47,7 +47,7 @@ class SimCamera : public Camera {
   double SetGain(double gain) override;       // clamped to [1, 16]
   void SetNdFilter(double density) override;  // any density >= 0
   double NdFilter() const override { return nd_; }
-  // Architecture: 4 views; every other target: 1.
+  // Architecture: 4 views; landscape: 2 (tripod and mast); every other target: 1.
   int ViewCount(Target target) const override;
   void Aim(Target target, int view) override;
   // Renders (cached per target, view and slot) and exposes one frame at the clock's time.

@@ -54,7 +54,9 @@ TEST(SimCameraTest, ControlsAreClampedAndQuantised) {
   EXPECT_TRUE(found);
   EXPECT_EQ(cam.ViewCount(Target::kArchitecture), 4);
   EXPECT_EQ(cam.ViewCount(Target::kSun), 1);
+  EXPECT_EQ(cam.ViewCount(Target::kLandscape), 2);
   EXPECT_THROW(cam.Aim(Target::kArchitecture, 4), DeviceError);
+  EXPECT_THROW(cam.Aim(Target::kLandscape, 2), DeviceError);
   EXPECT_THROW(cam.Aim(Target::kSky, 1), DeviceError);
 }
 
@@ -91,6 +93,12 @@ TEST(SimCameraTest, GrabsFramesOfEachTargetAtTheSlotTime) {
       EXPECT_EQ(v, std::round(v));
     }
   }
+  // The second landscape view is taken from the mast at the top of the tower.
+  cam.Aim(Target::kLandscape, 1);
+  const CapturedFrame high = cam.Grab();
+  ASSERT_TRUE(high.pose);
+  EXPECT_GT(high.pose->position.z(), 66.0);
+  EXPECT_EQ(high.image.width, 512);
   // The lighting stayed at the slot: no new time was computed for the later frame times.
   EXPECT_EQ(SimTestWorld().stats().times_computed, computed);
 }

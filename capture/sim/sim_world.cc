@@ -761,12 +761,15 @@ SimView SimWorld::SkyView() const {
   return v;
 }
 
-SimView SimWorld::LandscapeView() const {
+std::vector<SimView> SimWorld::LandscapeViews() const {
   const double a = 202.5 * kPi / 180;
-  SimView v;
-  v.intrinsics = Intrinsics::Equirect(512, 256);
-  v.pose = Pose::Level(Eigen::Vector3d(35.0 * std::sin(a), 35.0 * std::cos(a), 1.6), 0.0, 0.0);
-  return v;
+  const Eigen::Vector3d tripod(35.0 * std::sin(a), 35.0 * std::cos(a), 1.6);
+  const Eigen::Vector3d mast = SkyView().pose.position;
+  std::vector<SimView> out;
+  for (const Eigen::Vector3d& eye : {tripod, mast}) {
+    out.push_back({Intrinsics::Equirect(512, 256), Pose::Level(eye, 0.0, 0.0)});
+  }
+  return out;
 }
 
 SimView SimWorld::SunView() const {

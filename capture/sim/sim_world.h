@@ -112,8 +112,12 @@ class SimWorld {
   // 180-degree fisheye (320x320) looking straight up from a mast 1 m above the roof apex;
   // image up = north.
   SimView SkyView() const;
-  // Equirect panorama 512x256 at 1.6 m, 35 m south-south-west of the tower, azimuth 0.
-  SimView LandscapeView() const;
+  // Level equirect panoramas 512x256 facing azimuth 0, for the environment at two heights
+  // (paper §3.3: a large building may need maps from several places):
+  // [0] on a tripod at 1.6 m, 35 m south-south-west of the tower;
+  // [1] on the sky camera's mast, 67 m (1 m above the roof apex): the surroundings much as
+  //     the belfry and the roof see them.
+  std::vector<SimView> LandscapeViews() const;
   // 6-degree pinhole (256x256) on the mast aimed at the current true sun.
   SimView SunView() const;
 

@@ -265,10 +265,19 @@ TEST(SimWorldTest, BlockIdsMarkModelSkyAndSurroundings) {
     EXPECT_TRUE(seen.count(4));   // the plaza
     EXPECT_TRUE(seen.count(0) && seen.count(1) && seen.count(3));
   }
-  const SimView land = w.LandscapeView();
-  const Image ids = w.RenderBlockIds(land.intrinsics, land.pose);
-  std::set<int> seen(ids.data.begin(), ids.data.end());
-  EXPECT_TRUE(seen.count(-1) && seen.count(-2) && seen.count(1));
+  const std::vector<SimView> land = w.LandscapeViews();
+  ASSERT_EQ(land.size(), 2u);
+  EXPECT_LT(land[0].pose.position.z(), 2.0);   // the tripod
+  EXPECT_GT(land[1].pose.position.z(), 66.0);  // the mast, above the roof apex (66 m)
+  // From the tripod: ground, sky and the shaft; from the mast: ground, sky and the roof
+  // below, but no longer the shaft (hidden by the roof and the belfry).
+  const Image low = w.RenderBlockIds(land[0].intrinsics, land[0].pose);
+  std::set<int> seen_low(low.data.begin(), low.data.end());
+  EXPECT_TRUE(seen_low.count(-1) && seen_low.count(-2) && seen_low.count(1));
+  const Image high = w.RenderBlockIds(land[1].intrinsics, land[1].pose);
+  std::set<int> seen_high(high.data.begin(), high.data.end());
+  EXPECT_TRUE(seen_high.count(-1) && seen_high.count(-2) && seen_high.count(3));
+  EXPECT_FALSE(seen_high.count(1));
 }
 
 TEST(SimWorldTest, BelfryInteriorIsLitOnlyThroughItsOpenings) {
