@@ -2,6 +2,7 @@
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
+#include <iostream>
 
 #include "app/commands.h"
 #include "app/progress.h"
@@ -16,16 +17,32 @@ namespace {
 
 struct CaptureArgs {
   std::string rig, out, from, target = "all";
-  bool resume = false, quick = false;
+  bool resume = false, quick = false, no_prompt = false, new_slot = false;
 };
+
+// Field rigs: the operator aims the camera and fits the ND filter, then presses Enter.
+void PromptOperator(const OperatorRequest& r) {
+  std::fprintf(stderr, "\n>>> %s ", r.text.c_str());
+  std::fflush(stderr);
+  std::string line;
+  if (!std::getline(std::cin, line))
+    throw Error(
+        "capture: the operator prompt needs a terminal (stdin closed); use --no-prompt "
+        "when the camera is aimed by other means");
+}
 
 void Run(const CaptureArgs& a) {
   RigConfig rig = LoadRig(a.rig);
   if (a.quick) rig.quick = true;
-  RigDevices dev = OpenRig(rig, a.from);
+  OpenRigOptions open;
+  open.from_session = a.from;
+  if (!a.no_prompt) open.prompt = PromptOperator;
+  RigDevices dev = OpenRig(rig, open);
+  for (const std::string& n : dev.notes) std::fprintf(stderr, "%s\n", n.c_str());
   if (a.target != "all") dev.plan.targets = {ParseTarget(a.target)};
   CaptureSessionOptions opts;
   opts.resume = a.resume;
+  opts.new_slot = a.new_slot;
   opts.from_session = a.from;
   CaptureSummary s = CaptureToSession(rig, dev, a.out, opts, /*show_progress=*/true);
   std::fprintf(stderr, "\n%s: %d frames in %d slot(s)%s\n", a.out.c_str(), s.frames, s.slots_done,
@@ -41,12 +58,32 @@ void OnSignal(int) { g_stop.store(true); }
 }  // namespace
 
 CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
-                                const std::filesystem::path& out,
-                                const CaptureSessionOptions& opts, bool show_progress) {
+                                const std::filesystem::path& out, const CaptureSessionOptions& opts,
+                                bool show_progress) {
   namespace fs = std::filesystem;
+  const bool field = !rig.simulated() && rig.kind != "replay";
+  if (opts.new_slot && !field)
+    throw Error(
+        "--new-slot adds a time of day to a field session; simulated and replay rigs "
+        "capture all their slots in one run");
+  if (opts.new_slot && !fs::exists(out / "session.json"))
+    throw Error(out.string() + ": --new-slot needs an existing session (run without it first)");
   std::optional<SessionWriter> writer;
-  if (opts.resume && fs::exists(out / "frames.jsonl")) {
+  if ((opts.resume || opts.new_slot) && fs::exists(out / "session.json")) {
     writer.emplace(SessionWriter::Resume(out));
+    if (field) {
+      // A field run is one slot: --resume continues the session's last slot, --new-slot
+      // starts the next one now.
+      int last = -1;
+      for (const FrameRecord& f : writer->frames()) last = std::max(last, f.slot);
+      dev.plan.first_slot = opts.new_slot ? last + 1 : std::max(last, 0);
+      if (opts.new_slot) {
+        SessionInfo info = writer->info();
+        if (info.extra.contains("plan") && info.extra["plan"].contains("slots"))
+          info.extra["plan"]["slots"].push_back(dev.plan.slots.front().Iso8601(9));
+        writer->UpdateInfo(info);
+      }
+    }
   } else {
     SessionInfo info;
     info.site = rig.site;
@@ -54,6 +91,7 @@ CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
     info.rig = fs::path(rig.path).filename().string();
     info.created_utc = NowUtc().Iso8601(3);
     info.extra["plan"] = PlanToJson(dev.plan);
+    info.extra["nd_filters"] = {{"sun", rig.sun_nd_density_rgb}};
     if (rig.heldout_slot >= 0) info.extra["heldout_slot"] = rig.heldout_slot;
     if (!opts.from_session.empty()) {
       Session src = Session::Load(opts.from_session);
@@ -61,34 +99,50 @@ CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
       info.site_source = src.info().site_source;
       info.clock_offset_s = src.info().clock_offset_s;
       info.notes = "replayed from " + opts.from_session.string();
-      if (src.info().extra.contains("heldout_slot"))
-        info.extra["heldout_slot"] = src.info().extra["heldout_slot"];
+      for (const char* key : {"heldout_slot", "nd_filters"})
+        if (src.info().extra.contains(key)) info.extra[key] = src.info().extra[key];
     }
     writer.emplace(SessionWriter::Create(out, info));
-    // The building model travels with the session.
+  }
+  // The building model travels with the session (also after a crash before it was written).
+  if (writer->info().model.empty()) {
+    std::optional<std::string> obj;
     if (dev.model) {
       WriteObj((out / "model.obj").string(), *dev.model);
-      info.model = "model.obj";
-      writer->UpdateInfo(info);
+      obj = "model.obj";
     } else if (!opts.from_session.empty()) {
       Session src = Session::Load(opts.from_session);
       if (!src.info().model.empty()) {
         fs::path m = ResolveInside(src.dir(), src.info().model);
         WriteFileAtomic(out / "model.obj", ReadFileToString(m));
-        info.model = "model.obj";
-        writer->UpdateInfo(info);
+        obj = "model.obj";
       }
     }
+    if (obj) {
+      SessionInfo info = writer->info();
+      info.model = *obj;
+      writer->UpdateInfo(info);
+    }
   }
-  CaptureController controller({dev.camera.get(), dev.gps.get(), dev.clock.get()}, dev.plan,
-                               writer->info().site);
+  DeviceLossOptions loss;
+  loss.policy = rig.on_device_lost;
+  loss.reconnect_timeout_s = rig.reconnect_timeout_s;
+  CaptureController controller(dev.Devices(), dev.plan, writer->info().site, loss);
   g_stop.store(false);
   auto old_int = std::signal(SIGINT, OnSignal);
   auto old_term = std::signal(SIGTERM, OnSignal);
   ProgressLine line(show_progress);
+  // Field rigs: report USB cameras and receivers pulled out or plugged back in as it happens.
+  std::shared_ptr<void> usb_watch;
+  if (!rig.simulated() && rig.kind != "replay")
+    usb_watch = WatchUsb([&line](const std::string& m) { line.Message(m); });
   CaptureSummary s = controller.Run(
       *writer,
       [&](const CaptureProgress& p) {
+        if (!p.event.empty()) {
+          line.Message(p.event);
+          return;
+        }
         char buf[256];
         std::snprintf(buf, sizeof buf,
                       "slot %d/%d  %-12s view %d  frames %5d  exposure %9.6f s  saturated %5.2f%%  "
@@ -98,6 +152,7 @@ CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
         line.Update(buf);
       },
       &g_stop);
+  usb_watch.reset();
   std::signal(SIGINT, old_int);
   std::signal(SIGTERM, old_term);
   line.Done();
@@ -120,15 +175,27 @@ CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
 void RegisterCapture(CLI::App& app) {
   auto a = std::make_shared<CaptureArgs>();
   CLI::App* c = app.add_subcommand(
-      "capture", "Run a rig's capture plan (sun, aureole, sky, landscape, architecture) into a "
-                 "session folder");
+      "capture",
+      "Run a rig's capture plan (sun, aureole, sky, landscape, architecture) into a "
+      "session folder");
   c->footer(
       "Each view is bracketed until its brightest pixels of interest are unsaturated and its\n"
       "darkest are above the noise floor; the sun is shot through the rig's ND filter until the\n"
       "disc is unsaturated. Every frame is written durably and journalled (frames.jsonl) with its\n"
-      "exposure, UTC time, GPS fix and sun position. Ctrl-C stops after the frame in flight and\n"
-      "keeps everything written; --resume continues an interrupted session.\n"
+      "exposure, UTC time, GPS fix and sun position.\n"
+      "Field rigs (uvc-webcam, rpi-libcamera, gige-aravis) shoot one time-of-day slot per run,\n"
+      "now (--new-slot adds the next time of day to an existing session): the capture asks you to "
+      "point the camera at each target and to fit or remove the ND\n"
+      "filter, and waits for Enter. The line at the bottom shows the slot, target, view, frames,\n"
+      "current exposure, saturated fraction and GPS status. Without a GPS fix the rig's [site]\n"
+      "is used (stated in session.json). If the camera is unplugged the rig's [capture]\n"
+      "on_device_lost decides: stop, or reconnect (plug it back in; the bracket is redone).\n"
+      "Ctrl-C stops after the frame in flight and keeps everything written; --resume continues\n"
+      "an interrupted session. `rouen devices` lists cameras and GPS receivers.\n"
       "Examples:\n"
+      "  rouen capture --rig rigs/uvc-webcam.toml --out sessions/rouen-0930\n"
+      "  rouen capture --rig rigs/uvc-webcam.toml --out sessions/rouen-0930 --resume\n"
+      "  rouen capture --rig rigs/uvc-webcam.toml --out sessions/rouen-0930 --new-slot   # 14:00\n"
       "  rouen capture --rig rigs/sim.toml --out sessions/sim1\n"
       "  rouen capture --rig rigs/replay.toml --from sessions/sim1 --out sessions/replayed");
   c->add_option("--rig", a->rig, "Rig description (rigs/*.toml)")->required();
@@ -139,7 +206,12 @@ void RegisterCapture(CLI::App& app) {
       ->check(CLI::IsMember({"all", "sun", "aureole", "sky", "landscape", "architecture"}))
       ->capture_default_str();
   c->add_flag("--resume", a->resume, "Continue an interrupted session in --out");
+  c->add_flag("--new-slot", a->new_slot,
+              "Field rigs: add this run to the session in --out as a new time of day")
+      ->excludes("--resume");
   c->add_flag("--quick", a->quick, "Simulated rigs: smaller images, fewer lighting samples");
+  c->add_flag("--no-prompt", a->no_prompt,
+              "Field rigs: do not stop to ask the operator to aim or fit the ND filter");
   c->callback([a] { Run(*a); });
 }
 

@@ -10,18 +10,21 @@ void RegisterCapture(CLI::App& app);
 void RegisterCalib(CLI::App& app);  // rouen calib response
 void RegisterHdr(CLI::App& app);
 void RegisterDemo(CLI::App& app);
+void RegisterDevices(CLI::App& app);
 
 }  // namespace rouen
 
 #include <filesystem>
 
 #include "capture/controller.h"
+#include "capture/devices/devices.h"
 #include "capture/rig.h"
 
 namespace rouen {
 
 struct CaptureSessionOptions {
   bool resume = false;
+  bool new_slot = false;  // field rigs: add this run as a new time-of-day slot to the session
   std::filesystem::path from_session;  // replay source
 };
 // Creates (or resumes) a session folder and runs the plan with the rig's devices. Installs a

@@ -14,6 +14,7 @@ int main(int argc, char** argv) {
   app.set_help_all_flag("--help-all", "Show help for every subcommand");
   rouen::RegisterDemo(app);
   rouen::RegisterCapture(app);
+  rouen::RegisterDevices(app);
   rouen::RegisterCalib(app);
   rouen::RegisterHdr(app);
   rouen::RegisterSun(app);

@@ -26,6 +26,11 @@ class ProgressLine {
     }
     shown_ = true;
   }
+  // A message that must not be throttled away (camera lost, reconnected): on its own line.
+  void Message(const std::string& text) {
+    if (!enabled_) return;
+    std::fprintf(stderr, "%s%s\n", tty_ && shown_ ? "\r\033[K" : "", text.c_str());
+  }
   void Done() {
     if (enabled_ && tty_ && shown_) std::fprintf(stderr, "\n");
   }

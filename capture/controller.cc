@@ -1,8 +1,10 @@
 #include "capture/controller.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <set>
+#include <thread>
 
 #include "core/error.h"
 
@@ -29,6 +31,7 @@ void CapturePlan::Validate() const {
     if (!(e > 0) || !std::isfinite(e)) throw Error("capture plan: aureole exposures must be > 0");
   if (!(start_exposure_s > 0) || !(sun_start_exposure_s > 0))
     throw Error("capture plan: start exposures must be > 0");
+  if (first_slot < 0) throw Error("capture plan: first_slot must be >= 0");
 }
 
 nlohmann::json PlanToJson(const CapturePlan& p) {
@@ -44,9 +47,12 @@ nlohmann::json PlanToJson(const CapturePlan& p) {
   j["start_exposure_s"] = p.start_exposure_s;
   j["sun_exclusion_deg"] = p.sun_exclusion_deg;
   const BracketOptions& b = p.bracket;
-  j["bracket"] = {{"step_stops", b.step_stops},         {"min_exposure_s", b.min_exposure_s},
-                  {"max_exposure_s", b.max_exposure_s}, {"max_frames", b.max_frames},
-                  {"saturation_dn", b.saturation_dn},   {"noise_floor_dn", b.noise_floor_dn},
+  j["bracket"] = {{"step_stops", b.step_stops},
+                  {"min_exposure_s", b.min_exposure_s},
+                  {"max_exposure_s", b.max_exposure_s},
+                  {"max_frames", b.max_frames},
+                  {"saturation_dn", b.saturation_dn},
+                  {"noise_floor_dn", b.noise_floor_dn},
                   {"max_saturated_fraction", b.max_saturated_fraction},
                   {"max_dark_fraction", b.max_dark_fraction}};
   return j;
@@ -85,10 +91,71 @@ std::string GroupName(int slot, Target target, int view) {
   return "slot" + std::to_string(slot) + "/" + TargetName(target) + "/view" + std::to_string(view);
 }
 
-CaptureController::CaptureController(CaptureDevices devices, CapturePlan plan, Site fallback_site)
-    : dev_(devices), plan_(std::move(plan)), fallback_site_(fallback_site) {
+CaptureController::CaptureController(CaptureDevices devices, CapturePlan plan, Site fallback_site,
+                                     DeviceLossOptions loss)
+    : dev_(std::move(devices)), plan_(std::move(plan)), fallback_site_(fallback_site), loss_(loss) {
   if (!dev_.camera || !dev_.clock) throw Error("capture: a camera and a clock are required");
+  if (!(loss_.reconnect_timeout_s > 0) || !(loss_.retry_interval_s > 0))
+    throw Error("capture: reconnect timeout and retry interval must be > 0");
   plan_.Validate();
+}
+
+void CaptureController::PollGps(SessionWriter& writer) {
+  if (!dev_.gps) return;
+  try {
+    if (auto fix = dev_.gps->Poll()) {
+      // A receiver that loses its fix keeps the last good position (the site does not move).
+      if (fix->valid()) {
+        last_fix_ = *fix;
+      } else if (!last_fix_) {
+        progress_.gps_status = "no fix yet";
+      }
+      clock_offset_.Add(*fix);
+    }
+  } catch (const DeviceError& e) {
+    progress_.gps_status = std::string("error: ") + e.what();
+  }
+  // Field rigs: frame times are the laptop's; record its offset from GPS time as it firms up.
+  std::optional<double> offset = clock_offset_.Offset();
+  if (offset && dev_.clock->IsLaptopClock() &&
+      std::abs(*offset - writer.info().clock_offset_s) > 1e-3) {
+    SessionInfo info = writer.info();
+    info.clock_offset_s = *offset;
+    info.extra["clock_offset"] = {
+        {"source", "gps"}, {"fixes", clock_offset_.count()}, {"spread_s", clock_offset_.Spread()}};
+    writer.UpdateInfo(info);
+  }
+}
+
+bool CaptureController::Recover(const DeviceError& e, const std::string& group,
+                                CaptureSummary& summary) {
+  summary.warnings.push_back(group + ": camera lost: " + e.what());
+  progress_.event = std::string("camera lost: ") + e.what();
+  if (progress_fn_) progress_fn_(progress_);
+  progress_.event.clear();
+  if (loss_.policy == DeviceLostPolicy::kStop || !dev_.reopen_camera) return false;
+  const UtcTime deadline = NowUtc().PlusSeconds(loss_.reconnect_timeout_s);
+  std::string last_error = e.what();
+  while (!(stop_ && stop_->load())) {
+    try {
+      if (Camera* cam = dev_.reopen_camera()) {
+        dev_.camera = cam;
+        ++summary.reconnects;
+        progress_.event = "camera back: " + cam->Id() + "; redoing " + group;
+        if (progress_fn_) progress_fn_(progress_);
+        progress_.event.clear();
+        return true;
+      }
+    } catch (const DeviceError& again) {
+      last_error = again.what();
+    }
+    if (NowUtc() >= deadline) break;
+    // Waiting for a device to come back is real time, not a test artefact.
+    std::this_thread::sleep_for(std::chrono::duration<double>(loss_.retry_interval_s));
+  }
+  summary.warnings.push_back(group + ": camera did not come back within " +
+                             std::to_string(loss_.reconnect_timeout_s) + " s: " + last_error);
+  return false;
 }
 
 void CaptureController::Notify(double exposure_s, double saturated_fraction) {
@@ -152,20 +219,15 @@ FrameRecord CaptureController::Journal(SessionWriter& writer, const CapturedFram
   r.target = target;
   r.group = group;
   r.slot = slot;
-  r.utc = frame.utc.PlusSeconds(writer.info().clock_offset_s);
+  r.utc =
+      dev_.clock->IsLaptopClock() ? frame.utc.PlusSeconds(writer.info().clock_offset_s) : frame.utc;
   r.hdr = frame.hdr;
   r.exposure_s = frame.exposure_s;
   r.gain = frame.gain;
   r.nd_density = frame.nd_density;
   r.intrinsics = frame.intrinsics;
   r.pose = frame.pose;
-  if (dev_.gps) {
-    try {
-      if (auto fix = dev_.gps->Poll()) last_fix_ = *fix;
-    } catch (const DeviceError& e) {
-      progress_.gps_status = std::string("error: ") + e.what();
-    }
-  }
+  PollGps(writer);
   Site site = fallback_site_;
   if (last_fix_ && last_fix_->valid()) {
     r.gps = *last_fix_;
@@ -233,7 +295,8 @@ bool CaptureController::CaptureGroup(SessionWriter& writer, int slot, Target tar
       Notify(f.exposure_s, sat);
       if (mx < b.saturation_dn) break;
       if (f.exposure_s <= b.min_exposure_s * 1.0001 || frames >= b.max_frames) {
-        summary.warnings.push_back(group + ": sun disc still saturated at the shortest exposure; "
+        summary.warnings.push_back(group +
+                                   ": sun disc still saturated at the shortest exposure; "
                                    "use a denser ND filter");
         break;
       }
@@ -308,8 +371,9 @@ CaptureSummary CaptureController::Run(SessionWriter& writer,
   stop_ = stop;
   CaptureSummary summary;
   progress_ = CaptureProgress{};
-  progress_.slots = static_cast<int>(plan_.slots.size());
+  progress_.slots = plan_.first_slot + static_cast<int>(plan_.slots.size());
   progress_.frames_total = static_cast<int>(writer.frames().size());
+  PollGps(writer);
 
   // Resume: every group already journalled is complete except the last one, which was in
   // flight when the previous run stopped and is captured again.
@@ -317,9 +381,10 @@ CaptureSummary CaptureController::Run(SessionWriter& writer,
   for (const FrameRecord& f : writer.frames()) done.insert(f.group);
   if (!writer.frames().empty()) done.erase(writer.frames().back().group);
 
-  for (int s = 0; s < static_cast<int>(plan_.slots.size()); ++s) {
+  for (int k = 0; k < static_cast<int>(plan_.slots.size()); ++k) {
+    const int s = plan_.first_slot + k;  // the slot's index in the session
     progress_.slot = s;
-    dev_.clock->JumpTo(plan_.slots[s]);
+    dev_.clock->JumpTo(plan_.slots[k]);
     for (Target t : plan_.targets) {
       int views = std::max(1, dev_.camera->ViewCount(t));
       for (int v = 0; v < views; ++v) {
@@ -328,7 +393,22 @@ CaptureSummary CaptureController::Run(SessionWriter& writer,
           summary.stopped = true;
           return summary;
         }
-        if (!CaptureGroup(writer, s, t, v, summary)) {
+        bool finished = false;
+        while (true) {
+          try {
+            finished = CaptureGroup(writer, s, t, v, summary);
+            break;
+          } catch (const DeviceError& e) {
+            // The frames of this bracket already journalled stay; a resumed or reconnected
+            // capture redoes the bracket (its last group is always redone).
+            if (!Recover(e, GroupName(s, t, v), summary)) {
+              summary.stopped = true;
+              summary.camera_lost = true;
+              return summary;
+            }
+          }
+        }
+        if (!finished) {
           summary.stopped = true;
           return summary;
         }

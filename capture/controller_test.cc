@@ -1,13 +1,15 @@
 #include "capture/controller.h"
 
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <map>
-
-#include <gtest/gtest.h>
+#include <set>
 
 #include "core/error.h"
+#include "core/files.h"
 
 namespace rouen {
 namespace {
@@ -22,7 +24,9 @@ class RampCamera : public Camera {
   std::vector<std::pair<Target, double>> grabs;  // (target, exposure)
 
   std::string Id() const override { return "ramp"; }
-  std::vector<ControlInfo> Controls() const override { return {{"exposure_s", 1e-4, 30, exposure}}; }
+  std::vector<ControlInfo> Controls() const override {
+    return {{"exposure_s", 1e-4, 30, exposure}};
+  }
   double SetExposure(double s) override { return exposure = std::clamp(s, 1e-4, 30.0); }
   double SetGain(double g) override { return g; }
   void SetNdFilter(double d) override { nd = d; }
@@ -60,8 +64,8 @@ class JumpClock : public Clock {
 };
 
 std::filesystem::path TempDir(const std::string& name) {
-  auto p = std::filesystem::temp_directory_path() / ("rouen_controller_test_" + name + "_" +
-                                                     std::to_string(::getpid()));
+  auto p = std::filesystem::temp_directory_path() /
+           ("rouen_controller_test_" + name + "_" + std::to_string(::getpid()));
   std::filesystem::remove_all(p);
   return p;
 }
@@ -140,7 +144,11 @@ TEST(ControllerTest, StopFlagEndsCleanlyAndResumeCompletes) {
     CaptureController ctl({&cam, nullptr, &clock}, plan, Site{});
     int seen = 0;
     CaptureSummary s = ctl.Run(
-        w, [&](const CaptureProgress&) { if (++seen == 5) stop = true; }, &stop);
+        w,
+        [&](const CaptureProgress&) {
+          if (++seen == 5) stop = true;
+        },
+        &stop);
     EXPECT_TRUE(s.stopped);
     EXPECT_LT(w.frames().size(), full);
   }
@@ -171,6 +179,182 @@ TEST(ControllerTest, RejectsBadPlans) {
   EXPECT_THROW(CaptureController({&cam, nullptr, &clock}, plan, Site{}), Error);
   plan = OneSlotPlan();
   EXPECT_THROW(CaptureController({nullptr, nullptr, &clock}, plan, Site{}), Error);
+}
+
+// A RampCamera that fails like an unplugged device after `fail_after` grabs.
+class UnpluggedCamera : public RampCamera {
+ public:
+  int fail_after = 1 << 30;
+  CapturedFrame Grab() override {
+    if (static_cast<int>(grabs.size()) >= fail_after)
+      throw DeviceError("ramp: device vanished (ENODEV)");
+    return RampCamera::Grab();
+  }
+};
+
+// The journal stays loadable and consistent after a lost camera: every frame journalled
+// before the loss is there, with its file.
+void ExpectConsistent(const std::filesystem::path& dir, size_t frames) {
+  Session s = Session::Load(dir);
+  EXPECT_EQ(s.frames().size(), frames);
+  for (const FrameRecord& f : s.frames())
+    EXPECT_EQ(Sha256File(s.dir() / f.file), f.sha256) << f.file;
+}
+
+TEST(ControllerTest, LostCameraStopsWithAConsistentSession) {
+  UnpluggedCamera cam;
+  cam.fail_after = 5;
+  JumpClock clock;
+  auto dir = TempDir("lost_stop");
+  CaptureSummary s;
+  {
+    SessionWriter w = SessionWriter::Create(dir, SessionInfo{});
+    CaptureController ctl({&cam, nullptr, &clock}, OneSlotPlan(), Site{});
+    s = ctl.Run(w, nullptr, nullptr);
+  }
+  EXPECT_TRUE(s.stopped);
+  EXPECT_TRUE(s.camera_lost);
+  EXPECT_EQ(s.frames, 5);
+  ASSERT_FALSE(s.warnings.empty());
+  EXPECT_NE(s.warnings.back().find("camera lost"), std::string::npos) << s.warnings.back();
+  ExpectConsistent(dir, 5);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(ControllerTest, LostCameraReconnectsAndRedoesTheBracket) {
+  RampCamera reference;
+  JumpClock clock;
+  auto ref_dir = TempDir("lost_ref");
+  SessionWriter ref = SessionWriter::Create(ref_dir, SessionInfo{});
+  CaptureController(CaptureDevices{&reference, nullptr, &clock}, OneSlotPlan(), Site{})
+      .Run(ref, nullptr, nullptr);
+  std::set<std::string> ref_groups;
+  for (const FrameRecord& f : ref.frames()) ref_groups.insert(f.group);
+
+  UnpluggedCamera first;
+  first.fail_after = 6;
+  RampCamera second;  // the device after it was plugged in again
+  int attempts = 0;
+  CaptureDevices dev{&first, nullptr, &clock};
+  dev.reopen_camera = [&]() -> Camera* {
+    // Not back on the first attempt, then back.
+    return ++attempts < 2 ? nullptr : &second;
+  };
+  DeviceLossOptions loss;
+  loss.policy = DeviceLostPolicy::kReconnect;
+  loss.retry_interval_s = 0.001;
+  auto dir = TempDir("lost_reconnect");
+  SessionWriter w = SessionWriter::Create(dir, SessionInfo{});
+  CaptureSummary s = CaptureController(dev, OneSlotPlan(), Site{}, loss).Run(w, nullptr, nullptr);
+  EXPECT_FALSE(s.stopped);
+  EXPECT_EQ(s.reconnects, 1);
+  EXPECT_EQ(attempts, 2);
+  std::set<std::string> groups;
+  for (const FrameRecord& f : w.frames()) groups.insert(f.group);
+  EXPECT_EQ(groups, ref_groups);
+  // The interrupted bracket was redone in full on the new device: every frame the reference
+  // took after the interrupted group's start was taken again by `second`.
+  EXPECT_EQ(w.frames().size(), 6 + second.grabs.size());
+  const std::string lost_group = w.frames()[5].group;
+  size_t ref_in_group = 0, redone_in_group = 0;
+  for (const FrameRecord& f : ref.frames()) ref_in_group += f.group == lost_group;
+  for (size_t i = 6; i < w.frames().size(); ++i)
+    redone_in_group += w.frames()[i].group == lost_group;
+  EXPECT_EQ(redone_in_group, ref_in_group);
+  std::filesystem::remove_all(dir);
+  std::filesystem::remove_all(ref_dir);
+}
+
+TEST(ControllerTest, ReconnectGivesUpAfterTheTimeout) {
+  UnpluggedCamera cam;
+  cam.fail_after = 2;
+  JumpClock clock;
+  CaptureDevices dev{&cam, nullptr, &clock};
+  int attempts = 0;
+  dev.reopen_camera = [&]() -> Camera* {
+    ++attempts;
+    throw DeviceError("ramp: no such device");
+  };
+  DeviceLossOptions loss;
+  loss.policy = DeviceLostPolicy::kReconnect;
+  loss.reconnect_timeout_s = 0.05;
+  loss.retry_interval_s = 0.01;
+  auto dir = TempDir("lost_timeout");
+  SessionWriter w = SessionWriter::Create(dir, SessionInfo{});
+  CaptureSummary s = CaptureController(dev, OneSlotPlan(), Site{}, loss).Run(w, nullptr, nullptr);
+  EXPECT_TRUE(s.camera_lost);
+  EXPECT_GE(attempts, 2);
+  EXPECT_NE(s.warnings.back().find("did not come back"), std::string::npos) << s.warnings.back();
+  std::filesystem::remove_all(dir);
+}
+
+// A GPS whose fixes are `lag_s` behind when they reach the laptop, whose clock is `skew_s`
+// behind GPS time.
+class LaggingGps : public Gps {
+ public:
+  double skew_s = 2.5;
+  std::vector<double> lags_s = {0.4, 0.15, 0.3, 0.12, 0.5};
+  int polls = 0;
+  std::string Id() const override { return "lag"; }
+  std::optional<GpsFix> Poll() override {
+    GpsFix f;
+    f.utc = ParseIso8601("2026-08-25T20:00:00Z").PlusSeconds(polls);
+    f.lat_deg = 37.87;
+    f.lon_deg = -122.26;
+    f.mode = 3;
+    f.satellites = 9;
+    f.received_utc = f.utc.PlusSeconds(lags_s[polls % lags_s.size()] - skew_s);
+    ++polls;
+    return f;
+  }
+};
+
+class LaptopClock : public JumpClock {
+ public:
+  bool JumpTo(UtcTime) override { return false; }
+  bool IsLaptopClock() const override { return true; }
+};
+
+TEST(ControllerTest, LaptopClockOffsetComesFromGpsFixes) {
+  RampCamera cam;
+  LaggingGps gps;
+  LaptopClock clock;
+  auto dir = TempDir("offset");
+  SessionWriter w = SessionWriter::Create(dir, SessionInfo{});
+  CaptureController(CaptureDevices{&cam, &gps, &clock}, OneSlotPlan(), Site{})
+      .Run(w, nullptr, nullptr);
+  ASSERT_GE(gps.polls, 5);
+  // The estimate is the skew minus the smallest lag seen (0.12 s once 4 fixes came in).
+  EXPECT_NEAR(w.info().clock_offset_s, gps.skew_s - 0.12, 1e-6);
+  EXPECT_EQ(w.info().extra["clock_offset"]["source"], "gps");
+  // Frame times are the camera's (laptop) times shifted by the offset known at the frame.
+  const FrameRecord& last = w.frames().back();
+  UtcTime grabbed = cam.now.PlusSeconds(-(cam.grabs.back().second + 0.1));
+  EXPECT_NEAR((last.utc.ns - grabbed.ns) * 1e-9, gps.skew_s - 0.12, 1e-6);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(ClockOffsetTest, IgnoresFixesWithoutLaptopTimeAndGlitches) {
+  ClockOffsetEstimator est;
+  GpsFix f;
+  f.mode = 3;
+  f.utc = ParseIso8601("2026-08-25T20:00:00Z");
+  est.Add(f);  // no received_utc
+  EXPECT_FALSE(est.Offset());
+  for (double lag : {0.3, 0.2, 0.25}) {
+    f.received_utc = f.utc.PlusSeconds(lag - 1.0);
+    est.Add(f);
+  }
+  GpsFix glitch = f;
+  glitch.utc = f.utc.PlusSeconds(604800);  // a week off: a cold-start glitch
+  est.Add(glitch);
+  GpsFix nofix = f;
+  nofix.mode = 0;
+  nofix.utc = f.utc.PlusSeconds(50);
+  est.Add(nofix);  // no fix: ignored
+  ASSERT_TRUE(est.Offset());
+  EXPECT_NEAR(*est.Offset(), 1.0 - 0.2, 1e-9);
+  EXPECT_EQ(est.count(), 4);
 }
 
 }  // namespace

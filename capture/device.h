@@ -73,6 +73,9 @@ class Clock {
   virtual UtcTime Now() = 0;
   // Simulated clocks jump to `t`; the real clock cannot and returns false.
   virtual bool JumpTo(UtcTime t) = 0;
+  // True for the laptop's clock, whose frame times are corrected by the offset to GPS time;
+  // simulated and replayed times are already on the GPS time scale.
+  virtual bool IsLaptopClock() const { return false; }
 };
 
 }  // namespace rouen

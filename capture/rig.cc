@@ -1,13 +1,12 @@
 #include "capture/rig.h"
 
-#include <algorithm>
-#include <cmath>
-#include <sstream>
-
 #include <toml++/toml.h>
 
-#include "capture/replay/replay_devices.h"
-#include "capture/sim/sim_devices.h"
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <sstream>
+
 #include "core/error.h"
 #include "core/files.h"
 
@@ -46,6 +45,23 @@ class RigReader {
       Fail(n, std::string("[") + section + "] '" + key + "' must be a number");
     return *v;
   }
+  bool Bool(const toml::table* t, const char* section, const char* key, bool def) const {
+    const toml::node* n = t ? t->get(key) : nullptr;
+    if (!n) return def;
+    if (!n->is_boolean())
+      Fail(n, std::string("[") + section + "] '" + key + "' must be true or false");
+    return *n->value<bool>();
+  }
+  int Int(const toml::table* t, const char* section, const char* key, int def, int lo,
+          int hi) const {
+    const toml::node* n = t ? t->get(key) : nullptr;
+    if (!n) return def;
+    std::optional<int64_t> v = n->is_integer() ? n->value<int64_t>() : std::nullopt;
+    if (!v || *v < lo || *v > hi)
+      Fail(n, std::string("[") + section + "] '" + key + "' must be an integer within " +
+                  std::to_string(lo) + ".." + std::to_string(hi));
+    return static_cast<int>(*v);
+  }
   std::string String(const toml::table* t, const char* section, const char* key,
                      const std::string& def, bool required = false) const {
     const toml::node* n = t ? t->get(key) : nullptr;
@@ -70,13 +86,15 @@ class RigReader {
     }
     return out;
   }
-  std::vector<std::string> Strings(const toml::table* t, const char* section, const char* key) const {
+  std::vector<std::string> Strings(const toml::table* t, const char* section,
+                                   const char* key) const {
     const toml::node* n = t ? t->get(key) : nullptr;
     if (!n) return {};
     if (!n->is_array()) Fail(n, std::string("[") + section + "] '" + key + "' must be an array");
     std::vector<std::string> out;
     for (const toml::node& e : *n->as_array()) {
-      if (!e.is_string()) Fail(&e, std::string("[") + section + "] '" + key + "' must hold strings");
+      if (!e.is_string())
+        Fail(&e, std::string("[") + section + "] '" + key + "' must hold strings");
       out.push_back(*e.value<std::string>());
     }
     return out;
@@ -89,6 +107,21 @@ class RigReader {
 
 }  // namespace
 
+const std::vector<std::string>& RigKinds() {
+  static const std::vector<std::string> kinds = {"sim",           "replay",      "uvc-webcam",
+                                                 "rpi-libcamera", "gige-aravis", "aravis-fake"};
+  return kinds;
+}
+
+std::string RigConfig::LensPath(Target target) const {
+  auto it = camera.target_lens.find(target);
+  const std::string& file = it != camera.target_lens.end() ? it->second : camera.lens;
+  if (file.empty()) return {};
+  std::filesystem::path p(file);
+  if (p.is_relative()) p = std::filesystem::path(path).parent_path() / p;
+  return p.string();
+}
+
 RigConfig ParseRig(const std::string& text, const std::string& name) {
   toml::table root;
   try {
@@ -99,43 +132,134 @@ RigConfig ParseRig(const std::string& text, const std::string& name) {
     throw Error(os.str());
   }
   RigReader r(root, name);
+  // A misspelt table or key would silently fall back to a default in the field: refuse it.
+  static const std::map<std::string, std::vector<std::string>> kSchema = {
+      {"rig", {"name", "kind", "seed", "quick"}},
+      {"site", {"lat_deg", "lon_deg", "height_m"}},
+      {"camera",
+       {"id", "device", "width", "height", "pixel_format", "buffers", "control_latency_frames",
+        "timeout_s", "lens"}},
+      {"lens", {}},  // target = lens file
+      {"gps", {"source", "device", "baud", "host", "port", "timeout_s"}},
+      {"nd", {"sun_density"}},
+      {"bracket",
+       {"step_stops", "min_exposure_s", "max_exposure_s", "max_frames", "saturation_dn",
+        "noise_floor_dn"}},
+      {"plan",
+       {"date", "timezone", "times", "heldout", "targets", "views", "start_exposure_s",
+        "sun_start_exposure_s", "aureole_exposures_s"}},
+      {"capture", {"on_device_lost", "reconnect_timeout_s"}},
+  };
+  for (const auto& [key, node] : root) {
+    auto it = kSchema.find(std::string(key.str()));
+    if (it == kSchema.end()) {
+      r.Fail(&node, "unknown table [" + std::string(key.str()) + "]");
+    }
+    if (it->first == "lens" || !node.is_table()) continue;
+    for (const auto& [k2, n2] : *node.as_table()) {
+      const std::vector<std::string>& known = it->second;
+      if (std::find(known.begin(), known.end(), std::string(k2.str())) == known.end()) {
+        std::string list;
+        for (const std::string& k : known) list += (list.empty() ? "" : ", ") + k;
+        r.Fail(&n2, "unknown key '" + std::string(k2.str()) + "' in [" + it->first +
+                        "] (known: " + list + ")");
+      }
+    }
+  }
   RigConfig rig;
   rig.path = name;
   const toml::table* t_rig = r.Table("rig", true);
   rig.name = r.String(t_rig, "rig", "name", "", true);
   rig.kind = r.String(t_rig, "rig", "kind", "", true);
-  if (rig.kind != "sim" && rig.kind != "replay")
-    r.Fail(t_rig->get("kind"), "unknown rig kind '" + rig.kind +
-                                   "' (this build knows: sim, replay)");
-  rig.quick = t_rig->get("quick") && t_rig->get("quick")->value<bool>().value_or(false);
+  const std::vector<std::string>& kinds = RigKinds();
+  if (std::find(kinds.begin(), kinds.end(), rig.kind) == kinds.end()) {
+    std::string known;
+    for (const std::string& k : kinds) known += (known.empty() ? "" : ", ") + k;
+    r.Fail(t_rig->get("kind"), "unknown rig kind '" + rig.kind + "' (known: " + known + ")");
+  }
+  const bool field = !rig.simulated() && rig.kind != "replay";
+  rig.quick = r.Bool(t_rig, "rig", "quick", false);
   rig.seed = static_cast<uint64_t>(r.Number(t_rig, "rig", "seed", 1));
 
-  const toml::table* t_site = r.Table("site", rig.kind == "sim");
+  const toml::table* t_site = r.Table("site", rig.simulated() || field);
   rig.site.lat_deg = r.Number(t_site, "site", "lat_deg", rig.site.lat_deg);
   rig.site.lon_deg = r.Number(t_site, "site", "lon_deg", rig.site.lon_deg);
   rig.site.height_m = r.Number(t_site, "site", "height_m", rig.site.height_m);
   if (std::abs(rig.site.lat_deg) > 90 || std::abs(rig.site.lon_deg) > 180)
     r.Fail(t_site, "site latitude/longitude out of range");
 
-  const toml::table* t_cam = r.Table("camera", false);
-  rig.camera_id = r.String(t_cam, "camera", "id", rig.camera_id);
-  rig.control_latency_frames =
-      static_cast<int>(r.Number(t_cam, "camera", "control_latency_frames", 0));
-  if (rig.control_latency_frames < 0 || rig.control_latency_frames > 30)
-    r.Fail(t_cam, "control_latency_frames must be within 0..30");
+  const toml::table* t_cam = r.Table("camera", field);
+  CameraConfig& cam = rig.camera;
+  cam.id = r.String(t_cam, "camera", "id", cam.id);
+  if (cam.id.empty()) r.Fail(t_cam, "[camera] 'id' must not be empty");
+  cam.device = r.String(t_cam, "camera", "device", cam.device);
+  cam.width = r.Int(t_cam, "camera", "width", 0, 0, 20000);
+  cam.height = r.Int(t_cam, "camera", "height", 0, 0, 20000);
+  cam.pixel_format = r.String(t_cam, "camera", "pixel_format", "");
+  cam.buffers = r.Int(t_cam, "camera", "buffers", cam.buffers, 2, 64);
+  cam.control_latency_frames = r.Int(t_cam, "camera", "control_latency_frames", 0, 0, 30);
+  cam.timeout_s = r.Number(t_cam, "camera", "timeout_s", cam.timeout_s);
+  if (!(cam.timeout_s > 0 && cam.timeout_s <= 600))
+    r.Fail(t_cam ? t_cam->get("timeout_s") : nullptr, "[camera] timeout_s must be in (0, 600]");
+  cam.lens = r.String(t_cam, "camera", "lens", "");
+  if (const toml::table* t_lens = r.Table("lens", false)) {
+    for (const auto& [key, node] : *t_lens) {
+      Target target;
+      try {
+        target = ParseTarget(std::string(key.str()));
+      } catch (const Error& e) {
+        r.Fail(&node, std::string("[lens] ") + e.what());
+      }
+      if (!node.is_string()) r.Fail(&node, "[lens] values must be lens file names");
+      cam.target_lens[target] = *node.value<std::string>();
+    }
+  }
 
   const toml::table* t_gps = r.Table("gps", false);
-  rig.gps_source = r.String(t_gps, "gps", "source", rig.kind);
+  GpsConfig& gps = rig.gps;
+  gps.source = r.String(t_gps, "gps", "source",
+                        rig.simulated()        ? "sim"
+                        : rig.kind == "replay" ? "replay"
+                                               : "none");
+  static const char* kSources[] = {"sim", "replay", "nmea", "gpsd", "none"};
+  if (std::find(std::begin(kSources), std::end(kSources), gps.source) == std::end(kSources))
+    r.Fail(t_gps->get("source"),
+           "unknown GPS source '" + gps.source + "' (known: sim, replay, nmea, gpsd, none)");
+  if ((gps.source == "sim") != rig.simulated() && gps.source != "none")
+    r.Fail(t_gps->get("source"), "GPS source 'sim' goes with simulated rigs only");
+  if ((gps.source == "replay") != (rig.kind == "replay") && gps.source != "none")
+    r.Fail(t_gps->get("source"), "GPS source 'replay' goes with replay rigs only");
+  gps.device = r.String(t_gps, "gps", "device", "");
+  if (gps.source == "nmea" && gps.device.empty())
+    r.Fail(t_gps, "[gps] source 'nmea' needs 'device' (a serial port or a log file)");
+  gps.baud = r.Int(t_gps, "gps", "baud", gps.baud, 0, 921600);
+  gps.host = r.String(t_gps, "gps", "host", gps.host);
+  gps.port = r.String(t_gps, "gps", "port", gps.port);
+  gps.timeout_s = r.Number(t_gps, "gps", "timeout_s", gps.timeout_s);
+  if (!(gps.timeout_s > 0 && gps.timeout_s <= 60))
+    r.Fail(t_gps, "[gps] timeout_s must be in (0, 60]");
 
   const toml::table* t_nd = r.Table("nd", false);
-  rig.plan.sun_nd_density = r.Number(t_nd, "nd", "sun_density", rig.plan.sun_nd_density);
+  if (const toml::node* n = t_nd ? t_nd->get("sun_density") : nullptr) {
+    if (n->is_array()) {
+      std::vector<double> d = r.Numbers(t_nd, "nd", "sun_density", {});
+      if (d.size() != 3) r.Fail(n, "[nd] sun_density: one number, or three (R, G, B)");
+      std::copy(d.begin(), d.end(), rig.sun_nd_density_rgb.begin());
+    } else {
+      rig.sun_nd_density_rgb.fill(r.Number(t_nd, "nd", "sun_density", 0));
+    }
+    for (double d : rig.sun_nd_density_rgb)
+      if (!(d >= 0 && d < 10)) r.Fail(n, "[nd] sun_density must be within 0..10 (optical density)");
+  }
+  rig.plan.sun_nd_density =
+      (rig.sun_nd_density_rgb[0] + rig.sun_nd_density_rgb[1] + rig.sun_nd_density_rgb[2]) / 3;
 
   const toml::table* t_b = r.Table("bracket", false);
   BracketOptions& b = rig.plan.bracket;
   b.step_stops = r.Number(t_b, "bracket", "step_stops", b.step_stops);
   b.min_exposure_s = r.Number(t_b, "bracket", "min_exposure_s", b.min_exposure_s);
   b.max_exposure_s = r.Number(t_b, "bracket", "max_exposure_s", b.max_exposure_s);
-  b.max_frames = static_cast<int>(r.Number(t_b, "bracket", "max_frames", b.max_frames));
+  b.max_frames = r.Int(t_b, "bracket", "max_frames", b.max_frames, 1, 32);
   b.saturation_dn = r.Number(t_b, "bracket", "saturation_dn", b.saturation_dn);
   b.noise_floor_dn = r.Number(t_b, "bracket", "noise_floor_dn", b.noise_floor_dn);
 
@@ -157,10 +281,24 @@ RigConfig ParseRig(const std::string& text, const std::string& name) {
       }
     }
   }
+  if (const toml::node* n = t_plan ? t_plan->get("views") : nullptr) {
+    if (!n->is_table()) r.Fail(n, "[plan] views must be a table, e.g. { architecture = 4 }");
+    for (const auto& [key, node] : *n->as_table()) {
+      Target target;
+      try {
+        target = ParseTarget(std::string(key.str()));
+      } catch (const Error& e) {
+        r.Fail(&node, std::string("[plan] views: ") + e.what());
+      }
+      std::optional<int64_t> v = node.value<int64_t>();
+      if (!v || *v < 1 || *v > 64) r.Fail(&node, "[plan] views: counts must be within 1..64");
+      rig.views[target] = static_cast<int>(*v);
+    }
+  }
   if (t_plan) {
-    std::string date = r.String(t_plan, "plan", "date", "", rig.kind == "sim");
-    std::string zone = r.String(t_plan, "plan", "timezone", "Z");
     rig.slot_labels = r.Strings(t_plan, "plan", "times");
+    std::string date = r.String(t_plan, "plan", "date", "", !rig.slot_labels.empty());
+    std::string zone = r.String(t_plan, "plan", "timezone", "Z");
     for (const std::string& hhmm : rig.slot_labels) {
       try {
         rig.plan.slots.push_back(ParseIso8601(date + "T" + hhmm + ":00" + zone));
@@ -176,7 +314,24 @@ RigConfig ParseRig(const std::string& text, const std::string& name) {
       rig.heldout_slot = static_cast<int>(it - rig.slot_labels.begin());
     }
   }
-  if (rig.kind == "sim" && rig.plan.slots.empty()) r.Fail(t_plan, "[plan] needs 'times'");
+  if (rig.simulated() && rig.plan.slots.empty()) r.Fail(t_plan, "[plan] needs 'times'");
+  if (field && !rig.plan.slots.empty())
+    r.Fail(t_plan->get("times"),
+           "[plan] times are for simulated rigs; a field rig captures one slot per run (now)");
+
+  const toml::table* t_capture = r.Table("capture", false);
+  std::string lost = r.String(t_capture, "capture", "on_device_lost", "stop");
+  if (lost == "stop") {
+    rig.on_device_lost = DeviceLostPolicy::kStop;
+  } else if (lost == "reconnect") {
+    rig.on_device_lost = DeviceLostPolicy::kReconnect;
+  } else {
+    r.Fail(t_capture->get("on_device_lost"),
+           "[capture] on_device_lost must be \"stop\" or \"reconnect\"");
+  }
+  rig.reconnect_timeout_s = r.Number(t_capture, "capture", "reconnect_timeout_s", 60);
+  if (!(rig.reconnect_timeout_s > 0 && rig.reconnect_timeout_s <= 3600))
+    r.Fail(t_capture, "[capture] reconnect_timeout_s must be in (0, 3600]");
   try {
     rig.plan.bracket.Validate();
   } catch (const Error& e) {
@@ -193,35 +348,6 @@ RigConfig LoadRig(const std::filesystem::path& path) {
     throw Error("rig " + path.string() + ": cannot read: " + e.what());
   }
   return ParseRig(text, path.string());
-}
-
-RigDevices OpenRig(const RigConfig& rig, const std::filesystem::path& from_session) {
-  RigDevices d;
-  d.plan = rig.plan;
-  if (rig.kind == "replay") {
-    if (from_session.empty()) throw Error(rig.path + ": a replay rig needs --from SESSION");
-    auto src = std::make_shared<ReplaySource>(from_session);
-    const nlohmann::json& extra = src->session().info().extra;
-    if (extra.contains("plan")) d.plan = PlanFromJson(extra["plan"]);  // the recorded plan
-    d.plan.slots = src->slot_times();
-    d.camera = std::make_unique<ReplayCamera>(src);
-    d.gps = std::make_unique<ReplayGps>(src);
-    d.clock = std::make_unique<ReplayClock>(src);
-    d.keep_alive = src;
-    return d;
-  }
-  SimWorldOptions wo;
-  wo.site = rig.site;
-  wo.quick = rig.quick;
-  wo.seed = rig.seed;
-  auto world = std::make_shared<SimWorld>(wo);
-  auto clock = std::make_unique<SimClock>();
-  d.camera = std::make_unique<SimCamera>(world, clock.get(), rig.quick, rig.seed);
-  if (rig.gps_source == "sim") d.gps = std::make_unique<SimGps>(world, clock.get(), rig.seed + 7);
-  d.clock = std::move(clock);
-  d.model = world->Model();
-  d.keep_alive = world;
-  return d;
 }
 
 }  // namespace rouen

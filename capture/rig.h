@@ -1,8 +1,11 @@
 // Rig descriptions (rigs/*.toml): which devices, the fallback site, ND filters, the
 // bracketing plan and the time-of-day slots. Malformed rigs are errors naming file and line.
+// Opening the devices a rig names is capture/devices (it links every driver of the build).
 #pragma once
 
+#include <array>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -10,39 +13,66 @@
 
 #include "capture/controller.h"
 #include "capture/device.h"
-#include "core/mesh.h"
 
 namespace rouen {
 
+// The rig kinds this code knows (whether this build has the driver is decided when the rig is
+// opened): sim, replay, uvc-webcam (V4L2), rpi-libcamera, gige-aravis, aravis-fake (the
+// simulated world served through Aravis's in-process fake camera).
+const std::vector<std::string>& RigKinds();
+
+struct CameraConfig {
+  std::string id = "cam0";  // the name frames are journalled under
+  // Which device: v4l2 a /dev/videoN path; libcamera a camera id; aravis a device id
+  // ("" = the first one found).
+  std::string device;
+  int width = 0, height = 0;       // 0 = the largest the device offers
+  std::string pixel_format;        // driver format name ("YUYV", "Mono8", ...), "" = best
+  int buffers = 4;                 // streaming buffers / queued requests
+  int control_latency_frames = 0;  // frames to discard after an exposure/gain change
+  double timeout_s = 2.0;          // a frame that takes longer is a device error
+  // Lens intrinsics (JSON as in session frames), resolved against the rig file's folder; a
+  // target may use another lens (e.g. a fisheye for the sky). Empty: unknown.
+  std::string lens;
+  std::map<Target, std::string> target_lens;
+};
+
+struct GpsConfig {
+  std::string source = "none";  // sim | replay | nmea | gpsd | none
+  std::string device;           // nmea: serial port (/dev/ttyACM0) or a recorded log file
+  int baud = 9600;              // nmea: serial speed; 0 reads `device` as a plain file
+  std::string host = "127.0.0.1", port = "2947";  // gpsd
+  double timeout_s = 1.0;
+};
+
 struct RigConfig {
-  std::string path;         // the rig file, for messages
+  std::string path;  // the rig file, for messages
   std::string name;
-  std::string kind;         // "sim" | "replay"
-  std::string camera_id = "cam0";
-  int control_latency_frames = 0;  // frames to discard after a control change
-  std::string gps_source = "none";  // "sim" | "replay" | "none"
-  Site site;                // fallback site when there is no GPS fix
-  CapturePlan plan;         // slots from [plan] date/timezone/times
+  std::string kind;  // one of RigKinds()
+  CameraConfig camera;
+  GpsConfig gps;
+  Site site;         // fallback site when there is no GPS fix (stated in session.json)
+  CapturePlan plan;  // slots from [plan] date/timezone/times (simulated rigs)
   std::vector<std::string> slot_labels;  // "07:30", ...
-  int heldout_slot = -1;    // demo: the slot whose architecture views are held out
-  bool quick = false;       // sim: smaller images, fewer samples
-  uint64_t seed = 1;        // sim: noise seed
+  int heldout_slot = -1;                 // demo: the slot whose architecture views are held out
+  // ND filter for the sun, optical density per channel (R, G, B); plan.sun_nd_density is
+  // their mean (what the operator is asked to fit).
+  std::array<double, 3> sun_nd_density_rgb = {4.5, 4.5, 4.5};
+  // Field rigs: views the operator shoots per target (simulated rigs know their own mounts).
+  std::map<Target, int> views;
+  DeviceLostPolicy on_device_lost = DeviceLostPolicy::kStop;
+  double reconnect_timeout_s = 60;
+  bool quick = false;  // sim: smaller images, fewer samples
+  uint64_t seed = 1;   // sim: noise seed
+
+  bool simulated() const { return kind == "sim" || kind == "aravis-fake"; }
+  // A lens file path resolved against the rig's folder ("" when none).
+  std::string LensPath(Target target) const;
 };
 
 // Throws rouen::Error "<file>:<line>: <problem>" for malformed rigs.
 RigConfig LoadRig(const std::filesystem::path& path);
 // Parses a rig from text (the name is used in messages).
 RigConfig ParseRig(const std::string& text, const std::string& name);
-
-// The devices a rig names, opened. `from_session` is the recorded session for replay rigs.
-struct RigDevices {
-  std::shared_ptr<void> keep_alive;  // shared state the devices use (world, session)
-  std::unique_ptr<Camera> camera;
-  std::unique_ptr<Gps> gps;
-  std::unique_ptr<Clock> clock;
-  CapturePlan plan;  // possibly adjusted (replay: the recorded slots)
-  std::optional<Mesh> model;  // the building model, when the rig knows it (sim)
-};
-RigDevices OpenRig(const RigConfig& rig, const std::filesystem::path& from_session = {});
 
 }  // namespace rouen

@@ -1,9 +1,9 @@
 #include "capture/rig.h"
 
+#include <gtest/gtest.h>
+
 #include <filesystem>
 #include <fstream>
-
-#include <gtest/gtest.h>
 
 #include "core/error.h"
 
@@ -46,15 +46,16 @@ void ExpectErrorAt(const std::string& text, const std::string& where) {
     ParseRig(text, "bad.toml");
     FAIL() << "no error for:\n" << text;
   } catch (const Error& e) {
-    EXPECT_NE(std::string(e.what()).find(where), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(where), std::string::npos)
+        << "wanted: " << where << "\n got: " << e.what();
   }
 }
 
 TEST(RigTest, MalformedRigsNameFileAndLine) {
-  ExpectErrorAt("[rig]\nname = \"x\"\nkind = = \"sim\"\n", "bad.toml:3");         // syntax
-  ExpectErrorAt("[rig]\nname = \"x\"\nkind = \"webcam9\"\n", "bad.toml:3");       // unknown kind
+  ExpectErrorAt("[rig]\nname = \"x\"\nkind = = \"sim\"\n", "bad.toml:3");    // syntax
+  ExpectErrorAt("[rig]\nname = \"x\"\nkind = \"webcam9\"\n", "bad.toml:3");  // unknown kind
   ExpectErrorAt(std::string(kGood) + "\n[camera]\ncontrol_latency_frames = \"two\"\n",
-                "bad.toml:");                                                     // type
+                "bad.toml:");  // type
   std::string bad_time = kGood;
   bad_time.replace(bad_time.find("07:45"), 5, "25:99");
   ExpectErrorAt(bad_time, "bad slot time");
@@ -78,8 +79,92 @@ TEST(RigTest, ShippedRigsLoad) {
   EXPECT_GE(sim.heldout_slot, 0);
 }
 
-TEST(RigTest, MissingFileIsAnError) {
-  EXPECT_THROW(LoadRig("/nonexistent/rig.toml"), Error);
+TEST(RigTest, MissingFileIsAnError) { EXPECT_THROW(LoadRig("/nonexistent/rig.toml"), Error); }
+
+const char* kField = R"(
+[rig]
+name = "webcam"
+kind = "uvc-webcam"
+[site]
+lat_deg = 48.86
+lon_deg = 2.35
+[camera]
+id = "c920"
+device = "/dev/video2"
+width = 1920
+height = 1080
+pixel_format = "YUYV"
+control_latency_frames = 4
+lens = "lenses/c920.json"
+[lens]
+sky = "/abs/fisheye.json"
+[gps]
+source = "nmea"
+device = "/dev/ttyACM0"
+baud = 38400
+[nd]
+sun_density = [4.4, 4.5, 4.9]
+[plan]
+views = { architecture = 6, landscape = 2 }
+[capture]
+on_device_lost = "reconnect"
+reconnect_timeout_s = 30
+)";
+
+TEST(RigTest, FieldRigCarriesDriverGpsNdAndPolicy) {
+  RigConfig r = ParseRig(kField, "/rigs/webcam.toml");
+  EXPECT_FALSE(r.simulated());
+  EXPECT_EQ(r.camera.id, "c920");
+  EXPECT_EQ(r.camera.device, "/dev/video2");
+  EXPECT_EQ(r.camera.width, 1920);
+  EXPECT_EQ(r.camera.control_latency_frames, 4);
+  EXPECT_EQ(r.LensPath(Target::kArchitecture), "/rigs/lenses/c920.json");
+  EXPECT_EQ(r.LensPath(Target::kSky), "/abs/fisheye.json");
+  EXPECT_EQ(r.gps.source, "nmea");
+  EXPECT_EQ(r.gps.baud, 38400);
+  EXPECT_DOUBLE_EQ(r.sun_nd_density_rgb[2], 4.9);
+  EXPECT_NEAR(r.plan.sun_nd_density, (4.4 + 4.5 + 4.9) / 3, 1e-12);
+  EXPECT_EQ(r.views.at(Target::kArchitecture), 6);
+  EXPECT_EQ(r.views.at(Target::kLandscape), 2);
+  EXPECT_EQ(r.on_device_lost, DeviceLostPolicy::kReconnect);
+  EXPECT_DOUBLE_EQ(r.reconnect_timeout_s, 30);
+  EXPECT_TRUE(r.plan.slots.empty());  // a field rig shoots now
+}
+
+TEST(RigTest, MalformedFieldRigsNameTheLine) {
+  auto with = [](const std::string& from, const std::string& to) {
+    std::string t = kField;
+    size_t at = t.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    return t.replace(at, from.size(), to);
+  };
+  ExpectErrorAt(with("baud = 38400", "baud = -3"), "bad.toml:21");
+  ExpectErrorAt(with("source = \"nmea\"", "source = \"glonass\""), "unknown GPS source");
+  ExpectErrorAt(with("device = \"/dev/ttyACM0\"\n", ""), "needs 'device'");
+  ExpectErrorAt(with("[4.4, 4.5, 4.9]", "[4.4, 4.5]"), "three (R, G, B)");
+  ExpectErrorAt(with("[4.4, 4.5, 4.9]", "12"), "within 0..10");
+  ExpectErrorAt(with("architecture = 6", "architecture = 0"), "1..64");
+  ExpectErrorAt(with("architecture = 6", "roof = 2"), "unknown target");
+  ExpectErrorAt(with("\"reconnect\"", "\"pray\""), "on_device_lost");
+  ExpectErrorAt(with("width = 1920", "width = 19.5"), "integer");
+  ExpectErrorAt(with("[capture]", "[plan2]\ntimes = [\"10:00\"]\n[capture]"),
+                "bad.toml:26: unknown table [plan2]");
+  ExpectErrorAt(with("baud = 38400", "baud = 38400\nbaudrate = 9600"),
+                "bad.toml:22: unknown key 'baudrate' in [gps]");
+  ExpectErrorAt(with("views =", "date = \"2026-01-01\"\ntimes = [\"10:00\"]\nviews ="),
+                "field rig captures one slot per run");
+}
+
+TEST(RigTest, EveryShippedRigParses) {
+  int n = 0;
+  for (const auto& e :
+       std::filesystem::directory_iterator(std::filesystem::path(ROUEN_SOURCE_DIR) / "rigs")) {
+    if (e.path().extension() != ".toml") continue;
+    RigConfig r = LoadRig(e.path());
+    EXPECT_FALSE(r.name.empty()) << e.path();
+    ++n;
+  }
+  EXPECT_GE(n, 6);  // sim, replay, uvc-webcam, rpi-libcamera, gige-aravis, aravis-fake
 }
 
 }  // namespace

@@ -158,6 +158,7 @@ void to_json(json& j, const FrameRecord& f) {
                {"lon_deg", f.gps->lon_deg},    {"height_m", f.gps->height_m},
                {"mode", f.gps->mode},          {"satellites", f.gps->satellites},
                {"hdop", f.gps->hdop}};
+    if (f.gps->received_utc) gps["received_utc"] = f.gps->received_utc->Iso8601(9);
   }
   j = json{{"id", f.id},
            {"device", f.device},
@@ -210,6 +211,7 @@ void from_json(const json& j, FrameRecord& f) {
     g.mode = static_cast<int>(NeedInt(gps, "mode", gw));
     g.satellites = static_cast<int>(NeedInt(gps, "satellites", gw));
     g.hdop = NeedNumber(gps, "hdop", gw);
+    if (gps.contains("received_utc")) g.received_utc = NeedTime(gps, "received_utc", gw);
     r.gps = g;
   }
   const json& sun = Need(j, "sun", what);
@@ -375,10 +377,20 @@ SessionWriter SessionWriter::Create(const fs::path& dir, const SessionInfo& info
   std::error_code ec;
   if (fs::exists(dir, ec)) {
     if (!fs::is_directory(dir)) throw Error(dir.string() + ": exists and is not a directory");
-    if (!fs::is_empty(dir)) {
-      throw Error(dir.string() + ": refusing to create a session in a non-empty folder "
-                                 "(use resume to continue it)");
+    // A folder left by a crash before its session.json was written holds no data: only an
+    // empty frames/ folder and temporary files. Anything else is refused.
+    for (const auto& entry : fs::directory_iterator(dir)) {
+      const std::string name = entry.path().filename().string();
+      const bool leftover = name.find(".tmp-") != std::string::npos ||
+                            (name == "frames" && fs::is_directory(entry.path()) &&
+                             fs::is_empty(entry.path()));
+      if (!leftover)
+        throw Error(dir.string() + ": refusing to create a session in a non-empty folder "
+                                   "(use resume to continue it)");
     }
+    for (const auto& entry : fs::directory_iterator(dir))
+      if (entry.path().filename().string().find(".tmp-") != std::string::npos)
+        fs::remove(entry.path(), ec);
   }
   fs::create_directories(dir / "frames", ec);
   if (ec) throw Error(dir.string() + ": cannot create the session folder: " + ec.message());
@@ -401,6 +413,11 @@ SessionWriter SessionWriter::Resume(const fs::path& dir) {
   // A journal line cut short by a crash: keep it if it is complete but for the newline,
   // otherwise truncate it away.
   const std::string journal = JournalPath(dir);
+  if (!fs::exists(journal)) {
+    // Killed between session.json and the journal's creation: an empty journal.
+    const int fd = OpenJournal(dir);
+    ::close(fd);
+  }
   {
     const std::string text = ReadFileToString(journal);
     if (!text.empty() && text.back() != '\n') {

@@ -27,6 +27,10 @@ struct GpsFix {
   int mode = 0;  // 0 none, 2 = 2D, 3 = 3D
   int satellites = 0;
   double hdop = 99;
+  // The laptop's clock when the fix was read from the receiver (real drivers set it):
+  // utc - received_utc estimates the laptop clock's offset from GPS time (to within the
+  // receiver's reporting lag, typically < 0.5 s).
+  std::optional<UtcTime> received_utc;
   bool valid() const { return mode >= 2; }
 };
 

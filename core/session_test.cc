@@ -313,6 +313,24 @@ TEST_F(SessionTest, CreateRefusesNonEmptyFolder) {
   EXPECT_TRUE(Session::Load(empty).frames().empty());
 }
 
+TEST_F(SessionTest, CrashLeftoversBeforeSessionJsonDoNotBlockCreateOrResume) {
+  // Killed after the folder and frames/ were made, while session.json was being written.
+  fs::create_directories(dir_ / "frames");
+  WriteFileAtomic(dir_ / "session.json.tmp-1-0", "{\"trunc");
+  { SessionWriter w = SessionWriter::Create(dir_, Info()); }
+  EXPECT_FALSE(fs::exists(dir_ / "session.json.tmp-1-0"));
+  // Killed between session.json and the journal: resume starts an empty journal.
+  fs::remove(dir_ / "frames.jsonl");
+  SessionWriter w = SessionWriter::Resume(dir_);
+  EXPECT_TRUE(w.frames().empty());
+  EXPECT_TRUE(fs::exists(dir_ / "frames.jsonl"));
+  // Leftovers do not excuse real content.
+  const fs::path other = root_ / "other";
+  fs::create_directories(other / "frames");
+  WriteFileAtomic(other / "frames" / "000001.png", "x");
+  EXPECT_THROW(SessionWriter::Create(other, Info()), Error);
+}
+
 TEST_F(SessionTest, BadInputsAreRefused) {
   SessionWriter w = SessionWriter::Create(dir_, Info());
   FrameRecord f = Meta(Target::kSky, false, NAN);

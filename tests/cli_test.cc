@@ -52,7 +52,7 @@ std::vector<std::string> Split(const std::string& s, char sep) {
 TEST(CliTest, HelpExplainsEveryCommand) {
   Result r = RunRouen("--help");
   EXPECT_EQ(r.code, 0);
-  for (const char* c : {"demo", "capture", "calib", "hdr", "sun"})
+  for (const char* c : {"demo", "capture", "devices", "calib", "hdr", "sun"})
     EXPECT_NE(r.out.find(c), std::string::npos) << c;
   Result c = RunRouen("capture --help");
   EXPECT_EQ(c.code, 0);
@@ -147,6 +147,42 @@ TEST(CliTest, CalibResponseAndHdrOnMemorial) {
                (dir / "response.json").string() + " --out " + (dir / "m.exr").string());
   ASSERT_EQ(r.code, 0) << r.out;
   EXPECT_GT(fs::file_size(dir / "m.exr"), 100000u);
+  fs::remove_all(dir);
+}
+
+TEST(CliTest, DevicesListsAsTextAndJson) {
+  Result h = RunRouen("devices --help");
+  EXPECT_EQ(h.code, 0);
+  EXPECT_NE(h.out.find("rig kind"), std::string::npos) << h.out;
+  Result t = RunRouen("devices");
+  EXPECT_EQ(t.code, 0) << t.out;
+  EXPECT_NE(t.out.find("drivers in this build:"), std::string::npos) << t.out;
+  Result j = RunRouen("devices --json");
+  ASSERT_EQ(j.code, 0) << j.out;
+  nlohmann::json parsed = nlohmann::json::parse(j.out);
+  EXPECT_TRUE(parsed["drivers"].is_array());
+  Result bad = RunRouen("devices --latency /dev/rouen-no-such-camera");
+  EXPECT_NE(bad.code, 0);
+  EXPECT_NE(bad.out.find("/dev/rouen-no-such-camera"), std::string::npos) << bad.out;
+}
+
+TEST(CliTest, FieldCaptureWithoutItsCameraFailsClearlyAndWritesNothing) {
+  fs::path dir = TempDir("field_missing");
+  WriteText(dir / "rig.toml",
+            "[rig]\nname = \"w\"\nkind = \"uvc-webcam\"\n[site]\nlat_deg = 1\nlon_deg = 2\n"
+            "[camera]\ndevice = \"/dev/rouen-no-such-video\"\n");
+  Result r = RunRouen("capture --rig " + (dir / "rig.toml").string() + " --out " +
+                      (dir / "s").string() + " --no-prompt");
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.out.find("/dev/rouen-no-such-video"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(dir / "s"));
+  // A misspelt key is refused with its line.
+  WriteText(dir / "typo.toml", "[rig]\nname = \"w\"\nkind = \"sim\"\n[camera]\nlatency = 3\n");
+  Result t = RunRouen("capture --rig " + (dir / "typo.toml").string() + " --out " +
+                      (dir / "t").string());
+  EXPECT_NE(t.code, 0);
+  EXPECT_NE(t.out.find("typo.toml:5: unknown key 'latency' in [camera]"), std::string::npos)
+      << t.out;
   fs::remove_all(dir);
 }
 
