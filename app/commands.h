@@ -11,6 +11,7 @@ void RegisterCalib(CLI::App& app);  // rouen calib response
 void RegisterHdr(CLI::App& app);
 void RegisterDemo(CLI::App& app);
 void RegisterDevices(CLI::App& app);
+void RegisterImport(CLI::App& app);  // rouen import: a session from existing photos
 
 }  // namespace rouen
 

@@ -18,6 +18,7 @@ int main(int argc, char** argv) {
   rouen::RegisterCalib(app);
   rouen::RegisterHdr(app);
   rouen::RegisterSun(app);
+  rouen::RegisterImport(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -40,6 +40,33 @@ void CheckCurve(const ResponseCurve& curve) {
   }
 }
 
+struct WeightedLog {
+  float weight;   // w(z)
+  float log_sum;  // g_c(z) - ln X_j
+};
+
+// Adds one frame's row to the per-value sums num += w (g - ln X), den += w; returns true
+// when some value was outside 0..255 or not finite (it is skipped).
+template <int NC>
+bool AccumulateRow(const float* s, size_t row_len, const WeightedLog* table, float* num,
+                   float* den) {
+  bool bad = false;
+  for (size_t i = 0; i < row_len; i += NC) {
+    for (int c = 0; c < NC; ++c) {
+      const float z = s[i + c];
+      if (!(z >= 0.f && z <= 255.f)) {
+        bad = true;
+        continue;
+      }
+      const int k = static_cast<int>(z * kSteps + 0.5f);
+      const WeightedLog e = table[static_cast<size_t>(k) * NC + c];
+      num[i + c] += e.weight * e.log_sum;
+      den[i + c] += e.weight;
+    }
+  }
+  return bad;
+}
+
 }  // namespace
 
 void MergeOptions::Validate() const {
@@ -113,43 +140,58 @@ Image MergeHdr(const std::vector<const Image*>& frames, const std::vector<double
   std::vector<float> g255(nc);
   for (int c = 0; c < nc; ++c) g255[c] = gtab[static_cast<size_t>(kTable - 1) * nc + c];
 
+  // Per frame, level and channel: {w(z), g_c(z) - ln X_j}, the same floats the sums use.
+  const size_t table_stride = static_cast<size_t>(kTable) * nc;
+  std::vector<WeightedLog> table(table_stride * nf);
+  for (int j = 0; j < nf; ++j) {
+    for (size_t e = 0; e < table_stride; ++e) {
+      table[j * table_stride + e] = {weight[e / nc], gtab[e] - log_x[j]};
+    }
+  }
+
   Image out(w, h, nc, PixelUnits::kRadiance);
   if (valid_mask) valid_mask->assign(static_cast<size_t>(w) * h, 1);
   std::atomic<int64_t> saturated{0}, dark{0};
   std::atomic<int> bad_frame{-1};
   std::atomic<bool> overflow{false};
 
+  // Row by row: frames in the outer loop stream through each row (accumulating in the
+  // same frame order as a per-pixel loop, so the sums are the same floats), then one pass
+  // per pixel finishes it.
   tbb::parallel_for(tbb::blocked_range<int>(0, h), [&](const tbb::blocked_range<int>& rows) {
     int64_t local_sat = 0, local_dark = 0;
+    const size_t row_len = static_cast<size_t>(w) * nc;
+    std::vector<float> num(row_len), den(row_len);
     std::vector<const float*> src(nf);
     for (int y = rows.begin(); y != rows.end(); ++y) {
       for (int j = 0; j < nf; ++j)
         src[j] = frames[j]->data.data() + static_cast<size_t>(y) * w * nc;
       float* dst = out.data.data() + static_cast<size_t>(y) * w * nc;
+      std::fill(num.begin(), num.end(), 0.f);
+      std::fill(den.begin(), den.end(), 0.f);
+      for (int j = 0; j < nf; ++j) {
+        const bool bad = nc == 3 ? AccumulateRow<3>(src[j], row_len, &table[j * table_stride],
+                                                    num.data(), den.data())
+                                 : AccumulateRow<1>(src[j], row_len, &table[j * table_stride],
+                                                    num.data(), den.data());
+        if (bad) bad_frame.store(j);
+      }
       for (int x = 0; x < w; ++x) {
         bool pixel_sat = false, pixel_dark = false, pixel_invalid = false;
         for (int c = 0; c < nc; ++c) {
           const size_t off = static_cast<size_t>(x) * nc + c;
-          float num = 0, den = 0;
-          float zmax = -1, zmin = 256;
-          for (int j = 0; j < nf; ++j) {
-            const float z = src[j][off];
-            if (!(z >= 0.f && z <= 255.f)) {
-              bad_frame.store(j);
-              continue;
-            }
-            const int k = static_cast<int>(z * kSteps + 0.5f);
-            const float wz = weight[k];
-            num += wz * (gtab[static_cast<size_t>(k) * nc + c] - log_x[j]);
-            den += wz;
-            zmax = std::max(zmax, z);
-            zmin = std::min(zmin, z);
-          }
           float log_l;
-          if (den > 0) {
-            log_l = num / den;
+          if (den[off] > 0) {
+            log_l = num[off] / den[off];
           } else {
             pixel_invalid = true;
+            float zmax = -1, zmin = 256;
+            for (int j = 0; j < nf; ++j) {
+              const float z = src[j][off];
+              if (!(z >= 0.f && z <= 255.f)) continue;
+              zmax = std::max(zmax, z);
+              zmin = std::min(zmin, z);
+            }
             const float zs = src[shortest][off];
             const float zl = src[longest][off];
             if (zs >= sat_level || zmin >= sat_level) {

@@ -198,35 +198,8 @@ TEST(RecoverResponse, RejectsBadInput) {
 
 // ---- Real data: Debevec's Memorial Church bracket. ----
 
-std::filesystem::path MemorialDir() {
-  return std::filesystem::path(ROUEN_SHARED_DIR) / "data" / "hdr" / "memorial";
-}
-
-// Loads the 16 frames cropped as the data set's README says (top 30, bottom 20, left 3,
-// right 4 px) to remove the blue registration padding.
-Bracket LoadMemorial() {
-  Bracket b;
-  std::ifstream list(MemorialDir() / "exposures.txt");
-  std::string line;
-  while (std::getline(list, line)) {
-    if (line.empty() || line[0] == '#') continue;
-    std::istringstream in(line);
-    std::string file;
-    double seconds = 0;
-    in >> file >> seconds;
-    const Image full = ReadImage((MemorialDir() / file).string());
-    const int x0 = 3, y0 = 30, w = full.width - 3 - 4, h = full.height - 30 - 20;
-    Image crop(w, h, full.channels, full.units);
-    for (int y = 0; y < h; ++y) {
-      for (int x = 0; x < w; ++x) {
-        for (int c = 0; c < full.channels; ++c) crop.at(x, y, c) = full.at(x + x0, y + y0, c);
-      }
-    }
-    b.frames.push_back(std::move(crop));
-    b.exposures.push_back(seconds);
-  }
-  return b;
-}
+using testing::LoadMemorial;
+using testing::MemorialDir;
 
 TEST(RecoverResponse, MemorialIsMonotoneAndStableUnderResampling) {
   if (!std::filesystem::exists(std::filesystem::path(ROUEN_SHARED_DIR) / "data")) {

@@ -1,0 +1,307 @@
+// rouen calib against OpenCV 4.6 (the peer) on the two real brackets of ../shared/data/hdr:
+// response-curve time and stability, HDR merge throughput and agreement. main() prints a
+// side-by-side table measured in this run, then runs the Google Benchmark timings.
+#include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <opencv2/core.hpp>
+#include <opencv2/photo.hpp>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "calib/hdr.h"
+#include "calib/response.h"
+#include "core/image.h"
+
+namespace rouen {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct DataSet {
+  std::string name;
+  Bracket bracket;              // rouen frames (RGB, kDigital)
+  std::vector<cv::Mat> cv;      // the same pixels, 8-bit BGR
+  std::vector<float> cv_times;  // seconds
+  double input_mp = 0;          // megapixels over all frames
+};
+
+// Reads `exposures.txt` (filename seconds) in `dir`; crops each frame by the given margins.
+DataSet Load(const std::string& name, const fs::path& dir, int top, int bottom, int left,
+             int right) {
+  DataSet d;
+  d.name = name;
+  std::ifstream list(dir / "exposures.txt");
+  if (!list) throw std::runtime_error("cannot read " + (dir / "exposures.txt").string());
+  std::string line;
+  while (std::getline(list, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream in(line);
+    std::string file;
+    double seconds = 0;
+    in >> file >> seconds;
+    const Image full = ReadImage((dir / file).string());
+    const int w = full.width - left - right, h = full.height - top - bottom;
+    Image crop(w, h, 3, PixelUnits::kDigital);
+    cv::Mat mat(h, w, CV_8UC3);
+    for (int y = 0; y < h; ++y) {
+      for (int x = 0; x < w; ++x) {
+        for (int c = 0; c < 3; ++c) {
+          const float v = full.at(x + left, y + top, full.channels == 3 ? c : 0);
+          crop.at(x, y, c) = v;
+          mat.at<cv::Vec3b>(y, x)[2 - c] = static_cast<uint8_t>(std::lround(v));
+        }
+      }
+    }
+    d.input_mp += w * static_cast<double>(h) * 1e-6;
+    d.bracket.frames.push_back(std::move(crop));
+    d.bracket.exposures.push_back(seconds);
+    d.cv.push_back(mat);
+    d.cv_times.push_back(static_cast<float>(seconds));
+  }
+  return d;
+}
+
+// Median wall time of `runs` calls, seconds.
+double Time(int runs, const std::function<void()>& f) {
+  std::vector<double> t;
+  for (int i = 0; i < runs; ++i) {
+    const auto s = std::chrono::steady_clock::now();
+    f();
+    t.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - s).count());
+  }
+  std::sort(t.begin(), t.end());
+  return t[t.size() / 2];
+}
+
+// OpenCV response (256x1 CV_32FC3, BGR, linear) as ln curves in RGB, pinned at z = 128.
+ResponseCurve FromCv(const cv::Mat& r, int* non_finite) {
+  ResponseCurve c;
+  *non_finite = 0;
+  for (int ch = 0; ch < 3; ++ch) {
+    c.g[ch].resize(256);
+    for (int z = 0; z < 256; ++z) {
+      const double v = r.at<cv::Vec3f>(z, 0)[2 - ch];
+      c.g[ch][z] = std::log(v);
+      if (!std::isfinite(c.g[ch][z])) ++*non_finite;
+    }
+    const double pin = c.g[ch][128];
+    for (double& v : c.g[ch]) v -= pin;
+  }
+  return c;
+}
+
+cv::Mat ToCv(const ResponseCurve& c) {
+  cv::Mat r(256, 1, CV_32FC3);
+  for (int z = 0; z < 256; ++z) {
+    for (int ch = 0; ch < 3; ++ch) r.at<cv::Vec3f>(z, 0)[2 - ch] = std::exp(c.g[ch][z]);
+  }
+  return r;
+}
+
+// Largest |g1 - g2| over z = 20..235 and all channels (both pinned at g(128) = 0); NaN
+// entries count as infinite.
+double MaxDelta(const ResponseCurve& a, const ResponseCurve& b) {
+  double m = 0;
+  for (int c = 0; c < 3; ++c) {
+    for (int z = 20; z <= 235; ++z) {
+      const double d = std::abs(a.g[c][z] - b.g[c][z]);
+      m = std::max(m, std::isfinite(d) ? d : INFINITY);
+    }
+  }
+  return m;
+}
+
+bool Monotone(const ResponseCurve& a) {
+  for (int c = 0; c < 3; ++c) {
+    for (int z = 1; z < 256; ++z) {
+      if (!(a.g[c][z] >= a.g[c][z - 1])) return false;
+    }
+  }
+  return true;
+}
+
+// Pearson correlation of ln luminance (Rec. 709 weights) between a rouen RGB image and an
+// OpenCV BGR CV_32FC3 image, over pixels where both are positive and finite.
+double LogLumCorrelation(const Image& a, const cv::Mat& b, int64_t* used) {
+  double sx = 0, sy = 0, sxx = 0, syy = 0, sxy = 0;
+  int64_t n = 0;
+  for (int y = 0; y < a.height; ++y) {
+    for (int x = 0; x < a.width; ++x) {
+      const cv::Vec3f p = b.at<cv::Vec3f>(y, x);
+      const double la = 0.2126 * a.at(x, y, 0) + 0.7152 * a.at(x, y, 1) + 0.0722 * a.at(x, y, 2);
+      const double lb = 0.2126 * p[2] + 0.7152 * p[1] + 0.0722 * p[0];
+      if (!(la > 0 && lb > 0 && std::isfinite(la) && std::isfinite(lb))) continue;
+      const double u = std::log(la), v = std::log(lb);
+      sx += u, sy += v, sxx += u * u, syy += v * v, sxy += u * v;
+      ++n;
+    }
+  }
+  *used = n;
+  const double cov = sxy / n - sx / n * sy / n;
+  return cov / std::sqrt((sxx / n - sx / n * sx / n) * (syy / n - sy / n * sy / n));
+}
+
+std::vector<const Image*> Pointers(const Bracket& b) {
+  std::vector<const Image*> p;
+  for (const Image& f : b.frames) p.push_back(&f);
+  return p;
+}
+
+ResponseOptions Samples(int samples) {
+  ResponseOptions o;
+  o.samples_per_bracket = samples;
+  return o;
+}
+
+std::vector<DataSet>* g_sets = nullptr;
+
+void PrintTable(std::vector<DataSet>& sets) {
+  for (DataSet& d : sets) {
+    std::printf("\n== %s: %zu frames, %.2f input MP ==\n", d.name.c_str(), d.cv.size(), d.input_mp);
+    // OpenCV curves.
+    cv::Mat cv_dm70, cv_dm140, cv_rob;
+    auto cal70 = cv::createCalibrateDebevec(70);
+    auto cal140 = cv::createCalibrateDebevec(140);
+    auto calr = cv::createCalibrateRobertson();
+    const double t_cv_dm = Time(3, [&] { cal70->process(d.cv, cv_dm70, d.cv_times); });
+    cal140->process(d.cv, cv_dm140, d.cv_times);
+    const double t_cv_rob = Time(1, [&] { calr->process(d.cv, cv_rob, d.cv_times); });
+    int nf70 = 0, nf140 = 0, nfr = 0;
+    const ResponseCurve c70 = FromCv(cv_dm70, &nf70), c140 = FromCv(cv_dm140, &nf140);
+    const ResponseCurve crob = FromCv(cv_rob, &nfr);
+    std::printf("%-28s %10s %10s %12s %9s %10s\n", "response curve", "time ms", "x OpenCV",
+                "stability", "monotone", "resid rms");
+    std::printf("%-28s %10.1f %10s %12.3f %9s %10s   (non-finite entries: %d)\n",
+                "OpenCV CalibrateDebevec 70", t_cv_dm * 1e3, "1.00", MaxDelta(c70, c140),
+                Monotone(c70) && Monotone(c140) ? "yes" : "NO", "-", nf70 + nf140);
+    std::printf("%-28s %10.1f %10s %12s %9s %10s   (non-finite entries: %d)\n",
+                "OpenCV CalibrateRobertson", t_cv_rob * 1e3, "-", "n/a (all px)",
+                Monotone(crob) ? "yes" : "NO", "-", nfr);
+    ResponseSummary s1;
+    ResponseCurve dm, dm400;
+    const double t = Time(3, [&] { dm = RecoverResponse({d.bracket}, Samples(200), &s1); });
+    dm400 = RecoverResponse({d.bracket}, Samples(400), nullptr);
+    std::printf("%-28s %10.1f %10.2f %12.3f %9s %10.3f\n", "rouen Debevec-Malik", t * 1e3,
+                t_cv_dm / t, MaxDelta(dm, dm400), Monotone(dm) && Monotone(dm400) ? "yes" : "NO",
+                s1.residual_rms);
+    std::printf(
+        "  (x OpenCV = OpenCV CalibrateDebevec(70) time / rouen time; stability = max "
+        "|delta ln g| over z=20..235, samples 200->400 for rouen, 70->140 for OpenCV)\n");
+
+    // Merge with the same (rouen DM) curve.
+    const cv::Mat resp = ToCv(dm);
+    auto merge = cv::createMergeDebevec();
+    cv::Mat cv_hdr;
+    Image hdr;
+    const auto ptrs = Pointers(d.bracket);
+    const double t_cv = Time(5, [&] { merge->process(d.cv, cv_hdr, d.cv_times, resp); });
+    const double t_r =
+        Time(5, [&] { hdr = MergeHdr(ptrs, d.bracket.exposures, dm, MergeOptions{}); });
+    int64_t used = 0;
+    const double corr = LogLumCorrelation(hdr, cv_hdr, &used);
+    std::printf("%-28s %10s %12s %10s\n", "HDR merge (same curve)", "time ms", "input MP/s",
+                "x OpenCV");
+    std::printf("%-28s %10.1f %12.1f %10s\n", "OpenCV MergeDebevec", t_cv * 1e3, d.input_mp / t_cv,
+                "1.00");
+    std::printf("%-28s %10.1f %12.1f %10.2f\n", "rouen MergeHdr", t_r * 1e3, d.input_mp / t_r,
+                t_cv / t_r);
+    std::printf("  log-luminance correlation rouen vs OpenCV: %.4f over %lld pixels\n", corr,
+                static_cast<long long>(used));
+  }
+  std::fflush(stdout);
+}
+
+void BM_Response(benchmark::State& state, int set) {
+  const DataSet& d = (*g_sets)[set];
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(RecoverResponse({d.bracket}, Samples(200), nullptr));
+  }
+}
+
+void BM_CvCalibrateDebevec(benchmark::State& state, int set) {
+  const DataSet& d = (*g_sets)[set];
+  auto cal = cv::createCalibrateDebevec(70);
+  cv::Mat r;
+  for (auto _ : state) cal->process(d.cv, r, d.cv_times);
+}
+
+void BM_CvCalibrateRobertson(benchmark::State& state, int set) {
+  const DataSet& d = (*g_sets)[set];
+  auto cal = cv::createCalibrateRobertson();
+  cv::Mat r;
+  for (auto _ : state) cal->process(d.cv, r, d.cv_times);
+}
+
+void BM_MergeHdr(benchmark::State& state, int set) {
+  const DataSet& d = (*g_sets)[set];
+  const ResponseCurve curve = RecoverResponse({d.bracket}, ResponseOptions{}, nullptr);
+  const auto ptrs = Pointers(d.bracket);
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(MergeHdr(ptrs, d.bracket.exposures, curve, MergeOptions{}));
+  }
+  state.counters["input_MP/s"] =
+      benchmark::Counter(d.input_mp * state.iterations(), benchmark::Counter::kIsRate);
+}
+
+void BM_CvMergeDebevec(benchmark::State& state, int set) {
+  const DataSet& d = (*g_sets)[set];
+  const cv::Mat resp = ToCv(RecoverResponse({d.bracket}, ResponseOptions{}, nullptr));
+  auto merge = cv::createMergeDebevec();
+  cv::Mat out;
+  for (auto _ : state) merge->process(d.cv, out, d.cv_times, resp);
+  state.counters["input_MP/s"] =
+      benchmark::Counter(d.input_mp * state.iterations(), benchmark::Counter::kIsRate);
+}
+
+}  // namespace
+}  // namespace rouen
+
+int main(int argc, char** argv) {
+  using namespace rouen;
+  const fs::path hdr = fs::path(ROUEN_SHARED_DIR) / "data" / "hdr";
+  if (!fs::exists(hdr)) {
+    std::printf("calib_bench: skipped, no data at %s\n", hdr.string().c_str());
+    return 0;
+  }
+  std::vector<DataSet> sets;
+  // Memorial: crop the blue registration padding as its README says.
+  sets.push_back(Load("Memorial", hdr / "memorial", 30, 20, 3, 4));
+  // St Louis arch: exposure times from exposures.txt, generated from the EXIF ExposureTime
+  // (README table: 1/30, 1/4, 2.5, 15 s).
+  sets.push_back(Load("St Louis arch", hdr / "stlouis_arch", 0, 0, 0, 0));
+  g_sets = &sets;
+  std::printf("OpenCV %s, %d threads\n", CV_VERSION, cv::getNumThreads());
+  // ROUEN_CALIB_BENCH_NO_TABLE=1 runs only the Google Benchmark timings.
+  if (!std::getenv("ROUEN_CALIB_BENCH_NO_TABLE")) PrintTable(sets);
+
+  for (int s = 0; s < static_cast<int>(sets.size()); ++s) {
+    const std::string n = s == 0 ? "Memorial" : "StLouis";
+    benchmark::RegisterBenchmark(("Response/DebevecMalik/" + n).c_str(), BM_Response, s)
+        ->Unit(benchmark::kMillisecond);
+    benchmark::RegisterBenchmark(("CvCalibrateDebevec/" + n).c_str(), BM_CvCalibrateDebevec, s)
+        ->Unit(benchmark::kMillisecond);
+    benchmark::RegisterBenchmark(("CvCalibrateRobertson/" + n).c_str(), BM_CvCalibrateRobertson, s)
+        ->Unit(benchmark::kMillisecond)
+        ->Iterations(1);
+    // Both merges are multi-threaded: rates over wall time.
+    benchmark::RegisterBenchmark(("MergeHdr/" + n).c_str(), BM_MergeHdr, s)
+        ->Unit(benchmark::kMillisecond)
+        ->UseRealTime();
+    benchmark::RegisterBenchmark(("CvMergeDebevec/" + n).c_str(), BM_CvMergeDebevec, s)
+        ->Unit(benchmark::kMillisecond)
+        ->UseRealTime();
+  }
+  benchmark::Initialize(&argc, argv);
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}

@@ -1,0 +1,244 @@
+#include "core/exif.h"
+
+#include <OpenImageIO/imageio.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <memory>
+#include <vector>
+
+#include "core/error.h"
+
+namespace rouen {
+namespace {
+
+const OIIO::ParamValue* Find(const OIIO::ImageSpec& spec, const char* name) {
+  return spec.find_attribute(name);  // case-insensitive: "Exif:" and XMP's "exif:" alike
+}
+
+// A positive finite number from a numeric (int, float, rational) or numeric-string attribute.
+std::optional<double> PositiveNumber(const OIIO::ImageSpec& spec, const char* name) {
+  const OIIO::ParamValue* p = Find(spec, name);
+  if (!p) return std::nullopt;
+  double v = std::nan("");
+  const OIIO::TypeDesc t = p->type();
+  if (t == OIIO::TypeRational) {
+    const int* r = static_cast<const int*>(p->data());
+    if (r[1] != 0) v = static_cast<double>(r[0]) / r[1];
+  } else if (t.basetype == OIIO::TypeDesc::STRING) {
+    const std::string s = p->get_string();
+    try {
+      size_t used = 0;
+      v = std::stod(s, &used);
+      if (used < s.size() && s[used] == '/') {
+        const double den = std::stod(s.substr(used + 1));
+        v = den != 0 ? v / den : std::nan("");
+      }
+    } catch (const std::exception&) {
+      v = std::nan("");
+    }
+  } else if (t.basetype == OIIO::TypeDesc::FLOAT) {
+    // A float attribute: take its shortest decimal form (2.7, not 2.700000047683716).
+    const float f = p->get_float(std::nanf(""));
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%.7g", f);
+    v = std::strtod(buf, nullptr);
+  } else {
+    v = p->get_float(std::nanf(""));
+  }
+  if (!std::isfinite(v) || !(v > 0)) return std::nullopt;
+  return v;
+}
+
+// EXIF stores exposure times as rationals, usually 1/n; OIIO hands them over as floats.
+// Restores 1/n when the float is within float precision of it (1/30 s, not 0.033333335).
+double SnapExposure(double t) {
+  if (t >= 1) return t;
+  const double n = std::round(1.0 / t);
+  return std::abs(1.0 / t - n) <= 1e-6 * n ? 1.0 / n : t;
+}
+
+std::optional<std::string> NonEmptyString(const OIIO::ImageSpec& spec, const char* name) {
+  const OIIO::ParamValue* p = Find(spec, name);
+  if (!p || p->type().basetype != OIIO::TypeDesc::STRING) return std::nullopt;
+  std::string s = p->get_string();
+  while (!s.empty() && (std::isspace(static_cast<unsigned char>(s.back())) || s.back() == '\0'))
+    s.pop_back();
+  size_t b = 0;
+  while (b < s.size() && std::isspace(static_cast<unsigned char>(s[b]))) ++b;
+  s = s.substr(b);
+  if (s.empty()) return std::nullopt;
+  return s;
+}
+
+// "YYYY:MM:DD HH:MM:SS" (EXIF) or "YYYY-MM-DDTHH:MM:SS..." (XMP) -> ISO form with 'T'.
+std::string NormaliseDateTime(std::string s) {
+  if (s.size() >= 19 && s[4] == ':' && s[7] == ':') {
+    s[4] = '-';
+    s[7] = '-';
+  }
+  if (s.size() >= 11 && s[10] == ' ') s[10] = 'T';
+  return s;
+}
+
+// Whether text after "YYYY-MM-DDTHH:MM:SS[.fff]" carries an offset.
+bool TextHasOffset(const std::string& iso) {
+  if (iso.size() <= 19) return false;
+  size_t i = 19;
+  if (iso[i] == '.' || iso[i] == ',') {
+    ++i;
+    while (i < iso.size() && std::isdigit(static_cast<unsigned char>(iso[i]))) ++i;
+  }
+  return i < iso.size() && (iso[i] == 'Z' || iso[i] == 'z' || iso[i] == '+' || iso[i] == '-');
+}
+
+}  // namespace
+
+bool IsRawFileName(const std::string& path) {
+  static const char* kExt[] = {".dng", ".cr2", ".cr3", ".crw", ".nef", ".nrw", ".arw",
+                               ".srf", ".sr2", ".raf", ".orf", ".rw2", ".rwl", ".pef",
+                               ".ptx", ".srw", ".raw", ".3fr", ".erf", ".kdc", ".dcr",
+                               ".mrw", ".mos", ".mef", ".iiq", ".x3f"};
+  std::string ext;
+  const size_t dot = path.rfind('.');
+  if (dot == std::string::npos || path.find('/', dot) != std::string::npos) return false;
+  ext = path.substr(dot);
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return std::find(std::begin(kExt), std::end(kExt), ext) != std::end(kExt);
+}
+
+PhotoMetadata ReadPhotoMetadata(const std::string& path) {
+  auto in = OIIO::ImageInput::open(path);
+  if (!in) {
+    std::string msg = OIIO::geterror();
+    throw Error(path + ": cannot read image: " + (msg.empty() ? "unknown format" : msg));
+  }
+  const OIIO::ImageSpec spec = in->spec();
+  PhotoMetadata m;
+  m.width = spec.width;
+  m.height = spec.height;
+  m.channels = spec.nchannels;
+  m.bits = static_cast<int>(spec.format.size() * 8);
+  const auto base = static_cast<OIIO::TypeDesc::BASETYPE>(spec.format.basetype);
+  m.is_float = base == OIIO::TypeDesc::HALF || base == OIIO::TypeDesc::FLOAT ||
+               base == OIIO::TypeDesc::DOUBLE;
+  m.is_raw = std::string(in->format_name()) == "raw";
+  in->close();
+
+  m.exposure_s = PositiveNumber(spec, "ExposureTime");
+  if (!m.exposure_s) m.exposure_s = PositiveNumber(spec, "Exif:ExposureTime");
+  if (m.exposure_s) m.exposure_s = SnapExposure(*m.exposure_s);
+  m.f_number = PositiveNumber(spec, "FNumber");
+  if (!m.f_number) m.f_number = PositiveNumber(spec, "Exif:FNumber");
+  for (const char* name : {"Exif:PhotographicSensitivity", "Exif:ISOSpeedRatings", "Exif:ISOSpeed",
+                           "ISOSpeedRatings"}) {
+    if (!m.iso) m.iso = PositiveNumber(spec, name);
+  }
+  // EXIF DateTime (0x0132) and PNG's tIME are when the file was last changed, not taken;
+  // only libraw reports the capture time under "DateTime".
+  for (const char* name : {"Exif:DateTimeOriginal", "Exif:DateTimeDigitized", "DateTime"}) {
+    if (m.datetime) break;
+    if (std::string(name) == "DateTime" && !m.is_raw) break;
+    m.datetime = NonEmptyString(spec, name);
+    // "0000:00:00 00:00:00" means unknown in EXIF; libraw reports an unknown time as the
+    // Unix epoch.
+    if (m.datetime &&
+        (m.datetime->rfind("0000", 0) == 0 ||
+         (m.is_raw && m.datetime->rfind("1970", 0) == 0 && m.datetime->find("00:00:00") == 11)))
+      m.datetime.reset();
+    if (m.datetime) m.datetime_source = name;
+  }
+  m.subsec = NonEmptyString(spec, "Exif:SubsecTimeOriginal");
+  if (m.subsec && !std::all_of(m.subsec->begin(), m.subsec->end(),
+                               [](unsigned char c) { return std::isdigit(c); }))
+    m.subsec.reset();
+  m.offset = NonEmptyString(spec, "Exif:OffsetTimeOriginal");
+  if (!m.offset) m.offset = NonEmptyString(spec, "Exif:OffsetTime");
+  m.make = NonEmptyString(spec, "Make");
+  m.model = NonEmptyString(spec, "Model");
+  return m;
+}
+
+int ParseUtcOffsetMinutes(std::string_view text) {
+  const std::string t(text);
+  auto fail = [&] {
+    throw Error("UTC offset \"" + t + "\" is not of the form +HH:MM, -HH:MM or Z");
+  };
+  if (t == "Z" || t == "z") return 0;
+  if (t.size() < 3 || (t[0] != '+' && t[0] != '-')) fail();
+  const int sign = t[0] == '-' ? -1 : 1;
+  std::string digits;
+  for (size_t i = 1; i < t.size(); ++i) {
+    if (t[i] == ':' && i == 3) continue;
+    if (!std::isdigit(static_cast<unsigned char>(t[i]))) fail();
+    digits += t[i];
+  }
+  if (digits.size() != 2 && digits.size() != 4) fail();
+  const int hh = std::stoi(digits.substr(0, 2));
+  const int mm = digits.size() == 4 ? std::stoi(digits.substr(2, 2)) : 0;
+  if (hh > 14 || mm > 59) fail();
+  return sign * (hh * 60 + mm);
+}
+
+bool HasOwnOffset(const PhotoMetadata& m) {
+  if (!m.datetime) return false;
+  return TextHasOffset(NormaliseDateTime(*m.datetime)) || m.offset.has_value();
+}
+
+std::optional<UtcTime> CaptureUtc(const PhotoMetadata& m, std::optional<int> fallback_offset_min) {
+  if (!m.datetime) return std::nullopt;
+  std::string iso = NormaliseDateTime(*m.datetime);
+  if (TextHasOffset(iso)) return ParseIso8601(iso);
+  // Sub-seconds from SubSecTimeOriginal when the stored time has none.
+  if (m.subsec && iso.size() == 19) iso += "." + m.subsec->substr(0, 9);
+  int offset_min = 0;
+  if (m.offset) {
+    offset_min = ParseUtcOffsetMinutes(*m.offset);
+  } else if (fallback_offset_min) {
+    offset_min = *fallback_offset_min;
+  } else {
+    return std::nullopt;
+  }
+  // Read the civil time as if it were UTC, then remove the offset.
+  const UtcTime as_utc = ParseIso8601(iso + "Z");
+  return as_utc.PlusSeconds(-60.0 * offset_min);
+}
+
+Image ReadRawLinear(const std::string& path) {
+  OIIO::ImageSpec config;
+  config.attribute("raw:ColorSpace", "linear");  // sRGB primaries, linear transfer
+  config.attribute("raw:use_camera_wb", 1);
+  config.attribute("raw:auto_bright", 0);    // no automatic brightening
+  config.attribute("raw:HighlightMode", 0);  // clip
+  auto in = OIIO::ImageInput::open(path, &config);
+  if (!in) {
+    std::string msg = OIIO::geterror();
+    throw Error(path + ": cannot read RAW image: " + (msg.empty() ? "unknown format" : msg));
+  }
+  const OIIO::ImageSpec spec = in->spec();
+  const int w = spec.width, h = spec.height, nch = spec.nchannels;
+  if (w <= 0 || h <= 0 || nch <= 0) throw Error(path + ": RAW image has no pixels");
+  std::vector<float> raw(static_cast<size_t>(w) * h * nch);
+  // Integer data come through OIIO's 0..1 normalisation: the white level maps to 1.
+  if (!in->read_image(0, 0, 0, nch, OIIO::TypeDesc::FLOAT, raw.data())) {
+    std::string msg = in->geterror();
+    throw Error(path + ": cannot read RAW pixels: " + (msg.empty() ? "read failed" : msg));
+  }
+  in->close();
+  const int out_ch = nch >= 3 ? 3 : nch;
+  Image img(w, h, out_ch, PixelUnits::kRadiance);
+  for (size_t p = 0; p < static_cast<size_t>(w) * h; ++p) {
+    for (int c = 0; c < out_ch; ++c) {
+      const float v = raw[p * nch + c];
+      if (!std::isfinite(v)) throw Error(path + ": RAW pixel value is not finite");
+      img.data[p * out_ch + c] = std::max(v, 0.f);
+    }
+  }
+  return img;
+}
+
+}  // namespace rouen
