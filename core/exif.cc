@@ -194,7 +194,10 @@ std::optional<UtcTime> CaptureUtc(const PhotoMetadata& m, std::optional<int> fal
   std::string iso = NormaliseDateTime(*m.datetime);
   if (TextHasOffset(iso)) return ParseIso8601(iso);
   // Sub-seconds from SubSecTimeOriginal when the stored time has none.
-  if (m.subsec && iso.size() == 19) iso += "." + m.subsec->substr(0, 9);
+  if (m.subsec && iso.size() == 19) {
+    iso.push_back('.');
+    iso.append(m.subsec->substr(0, 9));
+  }
   int offset_min = 0;
   if (m.offset) {
     offset_min = ParseUtcOffsetMinutes(*m.offset);

@@ -142,7 +142,9 @@ TEST_P(CrashTest, SigkillAtRandomMomentsThenResume) {
   std::mt19937 rng(1234 + GetParam());
   for (int run = 0; run < kRunsPerShard; ++run) {
     SCOPED_TRACE("shard " + std::to_string(GetParam()) + " run " + std::to_string(run));
-    const fs::path out = *dir_ / ("s" + std::to_string(GetParam()) + "_" + std::to_string(run));
+    std::string name = "s";
+    name.append(std::to_string(GetParam())).append("_").append(std::to_string(run));
+    const fs::path out = *dir_ / name;
     const fs::path log = out.string() + ".log";
     // Kill once the journal holds `after` frames, plus a random delay that lands anywhere in
     // the next frame's rendering, encoding, fsync, rename or journalling. after == 0 with a

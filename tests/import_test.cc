@@ -56,7 +56,12 @@ fs::path TempDir(const std::string& name) {
 
 void WriteText(const fs::path& p, const std::string& s) { std::ofstream(p) << s; }
 
-std::string Q(const fs::path& p) { return "'" + p.string() + "'"; }
+std::string Q(const fs::path& p) {
+  std::string q(1, '\'');
+  q.append(p.string());
+  q.push_back('\'');
+  return q;
+}
 
 // Names in `dir` that start with `prefix` (the session folder or its temporary twin).
 std::vector<std::string> Leftovers(const fs::path& dir, const std::string& prefix) {

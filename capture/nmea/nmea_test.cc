@@ -359,7 +359,7 @@ TEST(NmeaDecoder, FuzzedInputNeverYieldsBadFix) {
           s.insert(pos, 1, alphabet[rng() % alphabet.size()]);
           break;
       }
-      if (s.empty()) s = "$";
+      if (s.empty()) s.push_back('$');
     }
     // Corrupt lines with a recomputed checksum get through the checksum and test the fields.
     if (rng() % 2 && s.find('*') != std::string::npos && s[0] == '$') {
