@@ -14,38 +14,45 @@
 
 namespace rouen {
 
-std::vector<ListedExposure> ReadExposureList(const std::string& list) {
+void ForEachListLine(const std::string& list,
+                     const std::function<void(const std::vector<std::string>& words,
+                                              const std::string& where)>& line) {
   std::ifstream in(list);
-  if (!in) throw Error(list + ": cannot open the exposure list");
+  if (!in) throw Error(list + ": cannot open the list file");
+  std::string text;
+  int lineno = 0, listed = 0;
+  while (std::getline(in, text)) {
+    ++lineno;
+    const size_t hash = text.find('#');
+    if (hash != std::string::npos) text.resize(hash);
+    std::istringstream ss(text);
+    std::vector<std::string> words;
+    for (std::string w; ss >> w;) words.push_back(w);
+    if (words.empty()) continue;
+    line(words, list + ":" + std::to_string(lineno));
+    ++listed;
+  }
+  if (listed == 0) throw Error(list + ": no images listed");
+}
+
+std::vector<ListedExposure> ReadExposureList(const std::string& list) {
   const std::filesystem::path base = std::filesystem::path(list).parent_path();
   std::vector<ListedExposure> out;
-  std::string line;
-  int lineno = 0;
-  while (std::getline(in, line)) {
-    ++lineno;
-    auto hash = line.find('#');
-    if (hash != std::string::npos) line.resize(hash);
-    std::istringstream ss(line);
-    std::string file, seconds, extra;
-    if (!(ss >> file)) continue;  // blank
-    if (!(ss >> seconds) || (ss >> extra))
-      throw Error(list + ":" + std::to_string(lineno) + ": expected 'image seconds'");
+  ForEachListLine(list, [&](const std::vector<std::string>& words, const std::string& where) {
+    if (words.size() != 2) throw Error(where + ": expected 'image seconds'");
     double s = 0;
     try {
       size_t used = 0;
-      s = std::stod(seconds, &used);
-      if (used != seconds.size()) throw std::invalid_argument("");
+      s = std::stod(words[1], &used);
+      if (used != words[1].size()) throw std::invalid_argument("");
     } catch (const std::exception&) {
-      throw Error(list + ":" + std::to_string(lineno) + ": exposure '" + seconds +
-                  "' is not a number of seconds");
+      throw Error(where + ": exposure '" + words[1] + "' is not a number of seconds");
     }
-    if (!(s > 0) || !std::isfinite(s))
-      throw Error(list + ":" + std::to_string(lineno) + ": exposure must be positive seconds");
-    std::filesystem::path p(file);
+    if (!(s > 0) || !std::isfinite(s)) throw Error(where + ": exposure must be positive seconds");
+    std::filesystem::path p(words[0]);
     if (p.is_relative()) p = base / p;
     out.push_back({p.string(), s});
-  }
-  if (out.empty()) throw Error(list + ": no images listed");
+  });
   return out;
 }
 
@@ -56,10 +63,9 @@ Bracket LoadBracket(const std::vector<ListedExposure>& listed) {
     if (im.units != PixelUnits::kDigital)
       throw Error(e.path + ": expected an 8- or 16-bit LDR photograph, got a float image");
     if (im.channels != 3) throw Error(e.path + ": expected an RGB image");
-    if (!b.frames.empty() &&
-        (im.width != b.frames[0].width || im.height != b.frames[0].height))
-      throw Error(e.path + ": size " + std::to_string(im.width) + "x" +
-                  std::to_string(im.height) + " differs from " + listed[0].path);
+    if (!b.frames.empty() && (im.width != b.frames[0].width || im.height != b.frames[0].height))
+      throw Error(e.path + ": size " + std::to_string(im.width) + "x" + std::to_string(im.height) +
+                  " differs from " + listed[0].path);
     b.frames.push_back(std::move(im));
     b.exposures.push_back(e.seconds);
   }
@@ -85,10 +91,11 @@ void RunResponse(const ResponseArgs& a) {
   ResponseSummary summary;
   ResponseCurve curve = RecoverResponse(brackets, opts, &summary);
   WriteResponseCurve(a.out, curve);
-  std::printf("%s: response curve from %zu images, %d samples, fit residual %.4f (ln units), "
-              "%.2f s\n",
-              a.out.c_str(), brackets[0].frames.size(), summary.samples_used, summary.residual_rms,
-              summary.seconds);
+  std::printf(
+      "%s: response curve from %zu images, %d samples, fit residual %.4f (ln units), "
+      "%.2f s\n",
+      a.out.c_str(), brackets[0].frames.size(), summary.samples_used, summary.residual_rms,
+      summary.seconds);
 }
 
 void RunHdr(const HdrArgs& a) {
@@ -112,8 +119,9 @@ void RegisterCalib(CLI::App& app) {
   auto r = std::make_shared<ResponseArgs>();
   CLI::App* c = calib->add_subcommand(
       "response", "Recover the camera response curve (Debevec-Malik) from one bracket");
-  c->footer("FILE lists one image per line: 'image seconds' (paths relative to FILE).\n"
-            "Example: rouen calib response --list memorial/exposures.txt --out response.json");
+  c->footer(
+      "FILE lists one image per line: 'image seconds' (paths relative to FILE).\n"
+      "Example: rouen calib response --list memorial/exposures.txt --out response.json");
   c->add_option("--list", r->list, "Exposure list file")->required();
   c->add_option("--out", r->out, "Response curve JSON to write")->required();
   c->add_option("--samples", r->samples, "Pixel samples (default: automatic)");

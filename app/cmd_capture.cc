@@ -68,6 +68,9 @@ CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
         "capture all their slots in one run");
   if (opts.new_slot && !fs::exists(out / "session.json"))
     throw Error(out.string() + ": --new-slot needs an existing session (run without it first)");
+  // The recorded session of a replay, read once for its site, notes and model.
+  std::optional<Session> src;
+  if (!opts.from_session.empty()) src.emplace(Session::Load(opts.from_session));
   std::optional<SessionWriter> writer;
   if ((opts.resume || opts.new_slot) && fs::exists(out / "session.json")) {
     writer.emplace(SessionWriter::Resume(out));
@@ -93,36 +96,27 @@ CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
     info.extra["plan"] = PlanToJson(dev.plan);
     info.extra["nd_filters"] = {{"sun", rig.sun_nd_density_rgb}};
     if (rig.heldout_slot >= 0) info.extra["heldout_slot"] = rig.heldout_slot;
-    if (!opts.from_session.empty()) {
-      Session src = Session::Load(opts.from_session);
-      info.site = src.info().site;
-      info.site_source = src.info().site_source;
-      info.clock_offset_s = src.info().clock_offset_s;
+    if (src) {
+      info.site = src->info().site;
+      info.site_source = src->info().site_source;
+      info.clock_offset_s = src->info().clock_offset_s;
       info.notes = "replayed from " + opts.from_session.string();
       for (const char* key : {"heldout_slot", "nd_filters"})
-        if (src.info().extra.contains(key)) info.extra[key] = src.info().extra[key];
+        if (src->info().extra.contains(key)) info.extra[key] = src->info().extra[key];
     }
     writer.emplace(SessionWriter::Create(out, info));
   }
   // The building model travels with the session (also after a crash before it was written).
-  if (writer->info().model.empty()) {
-    std::optional<std::string> obj;
+  if (writer->info().model.empty() && (dev.model || (src && !src->info().model.empty()))) {
     if (dev.model) {
       WriteObj((out / "model.obj").string(), *dev.model);
-      obj = "model.obj";
-    } else if (!opts.from_session.empty()) {
-      Session src = Session::Load(opts.from_session);
-      if (!src.info().model.empty()) {
-        fs::path m = ResolveInside(src.dir(), src.info().model);
-        WriteFileAtomic(out / "model.obj", ReadFileToString(m));
-        obj = "model.obj";
-      }
+    } else {
+      WriteFileAtomic(out / "model.obj",
+                      ReadFileToString(ResolveInside(src->dir(), src->info().model)));
     }
-    if (obj) {
-      SessionInfo info = writer->info();
-      info.model = *obj;
-      writer->UpdateInfo(info);
-    }
+    SessionInfo info = writer->info();
+    info.model = "model.obj";
+    writer->UpdateInfo(info);
   }
   DeviceLossOptions loss;
   loss.policy = rig.on_device_lost;

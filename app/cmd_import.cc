@@ -68,7 +68,7 @@ struct ListEntry {
   std::optional<UtcTime> utc;
   std::string group;
   std::optional<Target> target;
-  int line = 0;
+  std::string where;  // "<list>:<line>", for messages
 };
 
 enum class Kind { kLdr, kHdr, kRaw };
@@ -143,24 +143,12 @@ Site ParseSite(const std::string& text) {
 }
 
 std::vector<ListEntry> ReadImportList(const std::string& list) {
-  std::ifstream in(list);
-  if (!in) throw Error(list + ": cannot open the list file");
   std::vector<ListEntry> out;
-  std::string line;
-  int lineno = 0;
-  while (std::getline(in, line)) {
-    ++lineno;
-    const auto hash = line.find('#');
-    if (hash != std::string::npos) line.resize(hash);
-    std::istringstream ss(line);
-    std::vector<std::string> words;
-    for (std::string w; ss >> w;) words.push_back(w);
-    if (words.empty()) continue;
-    const std::string where = list + ":" + std::to_string(lineno);
+  ForEachListLine(list, [&](const std::vector<std::string>& words, const std::string& where) {
     if (words.size() < 2)
       throw Error(where + ": expected 'image seconds [ISO-time] [group=NAME] [target=T]'");
     ListEntry e;
-    e.line = lineno;
+    e.where = where;
     e.name = words[0];
     if (words[1] != "-") {
       const double s = ParseNumber(words[1], where, "exposure");
@@ -191,8 +179,7 @@ std::vector<ListEntry> ReadImportList(const std::string& list) {
       }
     }
     out.push_back(std::move(e));
-  }
-  if (out.empty()) throw Error(list + ": no images listed");
+  });
   return out;
 }
 
@@ -232,7 +219,7 @@ std::vector<Photo> PlanImport(const ImportArgs& a, const Target default_target,
   std::map<std::string, ListEntry> listed;  // by lexically normal relative path
   if (!a.list.empty()) {
     for (ListEntry& e : ReadImportList(a.list)) {
-      const std::string where = a.list + ":" + std::to_string(e.line);
+      const std::string& where = e.where;
       fs::path p;
       try {
         p = ResolveInside(dir, e.name);

@@ -16,6 +16,9 @@ void RegisterImport(CLI::App& app);  // rouen import: a session from existing ph
 }  // namespace rouen
 
 #include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
 
 #include "capture/controller.h"
 #include "capture/devices/devices.h"
@@ -31,14 +34,21 @@ struct CaptureSessionOptions {
 // Creates (or resumes) a session folder and runs the plan with the rig's devices. Installs a
 // SIGINT/SIGTERM handler for the duration so Ctrl-C stops cleanly after the frame in flight.
 CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
-                                const std::filesystem::path& out,
-                                const CaptureSessionOptions& opts, bool show_progress);
+                                const std::filesystem::path& out, const CaptureSessionOptions& opts,
+                                bool show_progress);
 
 }  // namespace rouen
 
 #include "calib/response.h"
 
 namespace rouen {
+
+// Reads a list file of whitespace-separated columns, '#' comments and blank lines skipped:
+// calls `line` with each line's words and "<file>:<line>" for messages. Throws rouen::Error
+// when the file cannot be opened or lists nothing.
+void ForEachListLine(const std::string& list,
+                     const std::function<void(const std::vector<std::string>& words,
+                                              const std::string& where)>& line);
 
 struct ListedExposure {
   std::string path;

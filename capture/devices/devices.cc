@@ -53,9 +53,7 @@ std::map<Target, Intrinsics> LoadLenses(const RigConfig& rig) {
       Intrinsics k = j.get<Intrinsics>();
       k.Validate();
       lenses[t] = k;
-    } catch (const nlohmann::json::exception& e) {
-      throw Error(rig.path + ": lens file " + path + ": " + e.what());
-    } catch (const Error& e) {
+    } catch (const std::exception& e) {  // unreadable, malformed JSON, bad intrinsics
       throw Error(rig.path + ": lens file " + path + ": " + e.what());
     }
   }
