@@ -75,7 +75,7 @@ Bracket LoadBracket(const std::vector<ListedExposure>& listed) {
 namespace {
 
 struct ResponseArgs {
-  std::string list, out;
+  std::string list, out, method = "debevec";
   int samples = 0;
   double lambda = 0;
 };
@@ -88,14 +88,23 @@ void RunResponse(const ResponseArgs& a) {
   ResponseOptions opts;
   if (a.samples > 0) opts.samples_per_bracket = a.samples;
   if (a.lambda > 0) opts.lambda = a.lambda;
+  if (a.method == "debevec") {
+    opts.method = ResponseMethod::kDebevecMalik;
+  } else if (a.method == "robertson") {
+    opts.method = ResponseMethod::kRobertson;
+  } else if (a.method == "mitsunaga") {
+    opts.method = ResponseMethod::kMitsunagaNayar;
+  } else {
+    throw Error("--method '" + a.method + "': expected debevec, robertson or mitsunaga");
+  }
   ResponseSummary summary;
   ResponseCurve curve = RecoverResponse(brackets, opts, &summary);
   WriteResponseCurve(a.out, curve);
   std::printf(
-      "%s: response curve from %zu images, %d samples, fit residual %.4f (ln units), "
-      "%.2f s\n",
-      a.out.c_str(), brackets[0].frames.size(), summary.samples_used, summary.residual_rms,
-      summary.seconds);
+      "%s: %s response curve from %zu images, %d samples, fit residual %.4f (ln units; "
+      "method's own residual %.4g), %.2f s\n",
+      a.out.c_str(), ResponseMethodName(summary.method), brackets[0].frames.size(),
+      summary.samples_used, summary.residual_rms, summary.method_residual, summary.seconds);
 }
 
 void RunHdr(const HdrArgs& a) {
@@ -111,14 +120,28 @@ void RunHdr(const HdrArgs& a) {
               static_cast<long long>(summary.saturated_pixels));
 }
 
+// `rouen hdr` and `rouen calib hdr` are the same command.
+void AddHdrCommand(CLI::App& parent, const std::string& example_prefix) {
+  auto a = std::make_shared<HdrArgs>();
+  CLI::App* c = parent.add_subcommand("hdr", "Merge a bracket into a scene-linear radiance EXR");
+  c->footer("Example: " + example_prefix +
+            " hdr --list exposures.txt --response response.json --out radiance.exr");
+  c->add_option("--list", a->list, "Exposure list file ('image seconds' per line)")->required();
+  c->add_option("--response", a->response, "Response curve JSON (rouen calib response)")
+      ->required();
+  c->add_option("--out", a->out, "Radiance EXR to write")->required();
+  c->callback([a] { RunHdr(*a); });
+}
+
 }  // namespace
 
 void RegisterCalib(CLI::App& app) {
-  CLI::App* calib = app.add_subcommand("calib", "Photometric calibration");
+  CLI::App* calib = app.add_subcommand(
+      "calib", "Calibration: response curve, HDR merge, ND filters, vignetting, lenses, poses");
   calib->require_subcommand(1);
   auto r = std::make_shared<ResponseArgs>();
   CLI::App* c = calib->add_subcommand(
-      "response", "Recover the camera response curve (Debevec-Malik) from one bracket");
+      "response", "Recover the camera response curve from one bracket");
   c->footer(
       "FILE lists one image per line: 'image seconds' (paths relative to FILE).\n"
       "Example: rouen calib response --list memorial/exposures.txt --out response.json");
@@ -126,18 +149,17 @@ void RegisterCalib(CLI::App& app) {
   c->add_option("--out", r->out, "Response curve JSON to write")->required();
   c->add_option("--samples", r->samples, "Pixel samples (default: automatic)");
   c->add_option("--lambda", r->lambda, "Smoothness weight (default: automatic)");
+  c->add_option("--method", r->method,
+                "debevec (Debevec-Malik 1997, sparse least squares), robertson (Robertson et "
+                "al. 2003, iterative) or mitsunaga (Mitsunaga-Nayar 1999, polynomial)")
+      ->capture_default_str();
   c->callback([r] { RunResponse(*r); });
+  AddHdrCommand(*calib, "rouen calib");
+  RegisterCalibGeometry(calib);  // rouen calib intrinsics|pose
+  RegisterCalibPhotometric(calib);  // rouen calib nd|vignetting
+  RegisterCalibEnvmap(calib);  // rouen calib envmap|orient
 }
 
-void RegisterHdr(CLI::App& app) {
-  auto a = std::make_shared<HdrArgs>();
-  CLI::App* c = app.add_subcommand("hdr", "Merge a bracket into a scene-linear radiance EXR");
-  c->footer("Example: rouen hdr --list exposures.txt --response response.json --out radiance.exr");
-  c->add_option("--list", a->list, "Exposure list file ('image seconds' per line)")->required();
-  c->add_option("--response", a->response, "Response curve JSON (rouen calib response)")
-      ->required();
-  c->add_option("--out", a->out, "Radiance EXR to write")->required();
-  c->callback([a] { RunHdr(*a); });
-}
+void RegisterHdr(CLI::App& app) { AddHdrCommand(app, "rouen"); }
 
 }  // namespace rouen

@@ -8,10 +8,15 @@ namespace rouen {
 void RegisterSun(CLI::App& app);
 void RegisterCapture(CLI::App& app);
 void RegisterCalib(CLI::App& app);  // rouen calib response
+void RegisterCalibGeometry(CLI::App* calib);  // rouen calib intrinsics|pose
+void RegisterCalibPhotometric(CLI::App* calib);  // rouen calib nd|vignetting
+void RegisterCalibEnvmap(CLI::App* calib);  // rouen calib envmap|orient
 void RegisterHdr(CLI::App& app);
 void RegisterDemo(CLI::App& app);
 void RegisterDevices(CLI::App& app);
 void RegisterImport(CLI::App& app);  // rouen import: a session from existing photos
+void RegisterRender(CLI::App& app);  // rouen render: a session at any time of day
+void RegisterSky(CLI::App& app);     // rouen sky fit / rouen sky render
 
 }  // namespace rouen
 

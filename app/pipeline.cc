@@ -1,10 +1,13 @@
 #include "app/pipeline.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <set>
 
 #include "calib/hdr.h"
+#include "calib/nd.h"
+#include "calib/vignetting.h"
 #include "core/error.h"
 #include "core/files.h"
 
@@ -30,6 +33,166 @@ std::string SafeName(std::string s) {
   return s;
 }
 
+// session.json "extra.vignetting": {"<device>/<target>" | "<device>" | "*": model} (the
+// models of calib/vignetting.h, e.g. from `rouen calib vignetting`).
+std::map<std::string, VignettingModel> ReadSessionVignetting(const Session& session) {
+  std::map<std::string, VignettingModel> out;
+  const nlohmann::json& extra = session.info().extra;
+  if (!extra.contains("vignetting")) return out;
+  const nlohmann::json& v = extra["vignetting"];
+  if (!v.is_object())
+    throw Error((session.dir() / "session.json").string() +
+                ": extra.vignetting must map a device (or device/target, or *) to a model");
+  for (const auto& [key, model] : v.items()) {
+    try {
+      out[key] = model.get<VignettingModel>();
+    } catch (const Error& e) {
+      throw Error((session.dir() / "session.json").string() + ": extra.vignetting." + key +
+                  ": " + e.what());
+    }
+  }
+  return out;
+}
+
+const VignettingModel* FindVignetting(const std::map<std::string, VignettingModel>& models,
+                                      const FrameRecord& f) {
+  for (const std::string& key :
+       {f.device + "/" + TargetName(f.target), f.device, std::string("*")}) {
+    auto it = models.find(key);
+    if (it != models.end()) return &it->second;
+  }
+  return nullptr;
+}
+
+// LDR bracket through the response curve (Debevec-Malik eq. 6 in calib/hdr), each channel
+// divided by its own ND transmission.
+Image MergeLdrFrames(const std::vector<Image>& images, const std::vector<double>& exposures,
+                     const std::vector<std::array<double, 3>>& transmission,
+                     const ResponseCurve& response, std::vector<uint8_t>* valid) {
+  std::vector<const Image*> ptrs;
+  for (const Image& im : images) ptrs.push_back(&im);
+  // Same filter colour in every frame (the usual case): merge with channel 0's factor and
+  // rescale the others by their ratio to it.
+  bool same_colour = true;
+  for (const auto& t : transmission)
+    for (int c = 1; c < 3; ++c)
+      if (std::abs(t[c] / t[0] - transmission[0][c] / transmission[0][0]) >
+          1e-9 * transmission[0][c] / transmission[0][0])
+        same_colour = false;
+  if (same_colour || images.front().channels != 3) {
+    std::vector<double> x(exposures.size());
+    for (size_t k = 0; k < x.size(); ++k) x[k] = exposures[k] * transmission[k][0];
+    Image r = MergeHdr(ptrs, x, response, MergeOptions{}, nullptr, valid);
+    if (r.channels == 3) {
+      for (size_t i = 0; i < r.data.size(); ++i) {
+        const int c = static_cast<int>(i % 3);
+        if (c > 0) r.data[i] /= static_cast<float>(transmission[0][c] / transmission[0][0]);
+      }
+    }
+    return r;
+  }
+  // Frames behind filters of different colours: merge each channel with its own exposures.
+  Image out(images.front().width, images.front().height, 3, PixelUnits::kRadiance);
+  if (valid) valid->assign(static_cast<size_t>(out.width) * out.height, 1);
+  for (int c = 0; c < 3; ++c) {
+    std::vector<Image> planes;
+    std::vector<double> x;
+    for (size_t k = 0; k < images.size(); ++k) {
+      Image p(images[k].width, images[k].height, 1, PixelUnits::kDigital);
+      for (size_t i = 0; i < p.data.size(); ++i) p.data[i] = images[k].data[i * 3 + c];
+      planes.push_back(std::move(p));
+      x.push_back(exposures[k] * transmission[k][c]);
+    }
+    std::vector<const Image*> pp;
+    for (const Image& p : planes) pp.push_back(&p);
+    ResponseCurve rc;
+    for (int k = 0; k < 3; ++k) rc.g[k] = response.g[c];
+    std::vector<uint8_t> vc;
+    const Image r = MergeHdr(pp, x, rc, MergeOptions{}, nullptr, &vc);
+    for (size_t i = 0; i < r.data.size(); ++i) {
+      out.data[i * 3 + c] = r.data[i];
+      if (valid && !vc[i]) (*valid)[i] = 0;
+    }
+  }
+  return out;
+}
+
+// HDR frames (kRadiance, already divided by seconds x gain as `rouen import` stores them,
+// not by the ND filter): per channel a weighted mean of value / transmission. A frame whose
+// channel maximum is shared by many pixels is clipped there (RAW white level); its weight
+// falls linearly to zero over the top 10% below that level. Weights grow with the exposure
+// (seconds x gain x transmission; 1 when unknown), the shot-noise-optimal choice for linear
+// data. A pixel saturated in every frame takes the least-exposed frame's value (a lower
+// bound) and is marked invalid, like non-finite values.
+Image MergeRadianceFrames(const std::vector<Image>& images,
+                          const std::vector<const FrameRecord*>& frames,
+                          const std::vector<double>& exposures,
+                          const std::vector<std::array<double, 3>>& transmission,
+                          std::vector<uint8_t>* valid) {
+  const Image& f0 = images.front();
+  const int nc = f0.channels;
+  if (nc != 3 && nc != 1)
+    throw Error("frame " + std::to_string(frames[0]->id) + ": HDR frames must have 1 or 3 "
+                "channels");
+  const size_t npix = static_cast<size_t>(f0.width) * f0.height;
+  for (size_t k = 0; k < images.size(); ++k) {
+    const Image& im = images[k];
+    if (im.units != PixelUnits::kRadiance)
+      throw Error("frame " + std::to_string(frames[k]->id) + " is marked HDR but holds "
+                  "digital numbers");
+    if (im.width != f0.width || im.height != f0.height || im.channels != nc)
+      throw Error("frame " + std::to_string(frames[k]->id) + ": size or channels differ from "
+                  "frame " + std::to_string(frames[0]->id) + " of the same bracket");
+  }
+  // Clip level per frame and channel (infinite when the frame shows no clipping).
+  const size_t min_clipped = std::max<size_t>(16, npix / 2000);
+  std::vector<std::array<double, 3>> clip(images.size());
+  std::vector<double> weight(images.size());
+  for (size_t k = 0; k < images.size(); ++k) {
+    for (int c = 0; c < nc; ++c) {
+      double mx = 0;
+      for (size_t i = 0; i < npix; ++i) {
+        const double v = images[k].data[i * nc + c];
+        if (std::isfinite(v)) mx = std::max(mx, v);
+      }
+      size_t at_max = 0;
+      for (size_t i = 0; i < npix; ++i)
+        if (images[k].data[i * nc + c] >= 0.999 * mx) ++at_max;
+      clip[k][c] = mx > 0 && at_max >= min_clipped ? mx : HUGE_VAL;
+    }
+    const double t = (transmission[k][0] + transmission[k][1] + transmission[k][2]) / 3;
+    weight[k] = (exposures[k] > 0 && std::isfinite(exposures[k]) ? exposures[k] : 1.0) * t;
+  }
+  Image out(f0.width, f0.height, nc, PixelUnits::kRadiance);
+  if (valid) valid->assign(npix, 1);
+  for (size_t i = 0; i < npix; ++i) {
+    for (int c = 0; c < nc; ++c) {
+      double sw = 0, swv = 0, fallback = 0, fallback_w = HUGE_VAL;
+      for (size_t k = 0; k < images.size(); ++k) {
+        const double v = images[k].data[i * nc + c];
+        if (!std::isfinite(v)) continue;
+        const double l = v / transmission[k][nc == 3 ? c : 0];
+        if (weight[k] < fallback_w) {
+          fallback_w = weight[k];
+          fallback = l;
+        }
+        const double top = clip[k][c];
+        const double w =
+            weight[k] * (std::isfinite(top) ? std::clamp((top - v) / (0.1 * top), 0.0, 1.0) : 1.0);
+        sw += w;
+        swv += w * l;
+      }
+      if (sw > 0) {
+        out.data[i * nc + c] = static_cast<float>(swv / sw);
+      } else {
+        out.data[i * nc + c] = static_cast<float>(std::max(0.0, fallback));
+        if (valid) (*valid)[i] = 0;
+      }
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 Site SessionSite(const Session& session) {
@@ -49,23 +212,39 @@ Site SessionSite(const Session& session) {
 
 CalibResult CalibrateSession(const Session& session, const PipelineOptions& options) {
   CalibResult out;
+  const std::string where = session.dir().string();
   std::map<std::string, std::vector<const FrameRecord*>> groups;
-  for (const FrameRecord& f : session.frames()) {
-    if (f.hdr) throw Error(session.dir().string() + ": frame " + std::to_string(f.id) +
-                           " is HDR; mixed LDR/HDR sessions are not supported yet");
-    groups[MergeKey(f)].push_back(&f);
+  for (const FrameRecord& f : session.frames()) groups[MergeKey(f)].push_back(&f);
+  if (groups.empty()) throw Error(where + ": the session has no frames");
+  // A bracket is all LDR (merged through the response curve) or all HDR (radiance frames,
+  // e.g. imported RAW/EXR, averaged); mixing both in one bracket is refused.
+  std::map<std::string, bool> group_hdr;
+  for (const auto& [name, frames] : groups) {
+    const bool hdr = frames.front()->hdr;
+    for (const FrameRecord* f : frames)
+      if (f->hdr != hdr)
+        throw Error(where + ": bracket " + name + " mixes LDR and HDR frames (frames " +
+                    std::to_string(frames.front()->id) + " and " + std::to_string(f->id) + ")");
+    group_hdr[name] = hdr;
   }
-  if (groups.empty()) throw Error(session.dir().string() + ": the session has no frames");
+  const nlohmann::json& extra = session.info().extra;
+  const nlohmann::json no_filters = nlohmann::json::object();
+  const nlohmann::json& nd_filters =
+      extra.contains("nd_filters") ? extra["nd_filters"] : no_filters;
+  const std::map<std::string, VignettingModel> vignetting = ReadSessionVignetting(session);
 
-  // Response curve (Debevec-Malik) from the architecture and landscape brackets, unless one
-  // is given.
+  // Response curve (Debevec-Malik) from the LDR architecture and landscape brackets, unless
+  // one is given. A session of HDR frames only needs none.
+  bool any_ldr = false;
+  for (const auto& [name, hdr] : group_hdr) any_ldr = any_ldr || !hdr;
   if (options.response) {
     out.response = *options.response;
     Log(options, "response curve given");
-  } else {
+  } else if (any_ldr) {
     std::vector<Bracket> brackets;
     std::vector<std::string> names;
     for (const auto& [name, frames] : groups) {
+      if (group_hdr[name]) continue;
       Target t = frames.front()->target;
       if (t != Target::kArchitecture && t != Target::kLandscape) continue;
       std::set<double> exps;
@@ -83,26 +262,38 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
       brackets.push_back(std::move(br));
     }
     if (brackets.empty())
-      throw Error(session.dir().string() +
-                  ": no bracket with two or more exposures to recover the response curve from");
+      throw Error(where +
+                  ": no LDR bracket with two or more exposures to recover the response curve "
+                  "from");
     Log(options, "response curve from " + std::to_string(brackets.size()) + " brackets");
     out.response = RecoverResponse(brackets, ResponseOptions{}, &out.response_summary);
+  } else {
+    Log(options, "all frames are HDR: no response curve needed");
   }
   std::filesystem::create_directories(options.work_dir / "calib" / "hdr");
-  WriteResponseCurve((options.work_dir / "calib" / "response.json").string(), out.response);
+  if (out.response.valid())
+    WriteResponseCurve((options.work_dir / "calib" / "response.json").string(), out.response);
 
   // HDR radiance per bracket.
   for (const auto& [name, frames] : groups) {
     std::vector<Image> images;
-    std::vector<double> exposures;
+    std::vector<double> exposures;  // seconds x gain (the ND filter is applied per channel)
+    std::vector<std::array<double, 3>> transmission;
     std::vector<UtcTime> times;
-    for (const FrameRecord* f : frames) {
+    const VignettingModel* vmodel = nullptr;
+    for (size_t k = 0; k < frames.size(); ++k) {
+      const FrameRecord* f = frames[k];
       images.push_back(session.LoadFrame(*f));
-      exposures.push_back(EffectiveExposure(*f));
+      exposures.push_back(f->exposure_s * f->gain);
+      transmission.push_back(NdTransmissionRgb(f->nd_density, nd_filters));
       times.push_back(f->utc);
+      const VignettingModel* v = FindVignetting(vignetting, *f);
+      if (k > 0 && v != vmodel)
+        throw Error(where + ": bracket " + name +
+                    " mixes frames with different vignetting models (frame " +
+                    std::to_string(f->id) + ")");
+      vmodel = v;
     }
-    std::vector<const Image*> ptrs;
-    for (const Image& im : images) ptrs.push_back(&im);
     HdrGroup g;
     g.name = name;
     const FrameRecord& first = *frames.front();
@@ -110,14 +301,28 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
     g.target = first.target == Target::kAureole ? Target::kSky : first.target;
     g.nd_density = first.nd_density;
     if (!first.intrinsics || !first.pose)
-      throw Error(session.dir().string() + ": frame " + std::to_string(first.id) +
+      throw Error(where + ": frame " + std::to_string(first.id) +
                   " has no intrinsics/pose; calibrate the camera geometry first");
     g.intrinsics = *first.intrinsics;
     g.pose = *first.pose;
     std::sort(times.begin(), times.end());
     g.utc = times[times.size() / 2];
-    MergeSummary ms;
-    g.radiance = MergeHdr(ptrs, exposures, out.response, MergeOptions{}, &ms, &g.valid);
+    if (group_hdr[name]) {
+      g.radiance = MergeRadianceFrames(images, frames, exposures, transmission, &g.valid);
+    } else {
+      if (!out.response.valid())
+        throw Error(where + ": bracket " + name + " is LDR but no response curve is known");
+      g.radiance = MergeLdrFrames(images, exposures, transmission, out.response, &g.valid);
+    }
+    // Vignetting multiplies every frame of a bracket alike, so dividing the merge is dividing
+    // each frame before merging (for LDR frames: ln L = g(z) - ln X - ln V).
+    if (vmodel) {
+      try {
+        RemoveVignetting(*vmodel, &g.radiance);
+      } catch (const Error& e) {
+        throw Error(where + ": bracket " + name + ": " + e.what());
+      }
+    }
     WriteImage((options.work_dir / "calib" / "hdr" / (SafeName(name) + ".exr")).string(),
                g.radiance, StoredType::kFloat);
     out.groups.emplace(name, std::move(g));
@@ -168,7 +373,11 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
     std::vector<SkySample> samples = ExtractSkySamples(sky_g->radiance, &sky_g->valid,
                                                        sky_g->intrinsics, sky_g->pose, sun_dir, so);
     SkyModel sky;
-    ss.sky_summary = FitSky(samples, sun_dir, SkyFitOptions{}, &sky);
+    // Relative residuals (sigma = y) fit the physically based sky better than eq. 10's
+    // sigma = y / log y (bench/sky_bench.cc); SkyWeighting::kPaper gives the paper's weights.
+    SkyFitOptions sky_fit_options;
+    sky_fit_options.weighting = SkyWeighting::kRelative;
+    ss.sky_summary = FitSky(samples, sun_dir, sky_fit_options, &sky);
     // §3.3: the environment from the landscape panoramas, one layer per height (e.g. from the
     // ground and from a mast at the top of the building).
     EnvOptions eo;
@@ -228,6 +437,16 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   r.albedo = SolveAlbedo(r.grid, r.hemisphere, *r.caster, lighting, obs, ao, &r.irradiance);
   Log(options, "pseudo-albedos: " + r.albedo.summary.BriefReport());
   return r;
+}
+
+SlotIrradiance IrradianceFor(const SolveResult& solved, const Lighting& lighting) {
+  const AlbedoOptions ao;
+  IrradianceOptions io = ao.irradiance;
+  io.mesh = &solved.mesh;
+  SlotIrradiance irr = ComputeIrradiance(solved.grid, solved.hemisphere, *solved.caster, lighting, io);
+  AddInterreflection(solved.grid, solved.hemisphere, solved.albedo.rho_sun, solved.albedo.rho_se,
+                     &irr, ao.bounces);
+  return irr;
 }
 
 }  // namespace rouen

@@ -156,9 +156,12 @@ std::vector<const Image*> Pointers(const Bracket& b) {
   return p;
 }
 
-ResponseOptions Samples(int samples) {
+ResponseOptions Samples(int samples, ResponseMethod method = ResponseMethod::kDebevecMalik) {
   ResponseOptions o;
+  o.method = method;
   o.samples_per_bracket = samples;
+  // Robertson samples at least robertson_min_samples_per_bracket; double that too.
+  o.robertson_min_samples_per_bracket = 10 * samples;
   return o;
 }
 
@@ -186,16 +189,35 @@ void PrintTable(std::vector<DataSet>& sets) {
     std::printf("%-28s %10.1f %10s %12s %9s %10s   (non-finite entries: %d)\n",
                 "OpenCV CalibrateRobertson", t_cv_rob * 1e3, "-", "n/a (all px)",
                 Monotone(crob) ? "yes" : "NO", "-", nfr);
-    ResponseSummary s1;
-    ResponseCurve dm, dm400;
-    const double t = Time(3, [&] { dm = RecoverResponse({d.bracket}, Samples(200), &s1); });
-    dm400 = RecoverResponse({d.bracket}, Samples(400), nullptr);
-    std::printf("%-28s %10.1f %10.2f %12.3f %9s %10.3f\n", "rouen Debevec-Malik", t * 1e3,
-                t_cv_dm / t, MaxDelta(dm, dm400), Monotone(dm) && Monotone(dm400) ? "yes" : "NO",
-                s1.residual_rms);
+    ResponseCurve dm;
+    for (ResponseMethod m : {ResponseMethod::kDebevecMalik, ResponseMethod::kRobertson,
+                             ResponseMethod::kMitsunagaNayar}) {
+      ResponseSummary s1;
+      ResponseCurve c1, c2;
+      try {
+        const double t = Time(3, [&] { c1 = RecoverResponse({d.bracket}, Samples(200, m), &s1); });
+        c2 = RecoverResponse({d.bracket}, Samples(400, m), nullptr);
+        const std::string name = std::string("rouen ") + ResponseMethodName(m);
+        std::printf("%-28s %10.1f %10.2f %12.3f %9s %10.3f", name.c_str(), t * 1e3, t_cv_dm / t,
+                    MaxDelta(c1, c2), Monotone(c1) && Monotone(c2) ? "yes" : "NO",
+                    s1.residual_rms);
+        if (m == ResponseMethod::kDebevecMalik) {
+          dm = c1;
+          std::printf("   (scan stride %d)\n", s1.scan_stride);
+        } else {
+          std::printf("   (vs Debevec-Malik: %.3f; %s %d)\n", MaxDelta(c1, dm),
+                      m == ResponseMethod::kRobertson ? "iterations" : "order",
+                      m == ResponseMethod::kRobertson ? s1.iterations : s1.polynomial_order);
+        }
+      } catch (const std::exception& e) {
+        std::printf("%-28s failed: %s\n", ResponseMethodName(m), e.what());
+      }
+    }
     std::printf(
         "  (x OpenCV = OpenCV CalibrateDebevec(70) time / rouen time; stability = max "
-        "|delta ln g| over z=20..235, samples 200->400 for rouen, 70->140 for OpenCV)\n");
+        "|delta ln g| over z=20..235, samples 200->400 for rouen (Robertson 2000->4000), "
+        "70->140 for OpenCV; resid = common fit residual, ln; vs Debevec-Malik = max |delta "
+        "ln g| over z=20..235)\n");
 
     // Merge with the same (rouen DM) curve.
     const cv::Mat resp = ToCv(dm);
@@ -204,26 +226,38 @@ void PrintTable(std::vector<DataSet>& sets) {
     Image hdr;
     const auto ptrs = Pointers(d.bracket);
     const double t_cv = Time(5, [&] { merge->process(d.cv, cv_hdr, d.cv_times, resp); });
-    const double t_r =
+    const double t_new =
         Time(5, [&] { hdr = MergeHdr(ptrs, d.bracket.exposures, dm, MergeOptions{}); });
+    Image reused;
+    const double t_r = Time(
+        5, [&] { MergeHdrInto(ptrs, d.bracket.exposures, dm, MergeOptions{}, &reused); });
+    MergeOptions ghost;
+    ghost.ghost_removal = true;
+    MergeSummary gs;
+    const double t_g = Time(
+        3, [&] { MergeHdrInto(ptrs, d.bracket.exposures, dm, ghost, &reused, &gs); });
     int64_t used = 0;
     const double corr = LogLumCorrelation(hdr, cv_hdr, &used);
     std::printf("%-28s %10s %12s %10s\n", "HDR merge (same curve)", "time ms", "input MP/s",
                 "x OpenCV");
     std::printf("%-28s %10.1f %12.1f %10s\n", "OpenCV MergeDebevec", t_cv * 1e3, d.input_mp / t_cv,
                 "1.00");
-    std::printf("%-28s %10.1f %12.1f %10.2f\n", "rouen MergeHdr", t_r * 1e3, d.input_mp / t_r,
-                t_cv / t_r);
+    std::printf("%-28s %10.1f %12.1f %10.2f\n", "rouen MergeHdr (new image)", t_new * 1e3,
+                d.input_mp / t_new, t_cv / t_new);
+    std::printf("%-28s %10.1f %12.1f %10.2f\n", "rouen MergeHdrInto (reused)", t_r * 1e3,
+                d.input_mp / t_r, t_cv / t_r);
+    std::printf("%-28s %10.1f %12.1f %10.2f   (%lld ghost pixels)\n", "rouen + ghost removal",
+                t_g * 1e3, d.input_mp / t_g, t_cv / t_g, static_cast<long long>(gs.ghost_pixels));
     std::printf("  log-luminance correlation rouen vs OpenCV: %.4f over %lld pixels\n", corr,
                 static_cast<long long>(used));
   }
   std::fflush(stdout);
 }
 
-void BM_Response(benchmark::State& state, int set) {
+void BM_Response(benchmark::State& state, int set, ResponseMethod m) {
   const DataSet& d = (*g_sets)[set];
   for (auto _ : state) {
-    benchmark::DoNotOptimize(RecoverResponse({d.bracket}, Samples(200), nullptr));
+    benchmark::DoNotOptimize(RecoverResponse({d.bracket}, Samples(200, m), nullptr));
   }
 }
 
@@ -245,8 +279,10 @@ void BM_MergeHdr(benchmark::State& state, int set) {
   const DataSet& d = (*g_sets)[set];
   const ResponseCurve curve = RecoverResponse({d.bracket}, ResponseOptions{}, nullptr);
   const auto ptrs = Pointers(d.bracket);
+  Image out;
   for (auto _ : state) {
-    benchmark::DoNotOptimize(MergeHdr(ptrs, d.bracket.exposures, curve, MergeOptions{}));
+    MergeHdrInto(ptrs, d.bracket.exposures, curve, MergeOptions{}, &out);
+    benchmark::DoNotOptimize(out.data.data());
   }
   state.counters["input_MP/s"] =
       benchmark::Counter(d.input_mp * state.iterations(), benchmark::Counter::kIsRate);
@@ -285,7 +321,14 @@ int main(int argc, char** argv) {
 
   for (int s = 0; s < static_cast<int>(sets.size()); ++s) {
     const std::string n = s == 0 ? "Memorial" : "StLouis";
-    benchmark::RegisterBenchmark(("Response/DebevecMalik/" + n).c_str(), BM_Response, s)
+    benchmark::RegisterBenchmark(("Response/DebevecMalik/" + n).c_str(), BM_Response, s,
+                                 ResponseMethod::kDebevecMalik)
+        ->Unit(benchmark::kMillisecond);
+    benchmark::RegisterBenchmark(("Response/Robertson/" + n).c_str(), BM_Response, s,
+                                 ResponseMethod::kRobertson)
+        ->Unit(benchmark::kMillisecond);
+    benchmark::RegisterBenchmark(("Response/MitsunagaNayar/" + n).c_str(), BM_Response, s,
+                                 ResponseMethod::kMitsunagaNayar)
         ->Unit(benchmark::kMillisecond);
     benchmark::RegisterBenchmark(("CvCalibrateDebevec/" + n).c_str(), BM_CvCalibrateDebevec, s)
         ->Unit(benchmark::kMillisecond);

@@ -16,6 +16,17 @@ struct MergeOptions {
   double dark_level = 5.0;
   double saturation_level = 250.0;
 
+  // Ghost removal for moving content. Per pixel, the reference is the frame nearest the
+  // median exposure in which every channel is well exposed. Another frame whose estimate
+  // ln L_j,c = g(z_j,c) - ln X_j differs from the reference's in some channel by more than
+  //   ghost_threshold + ghost_noise_dn * (g'(z_j,c) + g'(z_ref,c))   (ln units)
+  // -- beyond its reading noise through the curve's slope -- is taken to see different
+  // content and gets weight 0 at that pixel (all channels). Pixels where no frame is well
+  // exposed in every channel are merged as usual.
+  bool ghost_removal = false;
+  double ghost_threshold = 0.15;  // ln units, besides the noise term
+  double ghost_noise_dn = 3.0;    // reading noise allowance, DN
+
   void Validate() const;  // throws rouen::Error explaining the bad field
 };
 
@@ -23,6 +34,7 @@ struct MergeSummary {
   int64_t pixels = 0;
   int64_t saturated_pixels = 0;  // some channel saturated in every frame (value is a lower bound)
   int64_t dark_pixels = 0;       // some channel dark in every frame (value from the longest)
+  int64_t ghost_pixels = 0;      // ghost_removal: pixels where some frame was left out
   double seconds = 0;
 };
 
@@ -38,5 +50,13 @@ struct MergeSummary {
 Image MergeHdr(const std::vector<const Image*>& frames, const std::vector<double>& exposures,
                const ResponseCurve& curve, const MergeOptions& options,
                MergeSummary* summary = nullptr, std::vector<uint8_t>* valid_mask = nullptr);
+
+// The same, into `out`, whose pixel buffer is reused when it already has the right size (no
+// allocation or page faults when merging brackets of one size repeatedly). `ghost_mask`, when
+// given, gets width x height entries: 1 where ghost removal left some frame out.
+void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<double>& exposures,
+                  const ResponseCurve& curve, const MergeOptions& options, Image* out,
+                  MergeSummary* summary = nullptr, std::vector<uint8_t>* valid_mask = nullptr,
+                  std::vector<uint8_t>* ghost_mask = nullptr);
 
 }  // namespace rouen

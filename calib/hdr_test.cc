@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <random>
 #include <vector>
 
 #include "calib/test_util.h"
@@ -128,6 +129,103 @@ TEST(MergeHdr, RejectsBadInput) {
   EXPECT_THROW(MergeHdr({&a, &b}, {1.0, 2.0}, curve, bad, nullptr), Error);
   // Absurd exposures push the radiance out of float range: an error, not inf.
   EXPECT_THROW(MergeHdr({&a, &b}, {1e-60, 2e-60}, curve, MergeOptions{}, nullptr), Error);
+}
+
+// A bright square moves between frames: without ghost removal the merge mixes the square
+// and the background where it passed; with it, each pixel follows the reference (median
+// exposure) frame.
+TEST(MergeHdr, GhostRemovalFollowsTheReferenceFrame) {
+  const int w = 120, h = 90;
+  const Image background = RadianceField(w, h, -2.0, 1.0, 31);
+  const std::vector<double> exposures = {1.0 / 16, 1.0 / 4, 1.0, 4.0, 16.0};
+  const double noise_dn = 0.7;
+  // Frame j sees the square (radiance 3, ~2.5 stops above the background mean) at x0 = 10 +
+  // 20 j; the reference is frame 2 (median exposure), square at x = 50..69.
+  std::mt19937_64 rng(8);
+  Bracket b;
+  b.exposures = exposures;
+  auto square_x = [](int j) { return 10 + 20 * j; };
+  for (int j = 0; j < 5; ++j) {
+    Image scene = background;
+    for (int y = 30; y < 50; ++y) {
+      for (int x = square_x(j); x < square_x(j) + 20; ++x) {
+        for (int c = 0; c < 3; ++c) scene.at(x, y, c) = 3.0f;
+      }
+    }
+    b.frames.push_back(testing::Expose(scene, exposures[j], noise_dn, &rng));
+  }
+  Image truth = background;  // the reference frame's scene
+  for (int y = 30; y < 50; ++y) {
+    for (int x = 50; x < 70; ++x) {
+      for (int c = 0; c < 3; ++c) truth.at(x, y, c) = 3.0f;
+    }
+  }
+  const auto ptrs = Pointers(b);
+  MergeOptions plain;
+  MergeOptions ghost;
+  ghost.ghost_removal = true;
+  Image merged_plain, merged_ghost;
+  MergeSummary s_plain, s_ghost;
+  std::vector<uint8_t> ghost_mask;
+  MergeHdrInto(ptrs, exposures, TrueCurve(), plain, &merged_plain, &s_plain);
+  MergeHdrInto(ptrs, exposures, TrueCurve(), ghost, &merged_ghost, &s_ghost, nullptr,
+               &ghost_mask);
+  EXPECT_EQ(s_plain.ghost_pixels, 0);
+  // Worst error inside the square's paths (rows 30..49, x 10..109) and elsewhere.
+  double worst_plain = 0, worst_ghost = 0, worst_static = 0;
+  int64_t flagged_static = 0;
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      const bool path = y >= 30 && y < 50 && x >= 10 && x < 110;
+      flagged_static += !path && ghost_mask[static_cast<size_t>(y) * w + x];
+      for (int c = 0; c < 3; ++c) {
+        const double ep = std::abs(std::log(merged_plain.at(x, y, c) / truth.at(x, y, c)));
+        const double eg = std::abs(std::log(merged_ghost.at(x, y, c) / truth.at(x, y, c)));
+        ASSERT_TRUE(std::isfinite(eg));
+        if (path) {
+          worst_plain = std::max(worst_plain, ep);
+          worst_ghost = std::max(worst_ghost, eg);
+        } else {
+          worst_static = std::max(worst_static, eg);
+        }
+      }
+    }
+  }
+  // The square is ~1-4 stops from the background: mixing it in is off by well over 0.5 ln.
+  EXPECT_GT(worst_plain, 0.5);
+  // With ghost removal: the bound of ReproducesTrueRadianceWithinNoise (3 sigma + half a DN
+  // at 0.2 ln/DN) everywhere, on the path as off it.
+  const double bound = (3 * noise_dn + 0.5) * 0.2;
+  EXPECT_LT(worst_ghost, bound);
+  EXPECT_LT(worst_static, bound);
+  // Most of the path is flagged: the other 4 frames' squares cover 80 x 20 px, and the
+  // reference's square is missing from them there (where the background happens to be as
+  // bright as the square, there is nothing to flag). Few static pixels are flagged (noise
+  // beyond 3 DN).
+  EXPECT_GE(s_ghost.ghost_pixels, 80 * 20 / 2);
+  EXPECT_LT(flagged_static, (w * h - 100 * 20) / 100);
+}
+
+TEST(MergeHdr, IntoReusesTheOutputAndMatchesTheReturningForm) {
+  const Image radiance = RadianceField(64, 48, -3.0, 2.0, 4);
+  const std::vector<double> exposures = {1.0 / 8, 1.0, 8.0};
+  const Bracket b = MakeBracket(radiance, exposures, 0.5, 3);
+  const Image a = MergeHdr(Pointers(b), exposures, TrueCurve(), MergeOptions{});
+  Image out(64, 48, 3, PixelUnits::kRadiance);
+  const float* buffer = out.data.data();
+  MergeHdrInto(Pointers(b), exposures, TrueCurve(), MergeOptions{}, &out);
+  EXPECT_EQ(out.data.data(), buffer);  // reused, not reallocated
+  EXPECT_EQ(out.data, a.data);
+  Image wrong(3, 3, 1, PixelUnits::kDigital);  // resized to fit
+  MergeHdrInto(Pointers(b), exposures, TrueCurve(), MergeOptions{}, &wrong);
+  EXPECT_EQ(wrong.width, 64);
+  EXPECT_EQ(wrong.units, PixelUnits::kRadiance);
+  EXPECT_EQ(wrong.data, a.data);
+  MergeOptions bad;
+  bad.ghost_threshold = -1;
+  EXPECT_THROW(bad.Validate(), Error);
+  EXPECT_THROW(MergeHdrInto(Pointers(b), exposures, TrueCurve(), MergeOptions{}, nullptr),
+               Error);
 }
 
 }  // namespace

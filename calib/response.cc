@@ -1,12 +1,16 @@
 #include "calib/response.h"
 
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <Eigen/Dense>
 #include <Eigen/Sparse>
 #include <Eigen/SparseCholesky>
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
+#include <limits>
 #include <cmath>
 #include <numeric>
 #include <random>
@@ -21,6 +25,12 @@ constexpr int kLevels = 256;
 constexpr int kPinned = 128;  // g_c(128) = 0 for every channel
 constexpr int kBins = 32;     // brightness strata for sample selection
 constexpr int kMinSamples = 8;
+
+int SamplesWanted(const ResponseOptions& o) {
+  return o.method == ResponseMethod::kRobertson
+             ? std::max(o.samples_per_bracket, o.robertson_min_samples_per_bracket)
+             : o.samples_per_bracket;
+}
 
 struct Sample {
   int bracket;
@@ -75,57 +85,96 @@ int CheckBracket(const Bracket& b, size_t index) {
 
 // Stratified sampling over brightness (mean over frames and channels, monotone in radiance),
 // preferring pixels of low local gradient; rejects pixels that darken as exposure grows.
-std::vector<size_t> SelectSamples(const Bracket& b, size_t index, const ResponseOptions& o) {
+// Large brackets are scanned on a grid of stride `*stride` (see ResponseOptions::scan_pixels);
+// the per-pixel scan runs in parallel over grid rows.
+std::vector<size_t> SelectSamples(const Bracket& b, size_t index, const ResponseOptions& o,
+                                  int* stride) {
   const int w = b.frames[0].width, h = b.frames[0].height, nc = b.frames[0].channels;
   const size_t np = static_cast<size_t>(w) * h;
   std::vector<int> order(b.frames.size());
   std::iota(order.begin(), order.end(), 0);
   std::stable_sort(order.begin(), order.end(),
                    [&](int i, int j) { return b.exposures[i] < b.exposures[j]; });
+  int s = 1;
+  if (static_cast<int64_t>(np) > o.scan_pixels) {
+    s = static_cast<int>(std::ceil(std::sqrt(static_cast<double>(np) / o.scan_pixels)));
+  }
+  *stride = s;
+  const int gw = (w + s - 1) / s, gh = (h + s - 1) / s;
+  const size_t ng = static_cast<size_t>(gw) * gh;
 
-  std::vector<float> key(np, 0.f);
-  std::vector<uint8_t> usable(np, 1);
-  std::vector<uint8_t> informative(np, 0);
-  std::vector<float> running(np * nc, -1.f);
+  // Per grid point: brightness key, and whether it is usable (never darkens by more than the
+  // tolerance as exposure grows, informative in at least two frames).
+  std::vector<float> key(ng, 0.f);
+  std::vector<uint8_t> ok(ng, 0);
+  std::atomic<int64_t> bad_pixel{-1};
+  std::atomic<int> bad_frame{-1};
   const float tol = static_cast<float>(o.monotone_tolerance);
   const float inv = 1.f / static_cast<float>(b.frames.size() * nc);
-  for (int j : order) {
-    const float* d = b.frames[j].data.data();
-    for (size_t p = 0; p < np; ++p) {
-      float sum = 0;
-      for (int c = 0; c < nc; ++c) {
-        const float v = d[p * nc + c];
-        if (!(v >= 0.f && v <= 255.f)) {
-          throw Error("response: bracket " + std::to_string(index) + " frame " + std::to_string(j) +
-                      ": pixel (" + std::to_string(p % w) + ", " + std::to_string(p / w) +
-                      ") holds " + std::to_string(v) + ", outside 0..255");
+  tbb::parallel_for(tbb::blocked_range<int>(0, gh), [&](const tbb::blocked_range<int>& rows) {
+    for (int k = rows.begin(); k != rows.end(); ++k) {
+      const size_t row = static_cast<size_t>(k) * s * w;
+      for (int i = 0; i < gw; ++i) {
+        const size_t p = row + static_cast<size_t>(i) * s;
+        float running[3] = {-1.f, -1.f, -1.f};
+        float acc = 0.f;
+        bool usable = true;
+        int informative = 0;
+        for (int j : order) {
+          const float* d = b.frames[j].data.data() + p * nc;
+          float sum = 0;
+          for (int c = 0; c < nc; ++c) {
+            const float v = d[c];
+            if (!(v >= 0.f && v <= 255.f)) {
+              bad_pixel.store(static_cast<int64_t>(p));
+              bad_frame.store(j);
+              usable = false;
+              continue;
+            }
+            if (v < running[c] - tol) usable = false;
+            running[c] = std::max(running[c], v);
+            sum += v;
+          }
+          acc += sum * inv;
+          const float mean = sum / nc;
+          if (mean >= 2.f && mean <= 253.f) ++informative;
         }
-        float& r = running[p * nc + c];
-        if (v < r - tol) usable[p] = 0;
-        r = std::max(r, v);
-        sum += v;
+        const size_t g = static_cast<size_t>(k) * gw + i;
+        key[g] = acc;
+        ok[g] = usable && informative >= 2 && (b.mask.empty() || b.mask[p] != 0);
       }
-      key[p] += sum * inv;
-      const float mean = sum / nc;
-      if (mean >= 2.f && mean <= 253.f && informative[p] < 2) ++informative[p];
     }
+  });
+  if (bad_pixel.load() >= 0) {
+    const int64_t p = bad_pixel.load();
+    throw Error("response: bracket " + std::to_string(index) + " frame " +
+                std::to_string(bad_frame.load()) + ": pixel (" + std::to_string(p % w) + ", " +
+                std::to_string(p / w) + ") holds a value outside 0..255 or not finite");
   }
 
-  // Candidates per brightness stratum (interior pixels only, for the gradient).
+  // Gradient between grid neighbours and brightness stratum, for interior grid points.
+  std::vector<float> grad(ng, 0.f);
+  std::vector<int8_t> bin_of(ng, -1);
+  tbb::parallel_for(tbb::blocked_range<int>(1, std::max(1, gh - 1)),
+                    [&](const tbb::blocked_range<int>& rows) {
+                      for (int k = rows.begin(); k != rows.end(); ++k) {
+                        for (int i = 1; i + 1 < gw; ++i) {
+                          const size_t g = static_cast<size_t>(k) * gw + i;
+                          if (!ok[g]) continue;
+                          grad[g] = std::abs(key[g + 1] - key[g - 1]) +
+                                    std::abs(key[g + gw] - key[g - gw]);
+                          bin_of[g] = static_cast<int8_t>(
+                              std::min(kBins - 1, static_cast<int>(key[g] * kBins / 256.f)));
+                        }
+                      }
+                    });
   std::vector<std::vector<size_t>> bins(kBins);
-  std::vector<float> grad(np, 0.f);
-  for (int y = 1; y + 1 < h; ++y) {
-    for (int x = 1; x + 1 < w; ++x) {
-      const size_t p = static_cast<size_t>(y) * w + x;
-      if (!usable[p] || informative[p] < 2) continue;
-      if (!b.mask.empty() && b.mask[p] == 0) continue;
-      grad[p] = std::abs(key[p + 1] - key[p - 1]) + std::abs(key[p + w] - key[p - w]);
-      const int bin = std::min(kBins - 1, static_cast<int>(key[p] * kBins / 256.f));
-      bins[bin].push_back(p);
-    }
+  for (size_t g = 0; g < ng; ++g) {
+    if (bin_of[g] >= 0) bins[bin_of[g]].push_back(g);
   }
   std::mt19937_64 rng(o.seed + 0x9E3779B97F4A7C15ull * (index + 1));
-  const size_t quota = (o.samples_per_bracket + kBins - 1) / kBins;
+  const int wanted = SamplesWanted(o);
+  const size_t quota = (wanted + kBins - 1) / kBins;
   for (auto& bin : bins) {
     std::shuffle(bin.begin(), bin.end(), rng);
     // A random pool a few times the quota, flattest first; the rest stays random after it.
@@ -136,11 +185,12 @@ std::vector<size_t> SelectSamples(const Bracket& b, size_t index, const Response
   std::vector<size_t> chosen;
   std::vector<size_t> next(kBins, 0);
   bool any = true;
-  while (chosen.size() < static_cast<size_t>(o.samples_per_bracket) && any) {
+  while (chosen.size() < static_cast<size_t>(wanted) && any) {
     any = false;
-    for (int k = 0; k < kBins && chosen.size() < static_cast<size_t>(o.samples_per_bracket); ++k) {
+    for (int k = 0; k < kBins && chosen.size() < static_cast<size_t>(wanted); ++k) {
       if (next[k] < bins[k].size()) {
-        chosen.push_back(bins[k][next[k]++]);
+        const size_t g = bins[k][next[k]++];
+        chosen.push_back((g / gw) * s * static_cast<size_t>(w) + (g % gw) * s);
         any = true;
       }
     }
@@ -151,6 +201,7 @@ std::vector<size_t> SelectSamples(const Bracket& b, size_t index, const Response
 struct Observation {
   int sample;
   uint8_t z;
+  int16_t frame;  // frame id over all brackets
   float log_exposure;
 };
 
@@ -183,10 +234,68 @@ std::vector<double> IsotonicFit(const std::vector<double>& v, const std::vector<
 struct ChannelResult {
   std::vector<double> g;
   int violations = 0;
+  int iterations = 0;
+  bool converged = true;
+  int order = 0;
+  double method_residual = 0;
+  std::vector<double> ratios;
+  double fit_high = 0;
 };
 
-ChannelResult SolveChannel(const std::vector<Observation>& obs, int num_samples,
-                           const ResponseOptions& o) {
+// Hat weight of the well-exposed readings (0 < z < 255) per level.
+std::vector<double> LevelSupport(const std::vector<Observation>& obs) {
+  std::vector<double> support(kLevels, 0.0);
+  for (const Observation& ob : obs) {
+    if (ob.z > 0 && ob.z < 255) support[ob.z] += HatWeight(ob.z, 0);
+  }
+  return support;
+}
+
+// First and last level with support (lo > hi when there is none).
+std::pair<int, int> SupportedRange(const std::vector<double>& support) {
+  int lo = 1, hi = kLevels - 2;
+  while (lo < kLevels - 1 && support[lo] <= 0) ++lo;
+  while (hi > 0 && support[hi] <= 0) --hi;
+  return {lo, hi};
+}
+
+// Common to every method: extrapolates the ends no supported reading reached, makes the curve
+// strictly increasing, smooths lightly and pins g(128) = 0.
+void FinishCurve(std::vector<double> g, const std::vector<double>& support,
+                 const ResponseOptions& o, ChannelResult* result) {
+  // Ends: linear extrapolation with the slope of the nearest supported stretch.
+  const auto [lo, hi] = SupportedRange(support);
+  if (lo < hi) {
+    const int span = std::min(8, hi - lo);
+    const double slope_lo = std::max(o.min_slope, (g[lo + span] - g[lo]) / span);
+    const double slope_hi = std::max(o.min_slope, (g[hi] - g[hi - span]) / span);
+    for (int z = 0; z < lo; ++z) g[z] = g[lo] - slope_lo * (lo - z);
+    for (int z = hi + 1; z < kLevels; ++z) g[z] = g[hi] + slope_hi * (z - hi);
+  }
+  result->violations = 0;
+  for (int z = 0; z + 1 < kLevels; ++z) {
+    if (g[z + 1] < g[z] + o.min_slope) ++result->violations;
+  }
+  // Strictly increasing: isotonic fit of g(z) - min_slope * z, then a [1 2 1]/4 pass (a
+  // non-negative kernel keeps it monotone), then the ramp back.
+  std::vector<double> v(kLevels), wt(kLevels);
+  for (int z = 0; z < kLevels; ++z) {
+    v[z] = g[z] - o.min_slope * z;
+    wt[z] = support[z] + 1e-3;
+  }
+  std::vector<double> iso = IsotonicFit(v, wt);
+  std::vector<double> smooth = iso;
+  for (int z = 1; z + 1 < kLevels; ++z) smooth[z] = 0.25 * (iso[z - 1] + 2 * iso[z] + iso[z + 1]);
+  for (int z = 0; z < kLevels; ++z) g[z] = smooth[z] + o.min_slope * z;
+  const double pin = g[kPinned];
+  for (double& gz : g) gz -= pin;
+  result->g = std::move(g);
+}
+
+// Debevec & Malik 1997, eq. 3: hat-weighted least squares on g(z_ij) - ln E_i - ln t_j with
+// lambda * w(z) g''(z) rows.
+std::vector<double> SolveDebevecMalik(const std::vector<Observation>& obs, int num_samples,
+                                      const ResponseOptions& o, ChannelResult* info) {
   // Unknowns: g(z) for z != 128 (255 of them), then ln E per sample.
   auto gi = [](int z) { return z < kPinned ? z : z - 1; };
   const int ng = kLevels - 1;
@@ -227,50 +336,408 @@ ChannelResult SolveChannel(const std::vector<Observation>& obs, int num_samples,
   if (ldlt.info() != Eigen::Success || !x.allFinite()) {
     throw Error("response: least-squares solve failed");
   }
-
-  std::vector<double> g(kLevels, 0.0), support(kLevels, 0.0);
+  std::vector<double> g(kLevels, 0.0);
   for (int z = 0; z < kLevels; ++z) g[z] = z == kPinned ? 0.0 : x[gi(z)];
+  // Objective: the weighted data rows, normalised by their weights.
+  double sq = 0, wsum = 0;
   for (const Observation& ob : obs) {
-    if (ob.z > 0 && ob.z < 255) support[ob.z] += HatWeight(ob.z, 0);
+    const double wz = HatWeight(ob.z, o.weight_epsilon);
+    const double r = g[ob.z] - x[ng + ob.sample] - ob.log_exposure;
+    sq += wz * wz * r * r;
+    wsum += wz * wz;
   }
+  info->method_residual = wsum > 0 ? std::sqrt(sq / wsum) : 0.0;
+  return g;
+}
 
-  // Ends that no well-exposed observation reached: linear extrapolation with the slope of
-  // the nearest supported stretch.
-  int lo = 1, hi = kLevels - 2;
-  while (lo < kLevels - 1 && support[lo] <= 0) ++lo;
-  while (hi > 0 && support[hi] <= 0) --hi;
-  if (lo < hi) {
-    const int span = std::min(8, hi - lo);
-    const double slope_lo = std::max(o.min_slope, (g[lo + span] - g[lo]) / span);
-    const double slope_hi = std::max(o.min_slope, (g[hi] - g[hi - span]) / span);
-    for (int z = 0; z < lo; ++z) g[z] = g[lo] - slope_lo * (lo - z);
-    for (int z = hi + 1; z < kLevels; ++z) g[z] = g[hi] + slope_hi * (z - hi);
+// Level nearest to 128 with support (the scale is fixed there while iterating).
+int Anchor(const std::vector<double>& support) {
+  for (int d = 0; d < kLevels; ++d) {
+    if (kPinned - d >= 0 && support[kPinned - d] > 0) return kPinned - d;
+    if (kPinned + d < kLevels && support[kPinned + d] > 0) return kPinned + d;
   }
+  return -1;
+}
 
+// Robertson, Borman & Stevenson 2003, eqs. for x_j and I(m) (see ResponseMethod::kRobertson).
+std::vector<double> SolveRobertson(const std::vector<Observation>& obs, int num_samples,
+                                   const std::vector<double>& support, const ResponseOptions& o,
+                                   ChannelResult* info) {
+  const int anchor = Anchor(support);
+  if (anchor < 0) throw Error("response: Robertson: no well-exposed readings");
+  const auto [lo, hi] = SupportedRange(support);
+  std::vector<double> t(obs.size());
+  for (size_t i = 0; i < obs.size(); ++i) t[i] = std::exp(static_cast<double>(obs[i].log_exposure));
+  // ln I(z), from a linear start; only supported levels are estimated.
+  std::vector<double> lg(kLevels);
+  for (int z = 0; z < kLevels; ++z) lg[z] = std::log((z + 0.5) / (anchor + 0.5));
+  std::vector<double> level(kLevels), weight(kLevels, 0.0);
+  std::vector<double> num(num_samples), den(num_samples), sum(kLevels), count(kLevels);
+  // Weight per level: hat / (dI/dz)^2, dI/dz = I * d ln I / dz over +-3 levels.
+  auto update_weights = [&]() {
+    for (int z = 0; z < kLevels; ++z) level[z] = std::exp(lg[z]);
+    for (int z = 0; z < kLevels; ++z) {
+      weight[z] = 0;
+      if (support[z] <= 0) continue;
+      const int a = std::max(lo, z - 3), b = std::min(hi, z + 3);
+      const double slope = b > a ? std::max((lg[b] - lg[a]) / (b - a), 1e-4) : 1e-2;
+      const double d = level[z] * slope;
+      // Readings within 3 DN of clipping get no weight: a clipped pixel with noise reads
+      // 253-254, and its vastly larger exposure would be averaged into those levels.
+      weight[z] = z < 3 || z > 252 ? 0.0 : HatWeight(z, 0) / (d * d);
+    }
+  };
+  update_weights();
+  info->converged = false;
+  double objective = 0;
+  for (int it = 1; it <= o.max_iterations; ++it) {
+    std::fill(num.begin(), num.end(), 0.0);
+    std::fill(den.begin(), den.end(), 0.0);
+    for (size_t i = 0; i < obs.size(); ++i) {
+      const double w = weight[obs[i].z];
+      num[obs[i].sample] += w * t[i] * level[obs[i].z];
+      den[obs[i].sample] += w * t[i] * t[i];
+    }
+    std::fill(sum.begin(), sum.end(), 0.0);
+    std::fill(count.begin(), count.end(), 0.0);
+    double sq = 0, wsum = 0;
+    for (size_t i = 0; i < obs.size(); ++i) {
+      const int s = obs[i].sample;
+      if (den[s] <= 0) continue;
+      const double tx = t[i] * num[s] / den[s];
+      sum[obs[i].z] += tx;
+      count[obs[i].z] += 1;
+      if (weight[obs[i].z] > 0) {
+        const double r = (level[obs[i].z] - tx) / level[obs[i].z];
+        const double hw = HatWeight(obs[i].z, 0);
+        sq += hw * r * r;
+        wsum += hw;
+      }
+    }
+    objective = wsum > 0 ? std::sqrt(sq / wsum) : 0.0;
+    if (!(count[anchor] > 0 && sum[anchor] > 0)) {
+      throw Error("response: Robertson: the scale level lost its readings");
+    }
+    // ln I over the supported levels: the level means, held together by the same
+    // second-difference term as Debevec-Malik (see ResponseMethod::kRobertson).
+    std::vector<double> next = lg;
+    {
+      const int n = hi - lo + 1;
+      std::vector<Eigen::Triplet<double>> trip;
+      Eigen::VectorXd rhs = Eigen::VectorXd::Zero(n);
+      double data_w2 = 0;
+      std::vector<double> dw(n, 0.0);
+      for (int z = lo; z <= hi; ++z) {
+        if (support[z] > 0 && count[z] > 0 && sum[z] > 0) {
+          dw[z - lo] = count[z] * std::pow(HatWeight(z, o.weight_epsilon), 2);
+          data_w2 += dw[z - lo];
+        }
+      }
+      double smooth_w2 = 0;
+      for (int z = lo + 1; z < hi; ++z) smooth_w2 += std::pow(HatWeight(z, o.weight_epsilon), 2);
+      const double s2 = smooth_w2 > 0 ? o.lambda * data_w2 / smooth_w2 : 0.0;
+      for (int z = lo; z <= hi; ++z) {
+        const double d = dw[z - lo];
+        if (d > 0) {
+          trip.emplace_back(z - lo, z - lo, d);
+          rhs[z - lo] += d * std::log(sum[z] / count[z]);
+        }
+      }
+      for (int z = lo + 1; z < hi; ++z) {
+        const double hw2 = s2 * std::pow(HatWeight(z, o.weight_epsilon), 2);
+        const int k[3] = {z - 1 - lo, z - lo, z + 1 - lo};
+        const double cf[3] = {1, -2, 1};
+        for (int a = 0; a < 3; ++a) {
+          for (int b = 0; b < 3; ++b) trip.emplace_back(k[a], k[b], hw2 * cf[a] * cf[b]);
+        }
+      }
+      Eigen::SparseMatrix<double> ata(n, n);
+      ata.setFromTriplets(trip.begin(), trip.end());
+      Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(ata);
+      const Eigen::VectorXd x = ldlt.solve(rhs);
+      if (ldlt.info() != Eigen::Success || !x.allFinite()) {
+        throw Error("response: Robertson: the level update is singular");
+      }
+      for (int z = lo; z <= hi; ++z) next[z] = x[z - lo];
+    }
+    const double pin = next[anchor];
+    double change = 0;
+    for (int z = lo; z <= hi; ++z) {
+      next[z] -= pin;
+      if (support[z] > 0) change = std::max(change, std::abs(next[z] - lg[z]));
+    }
+    lg = std::move(next);
+    update_weights();
+    info->iterations = it;
+    if (change < o.convergence_tolerance) {
+      info->converged = true;
+      break;
+    }
+  }
+  info->method_residual = objective;
+  return lg;
+}
+
+// Chebyshev polynomials T_0..T_order at u = 2M - 1 (the fit is a polynomial in M; this basis
+// keeps the normal equations well conditioned).
+void Chebyshev(double m, int order, double* out) {
+  const double u = 2 * m - 1;
+  out[0] = 1;
+  if (order >= 1) out[1] = u;
+  for (int n = 2; n <= order; ++n) out[n] = 2 * u * out[n - 1] - out[n - 2];
+}
+
+double EvalPoly(const Eigen::VectorXd& c, double m) {
+  double basis[16];
+  Chebyshev(m, static_cast<int>(c.size()) - 1, basis);
+  double v = 0;
+  for (int n = 0; n < c.size(); ++n) v += c[n] * basis[n];
+  return v;
+}
+
+// Mitsunaga & Nayar 1999, eq. 6-8 (see ResponseMethod::kMitsunagaNayar).
+// Returns false when no order gives an increasing f over the fitted range.
+bool FitMitsunagaNayar(const std::vector<Observation>& obs, double fit_high,
+                       std::vector<double>* support, const ResponseOptions& o,
+                       ChannelResult* info, std::vector<double>* g_out) {
+  struct Pair {
+    double m0, m1;
+    int key;  // which pair of frames (for the ratio)
+    int sample;
+  };
+  std::vector<Pair> pairs;
+  std::vector<std::pair<int, int>> keys;  // frame ids of each ratio
+  std::vector<double> ratio;              // R = t_q / t_q+1 per key
+  std::vector<double> pair_support(kLevels, 0.0);
+  for (size_t begin = 0; begin < obs.size();) {
+    size_t end = begin;
+    while (end < obs.size() && obs[end].sample == obs[begin].sample) ++end;
+    std::vector<Observation> group(obs.begin() + begin, obs.begin() + end);
+    std::sort(group.begin(), group.end(), [](const Observation& a, const Observation& b) {
+      return a.log_exposure < b.log_exposure;
+    });
+    for (size_t k = 0; k + 1 < group.size(); ++k) {
+      const Observation &a = group[k], &b = group[k + 1];
+      if (!(b.log_exposure > a.log_exposure)) continue;
+      if (a.z < o.mn_fit_low || a.z > o.mn_fit_high || b.z < o.mn_fit_low ||
+          b.z > fit_high) {
+        continue;
+      }
+      const std::pair<int, int> id(a.frame, b.frame);
+      int key = static_cast<int>(std::find(keys.begin(), keys.end(), id) - keys.begin());
+      if (key == static_cast<int>(keys.size())) {
+        keys.push_back(id);
+        ratio.push_back(std::exp(static_cast<double>(a.log_exposure - b.log_exposure)));
+      }
+      pairs.push_back({a.z / 255.0, b.z / 255.0, key, a.sample});
+      pair_support[a.z] += 1;
+      pair_support[b.z] += 1;
+    }
+    begin = end;
+  }
+  if (pairs.size() < 8) {
+    throw Error("response: Mitsunaga-Nayar: only " + std::to_string(pairs.size()) +
+                " pairs of consecutive readings inside the fit range");
+  }
+  const auto [lo, hi] = SupportedRange(pair_support);
+  const double m_ref = kPinned / 255.0;
+
+  // Equality-constrained least squares: min sum_p (r_p (f(M0) - R f(M1)))^2, f(m_ref) = 1,
+  // r_p = 1 / previous f(M0); from a linear start, a few reweighting passes.
+  auto fit = [&](int order, int parity, const std::vector<double>& rat) -> Eigen::VectorXd {
+    Eigen::VectorXd c = Eigen::VectorXd::Zero(order + 1);
+    // Linear start f(M) = M / m_ref, in the Chebyshev basis: M = (T0 + T1) / 2.
+    c[0] = 0.5 / m_ref;
+    if (order >= 1) c[1] = 0.5 / m_ref;
+    double b0[16], b1[16], bref[16];
+    Chebyshev(m_ref, order, bref);
+    for (int pass = 0; pass < 4; ++pass) {
+      Eigen::MatrixXd ata = Eigen::MatrixXd::Zero(order + 1, order + 1);
+      for (const Pair& p : pairs) {
+        if (parity >= 0 && p.sample % 2 != parity) continue;
+        const double prev = EvalPoly(c, p.m0);
+        const double r = 1.0 / std::max(prev, 1e-6);
+        Chebyshev(p.m0, order, b0);
+        Chebyshev(p.m1, order, b1);
+        Eigen::VectorXd row(order + 1);
+        for (int n = 0; n <= order; ++n) row[n] = r * (b0[n] - rat[p.key] * b1[n]);
+        ata.selfadjointView<Eigen::Lower>().rankUpdate(row);
+      }
+      ata = ata.selfadjointView<Eigen::Lower>();
+      Eigen::MatrixXd kkt = Eigen::MatrixXd::Zero(order + 2, order + 2);
+      kkt.topLeftCorner(order + 1, order + 1) = ata;
+      for (int n = 0; n <= order; ++n) kkt(order + 1, n) = kkt(n, order + 1) = bref[n];
+      Eigen::VectorXd rhs = Eigen::VectorXd::Zero(order + 2);
+      rhs[order + 1] = 1;
+      const Eigen::VectorXd sol = kkt.fullPivLu().solve(rhs);
+      if (!sol.allFinite()) break;
+      c = sol.head(order + 1);
+    }
+    return c;
+  };
+  // The run of levels around 128 over which f is positive and strictly increasing.
+  auto valid_run = [&](const Eigen::VectorXd& c) -> std::pair<int, int> {
+    auto f = [&](int z) { return EvalPoly(c, z / 255.0); };
+    const int mid = std::clamp(kPinned, lo, hi);
+    if (!c.allFinite() || !(f(mid) > 0)) return {kLevels, -1};
+    int a = mid, b = mid;
+    while (a > lo && f(a - 1) > 0 && f(a - 1) < f(a)) --a;
+    while (b < hi && f(b + 1) > f(b)) ++b;
+    return {a, b};
+  };
+  // An order must describe the curve over z = 20..235 (or the fitted part of it).
+  const int need_lo = std::max(lo, 20), need_hi = std::min(hi, 235);
+  auto increasing = [&](const Eigen::VectorXd& c) {
+    const auto [a, b] = valid_run(c);
+    return a <= need_lo && b >= need_hi;
+  };
+  // Relative residual of the ratio equations of the given parity (-1: all).
+  auto score = [&](const Eigen::VectorXd& c, int parity, const std::vector<double>& rat) {
+    double sq = 0;
+    int n = 0;
+    for (const Pair& p : pairs) {
+      if (parity >= 0 && p.sample % 2 != parity) continue;
+      const double f0 = EvalPoly(c, p.m0);
+      const double r = (f0 - rat[p.key] * EvalPoly(c, p.m1)) / std::max(std::abs(f0), 1e-12);
+      sq += r * r;
+      ++n;
+    }
+    return n > 0 ? std::sqrt(sq / n) : 0.0;
+  };
+  const int rounds = o.mn_estimate_ratios ? 5 : 1;
+  Eigen::VectorXd c;
+  int best = 0;
+  for (int round = 0; round < rounds; ++round) {
+    best = 0;
+    double best_score = std::numeric_limits<double>::infinity();
+    for (int order = 1; order <= o.max_polynomial_order; ++order) {
+      const Eigen::VectorXd even = fit(order, 0, ratio), odd = fit(order, 1, ratio);
+      if (!increasing(even) || !increasing(odd)) continue;
+      const double sc = score(even, 1, ratio) + score(odd, 0, ratio);
+      if (sc < best_score) {
+        best_score = sc;
+        best = order;
+      }
+    }
+    if (best == 0) break;
+    c = fit(best, -1, ratio);
+    if (!increasing(c)) {
+      best = 0;
+      break;
+    }
+    if (round + 1 < rounds) {
+      // The paper's ratio update: R_q = mean over pairs of f(M_q) / f(M_q+1).
+      std::vector<double> rsum(ratio.size(), 0.0), rcount(ratio.size(), 0.0);
+      const auto [a, b] = valid_run(c);
+      for (const Pair& p : pairs) {
+        const int z0 = static_cast<int>(std::lround(p.m0 * 255)),
+                  z1 = static_cast<int>(std::lround(p.m1 * 255));
+        if (z0 < a || z0 > b || z1 < a || z1 > b) continue;
+        rsum[p.key] += EvalPoly(c, p.m0) / EvalPoly(c, p.m1);
+        rcount[p.key] += 1;
+      }
+      for (size_t k = 0; k < ratio.size(); ++k) {
+        if (rcount[k] > 0) ratio[k] = rsum[k] / rcount[k];
+      }
+    }
+  }
+  if (best == 0) return false;
+  info->order = best;
+  info->method_residual = score(c, -1, ratio);
+  if (o.mn_estimate_ratios) info->ratios = ratio;
+  const auto [run_lo, run_hi] = valid_run(c);
+  std::vector<double> g(kLevels, 0.0);
+  for (int z = run_lo; z <= run_hi; ++z) g[z] = std::log(EvalPoly(c, z / 255.0));
+  // Levels outside the fitted run are extrapolated by FinishCurve.
+  for (int z = 0; z < kLevels; ++z) (*support)[z] = z >= run_lo && z <= run_hi ? 1.0 : 0.0;
+  *g_out = std::move(g);
+  return true;
+}
+
+// Mitsunaga-Nayar over [mn_fit_low, mn_fit_high]; when no order is increasing there (a
+// shoulder too steep for a polynomial), the top of the range is lowered in 12 DN steps
+// down to 192 and the levels above are extrapolated.
+std::vector<double> SolveMitsunagaNayar(const std::vector<Observation>& obs,
+                                        std::vector<double>* support, const ResponseOptions& o,
+                                        ChannelResult* info) {
+  std::vector<double> g;
+  for (double high = o.mn_fit_high; high >= std::max(192.0, o.mn_fit_low + 64); high -= 12) {
+    if (FitMitsunagaNayar(obs, high, support, o, info, &g)) {
+      info->fit_high = high;
+      return g;
+    }
+  }
+  throw Error("response: Mitsunaga-Nayar: no polynomial order up to " +
+              std::to_string(o.max_polynomial_order) +
+              " gives an increasing response, even with the fit range lowered to 192 DN; use "
+              "Debevec-Malik or Robertson");
+}
+
+ChannelResult SolveChannel(const std::vector<Observation>& obs, int num_samples,
+                           const ResponseOptions& o) {
+  std::vector<double> support = LevelSupport(obs);
   ChannelResult result;
-  for (int z = 0; z + 1 < kLevels; ++z) {
-    if (g[z + 1] < g[z] + o.min_slope) ++result.violations;
+  std::vector<double> g;
+  switch (o.method) {
+    case ResponseMethod::kDebevecMalik:
+      g = SolveDebevecMalik(obs, num_samples, o, &result);
+      break;
+    case ResponseMethod::kRobertson:
+      g = SolveRobertson(obs, num_samples, support, o, &result);
+      break;
+    case ResponseMethod::kMitsunagaNayar:
+      g = SolveMitsunagaNayar(obs, &support, o, &result);
+      break;
   }
-  // Strictly increasing: isotonic fit of g(z) - min_slope * z, then a [1 2 1]/4 pass (a
-  // non-negative kernel keeps it monotone), then the ramp back.
-  std::vector<double> v(kLevels), wt(kLevels);
-  for (int z = 0; z < kLevels; ++z) {
-    v[z] = g[z] - o.min_slope * z;
-    wt[z] = support[z] + 1e-3;
-  }
-  std::vector<double> iso = IsotonicFit(v, wt);
-  std::vector<double> smooth = iso;
-  for (int z = 1; z + 1 < kLevels; ++z) smooth[z] = 0.25 * (iso[z - 1] + 2 * iso[z] + iso[z + 1]);
-  for (int z = 0; z < kLevels; ++z) g[z] = smooth[z] + o.min_slope * z;
-  const double pin = g[kPinned];
-  for (double& gz : g) gz -= pin;
-  result.g = std::move(g);
+  FinishCurve(std::move(g), support, o, &result);
   return result;
 }
 
 }  // namespace
 
+const char* ResponseMethodName(ResponseMethod method) {
+  switch (method) {
+    case ResponseMethod::kDebevecMalik:
+      return "Debevec-Malik";
+    case ResponseMethod::kRobertson:
+      return "Robertson";
+    case ResponseMethod::kMitsunagaNayar:
+      return "Mitsunaga-Nayar";
+  }
+  return "unknown";
+}
+
 void ResponseOptions::Validate() const {
+  if (method != ResponseMethod::kDebevecMalik && method != ResponseMethod::kRobertson &&
+      method != ResponseMethod::kMitsunagaNayar) {
+    throw Error("ResponseOptions: unknown method " + std::to_string(static_cast<int>(method)));
+  }
+  if (scan_pixels < 10000) {
+    throw Error("ResponseOptions: scan_pixels must be >= 10000, got " +
+                std::to_string(scan_pixels));
+  }
+  if (robertson_min_samples_per_bracket < 0 || robertson_min_samples_per_bracket > 1000000) {
+    throw Error("ResponseOptions: robertson_min_samples_per_bracket must be in [0, 1e6], got " +
+                std::to_string(robertson_min_samples_per_bracket));
+  }
+  if (max_iterations < 1 || max_iterations > 100000) {
+    throw Error("ResponseOptions: max_iterations must be in [1, 100000], got " +
+                std::to_string(max_iterations));
+  }
+  if (!std::isfinite(convergence_tolerance) || convergence_tolerance <= 0 ||
+      convergence_tolerance >= 1) {
+    throw Error("ResponseOptions: convergence_tolerance must be in (0, 1), got " +
+                std::to_string(convergence_tolerance));
+  }
+  if (max_polynomial_order < 1 || max_polynomial_order > 15) {
+    throw Error("ResponseOptions: max_polynomial_order must be in [1, 15], got " +
+                std::to_string(max_polynomial_order));
+  }
+  if (!std::isfinite(mn_fit_low) || !std::isfinite(mn_fit_high) || mn_fit_low < 1 ||
+      mn_fit_high > 254 || mn_fit_high - mn_fit_low < 64) {
+    throw Error("ResponseOptions: need 1 <= mn_fit_low, mn_fit_low + 64 <= mn_fit_high <= 254, "
+                "got " + std::to_string(mn_fit_low) + " and " + std::to_string(mn_fit_high));
+  }
   if (samples_per_bracket < kMinSamples || samples_per_bracket > 1000000) {
     throw Error("ResponseOptions: samples_per_bracket must be in [8, 1e6], got " +
                 std::to_string(samples_per_bracket));
@@ -309,10 +776,20 @@ ResponseCurve RecoverResponse(const std::vector<Bracket>& brackets, const Respon
   }
 
   std::vector<Sample> samples;
+  std::vector<int> first_frame(brackets.size(), 0);
+  int stride = 1;
   for (size_t i = 0; i < brackets.size(); ++i) {
-    for (size_t p : SelectSamples(brackets[i], i, options)) {
+    int s = 1;
+    for (size_t p : SelectSamples(brackets[i], i, options, &s)) {
       samples.push_back({static_cast<int>(i), p});
     }
+    stride = std::max(stride, s);
+    if (i + 1 < brackets.size()) {
+      first_frame[i + 1] = first_frame[i] + static_cast<int>(brackets[i].frames.size());
+    }
+  }
+  if (first_frame.back() + brackets.back().frames.size() > 32767) {
+    throw Error("response: more than 32767 frames in all brackets");
   }
   if (samples.size() < static_cast<size_t>(kMinSamples)) {
     throw Error("response: only " + std::to_string(samples.size()) +
@@ -328,6 +805,7 @@ ResponseCurve RecoverResponse(const std::vector<Bracket>& brackets, const Respon
         const float v = b.frames[j].data[samples[s].pixel * channels + c];
         const int z = std::clamp(static_cast<int>(std::lround(v)), 0, 255);
         obs[c].push_back({static_cast<int>(s), static_cast<uint8_t>(z),
+                          static_cast<int16_t>(first_frame[samples[s].bracket] + j),
                           static_cast<float>(std::log(b.exposures[j]))});
       }
     }
@@ -342,10 +820,15 @@ ResponseCurve RecoverResponse(const std::vector<Bracket>& brackets, const Respon
   for (int c = 0; c < 3; ++c) curve.g[c] = res[channels == 1 ? 0 : c].g;
 
   // Residuals of the final curve, with each sample's ln E re-estimated from it.
-  double sq = 0, wsum = 0;
-  int violations = 0;
+  double sq = 0, wsum = 0, method_sq = 0;
+  int violations = 0, iterations = 0, order = 0;
+  bool converged = true;
   for (int c = 0; c < channels; ++c) {
     violations += res[c].violations;
+    iterations = std::max(iterations, res[c].iterations);
+    order = std::max(order, res[c].order);
+    converged = converged && res[c].converged;
+    method_sq += res[c].method_residual * res[c].method_residual;
     const std::vector<double>& g = res[c].g;
     std::vector<double> num(samples.size(), 0), den(samples.size(), 0);
     for (const Observation& ob : obs[c]) {
@@ -371,7 +854,19 @@ ResponseCurve RecoverResponse(const std::vector<Bracket>& brackets, const Respon
     summary->samples_used = static_cast<int>(samples.size());
     summary->equations = static_cast<int>(obs[0].size());
     summary->residual_rms = wsum > 0 ? std::sqrt(sq / wsum) : 0.0;
+    summary->method_residual = std::sqrt(method_sq / channels);
     summary->monotone_violations = violations;
+    summary->method = options.method;
+    summary->iterations = iterations;
+    summary->converged = converged;
+    summary->polynomial_order = order;
+    summary->exposure_ratios = res[0].ratios;
+    summary->mn_fit_high = 255;
+    for (int c = 0; c < channels; ++c) {
+      if (res[c].fit_high > 0) summary->mn_fit_high = std::min(summary->mn_fit_high, res[c].fit_high);
+    }
+    if (options.method != ResponseMethod::kMitsunagaNayar) summary->mn_fit_high = 0;
+    summary->scan_stride = stride;
     summary->seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }

@@ -20,14 +20,8 @@ using testing::RadianceField;
 using testing::TrueLogExposure;
 using testing::TrueSlope;
 
-const std::vector<double> kExposures = {1.0 / 64, 1.0 / 16, 1.0 / 4, 1.0, 4.0, 16.0};
-
-bool StrictlyIncreasing(const std::vector<double>& g) {
-  for (size_t z = 1; z < g.size(); ++z) {
-    if (!(g[z] > g[z - 1])) return false;
-  }
-  return true;
-}
+const std::vector<double>& kExposures = testing::kTwoStopExposures;
+using testing::StrictlyIncreasing;
 
 TEST(RecoverResponse, MatchesSyntheticCurveUpToConstant) {
   // Radiance spans e^-5..e^4; with exposures 1/64..16 every value is well exposed somewhere.

@@ -16,25 +16,38 @@
 
 namespace rouen::testing {
 
-// z = 255 (x / (x + k_c))^0.8 with k_c per channel: a film-like curve with a toe and a shoulder.
-inline double TrueDigital(int c, double x) {
+// Known synthetic responses. kFilm: z = 255 (x / (x + k_c))^0.8, a film-like curve with a
+// toe and a shoulder whose inverse has a pole at z = 255 (it never clips). kSrgb: the sRGB
+// encoding of g_c x, clipped at x g_c = 1 as a digital camera clips.
+enum class CurveShape { kFilm, kSrgb };
+
+inline double TrueDigital(int c, double x, CurveShape shape = CurveShape::kFilm) {
   static const double kK[3] = {0.25, 0.3, 0.4};
-  return 255.0 * std::pow(x / (x + kK[c]), 0.8);
+  static const double kGain[3] = {0.9, 1.0, 0.8};
+  if (shape == CurveShape::kFilm) return 255.0 * std::pow(x / (x + kK[c]), 0.8);
+  const double v = std::min(1.0, x * kGain[c]);
+  return 255.0 * (v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1 / 2.4) - 0.055);
 }
 
 // Exact inverse: ln x for a (fractional) digital number 0 < z < 255.
-inline double TrueLogExposure(int c, double z) {
+inline double TrueLogExposure(int c, double z, CurveShape shape = CurveShape::kFilm) {
   static const double kK[3] = {0.25, 0.3, 0.4};
-  const double u = std::pow(z / 255.0, 1.25);
-  return std::log(kK[c] * u / (1 - u));
+  static const double kGain[3] = {0.9, 1.0, 0.8};
+  if (shape == CurveShape::kFilm) {
+    const double u = std::pow(z / 255.0, 1.25);
+    return std::log(kK[c] * u / (1 - u));
+  }
+  const double m = z / 255.0;
+  const double v = m <= 0.04045 ? m / 12.92 : std::pow((m + 0.055) / 1.055, 2.4);
+  return std::log(v / kGain[c]);
 }
 
 // d ln x / dz of the true curve (ln units per digital number).
-inline double TrueSlope(int c, double z) {
-  return 0.5 * (TrueLogExposure(c, z + 1) - TrueLogExposure(c, z - 1));
+inline double TrueSlope(int c, double z, CurveShape shape = CurveShape::kFilm) {
+  return 0.5 * (TrueLogExposure(c, z + 1, shape) - TrueLogExposure(c, z - 1, shape));
 }
 
-// The true curve tabulated as a ResponseCurve; the open ends z = 0 and 255 (ln x = -inf and
+// The film curve tabulated as a ResponseCurve; the open ends z = 0 and 255 (ln x = -inf and
 // +inf) are extrapolated linearly from their neighbours.
 inline ResponseCurve TrueCurve() {
   ResponseCurve r;
@@ -75,13 +88,14 @@ inline Image RadianceField(int w, int h, double log_lo, double log_hi, uint64_t 
 }
 
 // One frame: z = round(TrueDigital(x * exposure) + noise), clamped to 0..255.
-inline Image Expose(const Image& radiance, double exposure, double noise_dn, std::mt19937_64* rng) {
+inline Image Expose(const Image& radiance, double exposure, double noise_dn, std::mt19937_64* rng,
+                    CurveShape shape = CurveShape::kFilm) {
   std::normal_distribution<double> n(0.0, noise_dn);
   Image f(radiance.width, radiance.height, 3, PixelUnits::kDigital);
   for (int y = 0; y < radiance.height; ++y) {
     for (int x = 0; x < radiance.width; ++x) {
       for (int c = 0; c < 3; ++c) {
-        double z = TrueDigital(c, radiance.at(x, y, c) * exposure);
+        double z = TrueDigital(c, radiance.at(x, y, c) * exposure, shape);
         if (noise_dn > 0) z += n(*rng);
         f.at(x, y, c) = static_cast<float>(std::clamp(std::round(z), 0.0, 255.0));
       }
@@ -91,15 +105,26 @@ inline Image Expose(const Image& radiance, double exposure, double noise_dn, std
 }
 
 inline Bracket MakeBracket(const Image& radiance, const std::vector<double>& exposures,
-                           double noise_dn, uint64_t seed) {
+                           double noise_dn, uint64_t seed, CurveShape shape = CurveShape::kFilm) {
   std::mt19937_64 rng(seed);
   Bracket b;
   b.exposures = exposures;
-  for (double e : exposures) b.frames.push_back(Expose(radiance, e, noise_dn, &rng));
+  for (double e : exposures) b.frames.push_back(Expose(radiance, e, noise_dn, &rng, shape));
   return b;
 }
 
 // ---- Real data: Debevec's Memorial Church bracket (ROUEN_SHARED_DIR, tests only). ----
+
+// Two stops apart; radiance e^-5..e^4 is well exposed somewhere for both curve shapes.
+inline const std::vector<double> kTwoStopExposures = {1.0 / 64, 1.0 / 16, 1.0 / 4, 1.0, 4.0,
+                                                      16.0};
+
+inline bool StrictlyIncreasing(const std::vector<double>& g) {
+  for (size_t z = 1; z < g.size(); ++z) {
+    if (!(g[z] > g[z - 1])) return false;
+  }
+  return true;
+}
 
 inline std::filesystem::path MemorialDir() {
   return std::filesystem::path(ROUEN_SHARED_DIR) / "data" / "hdr" / "memorial";

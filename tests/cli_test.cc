@@ -8,36 +8,20 @@
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+
+#include "core/image.h"
+#include "tests/cli_util.h"
 #include <sys/wait.h>
 
 namespace {
 
 namespace fs = std::filesystem;
+using rouen::cli_test::Result;
+using rouen::cli_test::RunRouen;
+using rouen::cli_test::TempDir;
 
-struct Result {
-  int code = -1;
-  std::string out;  // stdout and stderr together
-};
 
-Result RunRouen(const std::string& args) {
-  std::string cmd = std::string(ROUEN_BINARY) + " " + args + " 2>&1";
-  Result r;
-  FILE* p = popen(cmd.c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof buf, p)) > 0) r.out.append(buf, n);
-  int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
 
-fs::path TempDir(const std::string& name) {
-  fs::path p = fs::temp_directory_path() / ("rouen_cli_test_" + name + "_" + std::to_string(getpid()));
-  fs::remove_all(p);
-  fs::create_directories(p);
-  return p;
-}
 
 void WriteText(const fs::path& p, const std::string& s) { std::ofstream(p) << s; }
 
@@ -126,6 +110,25 @@ TEST(CliTest, CalibResponseBadInput) {
   WriteText(dir / "list3.txt", "a.png -1\n");
   r = RunRouen("calib response --list " + (dir / "list3.txt").string() + " --out x.json");
   EXPECT_NE(r.out.find("positive"), std::string::npos) << r.out;
+  // Readable images, but one exposure only, or the same exposure twice: nothing to recover
+  // the curve from.
+  rouen::Image im(16, 16, 3, rouen::PixelUnits::kDigital);
+  for (size_t i = 0; i < im.data.size(); ++i) im.data[i] = static_cast<float>(i % 200 + 20);
+  rouen::WriteImage((dir / "g.png").string(), im, rouen::StoredType::kUint8);
+  WriteText(dir / "one.txt", "g.png 0.1\n");
+  WriteText(dir / "same.txt", "g.png 0.1\ng.png 0.1\n");
+  for (const char* list : {"one.txt", "same.txt"}) {
+    r = RunRouen("calib response --list " + (dir / list).string() + " --out " +
+                 (dir / "r.json").string());
+    EXPECT_NE(r.code, 0) << list;
+    EXPECT_NE(r.out.find("exposure"), std::string::npos) << r.out;
+    EXPECT_FALSE(fs::exists(dir / "r.json"));
+  }
+  WriteText(dir / "two.txt", "g.png 0.1\ng.png 0.4\n");
+  r = RunRouen("calib response --method newton --list " + (dir / "two.txt").string() +
+               " --out x.json");
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.out.find("newton"), std::string::npos) << r.out;
   fs::remove_all(dir);
 }
 
@@ -143,10 +146,20 @@ TEST(CliTest, CalibResponseAndHdrOnMemorial) {
     ASSERT_EQ(ch.size(), 256u);
     for (size_t z = 1; z < 256; ++z) EXPECT_GE(ch[z].get<double>(), ch[z - 1].get<double>());
   }
-  r = RunRouen("hdr --list " + (mem / "exposures.txt").string() + " --response " +
+  r = RunRouen("calib hdr --list " + (mem / "exposures.txt").string() + " --response " +
                (dir / "response.json").string() + " --out " + (dir / "m.exr").string());
   ASSERT_EQ(r.code, 0) << r.out;
   EXPECT_GT(fs::file_size(dir / "m.exr"), 100000u);
+  // The alternative methods: each a monotone curve, named in the report.
+  for (const char* method : {"robertson", "mitsunaga"}) {
+    r = RunRouen(std::string("calib response --method ") + method + " --list " +
+                 (mem / "exposures.txt").string() + " --out " + (dir / "alt.json").string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_NE(r.out.find("fit residual"), std::string::npos) << r.out;
+    nlohmann::json alt = nlohmann::json::parse(std::ifstream(dir / "alt.json"));
+    for (const auto& ch : alt["g"])
+      for (size_t z = 1; z < 256; ++z) EXPECT_GT(ch[z].get<double>(), ch[z - 1].get<double>());
+  }
   fs::remove_all(dir);
 }
 

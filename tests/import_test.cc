@@ -22,37 +22,18 @@
 #include "core/session.h"
 #include "core/solar.h"
 #include "core/time.h"
+#include "tests/cli_util.h"
 
 namespace rouen {
 namespace {
 
 namespace fs = std::filesystem;
+using rouen::cli_test::Result;
+using rouen::cli_test::RunRouen;
+using rouen::cli_test::TempDir;
 
-struct Result {
-  int code = -1;
-  std::string out;  // stdout and stderr together
-};
 
-Result RunRouen(const std::string& args) {
-  const std::string cmd = std::string(ROUEN_BINARY) + " " + args + " 2>&1";
-  Result r;
-  FILE* p = popen(cmd.c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof buf, p)) > 0) r.out.append(buf, n);
-  const int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
 
-fs::path TempDir(const std::string& name) {
-  fs::path p =
-      fs::temp_directory_path() / ("rouen_import_test_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(p);
-  fs::create_directories(p);
-  return p;
-}
 
 void WriteText(const fs::path& p, const std::string& s) { std::ofstream(p) << s; }
 
