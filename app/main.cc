@@ -19,6 +19,8 @@ int main(int argc, char** argv) {
   rouen::RegisterHdr(app);
   rouen::RegisterSun(app);
   rouen::RegisterImport(app);
+  rouen::RegisterSky(app);
+  rouen::RegisterRender(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -81,6 +81,10 @@ struct SolveResult {
 SolveResult SolveSession(const Session& session, const CalibResult& calib,
                          const PipelineOptions& options);
 
+// Irradiance of the solved model's grid under other lighting (a novel time), with the
+// interreflection from the recovered albedos, computed as SolveSession computed the slots'.
+SlotIrradiance IrradianceFor(const SolveResult& solved, const Lighting& lighting);
+
 // Site of a session: the GPS fixes' mean when there are any, else session.json's site.
 Site SessionSite(const Session& session);
 

@@ -62,6 +62,12 @@ void IrradianceOptions::Validate() const {
   if (sun_samples < 1 || sun_samples > 1024) {
     throw Error("IrradianceOptions: sun_samples must be in 1..1024");
   }
+  if (method == IrradianceMethod::kVectorFlux) {
+    if (mesh == nullptr) {
+      throw Error("IrradianceOptions: the vector-flux method needs the model mesh (mesh)");
+    }
+    vector_flux.Validate();
+  }
 }
 
 Eigen::Vector3d HemisphereCache::Direction(const GridPoint& p, int point_index, int k) const {
@@ -140,6 +146,16 @@ SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache&
     throw Error("irradiance: sun radiance must be finite and >= 0, solid angle in [0, 1) sr");
   }
   if (lighting.use_env) lighting.env.Validate();
+  const bool vector_flux = options.method == IrradianceMethod::kVectorFlux;
+  if (vector_flux && static_cast<int>(options.mesh->triangles.size()) != model.num_triangles()) {
+    throw Error("irradiance: the mesh has " + std::to_string(options.mesh->triangles.size()) +
+                " triangles but the ray-casting model " +
+                std::to_string(model.num_triangles()) + " (not the same model)");
+  }
+  std::vector<SphericalPolygon> regions;
+  if (vector_flux && lighting.use_env) {
+    regions = EnvironmentRegionPolygons(lighting.env, options.vector_flux);
+  }
 
   SlotIrradiance irr;
   irr.sun.assign(n, Eigen::Vector3d::Zero());
@@ -188,6 +204,22 @@ SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache&
         const double v = static_cast<double>(visible) / disc.size();
         irr.sun_visibility[i] = static_cast<float>(v);
         irr.sun[i] = sun_e * (cosi * v);
+      }
+      if (vector_flux) {
+        // App. A: vector flux of the visible sky patches / environment regions.
+        const PointVisibility vis(*options.mesh, origin, p.normal, p.triangle);
+        if (lighting.use_env) {
+          std::vector<ConvexSpherical> shadow;
+          if (ground_shadow && origin.z() > ground_z) {
+            shadow = GroundShadowPolygons(*options.mesh, s, ground_z, origin);
+          }
+          irr.direct_se[i] = EnvironmentIrradianceVectorFlux(
+              vis, lighting.env, p.position.z(), regions, ground_shadow ? &shadow : nullptr,
+              shadow_ratio);
+        } else {
+          irr.direct_se[i] = SkyIrradianceVectorFlux(vis, lighting.sky, options.vector_flux);
+        }
+        continue;
       }
       Eigen::Vector3d sum = Eigen::Vector3d::Zero();
       for (int k = 0; k < K; ++k) {

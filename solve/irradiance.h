@@ -1,18 +1,21 @@
 // Irradiance at the surface grid points from the sun, the sky and the environment, with
-// one-bounce interreflection between model faces (Yu & Malik 1998, §4.1 and App. A; this
-// first version integrates numerically over cosine-distributed directions with ray-cast
-// visibility instead of clipping spherical polygons).
+// one-bounce interreflection between model faces (Yu & Malik 1998, §4.1 and App. A). The
+// direct sky + environment term is either integrated numerically over cosine-distributed
+// directions with ray-cast visibility (Monte Carlo) or, as the paper does, analytically as
+// the vector flux of clipped spherical polygons (solve/vector_flux.h).
 #pragma once
 
 #include <Eigen/Core>
 #include <cstdint>
 #include <vector>
 
+#include "core/mesh.h"
 #include "core/time.h"
 #include "solve/environment.h"
 #include "solve/grid.h"
 #include "solve/raycast.h"
 #include "solve/sky_model.h"
+#include "solve/vector_flux.h"
 
 namespace rouen {
 
@@ -71,17 +74,33 @@ struct SlotIrradiance {
   double seconds = 0;
 };
 
+enum class IrradianceMethod {
+  kMonteCarlo,  // the hemisphere cache's directions (noisy, any geometry)
+  kVectorFlux,  // App. A: vector flux of clipped spherical polygons (needs `mesh`)
+};
+
 struct IrradianceOptions {
+  // How the direct sky + environment term E_direct_se is integrated. The sun and the
+  // interreflection (AddInterreflection, through the hemisphere cache) are the same for both.
+  IrradianceMethod method = IrradianceMethod::kMonteCarlo;
+  VectorFluxOptions vector_flux;
+  // The model mesh the RayCaster was built from (not owned); required by kVectorFlux, which
+  // projects its faces onto each point's sphere of directions.
+  const Mesh* mesh = nullptr;
   int sun_samples = 1;  // shadow rays per point over the sun disc (1: centre only)
   // Beyond the paper: the environment below the horizon is taken as flat Lambertian ground at
   // the model's lowest level; where an escaped ray meets that ground inside the model's cast
   // shadow, its radiance is scaled by the ground's shadowed/sunlit ratio E_sky / (E_sky +
   // E_sun) (a tall building darkens the far ground it sees in the morning and evening).
+  // kVectorFlux: the shadowed ground is the model's faces projected along the sun onto that
+  // ground, clipped on the sphere like the occluders.
   bool ground_shadow = true;
   void Validate() const;
 };
 
-// E_sun[i] = L_sun Omega max(0, n.s) V and E_se[i] = (pi/K) sum over escaped directions of L.
+// E_sun[i] = L_sun Omega max(0, n.s) V and E_se[i] = (pi/K) sum over escaped directions of L
+// (kMonteCarlo), or sum over visible sky patches / environment regions of L n.Phi
+// (kVectorFlux; sky patches subdivided until L is nearly uniform over each).
 SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache& cache,
                                  const RayCaster& model, const Lighting& lighting,
                                  const IrradianceOptions& options = {});

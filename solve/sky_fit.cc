@@ -13,6 +13,7 @@
 
 #include "core/error.h"
 #include "solve/internal/sky_cost.h"
+#include "solve/sky_cie.h"
 
 namespace rouen {
 namespace {
@@ -75,11 +76,14 @@ StartResult Solve(const std::vector<SkyPoint>& points, const double* start, doub
   double* p = r.params;
   std::copy(start, start + 7, p);
   p[1] = std::max(p[1], a_lower);
+  const bool fixed_h = options.model == SkyModelKind::kPerez5;
+  if (fixed_h) p[6] = 1;
+  const int n = fixed_h ? 6 : 7;
   ceres::Problem::Options po;
   po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
   ceres::Problem problem(po);
-  problem.AddResidualBlock(new SkyCost(points), nullptr, p);
-  for (int k = 0; k < 7; ++k) {
+  problem.AddResidualBlock(new SkyCost(points, fixed_h), nullptr, p);
+  for (int k = 0; k < n; ++k) {
     problem.SetParameterLowerBound(p, k, k == 1 ? a_lower : kLower[k]);
     if (std::isfinite(kUpper[k])) problem.SetParameterUpperBound(p, k, kUpper[k]);
   }
@@ -135,7 +139,75 @@ void MakeStart(const std::vector<SkyPoint>& points, const double shape[6], doubl
   p[0] = den > 0 && num > 0 ? num / den : 1.0;
 }
 
+// Closed-form Lz for fixed shape parameters p[1..6] (weighted linear least squares); returns
+// the eq. 10 cost and writes p[0].
+double FitLzOnly(const std::vector<SkyPoint>& points, double* p) {
+  p[0] = 1.0;
+  double num = 0, den = 0;
+  std::vector<double> f(points.size());
+  for (size_t i = 0; i < points.size(); ++i) {
+    const SkyPoint& q = points[i];
+    f[i] = internal::SkyModelAt(p, q, nullptr);
+    num += q.s * q.s * q.y * f[i];
+    den += q.s * q.s * f[i] * f[i];
+  }
+  p[0] = den > 0 && num > 0 ? num / den : 1.0;
+  double cost = 0;
+  for (size_t i = 0; i < points.size(); ++i) {
+    const double r = points[i].s * (points[i].y - p[0] * f[i]);
+    cost += 0.5 * r * r;
+  }
+  return std::isfinite(cost) ? cost : std::numeric_limits<double>::infinity();
+}
+
 }  // namespace
+
+const char* SkyModelKindName(SkyModelKind kind) {
+  switch (kind) {
+    case SkyModelKind::kSevenParam: return "7";
+    case SkyModelKind::kPerez5: return "perez5";
+    case SkyModelKind::kCie: return "cie";
+  }
+  return "7";
+}
+
+SkyModelKind ParseSkyModelKind(const std::string& name) {
+  if (name == "7" || name == "seven") return SkyModelKind::kSevenParam;
+  if (name == "perez5") return SkyModelKind::kPerez5;
+  if (name == "cie") return SkyModelKind::kCie;
+  throw Error("sky model '" + name + "' is not one of 7, perez5, cie");
+}
+
+std::vector<Eigen::Vector3d> SkyRelativeResiduals(const SkyModel& model,
+                                                  const std::vector<SkySample>& samples) {
+  std::vector<Eigen::Vector3d> out(samples.size());
+  for (size_t i = 0; i < samples.size(); ++i) {
+    const Eigen::Vector3d l = model.Radiance(samples[i].dir);
+    for (int c = 0; c < 3; ++c) {
+      const double y = samples[i].radiance[c];
+      out[i][c] = y > 0 && std::isfinite(y) ? (l[c] - y) / y : 0.0;
+    }
+  }
+  return out;
+}
+
+SkyResidualStats SummarizeSkyResiduals(const std::vector<Eigen::Vector3d>& residuals) {
+  SkyResidualStats s;
+  if (residuals.empty()) return s;
+  for (int c = 0; c < 3; ++c) {
+    std::vector<double> a(residuals.size());
+    double sum = 0;
+    for (size_t i = 0; i < residuals.size(); ++i) {
+      a[i] = std::abs(residuals[i][c]);
+      sum += a[i];
+    }
+    s.median[c] = Percentile(a, 0.5);
+    s.p90[c] = Percentile(a, 0.9);
+    s.max[c] = *std::max_element(a.begin(), a.end());
+    s.mean[c] = sum / a.size();
+  }
+  return s;
+}
 
 void SkySampleOptions::Validate() const {
   if (!std::isfinite(min_elevation_deg) || min_elevation_deg < 0 || min_elevation_deg >= 89) {
@@ -292,69 +364,113 @@ SkyFitSummary FitSky(const std::vector<SkySample>& samples, const Eigen::Vector3
 
   SkyFitSummary summary;
   summary.samples = static_cast<int>(samples.size());
+  summary.model = options.model;
   SkyModel model;
   model.sun_dir = sun;
-  const int n_starts = options.multiple_starts ? static_cast<int>(std::size(kStarts)) : 1;
-
-  tbb::parallel_for(0, 3, [&](int c) {
-    const auto t0 = std::chrono::steady_clock::now();
-    // Normalised radiance y' = y / (0.5 min y) >= 2, so log y' >= log 2 > 0 (eq. 10 weights).
-    const double ref = 0.5 * min_y[c];
-    std::vector<SkyPoint> points;
-    points.reserve(samples.size());
+  const bool relative = options.weighting == SkyWeighting::kRelative;
+  // Normalised radiance y' = y / (0.5 min y) >= 2, so log y' >= log 2 > 0 (eq. 10 weights).
+  std::array<double, 3> ref{};
+  std::array<std::vector<SkyPoint>, 3> points;
+  for (int c = 0; c < 3; ++c) {
+    ref[c] = 0.5 * min_y[c];
+    points[c].reserve(samples.size());
     for (const SkySample& s : samples) {
-      points.push_back(internal::MakeSkyPoint(s.dir, sun, s.radiance[c] / ref));
+      points[c].push_back(internal::MakeSkyPoint(s.dir, sun, s.radiance[c] / ref[c], relative));
     }
-    // Every start on an evenly thinned subset, then the best two on all samples.
-    const size_t stride = std::max<size_t>(1, points.size() / kScreenSamples);
-    std::vector<SkyPoint> subset;
-    for (size_t i = 0; i < points.size(); i += stride) subset.push_back(points[i]);
-    std::vector<StartResult> screened;
-    for (int k = 0; k < n_starts; ++k) {
-      double p0[7];
-      MakeStart(subset, kStarts[k], p0);
-      screened.push_back(stride > 1 ? RunStart(subset, p0, kScreenIterations, options)
-                                    : RunStart(points, p0, options.max_iterations, options));
-    }
-    std::sort(screened.begin(), screened.end(), [](const StartResult& a, const StartResult& b) {
-      return a.final_cost < b.final_cost;
-    });
-    StartResult best;
-    if (stride == 1) {
-      best = screened.front();
-    } else {
-      for (size_t k = 0; k < std::min<size_t>(kRefined, screened.size()); ++k) {
-        if (!std::isfinite(screened[k].final_cost)) break;
-        StartResult r = RunStart(points, screened[k].params, options.max_iterations, options);
-        r.iterations += screened[k].iterations;
-        if (r.final_cost < best.final_cost) best = r;
+  }
+  std::array<StartResult, 3> best;
+
+  if (options.model == SkyModelKind::kCie) {
+    // Every CIE type with a closed-form Lz per channel; the lowest total cost wins.
+    const auto t0 = std::chrono::steady_clock::now();
+    const double sun_zenith = std::acos(std::clamp(sun.z(), 0.0, 1.0));
+    double best_total = std::numeric_limits<double>::infinity();
+    for (int t = 1; t <= kNumCieSkyTypes; ++t) {
+      const SkyParams q = CieAsSkyParams(CieStandardSky(t), sun_zenith, 1.0);
+      std::array<StartResult, 3> trial;
+      double total = 0;
+      for (int c = 0; c < 3; ++c) {
+        double* p = trial[c].params;
+        const double shape[7] = {1, q.a, q.b, q.c, q.d, q.e, q.h};
+        std::copy(shape, shape + 7, p);
+        trial[c].final_cost = trial[c].initial_cost = FitLzOnly(points[c], p);
+        total += trial[c].final_cost;
+      }
+      if (total < best_total) {
+        best_total = total;
+        best = trial;
+        summary.cie_type = t;
       }
     }
-    SkyChannelSummary& cs = summary.channel[c];
-    cs.starts = n_starts;
-    cs.final_cost = best.final_cost;
-    if (!std::isfinite(best.final_cost)) return;  // reported after the loop
-    SkyParams& p = model.channel[c];
-    p.Lz = best.params[0] * ref;
-    p.a = best.params[1];
-    p.b = best.params[2];
-    p.c = best.params[3];
-    p.d = best.params[4];
-    p.e = best.params[5];
-    p.h = best.params[6];
-    std::vector<double> rel(points.size());
-    for (size_t i = 0; i < points.size(); ++i) {
-      const double l = internal::SkyModelAt(best.params, points[i], nullptr);
-      rel[i] = std::abs(l - points[i].y) / points[i].y;
+    for (int c = 0; c < 3; ++c) {
+      summary.channel[c].starts = kNumCieSkyTypes;
+      summary.channel[c].seconds = Seconds(t0);
     }
-    cs.iterations = best.iterations;
-    cs.initial_cost = best.initial_cost;
-    cs.final_cost = best.final_cost;
+  } else {
+    const int n_starts = options.multiple_starts ? static_cast<int>(std::size(kStarts)) : 1;
+    tbb::parallel_for(0, 3, [&](int c) {
+      const auto t0 = std::chrono::steady_clock::now();
+      const std::vector<SkyPoint>& pts = points[c];
+      // Every start on an evenly thinned subset, then the best two on all samples.
+      const size_t stride = std::max<size_t>(1, pts.size() / kScreenSamples);
+      std::vector<SkyPoint> subset;
+      for (size_t i = 0; i < pts.size(); i += stride) subset.push_back(pts[i]);
+      std::vector<StartResult> screened;
+      for (int k = 0; k < n_starts; ++k) {
+        double p0[7];
+        MakeStart(subset, kStarts[k], p0);
+        if (options.model == SkyModelKind::kPerez5) p0[6] = 1;
+        screened.push_back(stride > 1 ? RunStart(subset, p0, kScreenIterations, options)
+                                      : RunStart(pts, p0, options.max_iterations, options));
+      }
+      std::sort(screened.begin(), screened.end(),
+                [](const StartResult& a, const StartResult& b) {
+                  return a.final_cost < b.final_cost;
+                });
+      StartResult b;
+      if (stride == 1) {
+        b = screened.front();
+      } else {
+        for (size_t k = 0; k < std::min<size_t>(kRefined, screened.size()); ++k) {
+          if (!std::isfinite(screened[k].final_cost)) break;
+          StartResult r = RunStart(pts, screened[k].params, options.max_iterations, options);
+          r.iterations += screened[k].iterations;
+          if (r.final_cost < b.final_cost) b = r;
+        }
+      }
+      best[c] = b;
+      summary.channel[c].starts = n_starts;
+      summary.channel[c].seconds = Seconds(t0);
+    });
+  }
+
+  for (int c = 0; c < 3; ++c) {
+    const StartResult& b = best[c];
+    SkyChannelSummary& cs = summary.channel[c];
+    cs.final_cost = b.final_cost;
+    if (!std::isfinite(b.final_cost)) continue;  // reported below
+    SkyParams& p = model.channel[c];
+    p.Lz = b.params[0] * ref[c];
+    p.a = b.params[1];
+    p.b = b.params[2];
+    p.c = b.params[3];
+    p.d = b.params[4];
+    p.e = b.params[5];
+    p.h = b.params[6];
+    std::vector<double> rel(points[c].size());
+    double sum = 0;
+    for (size_t i = 0; i < points[c].size(); ++i) {
+      const double l = internal::SkyModelAt(b.params, points[c][i], nullptr);
+      rel[i] = std::abs(l - points[c][i].y) / points[c][i].y;
+      sum += rel[i];
+    }
+    cs.iterations = b.iterations;
+    cs.initial_cost = b.initial_cost;
     cs.rel_error_median = Percentile(rel, 0.5);
     cs.rel_error_p90 = Percentile(rel, 0.9);
     cs.rel_error_max = *std::max_element(rel.begin(), rel.end());
-    cs.seconds = Seconds(t0);
-  });
+    cs.rel_error_mean = sum / rel.size();
+  }
 
   for (int c = 0; c < 3; ++c) {
     const SkyParams& p = model.channel[c];

@@ -5,6 +5,7 @@
 #include <Eigen/Core>
 #include <array>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "core/camera.h"
@@ -37,7 +38,24 @@ std::vector<SkySample> ExtractSkySamples(const Image& hdr, const std::vector<uin
                                          const Eigen::Vector3d& sun_dir,
                                          const SkySampleOptions& options);
 
+// Which sky model FitSky fits. All three are stored as eq. 9 parameters (SkyParams).
+enum class SkyModelKind {
+  kSevenParam,  // eq. 9, the paper's revised model
+  kPerez5,      // Perez et al. 1993 as the paper writes it: eq. 9 with h = 1
+  kCie,         // best of the 15 CIE standard general skies (solve/sky_cie.h), Lz per channel
+};
+const char* SkyModelKindName(SkyModelKind kind);  // "7", "perez5", "cie"
+// Accepts "7", "seven", "perez5", "cie"; throws rouen::Error naming the bad value.
+SkyModelKind ParseSkyModelKind(const std::string& name);
+
+enum class SkyWeighting {
+  kPaper,     // eq. 10: sigma_i = y_i / log y_i (radiance normalised so log y_i >= log 2)
+  kRelative,  // sigma_i = y_i: plain relative residuals
+};
+
 struct SkyFitOptions {
+  SkyModelKind model = SkyModelKind::kSevenParam;
+  SkyWeighting weighting = SkyWeighting::kPaper;
   int max_iterations = 200;  // Levenberg-Marquardt iterations per start
   int min_samples = 20;
   // Try the eight starting shapes (CIE general skies, Perez-like); false: CIE clear only.
@@ -55,10 +73,13 @@ struct SkyChannelSummary {
   double rel_error_median = 0;  // |model - y| / y over the samples
   double rel_error_p90 = 0;
   double rel_error_max = 0;
+  double rel_error_mean = 0;
   double seconds = 0;
 };
 
 struct SkyFitSummary {
+  SkyModelKind model = SkyModelKind::kSevenParam;
+  int cie_type = 0;  // 1..15 when model == kCie
   int samples = 0;
   std::array<SkyChannelSummary, 3> channel;
   double seconds = 0;
@@ -74,7 +95,20 @@ struct SkyFitSummary {
 // refined on all samples and the lower cost wins.
 // Throws rouen::Error for too few samples, non-positive or non-finite radiance, directions
 // that are not unit or below the horizon, or a bad sun direction.
+// kPerez5 fits the same way with h fixed at 1. kCie tries the 15 CIE types, each with Lz per
+// channel in closed form (weighted linear least squares with the chosen weights), and keeps
+// the type of lowest total cost; the result is stored as eq. 9 parameters (CieAsSkyParams).
 SkyFitSummary FitSky(const std::vector<SkySample>& samples, const Eigen::Vector3d& sun_dir,
                      const SkyFitOptions& options, SkyModel* out);
+
+// Per-sample relative residuals (model - y) / y per channel, in the order of `samples`.
+std::vector<Eigen::Vector3d> SkyRelativeResiduals(const SkyModel& model,
+                                                  const std::vector<SkySample>& samples);
+
+// Median, p90, max and mean of |residual| over the samples, per channel.
+struct SkyResidualStats {
+  std::array<double, 3> median{}, p90{}, max{}, mean{};
+};
+SkyResidualStats SummarizeSkyResiduals(const std::vector<Eigen::Vector3d>& residuals);
 
 }  // namespace rouen

@@ -11,6 +11,7 @@
 
 #include "core/error.h"
 #include "solve/internal/sky_cost.h"
+#include "solve/sky_cie.h"
 #include "solve/sky_model.h"
 
 namespace rouen {
@@ -343,6 +344,87 @@ TEST(FitSky, EndToEndFromImageAndTiming) {
   std::nth_element(rel.begin(), rel.begin() + rel.size() / 2, rel.end());
   EXPECT_LT(rel[rel.size() / 2], 0.03);
   RecordProperty("fit_seconds_20k_x3", std::to_string(summary.seconds));
+}
+
+TEST(FitSky, Perez5FixesHAtOne) {
+  const Eigen::Vector3d sun = AzEl(60, 45);
+  SkyModel truth = ClearSkyTruth(sun);
+  for (SkyParams& p : truth.channel) p.h = 1;  // a Perez-form sky
+  std::vector<SkySample> samples;
+  for (const Eigen::Vector3d& d : SkyDirections(3000, sun, 3, 3, 5)) {
+    samples.push_back({d, truth.Radiance(d)});
+  }
+  SkyFitOptions o;
+  o.model = SkyModelKind::kPerez5;
+  SkyModel fit;
+  const SkyFitSummary s = FitSky(samples, sun, o, &fit);
+  EXPECT_EQ(s.model, SkyModelKind::kPerez5);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_EQ(fit.channel[c].h, 1.0);
+    // Noise-free samples of a model in the family: the fit is exact up to LM tolerances.
+    EXPECT_LT(s.channel[c].rel_error_p90, 2e-3) << "channel " << c;
+  }
+}
+
+TEST(FitSky, CiePicksTheGeneratingTypeAndScalesLzPerChannel) {
+  const Eigen::Vector3d sun = AzEl(150, 30);
+  const double zs = std::acos(sun.z());
+  const double lz[3] = {2.0, 3.0, 5.0};
+  for (int type : {1, 7, 12}) {
+    SkyModel truth;
+    truth.sun_dir = sun;
+    for (int c = 0; c < 3; ++c) truth.channel[c] = CieAsSkyParams(CieStandardSky(type), zs, lz[c]);
+    std::vector<SkySample> samples;
+    for (const Eigen::Vector3d& d : SkyDirections(2000, sun, 3, 3, 6)) {
+      samples.push_back({d, truth.Radiance(d)});
+    }
+    SkyFitOptions o;
+    o.model = SkyModelKind::kCie;
+    SkyModel fit;
+    const SkyFitSummary s = FitSky(samples, sun, o, &fit);
+    EXPECT_EQ(s.model, SkyModelKind::kCie);
+    EXPECT_EQ(s.cie_type, type);
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_NEAR(fit.Radiance(Eigen::Vector3d::UnitZ())[c], lz[c], 1e-9 * lz[c]);
+      EXPECT_LT(s.channel[c].rel_error_max, 1e-9);
+    }
+  }
+}
+
+TEST(FitSky, RelativeWeightingAndResiduals) {
+  const Eigen::Vector3d sun = AzEl(140, 35);
+  const SkyModel truth = ClearSkyTruth(sun);
+  std::mt19937_64 rng(8);
+  std::normal_distribution<double> noise(0, 0.01);
+  std::vector<SkySample> samples;
+  for (const Eigen::Vector3d& d : SkyDirections(3000, sun, 3, 3, 2)) {
+    Eigen::Vector3d y = truth.Radiance(d);
+    for (int c = 0; c < 3; ++c) y[c] *= 1 + noise(rng);
+    samples.push_back({d, y});
+  }
+  SkyFitOptions o;
+  o.weighting = SkyWeighting::kRelative;
+  SkyModel fit;
+  const SkyFitSummary s = FitSky(samples, sun, o, &fit);
+  const std::vector<Eigen::Vector3d> res = SkyRelativeResiduals(fit, samples);
+  ASSERT_EQ(res.size(), samples.size());
+  const SkyResidualStats st = SummarizeSkyResiduals(res);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(s.channel[c].rel_error_median, 0.0067, 0.0015) << "channel " << c;
+    // The per-sample residuals reproduce the summary's statistics.
+    EXPECT_NEAR(st.median[c], s.channel[c].rel_error_median, 1e-9);
+    EXPECT_NEAR(st.p90[c], s.channel[c].rel_error_p90, 1e-9);
+    EXPECT_NEAR(st.mean[c], s.channel[c].rel_error_mean, 1e-9);
+  }
+  // A residual is (model - y) / y.
+  EXPECT_NEAR(res[5][1], fit.Radiance(samples[5].dir)[1] / samples[5].radiance[1] - 1, 1e-12);
+}
+
+TEST(FitSky, ModelKindNames) {
+  for (SkyModelKind k : {SkyModelKind::kSevenParam, SkyModelKind::kPerez5, SkyModelKind::kCie}) {
+    EXPECT_EQ(ParseSkyModelKind(SkyModelKindName(k)), k);
+  }
+  EXPECT_THROW(ParseSkyModelKind("perez"), Error);
 }
 
 }  // namespace

@@ -1,6 +1,7 @@
 // The whole pipeline end to end: `rouen demo --quick` captures a simulated session through
 // the capture controller, solves it and scores it; then the session is replayed through the
 // replay devices on the same code path and must come out identical.
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -10,21 +11,19 @@
 #include <nlohmann/json.hpp>
 #include <sys/wait.h>
 
+#include "core/image.h"
 #include "core/session.h"
+#include "tests/cli_util.h"
 
 namespace {
 
 namespace fs = std::filesystem;
 
+// Exit code of `rouen ARGS`; its output appended to *out.
 int RunRouen(const std::string& args, std::string* out) {
-  std::string cmd = std::string(ROUEN_BINARY) + " " + args + " 2>&1";
-  FILE* p = popen(cmd.c_str(), "r");
-  if (!p) return -1;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof buf, p)) > 0) out->append(buf, n);
-  int status = pclose(p);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  const rouen::cli_test::Result r = rouen::cli_test::RunRouen(args);
+  *out += r.out;
+  return r.code;
 }
 
 // One demo run shared by the checks below (CTest runs each test in its own process, so they
@@ -39,6 +38,8 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
        {"response_max_rel_error", "sun_direction_error_deg", "sun_radiance_rel_error",
         "sky_rel_error_median", "sky_rel_error_p90", "albedo_sun_rel_error_mean",
         "albedo_skyenv_rel_error_mean", "heldout_render_rel_rmse", "heldout_render_psnr_db",
+        "heldout_predicted_render_rel_rmse", "heldout_predicted_sky_rel_error_median",
+        "heldout_predicted_sun_radiance_rel_error",
         "frames_captured", "wall_seconds"}) {
     ASSERT_TRUE(m.contains(k)) << k;
     ASSERT_TRUE(m[k].is_number()) << k;
@@ -58,6 +59,7 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
   EXPECT_LT(m["sun_direction_error_deg"].get<double>(), 0.05);
   EXPECT_TRUE(fs::exists(dir / "heldout.png"));
   EXPECT_TRUE(fs::exists(dir / "heldout_truth.png"));
+  EXPECT_TRUE(fs::exists(dir / "heldout_predicted.png"));
 
   // Replay through the replay devices: the same frames, times and metadata.
   fs::path replayed = dir / "replayed";
@@ -79,6 +81,50 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
     EXPECT_DOUBLE_EQ(fa.sun_azimuth_deg, fb.sun_azimuth_deg) << i;
   }
   EXPECT_EQ(a.info().site_source, b.info().site_source);
+
+  // rouen render on the same session: under a captured slot's lighting, and at another time
+  // under predicted lighting with part of the sun blocked (§5, §6.3).
+  const std::string session = " --session " + (dir / "session").string() + " --work " +
+                              (dir / "render-work").string();
+  out.clear();
+  ASSERT_EQ(RunRouen("render" + session + " --quick --slot 1 --view slot1/architecture/view0 --out " +
+                         (dir / "slot1.exr").string(),
+                     &out),
+            0)
+      << out;
+  out.clear();
+  ASSERT_EQ(RunRouen("render" + session +
+                         " --quick --time 2026-08-25T17:00:00-07:00 --pbs 0.5 --out " +
+                         (dir / "p.exr").string() + " --png " + (dir / "p.png").string(),
+                     &out),
+            0)
+      << out;
+  EXPECT_NE(out.find("air mass"), std::string::npos) << out;
+  for (const char* f : {"slot1.exr", "p.exr"}) {
+    const rouen::Image im = rouen::ReadImage((dir / f).string());
+    double sum = 0;
+    for (float v : im.data) {
+      ASSERT_TRUE(std::isfinite(v)) << f;
+      ASSERT_GE(v, 0) << f;
+      sum += v;
+    }
+    EXPECT_GT(sum, 0) << f;
+  }
+  EXPECT_TRUE(fs::exists(dir / "p.png"));
+  // Night, and contradictory options, fail at once with the reason.
+  out.clear();
+  EXPECT_NE(RunRouen("render" + session + " --time 2026-08-25T23:30:00-07:00 --out " +
+                         (dir / "n.exr").string(),
+                     &out),
+            0);
+  EXPECT_NE(out.find("below the horizon"), std::string::npos) << out;
+  out.clear();
+  EXPECT_NE(RunRouen("render" + session + " --slot 0 --time 2026-08-25T12:00:00-07:00 --out " +
+                         (dir / "n.exr").string(),
+                     &out),
+            0);
+  EXPECT_NE(out.find("exactly one"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir / "n.exr"));
   fs::remove_all(dir);
 }
 

@@ -20,14 +20,16 @@ struct SkyPoint {
   double log_gamma;   // ln max(gamma, 1e-6), gamma in radians
   double cos2_gamma;  // cos^2 gamma
   double y;           // normalised radiance (>= 2)
-  double s;           // 1 / sigma = log(y) / y (eq. 10)
+  double s;           // 1 / sigma = log(y) / y (eq. 10), or 1 / y (relative weighting)
 };
 
-inline SkyPoint MakeSkyPoint(const Eigen::Vector3d& dir, const Eigen::Vector3d& sun, double y) {
+// `relative`: sigma = y (plain relative residuals) instead of eq. 10's y / log y.
+inline SkyPoint MakeSkyPoint(const Eigen::Vector3d& dir, const Eigen::Vector3d& sun, double y,
+                             bool relative = false) {
   const double cos_xi = std::max(dir.z(), 0.01);
   const double cos_g = std::clamp(dir.dot(sun), -1.0, 1.0);
   const double gamma = std::max(std::acos(cos_g), 1e-6);
-  return {1.0 / cos_xi, std::log(gamma), cos_g * cos_g, y, std::log(y) / y};
+  return {1.0 / cos_xi, std::log(gamma), cos_g * cos_g, y, relative ? 1.0 / y : std::log(y) / y};
 }
 
 // Eq. 9 at a precomputed point, and optionally its gradient with respect to the parameters.
@@ -50,17 +52,20 @@ inline double SkyModelAt(const double* p, const SkyPoint& q, double* grad) {
 }
 
 // Residual i = (y_i - Ls_i) / sigma_i with sigma_i = y_i / log y_i (eq. 10); one block of
-// seven parameters {Lz, a, b, c, d, e, h}.
+// seven parameters {Lz, a, b, c, d, e, h}. With `fixed_h` (Perez et al. 1993's five-parameter
+// form) the block has six parameters {Lz, a, b, c, d, e} and h = 1.
 class SkyCost : public ceres::CostFunction {
  public:
-  explicit SkyCost(std::vector<SkyPoint> points) : points_(std::move(points)) {
+  explicit SkyCost(std::vector<SkyPoint> points, bool fixed_h = false)
+      : points_(std::move(points)), n_(fixed_h ? kNumSkyParams - 1 : kNumSkyParams) {
     set_num_residuals(static_cast<int>(points_.size()));
-    mutable_parameter_block_sizes()->push_back(kNumSkyParams);
+    mutable_parameter_block_sizes()->push_back(n_);
   }
 
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override {
-    const double* p = parameters[0];
+    double p[kNumSkyParams] = {0, 0, 0, 0, 0, 0, 1};
+    std::copy(parameters[0], parameters[0] + n_, p);
     double* jac = jacobians ? jacobians[0] : nullptr;
     double grad[kNumSkyParams];
     for (size_t i = 0; i < points_.size(); ++i) {
@@ -69,7 +74,7 @@ class SkyCost : public ceres::CostFunction {
       residuals[i] = q.s * (q.y - l);
       if (!std::isfinite(residuals[i])) return false;
       if (jac) {
-        for (int k = 0; k < kNumSkyParams; ++k) jac[i * kNumSkyParams + k] = -q.s * grad[k];
+        for (int k = 0; k < n_; ++k) jac[i * n_ + k] = -q.s * grad[k];
       }
     }
     return true;
@@ -77,6 +82,7 @@ class SkyCost : public ceres::CostFunction {
 
  private:
   std::vector<SkyPoint> points_;
+  int n_;
 };
 
 }  // namespace rouen::internal

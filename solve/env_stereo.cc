@@ -1,0 +1,731 @@
+#include "solve/env_stereo.h"
+
+#include <ceres/autodiff_cost_function.h>
+#include <ceres/cost_function.h>
+#include <ceres/loss_function.h>
+#include <ceres/problem.h>
+#include <ceres/solver.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <string>
+
+#include "core/error.h"
+
+namespace rouen {
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr int kNumParams = 8;  // k_sky (3), two free k_sun, n (3)
+
+// Eq. 18's smooth clamp of x = n.l for a unit normal: x when x >= 0, else (e^{alpha x} - 1) /
+// alpha; and its derivative (1 at 0 from both sides).
+inline double SoftCos(double x, double alpha, double* deriv) {
+  if (x >= 0) {
+    *deriv = 1;
+    return x;
+  }
+  if (alpha * x < -40) {
+    *deriv = 0;
+    return -1 / alpha;
+  }
+  const double e = std::exp(alpha * x);
+  *deriv = e;
+  return (e - 1) / alpha;
+}
+
+// The sky of one time as a quadrature over the upper hemisphere: direction and L x dOmega.
+struct SkyQuad {
+  std::vector<Eigen::Vector3d> dir;
+  std::vector<Eigen::Vector3d> weight;
+  Eigen::Vector3d horizontal = Eigen::Vector3d::Zero();  // E on an unoccluded level plane
+  Eigen::Vector3d ground = Eigen::Vector3d::Zero();      // ground radiance (kPlane, albedo > 0)
+};
+
+SkyQuad MakeSkyQuad(const EnvLighting& l, const EnvStereoOptions& o) {
+  SkyQuad q;
+  const int ne = o.sky_quadrature, na = 2 * o.sky_quadrature;
+  const double del = kPi / 2 / ne, daz = 2 * kPi / na;
+  for (int i = 0; i < ne; ++i) {
+    const double el = (i + 0.5) * del;
+    // Exact solid angle of the ring cell.
+    const double domega = daz * (std::sin((i + 1) * del) - std::sin(i * del));
+    for (int j = 0; j < na; ++j) {
+      const double az = (j + 0.5) * daz;
+      const Eigen::Vector3d d(std::cos(el) * std::sin(az), std::cos(el) * std::cos(az),
+                              std::sin(el));
+      const Eigen::Vector3d w = l.sky.Radiance(d) * domega;
+      q.dir.push_back(d);
+      q.weight.push_back(w);
+      q.horizontal += w * d.z();
+    }
+  }
+  if (o.sky_irradiance == EnvSkyIrradiance::kPlane && o.ground_albedo > 0) {
+    const Eigen::Vector3d sun_h =
+        l.sun_radiance * l.sun_solid_angle_sr * std::max(0.0, l.sun_dir.normalized().z());
+    q.ground = o.ground_albedo / kPi * (sun_h + q.horizontal);
+  }
+  return q;
+}
+
+// E_sky per channel for unit normal nh, and (optionally) its gradient d E_c / d nh (rows).
+Eigen::Vector3d SkyIrradiance(const SkyQuad& q, const EnvStereoOptions& o,
+                              const Eigen::Vector3d& nh, Eigen::Matrix3d* grad) {
+  if (grad) grad->setZero();
+  if (o.sky_irradiance == EnvSkyIrradiance::kAmbient) return q.horizontal;
+  Eigen::Vector3d e = Eigen::Vector3d::Zero();
+  for (size_t k = 0; k < q.dir.size(); ++k) {
+    double ds;
+    const double s = SoftCos(nh.dot(q.dir[k]), o.alpha, &ds);
+    e += q.weight[k] * s;
+    if (grad && ds != 0) *grad += (q.weight[k] * ds) * q.dir[k].transpose();
+  }
+  if (q.ground.any()) {
+    // Flat Lambertian ground filling the lower hemisphere: E = L_g pi (1 - n_z) / 2.
+    e += q.ground * kPi * (1 - nh.z()) / 2;
+    if (grad) grad->col(2) -= q.ground * kPi / 2;
+  }
+  return e;
+}
+
+struct TimeData {
+  const SkyQuad* quad = nullptr;
+  Eigen::Vector3d I, inv_sigma, e_sun, sky_mean;
+  Eigen::Vector3d l;  // unit sun direction
+};
+
+// Free parameter index of k_sun for each channel (-1: the fixed one).
+std::array<int, 3> SunIndex(int fixed) {
+  std::array<int, 3> idx{};
+  int next = 3;
+  for (int c = 0; c < 3; ++c) idx[c] = c == fixed ? -1 : next++;
+  return idx;
+}
+
+// Eq. 18 residuals (model - I) / sigma for one region over all times, analytic Jacobians.
+// Blocks: x (8) and, when with_fraction, f (1).
+class RegionCost : public ceres::CostFunction {
+ public:
+  RegionCost(const std::vector<TimeData>* data, const EnvStereoOptions* o, bool with_fraction)
+      : data_(data), o_(o), sun_idx_(SunIndex(o->fixed_channel)) {
+    set_num_residuals(3 * static_cast<int>(data->size()));
+    mutable_parameter_block_sizes()->push_back(kNumParams);
+    if (with_fraction) mutable_parameter_block_sizes()->push_back(1);
+    k_fix_ = o->fixed_rho_sun / kPi;
+  }
+
+  bool Evaluate(double const* const* p, double* residuals, double** jac) const override {
+    const double* x = p[0];
+    const bool with_f = parameter_block_sizes().size() > 1;
+    const double f = with_f ? p[1][0] : 0.0;
+    const Eigen::Vector3d n(x[5], x[6], x[7]);
+    const double nn = std::max(n.norm(), 1e-12);
+    const Eigen::Vector3d nh = n / nn;
+    const Eigen::Matrix3d dnh_dn = (Eigen::Matrix3d::Identity() - nh * nh.transpose()) / nn;
+    Eigen::Vector3d ksun;
+    for (int c = 0; c < 3; ++c) ksun[c] = sun_idx_[c] < 0 ? k_fix_ : x[sun_idx_[c]];
+    const double alpha = o_->alpha;
+    for (size_t t = 0; t < data_->size(); ++t) {
+      const TimeData& d = (*data_)[t];
+      Eigen::Matrix3d gsky;
+      const Eigen::Vector3d esky = SkyIrradiance(*d.quad, *o_, nh, jac ? &gsky : nullptr);
+      // S(n, l) and dS/dn (eq. 18).
+      const double u = nh.dot(d.l);
+      double s;
+      Eigen::Vector3d ds_dn;
+      if (u >= 0) {
+        s = n.dot(d.l);
+        ds_dn = d.l;
+      } else if (alpha * u < -40) {
+        s = -nn / alpha;
+        ds_dn = -nh / alpha;
+      } else {
+        const double e = std::exp(alpha * u);
+        s = nn * (e - 1) / alpha;
+        ds_dn = nh * (e - 1) / alpha + e * (d.l - u * nh);
+      }
+      for (int c = 0; c < 3; ++c) {
+        const int i = 3 * static_cast<int>(t) + c;
+        const double w = d.inv_sigma[c];
+        const double m = x[c] * esky[c] + ksun[c] * d.e_sun[c] * s + f * d.sky_mean[c];
+        residuals[i] = (m - d.I[c]) * w;
+        if (!jac) continue;
+        if (jac[0]) {
+          double* J = jac[0] + i * kNumParams;
+          std::fill(J, J + kNumParams, 0.0);
+          J[c] = esky[c] * w;
+          if (sun_idx_[c] >= 0) J[sun_idx_[c]] = d.e_sun[c] * s * w;
+          const Eigen::RowVector3d gn =
+              (x[c] * gsky.row(c) * dnh_dn + ksun[c] * d.e_sun[c] * ds_dn.transpose()) * w;
+          J[5] = gn[0];
+          J[6] = gn[1];
+          J[7] = gn[2];
+        }
+        if (with_f && jac[1]) jac[1][i] = d.sky_mean[c] * w;
+      }
+    }
+    return true;
+  }
+
+ private:
+  const std::vector<TimeData>* data_;
+  const EnvStereoOptions* o_;
+  std::array<int, 3> sun_idx_;
+  double k_fix_ = 0;
+};
+
+// Smoothing between adjacent regions: w (n_i / |n_i| - n_j / |n_j|).
+struct SmoothCost {
+  double w;
+  template <typename T>
+  bool operator()(const T* a, const T* b, T* r) const {
+    using std::sqrt;
+    const T na = sqrt(a[5] * a[5] + a[6] * a[6] + a[7] * a[7]) + T(1e-12);
+    const T nb = sqrt(b[5] * b[5] + b[6] * b[6] + b[7] * b[7]) + T(1e-12);
+    for (int k = 0; k < 3; ++k) r[k] = T(w) * (a[5 + k] / na - b[5 + k] / nb);
+    return true;
+  }
+};
+
+Eigen::Vector3d RegionCentre(const EnvironmentMap& m, int region) {
+  double el0, el1, az0, az1;
+  m.RegionBounds(region, &el0, &el1, &az0, &az1);
+  const double el = (el0 + el1) / 2, az = (az0 + az1) / 2;
+  return Eigen::Vector3d(std::cos(el) * std::sin(az), std::cos(el) * std::cos(az), std::sin(el));
+}
+
+EnvOptions GridOptions(int bands_below, int bands_above, int sectors, int sky_fill_samples) {
+  EnvOptions eo;
+  eo.bands_below = bands_below;
+  eo.bands_above = bands_above;
+  eo.sectors = sectors;
+  eo.sky_fill_samples = sky_fill_samples;
+  return eo;
+}
+
+void CheckLighting(const EnvLighting& l, const std::string& what) {
+  if (!l.sun_dir.allFinite() || std::abs(l.sun_dir.norm() - 1) > 1e-3) {
+    throw Error(what + ": the sun direction is not a unit vector");
+  }
+  if (!l.sun_radiance.allFinite() || l.sun_radiance.minCoeff() < 0) {
+    throw Error(what + ": the sun radiance is negative or not finite");
+  }
+  if (!(l.sun_solid_angle_sr > 0) || !std::isfinite(l.sun_solid_angle_sr)) {
+    throw Error(what + ": the sun's solid angle must be > 0 sr");
+  }
+  const Eigen::Vector3d z = l.sky.Radiance(Eigen::Vector3d::UnitZ());
+  if (!z.allFinite() || z.minCoeff() < 0) {
+    throw Error(what + ": the sky model gives a negative or non-finite zenith radiance");
+  }
+}
+
+double Percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0;
+  const size_t k = static_cast<size_t>(std::clamp(p, 0.0, 1.0) * (v.size() - 1));
+  std::nth_element(v.begin(), v.begin() + k, v.end());
+  return v[k];
+}
+
+// Sky-only fit for a fixed unit normal: k_sky per channel by weighted linear least squares.
+void FitSkyOnly(const std::vector<TimeData>& data, const EnvStereoOptions& o,
+                const Eigen::Vector3d& nh, EnvRegionFit* fit) {
+  Eigen::Vector3d num = Eigen::Vector3d::Zero(), den = Eigen::Vector3d::Zero();
+  std::vector<Eigen::Vector3d> esky;
+  for (const TimeData& d : data) {
+    esky.push_back(SkyIrradiance(*d.quad, o, nh, nullptr));
+    for (int c = 0; c < 3; ++c) {
+      const double w2 = d.inv_sigma[c] * d.inv_sigma[c];
+      num[c] += esky.back()[c] * d.I[c] * w2;
+      den[c] += esky.back()[c] * esky.back()[c] * w2;
+    }
+  }
+  Eigen::Vector3d k;
+  for (int c = 0; c < 3; ++c) k[c] = den[c] > 0 ? std::max(0.0, num[c] / den[c]) : 0.0;
+  double ss = 0;
+  for (size_t t = 0; t < data.size(); ++t) {
+    for (int c = 0; c < 3; ++c) {
+      const double r = (k[c] * esky[t][c] - data[t].I[c]) * data[t].inv_sigma[c];
+      ss += r * r;
+    }
+  }
+  fit->kind = EnvRegionKind::kSkyOnly;
+  fit->normal = nh;
+  fit->rho_sky = kPi * k;
+  fit->rho_sun.setZero();
+  fit->sky_fraction = 0;
+  fit->rel_rms = std::sqrt(ss / (3.0 * data.size()));
+}
+
+void SolverOptions(const EnvStereoOptions& o, ceres::Solver::Options* so) {
+  so->minimizer_type = ceres::TRUST_REGION;
+  so->trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+  so->linear_solver_type = ceres::DENSE_QR;
+  so->max_num_iterations = o.max_iterations;
+  so->function_tolerance = 1e-12;
+  so->gradient_tolerance = 1e-14;
+  so->parameter_tolerance = 1e-12;
+  so->num_threads = 1;
+  so->logging_type = ceres::SILENT;
+  so->minimizer_progress_to_stdout = false;
+}
+
+// The fitted parameters of a landscape region (kept for the smoothing refinement).
+struct RegionState {
+  std::vector<TimeData> data;
+  double x[kNumParams] = {0};
+  double f = 0;
+  bool with_fraction = false;
+};
+
+void StateToFit(const RegionState& s, const EnvStereoOptions& o, EnvRegionFit* fit) {
+  const std::array<int, 3> idx = SunIndex(o.fixed_channel);
+  const Eigen::Vector3d n(s.x[5], s.x[6], s.x[7]);
+  const double nn = std::max(n.norm(), 1e-12);
+  fit->kind = EnvRegionKind::kLandscape;
+  fit->normal = n / nn;
+  for (int c = 0; c < 3; ++c) {
+    fit->rho_sky[c] = kPi * s.x[c];
+    fit->rho_sun[c] = kPi * nn * (idx[c] < 0 ? o.fixed_rho_sun / kPi : s.x[idx[c]]);
+  }
+  fit->sky_fraction = s.with_fraction ? s.f : 0;
+  fit->sunlit_times = 0;
+  for (const TimeData& d : s.data) fit->sunlit_times += fit->normal.dot(d.l) > 0;
+}
+
+double Cost(const RegionState& s, const EnvStereoOptions& o) {
+  RegionCost cost(&s.data, &o, s.with_fraction);
+  std::vector<double> r(3 * s.data.size());
+  const double* blocks[2] = {s.x, &s.f};
+  cost.Evaluate(blocks, r.data(), nullptr);
+  double ss = 0;
+  for (double v : r) ss += v * v;
+  return ss;
+}
+
+Eigen::Vector3d PredictWithQuad(const EnvRegionFit& fit, const EnvStereoOptions& o,
+                                const EnvLighting& l, const SkyQuad& q,
+                                const Eigen::Vector3d& sky_mean) {
+  Eigen::Vector3d out = Eigen::Vector3d::Zero();
+  switch (fit.kind) {
+    case EnvRegionKind::kSky:
+      out = sky_mean;
+      break;
+    case EnvRegionKind::kUnobserved:
+      break;
+    case EnvRegionKind::kLandscape:
+    case EnvRegionKind::kSkyOnly: {
+      const Eigen::Vector3d esky = SkyIrradiance(q, o, fit.normal, nullptr);
+      const double cos_sun = std::max(0.0, fit.normal.dot(l.sun_dir.normalized()));
+      out = (fit.rho_sky.cwiseProduct(esky) +
+             fit.rho_sun.cwiseProduct(l.sun_radiance) * l.sun_solid_angle_sr * cos_sun) /
+                kPi +
+            fit.sky_fraction * sky_mean;
+      break;
+    }
+  }
+  for (int c = 0; c < 3; ++c) {
+    if (!std::isfinite(out[c]) || out[c] < 0) out[c] = 0;
+  }
+  return out;
+}
+
+}  // namespace
+
+void EnvStereoOptions::Validate() const {
+  if (!(alpha >= 10) || !std::isfinite(alpha)) {
+    throw Error("EnvStereoOptions: alpha must be a large positive constant (>= 10; the paper "
+                "uses 1000)");
+  }
+  if (fixed_channel < 0 || fixed_channel > 2) {
+    throw Error("EnvStereoOptions: fixed_channel must be 0, 1 or 2");
+  }
+  if (!(fixed_rho_sun > 0) || !std::isfinite(fixed_rho_sun)) {
+    throw Error("EnvStereoOptions: fixed_rho_sun must be > 0");
+  }
+  if (!(ground_albedo >= 0 && ground_albedo <= 1)) {
+    throw Error("EnvStereoOptions: ground_albedo must be in [0, 1]");
+  }
+  if (sky_quadrature < 2 || sky_quadrature > 200) {
+    throw Error("EnvStereoOptions: sky_quadrature must be in 2..200");
+  }
+  if (min_times < 3) {
+    throw Error("EnvStereoOptions: min_times must be >= 3 (8 unknowns, 3 equations per time)");
+  }
+  if (!(sky_match_tolerance >= 0) || !std::isfinite(sky_match_tolerance)) {
+    throw Error("EnvStereoOptions: sky_match_tolerance must be >= 0");
+  }
+  if (!(fallback_rel_error > 0) || !std::isfinite(fallback_rel_error)) {
+    throw Error("EnvStereoOptions: fallback_rel_error must be > 0");
+  }
+  if (!(sigma_relative >= 0 && sigma_relative <= 1)) {
+    throw Error("EnvStereoOptions: sigma_relative must be in [0, 1]");
+  }
+  if (!(max_albedo > 0) || !std::isfinite(max_albedo)) {
+    throw Error("EnvStereoOptions: max_albedo must be > 0");
+  }
+  if (!(smoothing_weight >= 0) || !std::isfinite(smoothing_weight)) {
+    throw Error("EnvStereoOptions: smoothing_weight must be >= 0");
+  }
+  if (max_iterations < 1) throw Error("EnvStereoOptions: max_iterations must be >= 1");
+  if (starts < 1 || starts > 3) throw Error("EnvStereoOptions: starts must be 1, 2 or 3");
+}
+
+const char* EnvRegionKindName(EnvRegionKind kind) {
+  switch (kind) {
+    case EnvRegionKind::kSky:
+      return "sky";
+    case EnvRegionKind::kLandscape:
+      return "landscape";
+    case EnvRegionKind::kSkyOnly:
+      return "sky_only";
+    case EnvRegionKind::kUnobserved:
+      return "unobserved";
+  }
+  return "?";
+}
+
+std::string EnvStereoSummary::BriefReport() const {
+  char buf[320];
+  std::snprintf(buf, sizeof buf,
+                "%d times; regions: %d landscape, %d sky-only (%d bad fit, %d never lit), %d sky, "
+                "%d unobserved; rel. residual median %.4f p90 %.4f%s; %.2f s",
+                times, regions_landscape, regions_sky_only, fallback_bad_fit, fallback_never_lit,
+                regions_sky, regions_unobserved, rel_rms_median, rel_rms_p90,
+                underdetermined ? " (underdetermined: sky-only)" : "", seconds);
+  return buf;
+}
+
+Eigen::Vector3d EnvSkyIrradianceAt(const EnvLighting& lighting, const EnvStereoOptions& options,
+                                   const Eigen::Vector3d& normal) {
+  options.Validate();
+  const SkyQuad q = MakeSkyQuad(lighting, options);
+  return SkyIrradiance(q, options, normal.normalized(), nullptr);
+}
+
+// §5.2, eq. 18: per-region photometric stereo under the sun and the sky.
+EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
+                               const EnvStereoOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  options.Validate();
+  if (per_time.empty()) throw Error("environment stereo: no observation given");
+  const EnvironmentMap& m0 = per_time.front().env;
+  for (size_t t = 0; t < per_time.size(); ++t) {
+    const std::string what = "environment stereo: observation " + std::to_string(t);
+    const EnvironmentMap& m = per_time[t].env;
+    try {
+      m.Validate();
+    } catch (const Error& e) {
+      throw Error(what + ": " + e.what());
+    }
+    if (m.bands_below != m0.bands_below || m.bands_above != m0.bands_above ||
+        m.sectors != m0.sectors || m.num_layers() != m0.num_layers()) {
+      throw Error(what + ": its environment map's regions or layers differ from observation 0's");
+    }
+    CheckLighting(per_time[t].lighting, what);
+  }
+  const int T = static_cast<int>(per_time.size());
+  const int nreg = m0.num_regions(), L = m0.num_layers();
+  const int first_above = m0.bands_below * m0.sectors;
+
+  EnvStereoResult res;
+  res.bands_below = m0.bands_below;
+  res.bands_above = m0.bands_above;
+  res.sectors = m0.sectors;
+  res.layer_z = m0.layer_z;
+  res.source = m0.source;
+  res.options = options;
+  res.regions.assign(static_cast<size_t>(nreg) * L, EnvRegionFit());
+  res.summary.times = T;
+  res.summary.underdetermined = T < options.min_times;
+
+  std::vector<SkyQuad> quads;
+  std::vector<EnvironmentMap> sky_means;  // per time: the sky model averaged per region
+  const EnvOptions grid = GridOptions(m0.bands_below, m0.bands_above, m0.sectors, 8);
+  for (const EnvObservation& o : per_time) {
+    quads.push_back(MakeSkyQuad(o.lighting, options));
+    sky_means.push_back(EnvironmentMap::FromSky(grid, o.lighting.sky, Eigen::Vector3d::Zero()));
+  }
+
+  const size_t total = res.regions.size();
+  std::vector<RegionState> states(total);
+  std::vector<int> fallback_reason(total, 0);  // 1 bad fit, 2 never lit
+  tbb::parallel_for(size_t{0}, total, [&](size_t gi) {
+    const int r = static_cast<int>(gi % nreg);
+    const bool above = r >= first_above;
+    EnvRegionFit& fit = res.regions[gi];
+    RegionState& st = states[gi];
+    // Data and classification.
+    bool all_zero = true, all_sky_filled = above;
+    double sky_err_sum = 0;
+    int sky_err_n = 0;
+    Eigen::Vector3d mean_I = Eigen::Vector3d::Zero();
+    for (int t = 0; t < T; ++t) {
+      const EnvironmentMap& m = per_time[t].env;
+      const Eigen::Vector3d I = m.radiance[gi];
+      all_zero = all_zero && I.isZero(0);
+      mean_I += I / T;
+      if (above) {
+        all_sky_filled = all_sky_filled && m.source[gi] == EnvRegionSource::kSkyModel;
+        if (m.source[gi] == EnvRegionSource::kObserved) {
+          const Eigen::Vector3d S = sky_means[t].radiance[r];
+          double e = 0;
+          for (int c = 0; c < 3; ++c) {
+            e = std::max(e, std::abs(I[c] - S[c]) / std::max(S[c], 1e-300));
+          }
+          sky_err_sum += e;
+          ++sky_err_n;
+        }
+      }
+    }
+    if (above && (all_sky_filled ||
+                  (sky_err_n > 0 && sky_err_sum / sky_err_n <= options.sky_match_tolerance))) {
+      fit.kind = EnvRegionKind::kSky;
+      fit.sky_fraction = 1;
+      return;
+    }
+    if (all_zero) {
+      fit.kind = EnvRegionKind::kUnobserved;
+      return;
+    }
+    st.with_fraction = above && options.fit_sky_fraction;
+    for (int t = 0; t < T; ++t) {
+      TimeData d;
+      d.quad = &quads[t];
+      d.I = per_time[t].env.radiance[gi];
+      for (int c = 0; c < 3; ++c) {
+        const double sigma =
+            options.sigma_relative * d.I[c] + (1 - options.sigma_relative) * mean_I[c];
+        d.inv_sigma[c] = sigma > 0 ? 1 / sigma : 0.0;
+      }
+      const EnvLighting& l = per_time[t].lighting;
+      d.e_sun = l.sun_radiance * l.sun_solid_angle_sr;
+      d.l = l.sun_dir.normalized();
+      d.sky_mean = st.with_fraction ? sky_means[t].radiance[r] : Eigen::Vector3d::Zero();
+      st.data.push_back(d);
+    }
+    const Eigen::Vector3d view = RegionCentre(m0, r);
+    if (res.summary.underdetermined) {
+      FitSkyOnly(st.data, options, -view, &fit);
+      return;
+    }
+    // Start values (§5.2): rho_sky = mean radiance / mean sky flux magnitude, rho_sun = mean
+    // radiance / mean sun irradiance; the fixed rho_sun component sets |n|.
+    Eigen::Vector3d mean_esky = Eigen::Vector3d::Zero(), mean_esun = Eigen::Vector3d::Zero();
+    for (const TimeData& d : st.data) {
+      mean_esky += d.quad->horizontal / T;
+      mean_esun += d.e_sun / T;
+    }
+    const int fc = options.fixed_channel;
+    const double k_fix = options.fixed_rho_sun / kPi;
+    Eigen::Vector3d ksky0, ksun0;
+    for (int c = 0; c < 3; ++c) {
+      ksky0[c] = mean_esky[c] > 0 ? mean_I[c] / mean_esky[c] : 0;
+      ksun0[c] = mean_esun[c] > 0 ? mean_I[c] / mean_esun[c] : 0;
+    }
+    const double scale = ksun0[fc] > 0 ? ksun0[fc] / k_fix : 1.0;
+    Eigen::Vector3d level(-view.x(), -view.y(), 0);
+    if (level.norm() < 1e-6) level = Eigen::Vector3d::UnitY();
+    const Eigen::Vector3d starts[3] = {-view, Eigen::Vector3d::UnitZ(), level.normalized()};
+    const std::array<int, 3> idx = SunIndex(fc);
+    ceres::Solver::Options so;
+    SolverOptions(options, &so);
+    // The best start; a normal facing the viewer (n . d < 0: the patch is seen from its
+    // front) is preferred over any that faces away.
+    double best = std::numeric_limits<double>::infinity();
+    bool best_facing = false;
+    RegionState best_state;
+    int best_iter = 0;
+    for (int s = 0; s < options.starts; ++s) {
+      RegionState trial;
+      trial.data = st.data;
+      trial.with_fraction = st.with_fraction;
+      for (int c = 0; c < 3; ++c) {
+        trial.x[c] = ksky0[c];
+        if (idx[c] >= 0) trial.x[idx[c]] = ksun0[fc] > 0 ? ksun0[c] / scale : k_fix;
+      }
+      for (int k = 0; k < 3; ++k) trial.x[5 + k] = starts[s][k] * scale;
+      trial.f = 0.5;
+      ceres::Problem::Options po;
+      po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
+      ceres::Problem problem(po);
+      auto* cost = new RegionCost(&trial.data, &options, trial.with_fraction);
+      if (trial.with_fraction) {
+        problem.AddResidualBlock(cost, nullptr, trial.x, &trial.f);
+        problem.SetParameterLowerBound(&trial.f, 0, 0.0);
+        problem.SetParameterUpperBound(&trial.f, 0, 1.0);
+      } else {
+        problem.AddResidualBlock(cost, nullptr, trial.x);
+      }
+      for (int k = 0; k < 5; ++k) problem.SetParameterLowerBound(trial.x, k, 0.0);
+      ceres::Solver::Summary sum;
+      ceres::Solve(so, &problem, &sum);
+      const double c = Cost(trial, options);
+      const Eigen::Vector3d tn(trial.x[5], trial.x[6], trial.x[7]);
+      const bool facing = tn.dot(view) < 0;
+      if (std::isfinite(c) && ((facing && !best_facing) || (facing == best_facing && c < best))) {
+        best_facing = facing;
+        best = c;
+        best_state = trial;
+        best_iter = static_cast<int>(sum.iterations.size());
+      }
+    }
+    if (!std::isfinite(best)) {
+      FitSkyOnly(st.data, options, -view, &fit);
+      fallback_reason[gi] = 1;
+      return;
+    }
+    std::copy(best_state.x, best_state.x + kNumParams, st.x);
+    st.f = best_state.f;
+    StateToFit(st, options, &fit);
+    fit.iterations = best_iter;
+    fit.rel_rms = std::sqrt(best / (3.0 * T));
+    // Sky-only fallback (§5.2): a bad fit with a normal pointing away from the viewer, or a
+    // normal no training sun lit (its solar term and direction are then unconstrained).
+    const bool away = fit.normal.dot(view) > 0;
+    const bool implausible = std::max(fit.rho_sun.maxCoeff(), fit.rho_sky.maxCoeff()) >
+                             options.max_albedo;
+    if ((fit.rel_rms > options.fallback_rel_error && away) || implausible ||
+        fit.sunlit_times == 0) {
+      fallback_reason[gi] = fit.sunlit_times == 0 ? 2 : 1;
+      FitSkyOnly(st.data, options, away ? Eigen::Vector3d(-view) : fit.normal, &fit);
+    }
+  });
+
+  // Optional smoothing between adjacent landscape regions of a layer, all solved together.
+  if (options.smoothing_weight > 0 && !res.summary.underdetermined) {
+    ceres::Problem::Options po;
+    po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
+    ceres::Problem problem(po);
+    auto land = [&](size_t gi) { return res.regions[gi].kind == EnvRegionKind::kLandscape; };
+    for (size_t gi = 0; gi < total; ++gi) {
+      if (!land(gi)) continue;
+      RegionState& st = states[gi];
+      auto* cost = new RegionCost(&st.data, &options, st.with_fraction);
+      if (st.with_fraction) {
+        problem.AddResidualBlock(cost, nullptr, st.x, &st.f);
+        problem.SetParameterLowerBound(&st.f, 0, 0.0);
+        problem.SetParameterUpperBound(&st.f, 0, 1.0);
+      } else {
+        problem.AddResidualBlock(cost, nullptr, st.x);
+      }
+      for (int k = 0; k < 5; ++k) problem.SetParameterLowerBound(st.x, k, 0.0);
+    }
+    const int S = m0.sectors;
+    for (size_t gi = 0; gi < total; ++gi) {
+      if (!land(gi)) continue;
+      const int r = static_cast<int>(gi % nreg);
+      const size_t base = gi - r;
+      const int band = r / S, sec = r % S;
+      const size_t east = base + band * S + (sec + 1) % S;
+      const size_t up = base + (band + 1) * S + sec;
+      // Not across the horizon (ground below, skyline above: a real edge); a Huber loss
+      // (linear beyond ~0.2 rad of normal difference) keeps other edges.
+      const bool up_ok = band + 1 < m0.num_bands() && band + 1 != m0.bands_below;
+      for (size_t gj : {east, up}) {
+        if (gj == gi || (gj == up && !up_ok) || !land(gj)) continue;
+        problem.AddResidualBlock(
+            new ceres::AutoDiffCostFunction<SmoothCost, 3, kNumParams, kNumParams>(
+                new SmoothCost{options.smoothing_weight}),
+            new ceres::HuberLoss(0.2 * options.smoothing_weight), states[gi].x, states[gj].x);
+      }
+    }
+    if (problem.NumResidualBlocks() > 0) {
+      ceres::Solver::Options so;
+      SolverOptions(options, &so);
+      so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+      if (!ceres::IsSparseLinearAlgebraLibraryTypeAvailable(
+              so.sparse_linear_algebra_library_type)) {
+        so.linear_solver_type = ceres::CGNR;
+      }
+      so.num_threads = 2;
+      ceres::Solver::Summary sum;
+      ceres::Solve(so, &problem, &sum);
+      for (size_t gi = 0; gi < total; ++gi) {
+        if (!land(gi)) continue;
+        EnvRegionFit& fit = res.regions[gi];
+        const int iters = fit.iterations;
+        StateToFit(states[gi], options, &fit);
+        fit.iterations = iters + static_cast<int>(sum.iterations.size());
+        fit.rel_rms = std::sqrt(Cost(states[gi], options) / (3.0 * T));
+      }
+    }
+  }
+
+  std::vector<double> rms;
+  for (size_t gi = 0; gi < total; ++gi) {
+    const EnvRegionFit& fit = res.regions[gi];
+    switch (fit.kind) {
+      case EnvRegionKind::kSky:
+        ++res.summary.regions_sky;
+        break;
+      case EnvRegionKind::kLandscape:
+        ++res.summary.regions_landscape;
+        rms.push_back(fit.rel_rms);
+        break;
+      case EnvRegionKind::kSkyOnly:
+        ++res.summary.regions_sky_only;
+        break;
+      case EnvRegionKind::kUnobserved:
+        ++res.summary.regions_unobserved;
+        break;
+    }
+    res.summary.fallback_bad_fit += fallback_reason[gi] == 1;
+    res.summary.fallback_never_lit += fallback_reason[gi] == 2;
+  }
+  res.summary.rel_rms_median = Percentile(rms, 0.5);
+  res.summary.rel_rms_p90 = Percentile(rms, 0.9);
+  res.summary.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return res;
+}
+
+Eigen::Vector3d PredictRegionRadiance(const EnvRegionFit& fit, const EnvStereoOptions& options,
+                                      const EnvLighting& lighting,
+                                      const Eigen::Vector3d& sky_mean) {
+  if (fit.kind == EnvRegionKind::kSky) return sky_mean;
+  if (fit.kind == EnvRegionKind::kUnobserved) return Eigen::Vector3d::Zero();
+  options.Validate();
+  const SkyQuad q = MakeSkyQuad(lighting, options);
+  return PredictWithQuad(fit, options, lighting, q, sky_mean);
+}
+
+// §5.2: eq. 17 (the exact clamp) with the recovered normals and albedos at a novel time.
+EnvironmentMap PredictEnvironment(const EnvStereoResult& result, const EnvLighting& lighting,
+                                  int sky_fill_samples) {
+  result.options.Validate();
+  CheckLighting(lighting, "environment prediction");
+  const EnvOptions grid =
+      GridOptions(result.bands_below, result.bands_above, result.sectors, sky_fill_samples);
+  grid.Validate();
+  const EnvironmentMap sky = EnvironmentMap::FromSky(grid, lighting.sky, Eigen::Vector3d::Zero());
+  const int nreg = sky.num_regions();
+  const int L = static_cast<int>(result.layer_z.size());
+  if (result.regions.size() != static_cast<size_t>(nreg) * L ||
+      result.source.size() != result.regions.size()) {
+    throw Error("environment prediction: the stereo result's regions do not match its grid");
+  }
+  const SkyQuad q = MakeSkyQuad(lighting, result.options);
+  EnvironmentMap m;
+  m.bands_below = result.bands_below;
+  m.bands_above = result.bands_above;
+  m.sectors = result.sectors;
+  m.layer_z = result.layer_z;
+  m.radiance.resize(result.regions.size());
+  m.pixel_count.assign(result.regions.size(), 0);
+  m.source = result.source;
+  for (size_t gi = 0; gi < result.regions.size(); ++gi) {
+    const int r = static_cast<int>(gi % nreg);
+    m.radiance[gi] = PredictWithQuad(result.regions[gi], result.options, lighting, q,
+                                     sky.radiance[r]);
+  }
+  m.Validate();
+  return m;
+}
+
+}  // namespace rouen

@@ -1,0 +1,73 @@
+// Lighting at a time of day that was not captured (Yu & Malik 1998 §5 and §6.3): the sun's
+// position from the site and time; its radiance from the measured sun radiances against air
+// mass; the sky interpolated between the measured skies by sun position (§5.1) and, for a sun
+// lower than every measured one, dimmed and reddened through the extra air mass; the environment from its recovered
+// per-region normals and albedos (§5.2); optionally part of the sunlight blocked by a cloud
+// layer, blending towards an overcast sky (§6.3).
+#pragma once
+
+#include <Eigen/Core>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/solar.h"
+#include "core/time.h"
+#include "solve/env_stereo.h"
+#include "solve/irradiance.h"
+#include "solve/sky_time.h"
+
+namespace rouen {
+
+struct RelightOptions {
+  // Blocked-sunlight fraction (§6.3): 0 a clear sky, 1 fully overcast.
+  double pbs = 0;
+  // Colour of the overcast sky (any positive RGB; only its ratios matter). Usually near grey.
+  Eigen::Vector3d overcast_colour = Eigen::Vector3d::Ones();
+  // Brightness of the overcast sky: its horizontal irradiance as a multiple of the clear sky's
+  // (sky only, no sun) at the same time.
+  double overcast_brightness = 1.0;
+  SkyInterpOptions sky;
+  EnvStereoOptions env;
+
+  void Validate() const;  // throws rouen::Error naming the bad field
+};
+
+struct RelightSummary {
+  double sun_elevation_deg = 0;
+  double air_mass = 0;             // Kasten-Young, of the new sun
+  double reference_air_mass = 0;   // inverse-distance weighted over the measured times
+  std::vector<double> sky_weights;  // per measured time (§5.1)
+  double sky_refit_rel_error_p90 = 0;
+  bool sun_from_extinction = false;  // false: interpolated sun radiance (too few air masses)
+  // > 0 when the sun is lower than every measured one: the sky was dimmed and reddened from
+  // this air mass (the lowest measured sun's) to the new sun's (§5.1 sunrise/sunset).
+  double extinction_from_air_mass = 0;
+  std::string Describe() const;
+};
+
+// Fitted once from the measured times, then asked for any number of times.
+class LightingPredictor {
+ public:
+  // `measured` holds the lighting solved at each captured time (sun, fitted sky, environment
+  // map). Fits the sun's extinction when the sun was seen through at least two distinct air
+  // masses and the environment's photometric stereo (§5.2). Throws rouen::Error for no
+  // measured time or inconsistent environment maps.
+  LightingPredictor(std::vector<Lighting> measured, const RelightOptions& options);
+
+  // Lighting at `utc` seen from `site`. Throws rouen::Error when the sun is below the horizon
+  // (the models are fitted to daylight) or the options are bad.
+  Lighting At(UtcTime utc, const Site& site, RelightSummary* summary = nullptr) const;
+
+  const EnvStereoResult& environment() const { return env_; }
+  const std::optional<SunExtinction>& extinction() const { return extinction_; }
+
+ private:
+  std::vector<Lighting> measured_;
+  std::vector<TimedSky> skies_;
+  RelightOptions options_;
+  std::optional<SunExtinction> extinction_;
+  EnvStereoResult env_;
+};
+
+}  // namespace rouen

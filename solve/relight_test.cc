@@ -1,0 +1,143 @@
+#include "solve/relight.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "core/error.h"
+
+namespace rouen {
+namespace {
+
+const Site kSite{37.8722, -122.2578, 60.0};
+
+// A clear sky of the CIE kind (gradation and indicatrix of a clear day), bluish, with the sun
+// at `sun_dir`.
+SkyModel ClearSky(const Eigen::Vector3d& sun_dir) {
+  SkyModel m;
+  const double lz[3] = {0.6, 0.8, 1.1};
+  for (int c = 0; c < 3; ++c) {
+    SkyParams& p = m.channel[c];
+    p.Lz = lz[c];
+    p.a = -1;
+    p.b = -0.32;
+    p.c = 10;
+    p.d = -3;
+    p.e = 0.45;
+    p.h = 1;
+  }
+  m.sun_dir = sun_dir;
+  return m;
+}
+
+// Measured lighting at local times of 2026-08-25 (PDT): the sun from the ephemeris, its
+// radiance through an atmosphere of known extinction, a clear sky, and an environment of sky
+// above the horizon and grey ground below.
+Lighting Measured(const std::string& local_time, const Eigen::Vector3d& beta,
+                  const Eigen::Vector3d& l0) {
+  Lighting l;
+  l.utc = ParseIso8601("2026-08-25T" + local_time + ":00-07:00");
+  const SunPosition sun = ComputeSunPosition(l.utc, kSite);
+  l.sun_dir = sun.DirectionEnu();
+  l.sun_solid_angle_sr = sun.SolidAngleSr();
+  const double m = KastenYoungAirMass(ElevationOf(l.sun_dir));
+  for (int c = 0; c < 3; ++c) l.sun_radiance[c] = l0[c] * std::exp(-beta[c] * m);
+  l.sky = ClearSky(l.sun_dir);
+  l.env = EnvironmentMap::FromSky(EnvOptions{}, l.sky, Eigen::Vector3d::Constant(0.3));
+  return l;
+}
+
+std::vector<Lighting> Day(const Eigen::Vector3d& beta, const Eigen::Vector3d& l0) {
+  std::vector<Lighting> v;
+  for (const char* t : {"07:45", "10:30", "13:30", "18:15"}) v.push_back(Measured(t, beta, l0));
+  return v;
+}
+
+TEST(RelightTest, SunRadianceFollowsTheExtinctionOfTheMeasuredTimes) {
+  const Eigen::Vector3d beta(0.10, 0.14, 0.22), l0(4e4, 4.2e4, 4.5e4);
+  LightingPredictor predictor(Day(beta, l0), RelightOptions{});
+  ASSERT_TRUE(predictor.extinction().has_value());
+  // A time between the measured ones and one near sunset: the sun radiance is L0 exp(-beta m)
+  // at the new sun's air mass (the fit is exact on noise-free data).
+  for (const char* t : {"2026-08-25T16:00:00-07:00", "2026-08-25T19:30:00-07:00"}) {
+    RelightSummary rs;
+    const Lighting l = predictor.At(ParseIso8601(t), kSite, &rs);
+    const SunPosition sun = ComputeSunPosition(ParseIso8601(t), kSite);
+    EXPECT_NEAR(std::acos(std::clamp(l.sun_dir.dot(sun.DirectionEnu()), -1.0, 1.0)), 0, 1e-9);
+    const double m = KastenYoungAirMass(ElevationOf(sun.DirectionEnu()));
+    EXPECT_NEAR(rs.air_mass, m, 1e-9);
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(l.sun_radiance[c] / (l0[c] * std::exp(-beta[c] * m)), 1, 1e-6) << t;
+    EXPECT_TRUE(rs.sun_from_extinction);
+    // 16:00 lies between measured suns (no sky extinction); 19:30 is below them all.
+    EXPECT_EQ(rs.extinction_from_air_mass > 0, std::string(t).find("19:30") != std::string::npos)
+        << t;
+    EXPECT_NEAR(l.sky.sun_dir.dot(l.sun_dir), 1, 1e-9);
+    EXPECT_EQ(l.env.num_regions(), EnvOptions{}.bands_below * 2 * EnvOptions{}.sectors);
+    for (const Eigen::Vector3d& r : l.env.radiance) EXPECT_TRUE(r.allFinite() && r.minCoeff() >= 0);
+  }
+  // Lower sun, more air: redder and dimmer (beta grows towards blue).
+  const Lighting noon = predictor.At(ParseIso8601("2026-08-25T13:00:00-07:00"), kSite);
+  const Lighting late = predictor.At(ParseIso8601("2026-08-25T19:30:00-07:00"), kSite);
+  EXPECT_LT(late.sun_radiance[1], noon.sun_radiance[1]);
+  EXPECT_GT(late.sun_radiance[0] / late.sun_radiance[2], noon.sun_radiance[0] / noon.sun_radiance[2]);
+}
+
+TEST(RelightTest, AMeasuredTimeGivesBackItsSky) {
+  const std::vector<Lighting> day = Day({0.1, 0.1, 0.1}, {1e4, 1e4, 1e4});
+  LightingPredictor predictor(day, RelightOptions{});
+  RelightSummary rs;
+  const Lighting l = predictor.At(day[1].utc, kSite, &rs);
+  ASSERT_EQ(rs.sky_weights.size(), 4u);
+  EXPECT_NEAR(rs.sky_weights[1], 1, 1e-9);
+  // Same air mass as the reference: no extinction change; the sky is that time's.
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(l.sky.channel[c].Lz / day[1].sky.channel[c].Lz, 1, 1e-6);
+    EXPECT_NEAR(l.sky.channel[c].c, day[1].sky.channel[c].c, 1e-6 * day[1].sky.channel[c].c);
+  }
+}
+
+TEST(RelightTest, BlockedSunlightBlendsTowardsOvercast) {
+  const std::vector<Lighting> day = Day({0.1, 0.12, 0.15}, {1e4, 1e4, 1e4});
+  const UtcTime t = ParseIso8601("2026-08-25T15:00:00-07:00");
+  LightingPredictor clear(day, RelightOptions{});
+  RelightOptions o;
+  o.pbs = 1;
+  o.overcast_colour = Eigen::Vector3d(1, 1, 1);
+  LightingPredictor overcast(day, o);
+  const Lighting lc = clear.At(t, kSite), lo = overcast.At(t, kSite);
+  EXPECT_EQ(lo.sun_radiance, Eigen::Vector3d::Zero());
+  // Fully overcast, grey: the zenith is brighter than the horizon by (1 + 2)/(1 + 2 cos 85deg)
+  // and the colour is the same in every channel (up to the 7-parameter approximation's error,
+  // 2.2% at most per sky_time's fit).
+  const Eigen::Vector3d zen = lo.sky.Radiance(Eigen::Vector3d::UnitZ());
+  const Eigen::Vector3d low = lo.sky.Radiance(Eigen::Vector3d(0, std::sin(85 * M_PI / 180),
+                                                              std::cos(85 * M_PI / 180)));
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(zen[c] / zen.mean(), 1, 0.03);
+    EXPECT_NEAR(low[c] / low.mean(), 1, 0.03);
+    EXPECT_NEAR(zen[c] / low[c], 3 / (1 + 2 * std::cos(85 * M_PI / 180)), 0.05 * 2.56);
+  }
+  EXPECT_GT(lc.sun_radiance.minCoeff(), 0);
+  EXPECT_THROW(
+      {
+        RelightOptions bad;
+        bad.pbs = 1.5;
+        LightingPredictor p(day, bad);
+      },
+      Error);
+}
+
+TEST(RelightTest, RefusesNightAndNoData) {
+  LightingPredictor predictor(Day({0.1, 0.1, 0.1}, {1e4, 1e4, 1e4}), RelightOptions{});
+  try {
+    predictor.At(ParseIso8601("2026-08-25T23:00:00-07:00"), kSite);
+    FAIL() << "no error at night";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("below the horizon"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(LightingPredictor({}, RelightOptions{}), Error);
+}
+
+}  // namespace
+}  // namespace rouen

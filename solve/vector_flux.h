@@ -1,0 +1,137 @@
+// Analytic irradiance from extended sources of piecewise uniform radiance (Yu & Malik 1998,
+// App. A): the vector flux (irradiance vector, Arvo 1995) of spherical polygons, clipping of
+// spherical polygons by planes through the centre and by the model faces in front of a
+// surface point, and the sky / environment irradiance gathered from them.
+//
+// Conventions: a SphericalPolygon is a list of unit vectors (directions from the surface
+// point); consecutive vertices (and the last with the first) are joined by the shorter great
+// arc, which must be shorter than pi. Vertices run counter-clockwise seen from outside the
+// sphere, i.e. the region lies to the left when walking along the boundary with the outward
+// direction as "up". (The paper's eq. 20 writes Pi_AB = -(OA x OB), i.e. it lists vertices the
+// other way round; the region and the result are the same.) Polygons may be non-convex; a
+// degenerate edge (zero length, or running back along itself) contributes nothing.
+#pragma once
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "core/mesh.h"
+#include "solve/environment.h"
+#include "solve/sky_model.h"
+
+namespace rouen {
+
+using SphericalPolygon = std::vector<Eigen::Vector3d>;
+
+// App. A, eq. 20: vector flux of a spherical polygon of uniform unit radiance,
+//   Phi = 1/2 sum_i Theta_i unit(v_i x v_{i+1}),  Theta_i = angle between v_i and v_{i+1}.
+// For uniform radiance L over the polygon, the irradiance on a surface with unit normal n is
+// L n.Phi when the polygon lies in the half space n.x >= 0 (units: L x sr). It equals the
+// integral over the polygon of the direction w dw (a boundary integral: valid for any size).
+Eigen::Vector3d VectorFlux(const SphericalPolygon& poly);
+
+// Signed solid angle (sr) of a polygon smaller than a hemisphere, fan of Van Oosterom-Strackee
+// triangles from the first vertex; positive for counter-clockwise polygons.
+double SolidAngle(const SphericalPolygon& poly);
+
+// The part of `poly` with m.x >= 0 (a plane through the centre: the cut runs along a great
+// circle, so new vertices, the chord intersections pushed back onto the sphere, are exact).
+// Empty when nothing is left. `m` need not be unit. `poly` must lie in an open hemisphere
+// (e.g. be convex and smaller than a hemisphere), so that the cut is shorter than pi.
+SphericalPolygon ClipToHalfSpace(const SphericalPolygon& poly, const Eigen::Vector3d& m);
+
+// A convex spherical polygon (smaller than a hemisphere) with its inward edge normals
+// (unit; the polygon is the intersection of the half spaces edge_normal[i].x >= 0).
+struct ConvexSpherical {
+  SphericalPolygon vertices;
+  std::vector<Eigen::Vector3d> edge_normal;
+  Eigen::Vector3d cap_centre = Eigen::Vector3d::UnitZ();  // bounding cap of the vertices
+  double cap_radius = 0;                                   // radians
+  double cap_cos = 1, cap_sin = 0;                         // of cap_radius
+  // From counter-clockwise vertices; false (and nothing set) when degenerate.
+  bool Set(const SphericalPolygon& ccw);
+};
+
+// Appends the parts of `p` outside the convex `q` to `outside` (at most one piece per edge
+// of q; convex when p is) and, when `inside` is not null, the part inside q to `inside`.
+void SubtractConvex(const SphericalPolygon& p, const ConvexSpherical& q,
+                    std::vector<SphericalPolygon>* outside,
+                    std::vector<SphericalPolygon>* inside = nullptr);
+
+// The planar convex polygon `points` (world frame) as seen from `origin`, clipped to the half
+// space normal.(x - origin) >= 0 and projected onto the unit sphere about `origin`, oriented
+// counter-clockwise. False when nothing of it lies in front or it is seen edge-on.
+bool ProjectPolygon(const std::vector<Eigen::Vector3d>& points, const Eigen::Vector3d& origin,
+                    const Eigen::Vector3d& normal, ConvexSpherical* out);
+
+// What a surface point sees: the hemisphere above its tangent plane minus the model faces
+// in front of it (every triangle with a vertex in front of the plane; the paper finds them
+// with an id buffer, here the model is small enough to take all of them -- extra faces hidden
+// behind others cost time, never accuracy).
+class PointVisibility {
+ public:
+  // `origin`: the surface point lifted off the surface (as for the ray-cast gathering);
+  // `normal`: unit surface normal; `own_triangle` is skipped (-1: none).
+  PointVisibility(const Mesh& mesh, const Eigen::Vector3d& origin, const Eigen::Vector3d& normal,
+                  int own_triangle = -1);
+  // Appends the visible parts of `patch` to `out` (convex pieces when `patch` is convex).
+  void Clip(const SphericalPolygon& patch, std::vector<SphericalPolygon>* out) const;
+  const Eigen::Vector3d& origin() const { return origin_; }
+  const Eigen::Vector3d& normal() const { return normal_; }
+  int num_occluders() const { return static_cast<int>(occluders_.size()); }
+
+ private:
+  Eigen::Vector3d origin_, normal_;
+  std::vector<ConvexSpherical> occluders_;  // largest solid angle first
+};
+
+struct VectorFluxOptions {
+  // The sky hemisphere starts as the 4 octant triangles above the horizon, each split into
+  // 4^sky_initial_split (the "small set of large patches" clipped for visibility).
+  int sky_initial_split = 1;
+  // A visible sky patch is subdivided while the sky radiance at its vertices, centre and
+  // (when inside) the sun differs by more than this fraction of their mean in some channel.
+  // The patch then contributes L(centre) n.Phi (centre: the direction of Phi), a midpoint
+  // rule: on a clear sky 0.1 gives ~3e-4 relative error with ~3000 patches per point, 0.05
+  // ~8e-5 with ~15000 (VectorFluxTest.AdaptiveSkyMatchesFineQuadrature).
+  double sky_tolerance = 0.1;
+  int sky_max_depth = 14;      // subdivisions below a visible patch
+  double sky_min_sr = 1e-7;    // patches smaller than this are not split further
+  // Environment regions' edges along parallels (small circles) are followed by this many
+  // great arcs per region (at least one per 60 deg of azimuth).
+  int env_parallel_segments = 4;
+  void Validate() const;  // throws rouen::Error
+};
+
+struct FluxStats {
+  int occluders = 0;  // model faces projected
+  int patches = 0;    // visible patches whose flux was summed
+};
+
+// Direct sky irradiance (sky model above the horizon, nothing below) at one point,
+// RGB, relative radiance x sr.
+Eigen::Vector3d SkyIrradianceVectorFlux(const PointVisibility& vis, const SkyModel& sky,
+                                        const VectorFluxOptions& options,
+                                        FluxStats* stats = nullptr);
+
+// The environment map's regions as spherical polygons (counter-clockwise), one per region,
+// built once per map layout.
+std::vector<SphericalPolygon> EnvironmentRegionPolygons(const EnvironmentMap& env,
+                                                        const VectorFluxOptions& options);
+
+// Direct environment irradiance at one point: regions (uniform radiance, looked up at height
+// `z`) clipped for visibility, no subdivision. When `ground_shadow` is given (convex spherical
+// polygons, seen from the point, of the ground in the model's cast shadow), visible parts
+// below the horizon inside them are scaled per channel by `shadow_ratio`.
+Eigen::Vector3d EnvironmentIrradianceVectorFlux(
+    const PointVisibility& vis, const EnvironmentMap& env, double z,
+    const std::vector<SphericalPolygon>& regions, const std::vector<ConvexSpherical>* ground_shadow,
+    const Eigen::Vector3d& shadow_ratio, FluxStats* stats = nullptr);
+
+// The model's shadow on the ground plane z = ground_z (every face above it projected along
+// the sun direction `sun`, z > 0), seen from `origin` (above the plane): convex polygons,
+// possibly overlapping.
+std::vector<ConvexSpherical> GroundShadowPolygons(const Mesh& mesh, const Eigen::Vector3d& sun,
+                                                  double ground_z, const Eigen::Vector3d& origin);
+
+}  // namespace rouen
