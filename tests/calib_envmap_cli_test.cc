@@ -26,6 +26,7 @@ namespace {
 namespace fs = std::filesystem;
 using rouen::cli_test::Result;
 using rouen::cli_test::RunRouen;
+using rouen::cli_test::Q;
 using rouen::cli_test::TempDir;
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kDeg = kPi / 180.0;
@@ -33,7 +34,6 @@ constexpr double kDeg = kPi / 180.0;
 
 
 
-std::string Q(const fs::path& p) { return "'" + p.string() + "'"; }
 
 Eigen::Vector3d Env(const Eigen::Vector3d& d) {
   return Eigen::Vector3d(1.5 + 0.5 * d.z() + 0.3 * d.x(), 1.2 + 0.4 * d.y(), 1.0 + 0.3 * d.z());

@@ -24,12 +24,12 @@ namespace {
 namespace fs = std::filesystem;
 using rouen::cli_test::Result;
 using rouen::cli_test::RunRouen;
+using rouen::cli_test::Q;
 using rouen::cli_test::TempDir;
 
 
 
 
-std::string Q(const fs::path& p) { return "'" + p.string() + "'"; }
 
 TEST(CalibGeometryCli, HelpExplains) {
   const Result i = RunRouen("calib intrinsics --help");

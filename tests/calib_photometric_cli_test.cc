@@ -32,6 +32,7 @@ namespace {
 namespace fs = std::filesystem;
 using rouen::cli_test::Result;
 using rouen::cli_test::RunRouen;
+using rouen::cli_test::Q;
 using rouen::cli_test::TempDir;
 using nlohmann::json;
 
@@ -40,7 +41,6 @@ using nlohmann::json;
 
 void WriteText(const fs::path& p, const std::string& s) { std::ofstream(p) << s; }
 
-std::string Q(const fs::path& p) { return "'" + p.string() + "'"; }
 
 const std::array<double, 3> kTrueDensity = {1.02, 0.95, 1.10};
 

@@ -29,6 +29,15 @@ inline Result RunRouen(const std::string& args) {
   return r;
 }
 
+// A path quoted for the shell (the tests' paths hold no quote). Built by appending: GCC 12
+// warns falsely (-Wrestrict) on "'" + std::string in Release builds.
+inline std::string Q(const std::filesystem::path& p) {
+  std::string q(1, '\'');
+  q.append(p.string());
+  q.push_back('\'');
+  return q;
+}
+
 // An empty folder of its own for this test process.
 inline std::filesystem::path TempDir(const std::string& name) {
   namespace fs = std::filesystem;

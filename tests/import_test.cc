@@ -30,6 +30,7 @@ namespace {
 namespace fs = std::filesystem;
 using rouen::cli_test::Result;
 using rouen::cli_test::RunRouen;
+using rouen::cli_test::Q;
 using rouen::cli_test::TempDir;
 
 
@@ -37,12 +38,6 @@ using rouen::cli_test::TempDir;
 
 void WriteText(const fs::path& p, const std::string& s) { std::ofstream(p) << s; }
 
-std::string Q(const fs::path& p) {
-  std::string q(1, '\'');
-  q.append(p.string());
-  q.push_back('\'');
-  return q;
-}
 
 // Names in `dir` that start with `prefix` (the session folder or its temporary twin).
 std::vector<std::string> Leftovers(const fs::path& dir, const std::string& prefix) {

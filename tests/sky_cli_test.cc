@@ -23,12 +23,12 @@ namespace {
 namespace fs = std::filesystem;
 using rouen::cli_test::Result;
 using rouen::cli_test::RunRouen;
+using rouen::cli_test::Q;
 using rouen::cli_test::TempDir;
 
 
 
 
-std::string Q(const fs::path& p) { return "'" + p.string() + "'"; }
 
 // A clear sky of eq. 9 (sun at azimuth 200, elevation 40), as `sky fit` would write it.
 nlohmann::json KnownFit() {
