@@ -5,10 +5,14 @@
 #include <fstream>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
+
 #include "app/commands.h"
 #include "calib/hdr.h"
 #include "calib/response.h"
+#include "core/camera.h"
 #include "core/error.h"
+#include "core/files.h"
 #include "core/image.h"
 #include "core/response_curve.h"
 
@@ -33,6 +37,50 @@ void ForEachListLine(const std::string& list,
     ++listed;
   }
   if (listed == 0) throw Error(list + ": no images listed");
+}
+
+nlohmann::json ReadJsonFile(const std::string& path, const char* what) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) throw Error(path + ": no such " + what + " file");
+  try {
+    return nlohmann::json::parse(ReadFileToString(path));
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(path + ": not valid JSON (" + e.what() + ")");
+  }
+}
+
+// A lens file: core/camera.h intrinsics, plus an optional "max_field_deg".
+Intrinsics ReadLens(const std::string& path, double* max_field_deg) {
+  const nlohmann::json j = ReadJsonFile(path, "lens");
+  Intrinsics k;
+  try {
+    k = j.get<Intrinsics>();
+    if (max_field_deg) {
+      *max_field_deg = 0;
+      if (j.contains("max_field_deg")) {
+        if (!j["max_field_deg"].is_number()) throw Error("\"max_field_deg\" is not a number");
+        *max_field_deg = j["max_field_deg"].get<double>();
+      }
+    }
+  } catch (const Error& e) {
+    throw Error(path + ": " + e.what());
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(path + ": " + e.what());
+  }
+  return k;
+}
+
+// A pose file: {"rotation": 3x3, "position": [x, y, z], ...} (as `rouen calib pose` and
+// `rouen calib orient` write them).
+Pose ReadPose(const std::string& path) {
+  const nlohmann::json j = ReadJsonFile(path, "pose");
+  try {
+    return j.get<Pose>();
+  } catch (const Error& e) {
+    throw Error(path + ": " + e.what());
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(path + ": " + e.what());
+  }
 }
 
 std::vector<ListedExposure> ReadExposureList(const std::string& list) {

@@ -35,21 +35,6 @@ struct RenderArgs {
   bool quick = false;
 };
 
-template <typename T>
-T ReadJsonFile(const std::string& path) {
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(ReadFileToString(path));
-  } catch (const nlohmann::json::exception& e) {
-    throw Error(path + ": not valid JSON (" + e.what() + ")");
-  }
-  try {
-    return j.get<T>();
-  } catch (const nlohmann::json::exception& e) {
-    throw Error(path + ": " + e.what());
-  }
-}
-
 void Run(const RenderArgs& a) {
   namespace fs = std::filesystem;
   if ((a.slot >= 0) == !a.time.empty())
@@ -86,9 +71,9 @@ void Run(const RenderArgs& a) {
   Intrinsics intrinsics;
   Pose pose;
   if (!a.lens.empty()) {
-    intrinsics = ReadJsonFile<Intrinsics>(a.lens);
+    intrinsics = ReadLens(a.lens, nullptr);
     intrinsics.Validate();
-    pose = ReadJsonFile<Pose>(a.pose);
+    pose = ReadPose(a.pose);
   } else {
     std::string name = a.view;
     if (name.empty()) {

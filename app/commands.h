@@ -44,7 +44,10 @@ CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
 
 }  // namespace rouen
 
+#include <nlohmann/json.hpp>
+
 #include "calib/response.h"
+#include "core/camera.h"
 
 namespace rouen {
 
@@ -54,6 +57,14 @@ namespace rouen {
 void ForEachListLine(const std::string& list,
                      const std::function<void(const std::vector<std::string>& words,
                                               const std::string& where)>& line);
+
+// A JSON file parsed; `what` names it in errors ("no such lens file", "not valid JSON").
+nlohmann::json ReadJsonFile(const std::string& path, const char* what);
+// A lens file: core/camera.h intrinsics, plus an optional "max_field_deg" (may be null).
+Intrinsics ReadLens(const std::string& path, double* max_field_deg);
+// A pose file: {"rotation": 3x3, "position": [x, y, z], ...} (as `rouen calib pose` and
+// `rouen calib orient` write them).
+Pose ReadPose(const std::string& path);
 
 struct ListedExposure {
   std::string path;
