@@ -49,27 +49,6 @@ nlohmann::json ReadJsonFile(const std::string& path, const char* what) {
   }
 }
 
-// A lens file: core/camera.h intrinsics, plus an optional "max_field_deg".
-Intrinsics ReadLens(const std::string& path, double* max_field_deg) {
-  const nlohmann::json j = ReadJsonFile(path, "lens");
-  Intrinsics k;
-  try {
-    k = j.get<Intrinsics>();
-    if (max_field_deg) {
-      *max_field_deg = 0;
-      if (j.contains("max_field_deg")) {
-        if (!j["max_field_deg"].is_number()) throw Error("\"max_field_deg\" is not a number");
-        *max_field_deg = j["max_field_deg"].get<double>();
-      }
-    }
-  } catch (const Error& e) {
-    throw Error(path + ": " + e.what());
-  } catch (const nlohmann::json::exception& e) {
-    throw Error(path + ": " + e.what());
-  }
-  return k;
-}
-
 // A pose file: {"rotation": 3x3, "position": [x, y, z], ...} (as `rouen calib pose` and
 // `rouen calib orient` write them).
 Pose ReadPose(const std::string& path) {

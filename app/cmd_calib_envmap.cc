@@ -17,6 +17,7 @@
 #include "core/error.h"
 #include "core/files.h"
 #include "core/image.h"
+#include "core/lens.h"
 #include "core/solar.h"
 #include "core/time.h"
 
@@ -81,7 +82,9 @@ void RunEnvmap(const EnvmapArgs& a) {
     }
     Loaded l;
     l.name = resolve(words[0]);
-    l.lens = ReadLens(resolve(words[1]), &l.max_field_deg);
+    const LensFile lens = ReadLensFile(resolve(words[1]));
+    l.lens = lens.intrinsics;
+    l.max_field_deg = lens.max_field_deg;
     l.pose = ReadPose(resolve(words[2]));
     l.image = ReadImage(l.name);
     if (l.image.units != PixelUnits::kRadiance) {
@@ -158,7 +161,7 @@ void RunOrient(const OrientArgs& a) {
     throw Error("calib orient: the sun is " + std::to_string(sun.elevation_deg) +
                 " deg below the horizon at " + a.time + "; check --time and --site");
   }
-  const Intrinsics k = ReadLens(a.lens, nullptr);
+  const Intrinsics k = ReadLensFile(a.lens).intrinsics;
   const Image img = ReadImage(a.image);
   SunDiscOptions so;
   so.sun_radius_deg = sun.angular_radius_deg;

@@ -14,6 +14,7 @@
 #include "calib/pose.h"
 #include "core/error.h"
 #include "core/files.h"
+#include "core/lens.h"
 
 namespace rouen {
 namespace {
@@ -91,7 +92,7 @@ void RunIntrinsics(const IntrinsicsArgs& a) {
 }
 
 void RunPose(const PoseArgs& a) {
-  const Intrinsics k = ReadLensFile(a.lens);
+  const Intrinsics k = ReadLensFile(a.lens).intrinsics;
   const LandmarkFile lm = ReadLandmarks(a.points);
   PoseOptions opt;
   opt.inlier_threshold_px = a.threshold_px;

@@ -10,6 +10,7 @@
 #include "capture/rig.h"
 #include "core/error.h"
 #include "core/files.h"
+#include "core/lens.h"
 #include "core/mesh.h"
 
 namespace rouen {
@@ -101,10 +102,28 @@ CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
       info.site_source = src->info().site_source;
       info.clock_offset_s = src->info().clock_offset_s;
       info.notes = "replayed from " + opts.from_session.string();
-      for (const char* key : {"heldout_slot", "nd_filters"})
+      for (const char* key : {"heldout_slot", "nd_filters", "vignetting"})
         if (src->info().extra.contains(key)) info.extra[key] = src->info().extra[key];
     }
     writer.emplace(SessionWriter::Create(out, info));
+  }
+  // A lens file's vignetting model travels with the session too, keyed by the frames' device
+  // and target (app/pipeline.cc divides it out); one already there (e.g. from `rouen calib
+  // vignetting --session`) is kept.
+  if (rig.kind != "replay" && dev.camera) {
+    SessionInfo info = writer->info();
+    bool changed = false;
+    for (Target t : dev.plan.targets) {
+      const std::string path = rig.LensPath(t);
+      if (path.empty()) continue;
+      const std::optional<VignettingModel> v = ReadLensFile(path).vignetting;
+      const std::string key = dev.camera->Id() + "/" + TargetName(t);
+      if (!v || (info.extra.contains("vignetting") && info.extra["vignetting"].contains(key)))
+        continue;
+      info.extra["vignetting"][key] = *v;
+      changed = true;
+    }
+    if (changed) writer->UpdateInfo(info);
   }
   // The building model travels with the session (also after a crash before it was written).
   if (writer->info().model.empty() && (dev.model || (src && !src->info().model.empty()))) {

@@ -13,6 +13,7 @@
 #include "core/error.h"
 #include "core/files.h"
 #include "core/image.h"
+#include "core/lens.h"
 #include "core/solar.h"
 #include "core/time.h"
 #include "render/render.h"
@@ -58,6 +59,13 @@ void Run(const RenderArgs& a) {
       throw Error("--time " + a.time + ": the sun is below the horizon there (elevation " +
                   std::to_string(sun.elevation_deg) + " deg); rouen renders daylight only");
   }
+  // A camera from files is read before the long solve, so a bad file fails at once.
+  Intrinsics intrinsics;
+  Pose pose;
+  if (!a.lens.empty()) {
+    intrinsics = ReadLensFile(a.lens).intrinsics;
+    pose = ReadPose(a.pose);
+  }
   PipelineOptions po;
   fs::path session_dir = fs::path(a.session).lexically_normal();
   if (!session_dir.has_filename()) session_dir = session_dir.parent_path();  // "s/" -> "s"
@@ -67,14 +75,8 @@ void Run(const RenderArgs& a) {
   CalibResult calib = CalibrateSession(session, po);
   SolveResult solved = SolveSession(session, calib, po);
 
-  // The camera: a view of the session, or a lens and a pose from files.
-  Intrinsics intrinsics;
-  Pose pose;
-  if (!a.lens.empty()) {
-    intrinsics = ReadLens(a.lens, nullptr);
-    intrinsics.Validate();
-    pose = ReadPose(a.pose);
-  } else {
+  // Otherwise the camera of a view of the session.
+  if (a.lens.empty()) {
     std::string name = a.view;
     if (name.empty()) {
       for (const auto& [n, g] : calib.groups)

@@ -60,8 +60,6 @@ void ForEachListLine(const std::string& list,
 
 // A JSON file parsed; `what` names it in errors ("no such lens file", "not valid JSON").
 nlohmann::json ReadJsonFile(const std::string& path, const char* what);
-// A lens file: core/camera.h intrinsics, plus an optional "max_field_deg" (may be null).
-Intrinsics ReadLens(const std::string& path, double* max_field_deg);
 // A pose file: {"rotation": 3x3, "position": [x, y, z], ...} (as `rouen calib pose` and
 // `rouen calib orient` write them).
 Pose ReadPose(const std::string& path);

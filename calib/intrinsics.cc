@@ -602,17 +602,6 @@ void WriteLensFile(const std::string& path, const IntrinsicsSummary& summary) {
   WriteFileAtomic(path, LensJson(summary).dump(2) + "\n");
 }
 
-Intrinsics ReadLensFile(const std::string& path) {
-  const std::string text = ReadFileToString(path);
-  try {
-    return nlohmann::json::parse(text).get<Intrinsics>();
-  } catch (const nlohmann::json::exception& e) {
-    throw Error(path + ": not a lens file (" + e.what() + ")");
-  } catch (const Error& e) {
-    throw Error(path + ": " + e.what());
-  }
-}
-
 }  // namespace rouen
 
 namespace rouen {

@@ -128,10 +128,9 @@ IntrinsicsSummary CalibrateIntrinsicsFromFiles(const std::vector<std::string>& p
 
 // A rig lens file (rigs/lenses/*.json): the core/camera.h Intrinsics keys, plus a
 // "calibration" object {rms_px, max_px, views, corners, board, stddev, images}, which
-// readers of lens files ignore.
+// readers of lens files ignore
+// (core/lens.h ReadLensFile reads them).
 nlohmann::json LensJson(const IntrinsicsSummary& summary);
 void WriteLensFile(const std::string& path, const IntrinsicsSummary& summary);
-// Reads a lens file (throws rouen::Error naming the file).
-Intrinsics ReadLensFile(const std::string& path);
 
 }  // namespace rouen

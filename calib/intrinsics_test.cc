@@ -16,6 +16,7 @@
 
 #include "core/error.h"
 #include "core/files.h"
+#include "core/lens.h"
 
 namespace rouen {
 namespace {
@@ -291,7 +292,7 @@ TEST(Calibrate, LensFileRoundTrip) {
   std::filesystem::create_directories(dir);
   const std::string path = (dir / "lens.json").string();
   WriteLensFile(path, sum);
-  const Intrinsics back = ReadLensFile(path);
+  const Intrinsics back = ReadLensFile(path).intrinsics;
   EXPECT_EQ(back.projection, Projection::kPinhole);
   EXPECT_EQ(back.width, 480);
   EXPECT_DOUBLE_EQ(back.fx, sum.intrinsics.fx);

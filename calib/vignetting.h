@@ -5,33 +5,13 @@
 #include <array>
 #include <vector>
 
-#include <nlohmann/json_fwd.hpp>
-
 #include "core/image.h"
+#include "core/lens.h"
 #include "core/response_curve.h"
 
 namespace rouen {
 
-// V(r) = 1 + a1 r^2 + a2 r^4 + a3 r^6, r = distance from the optical centre (cx, cy) divided
-// by the half-diagonal of the calibration image (r = 1 at the corners of a centred lens).
-// A measured radiance is L_true x V.
-struct VignettingModel {
-  int width = 0, height = 0;  // image size the model was calibrated at (pixels)
-  double cx = 0, cy = 0;      // optical centre, pixels (pixel centres at integer + 0.5)
-  std::array<double, 3> a = {0, 0, 0};
-
-  // Fall-off at pixel (x, y) (continuous coordinates) of an image of the calibration size.
-  double Falloff(double x, double y) const;
-  double FalloffAtRadius(double r) const;
-  // Largest normalised radius of any image corner from the centre.
-  double MaxRadius() const;
-  // Checks sizes, a finite centre inside the image, finite coefficients and V > 0.05 from the
-  // centre out to the farthest corner; throws rouen::Error.
-  void Validate() const;
-};
-
-void to_json(nlohmann::json& j, const VignettingModel& v);
-void from_json(const nlohmann::json& j, VignettingModel& v);  // validates; throws rouen::Error
+// The model (VignettingModel) and its removal (RemoveVignetting) live in core/lens.h.
 
 struct VignettingOptions {
   // Flat frames are averaged over square bins of this many pixels on a side before the fit.
@@ -67,10 +47,5 @@ struct VignettingSummary {
 VignettingModel FitVignetting(const std::vector<const Image*>& flats,
                               const VignettingOptions& options, const ResponseCurve* curve,
                               VignettingSummary* summary = nullptr);
-
-// Divides a radiance image by the fall-off (an image of another size with the same aspect
-// ratio is mapped by scaling). Throws rouen::Error for a different aspect ratio or a digital
-// image.
-void RemoveVignetting(const VignettingModel& model, Image* radiance);
 
 }  // namespace rouen

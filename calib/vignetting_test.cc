@@ -4,7 +4,6 @@
 #include <random>
 
 #include <gtest/gtest.h>
-#include <nlohmann/json.hpp>
 
 #include "calib/test_util.h"
 #include "core/error.h"
@@ -103,38 +102,6 @@ TEST(VignettingTest, LinearisesDigitalFlatsThroughTheResponse) {
   // 0.7 DN at about 0.02 ln/DN is 1.4% per value: twice the radiance case's noise.
   EXPECT_LT(MaxModelError(fit, truth), 2 * kTol);
   EXPECT_THROW(FitVignetting({&d1}, VignettingOptions{}, nullptr), Error);
-}
-
-TEST(VignettingTest, RemovingTheModelFlattensTheField) {
-  const VignettingModel truth = TrueModel(kW / 2.0 + 5, kH / 2.0);
-  Image flat = Flat(truth, 10, 0, 0, 0, 0);
-  RemoveVignetting(truth, &flat);
-  for (float v : flat.data) ASSERT_NEAR(v, 10, 1e-4);
-  // Half the size, same aspect: the model scales.
-  Image small(kW / 2, kH / 2, 3, PixelUnits::kRadiance, 1.f);
-  RemoveVignetting(truth, &small);
-  EXPECT_NEAR(small.at(0, 0, 0), 1 / truth.Falloff(1, 1), 1e-4);
-  Image other(100, 100, 3, PixelUnits::kRadiance, 1.f);
-  EXPECT_THROW(RemoveVignetting(truth, &other), Error);
-  Image digital(kW, kH, 3, PixelUnits::kDigital, 1.f);
-  EXPECT_THROW(RemoveVignetting(truth, &digital), Error);
-}
-
-TEST(VignettingTest, JsonRoundTripAndValidation) {
-  const VignettingModel m = TrueModel(121, 79);
-  const VignettingModel back = nlohmann::json(m).get<VignettingModel>();
-  EXPECT_EQ(back.width, m.width);
-  EXPECT_DOUBLE_EQ(back.cx, m.cx);
-  EXPECT_DOUBLE_EQ(back.a[2], m.a[2]);
-  nlohmann::json j = m;
-  j["a"] = {-1.5, 0, 0};  // V < 0 at the corners
-  EXPECT_THROW(j.get<VignettingModel>(), Error);
-  j = m;
-  j.erase("cx");
-  EXPECT_THROW(j.get<VignettingModel>(), Error);
-  j = m;
-  j["cx"] = 1e6;
-  EXPECT_THROW(j.get<VignettingModel>(), Error);
 }
 
 TEST(VignettingTest, BadInputsAreErrors) {

@@ -6,25 +6,6 @@
 #include "core/error.h"
 
 namespace rouen {
-namespace {
-
-// Irradiance of an unoccluded horizontal plane under the sky model (upper hemisphere only),
-// by the midpoint rule in cos(xi) and azimuth: E = integral L cos(xi) d omega.
-Eigen::Vector3d HorizontalIrradiance(const SkyModel& sky) {
-  constexpr int kRings = 48, kSectors = 96;
-  Eigen::Vector3d e = Eigen::Vector3d::Zero();
-  for (int i = 0; i < kRings; ++i) {
-    const double mu = (i + 0.5) / kRings;  // cos(xi)
-    const double s = std::sqrt(1 - mu * mu);
-    for (int j = 0; j < kSectors; ++j) {
-      const double phi = 2 * M_PI * (j + 0.5) / kSectors;
-      e += sky.Radiance(Eigen::Vector3d(s * std::sin(phi), s * std::cos(phi), mu)) * mu;
-    }
-  }
-  return e * (2 * M_PI / (kRings * kSectors));  // d omega = d mu d phi
-}
-
-}  // namespace
 
 void RelightOptions::Validate() const {
   if (!(pbs >= 0 && pbs <= 1)) throw Error("relight: pbs must be within 0..1");

@@ -43,21 +43,6 @@ double AngleBetween(const Eigen::Vector3d& u, const Eigen::Vector3d& v) {
   return std::atan2(u.cross(v).norm(), u.dot(v));
 }
 
-// Equal-area grid on the upper hemisphere: rings uniform in cos(xi), columns uniform in azimuth.
-std::vector<Eigen::Vector3d> HemisphereGrid(int rings, int columns) {
-  std::vector<Eigen::Vector3d> dirs;
-  dirs.reserve(static_cast<size_t>(rings) * columns);
-  for (int i = 0; i < rings; ++i) {
-    const double u = (i + 0.5) / rings;  // cos xi
-    const double s = std::sqrt(std::max(0.0, 1 - u * u));
-    for (int j = 0; j < columns; ++j) {
-      const double phi = 2 * kPi * (j + 0.5) / columns;
-      dirs.emplace_back(s * std::sin(phi), s * std::cos(phi), u);  // azimuth from north (y)
-    }
-  }
-  return dirs;
-}
-
 struct Quantiles {
   double median = 0, p90 = 0, max = 0;
 };
@@ -159,6 +144,28 @@ int Iterations(const ceres::Solver::Summary& s) {
 }
 
 }  // namespace
+
+std::vector<Eigen::Vector3d> HemisphereGrid(int rings, int columns) {
+  std::vector<Eigen::Vector3d> dirs;
+  dirs.reserve(static_cast<size_t>(rings) * columns);
+  for (int i = 0; i < rings; ++i) {
+    const double u = (i + 0.5) / rings;  // cos xi
+    const double s = std::sqrt(std::max(0.0, 1 - u * u));
+    for (int j = 0; j < columns; ++j) {
+      const double phi = 2 * kPi * (j + 0.5) / columns;
+      dirs.emplace_back(s * std::sin(phi), s * std::cos(phi), u);  // azimuth from north (y)
+    }
+  }
+  return dirs;
+}
+
+Eigen::Vector3d HorizontalIrradiance(const SkyModel& sky) {
+  constexpr int kRings = 48, kColumns = 96;
+  Eigen::Vector3d e = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3d& d : HemisphereGrid(kRings, kColumns)) e += sky.Radiance(d) * d.z();
+  return e * (2 * kPi / (kRings * kColumns));  // d omega = d(cos xi) d(azimuth)
+}
+
 
 // ---------------------------------------------------------------------------------------------
 

@@ -87,6 +87,13 @@ SkyModel InterpolateSky(const std::vector<TimedSky>& skies, const Eigen::Vector3
 double SkyBackground(const SkyParams& p, double xi);     // Bg(xi) = 1 + a exp(b / cos xi)
 double SkyScattering(const SkyParams& p, double gamma);  // Sa = 1 + c exp(d g^h) + e cos^2 g
 
+// Equal-area grid on the upper hemisphere: `rings` uniform in cos(xi), `columns` uniform in
+// azimuth (from north through east), cell centres; ENU unit vectors.
+std::vector<Eigen::Vector3d> HemisphereGrid(int rings, int columns);
+// Irradiance on an unoccluded level plane from the sky model (upper hemisphere only):
+// E = integral L cos(xi) d omega, by the midpoint rule on a 48 x 96 HemisphereGrid.
+Eigen::Vector3d HorizontalIrradiance(const SkyModel& sky);
+
 // ---------------------------------------------------------------------------------------------
 // Sunrise and sunset (§5.1).
 

@@ -90,6 +90,26 @@ TEST(SkyParts, ProductIsEquationNine) {
   }
 }
 
+TEST(SkyParts, HorizontalIrradianceOfUniformAndCosineSkies) {
+  // A uniform sky (Bg = Sa = 1) of radiance Lz gives pi Lz on a level plane; the midpoint
+  // rule in cos(xi) is exact for the linear integrand L cos(xi).
+  SkyModel sky;
+  sky.sun_dir = SunAt(90, 30);
+  for (int c = 0; c < 3; ++c) sky.channel[c] = SkyParams{0.5 + c, 0, -1, 0, -3, 0, 1};
+  const Eigen::Vector3d e = HorizontalIrradiance(sky);
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(e[c], M_PI * (0.5 + c), 1e-12 * (0.5 + c));
+  // The grid is equal-area and covers the upper hemisphere once.
+  const std::vector<Eigen::Vector3d> grid = HemisphereGrid(6, 12);
+  ASSERT_EQ(grid.size(), 72u);
+  double mean_z = 0;
+  for (const Eigen::Vector3d& d : grid) {
+    EXPECT_NEAR(d.norm(), 1, 1e-12);
+    EXPECT_GT(d.z(), 0);
+    mean_z += d.z() / grid.size();
+  }
+  EXPECT_NEAR(mean_z, 0.5, 1e-12);  // mean of cos(xi) over the hemisphere's area
+}
+
 // ---------------------------------------------------------------------------------------------
 // Interpolation (§5.1).
 

@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 #include <sys/wait.h>
 
+#include "core/files.h"
 #include "core/image.h"
 #include "core/session.h"
 #include "tests/cli_util.h"
@@ -111,6 +112,41 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
     EXPECT_GT(sum, 0) << f;
   }
   EXPECT_TRUE(fs::exists(dir / "p.png"));
+  // The same view from a lens file and a pose file (as `rouen calib intrinsics` and `rouen
+  // calib pose` write them) renders the same image: JSON keeps every double exactly and the
+  // solve is deterministic.
+  {
+    const rouen::Session s = rouen::Session::Load(dir / "session");
+    const rouen::FrameRecord* view = nullptr;
+    for (const rouen::FrameRecord& f : s.frames())
+      if (f.group == "slot1/architecture/view0") view = &f;
+    ASSERT_TRUE(view && view->intrinsics && view->pose);
+    rouen::WriteFileAtomic(dir / "lens.json", nlohmann::json(*view->intrinsics).dump());
+    rouen::WriteFileAtomic(dir / "pose.json", nlohmann::json(*view->pose).dump());
+  }
+  out.clear();
+  ASSERT_EQ(RunRouen("render" + session + " --quick --slot 1 --lens " + (dir / "lens.json").string() +
+                         " --pose " + (dir / "pose.json").string() + " --out " +
+                         (dir / "files.exr").string(),
+                     &out),
+            0)
+      << out;
+  {
+    const rouen::Image a = rouen::ReadImage((dir / "slot1.exr").string());
+    const rouen::Image b = rouen::ReadImage((dir / "files.exr").string());
+    ASSERT_EQ(a.width, b.width);
+    ASSERT_EQ(a.height, b.height);
+    EXPECT_EQ(a.data, b.data);
+  }
+  // A bad lens file fails before the solve, naming the file.
+  rouen::WriteFileAtomic(dir / "bad-lens.json", "{\"projection\": \"pinhole\"");
+  out.clear();
+  EXPECT_NE(RunRouen("render" + session + " --slot 1 --lens " + (dir / "bad-lens.json").string() +
+                         " --pose " + (dir / "pose.json").string() + " --out " +
+                         (dir / "n.exr").string(),
+                     &out),
+            0);
+  EXPECT_NE(out.find("bad-lens.json: not a valid lens file"), std::string::npos) << out;
   // Night, and contradictory options, fail at once with the reason.
   out.clear();
   EXPECT_NE(RunRouen("render" + session + " --time 2026-08-25T23:30:00-07:00 --out " +

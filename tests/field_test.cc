@@ -120,6 +120,13 @@ TEST(FieldTest, GigeFakeCameraListedThenBracketJournalledWithGpsAndSun) {
   WriteFileAtomic(dir / "gps.nmea", log);
   const std::vector<double> exposures = {1.0 / 8000, 1.0 / 4000, 1.0 / 2000, 1.0 / 1000,
                                          1.0 / 500,  1.0 / 250,  1.0 / 125};
+  // The aureole lens carries a vignetting model (as `rouen calib vignetting --lens` writes it):
+  // capture copies it into the session for the frames' device and target.
+  const std::string lens =
+      "{\"projection\": \"pinhole\", \"width\": 512, \"height\": 512, \"fx\": 400, "
+      "\"fy\": 400, \"cx\": 256, \"cy\": 256, \"vignetting\": {\"width\": 512, "
+      "\"height\": 512, \"cx\": 256, \"cy\": 256, \"a\": [-0.3, 0.05, 0]}}";
+  WriteFileAtomic(dir / "lens.json", lens);
   std::string list;
   for (double e : exposures) list += (list.empty() ? "" : ", ") + std::to_string(e);
   WriteFileAtomic(dir / "rig.toml",
@@ -132,6 +139,7 @@ TEST(FieldTest, GigeFakeCameraListedThenBracketJournalledWithGpsAndSun) {
                       "[gps]\nsource = \"nmea\"\ndevice = \"" +
                       (dir / "gps.nmea").string() +
                       "\"\nbaud = 0\n"
+                      "[lens]\naureole = \"lens.json\"\n"
                       "[plan]\ntargets = [\"aureole\"]\n"
                       "aureole_exposures_s = [" +
                       list + "]\n");
@@ -159,6 +167,10 @@ TEST(FieldTest, GigeFakeCameraListedThenBracketJournalledWithGpsAndSun) {
     EXPECT_NEAR(f.sun_elevation_deg, sp.elevation_deg, 1e-9);
     EXPECT_EQ(Sha256File(s.dir() / f.file), f.sha256);
   }
+  const nlohmann::json& vig = s.info().extra["vignetting"]["gige0/aureole"];
+  ASSERT_TRUE(vig.is_object()) << s.info().extra.dump();
+  EXPECT_DOUBLE_EQ(vig["a"][0].get<double>(), -0.3);
+  EXPECT_DOUBLE_EQ(vig["a"][1].get<double>(), 0.05);
   // A recorded log is not live: no clock offset is derived from it.
   EXPECT_DOUBLE_EQ(s.info().clock_offset_s, 0.0);
 
@@ -182,6 +194,15 @@ TEST(FieldTest, GigeFakeCameraListedThenBracketJournalledWithGpsAndSun) {
                  &code);
   EXPECT_NE(code, 0);
   EXPECT_NE(out.find("needs an existing session"), std::string::npos) << out;
+  // A lens whose vignetting model is impossible (the fall-off goes negative) stops the
+  // capture before any frame, naming the rig, the lens file and the problem.
+  WriteFileAtomic(dir / "lens.json", lens.substr(0, lens.find("-0.3")) + "-2, 0, 0]}}");
+  out = RunRouen("capture --rig " + (dir / "rig.toml").string() + " --out " +
+                     (dir / "bad").string() + " --no-prompt",
+                 &code);
+  EXPECT_NE(code, 0);
+  EXPECT_NE(out.find("lens.json: vignetting: the fall-off drops"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir / "bad" / "session.json"));
   fs::remove_all(dir);
 }
 

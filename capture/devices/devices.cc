@@ -30,6 +30,7 @@
 #include "capture/sim/sim_devices.h"
 #include "core/error.h"
 #include "core/files.h"
+#include "core/lens.h"
 
 namespace rouen {
 namespace {
@@ -49,12 +50,9 @@ std::map<Target, Intrinsics> LoadLenses(const RigConfig& rig) {
     std::string path = rig.LensPath(t);
     if (path.empty()) continue;
     try {
-      nlohmann::json j = nlohmann::json::parse(ReadFileToString(path));
-      Intrinsics k = j.get<Intrinsics>();
-      k.Validate();
-      lenses[t] = k;
-    } catch (const std::exception& e) {  // unreadable, malformed JSON, bad intrinsics
-      throw Error(rig.path + ": lens file " + path + ": " + e.what());
+      lenses[t] = ReadLensFile(path).intrinsics;
+    } catch (const Error& e) {  // missing, malformed JSON, bad intrinsics or vignetting
+      throw Error(rig.path + ": lens file " + e.what());
     }
   }
   return lenses;
