@@ -6,9 +6,11 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <memory>
 #include <string>
 
 #include "core/error.h"
+#include "solve/vector_flux_cache.h"
 
 namespace rouen {
 
@@ -153,8 +155,19 @@ SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache&
                 std::to_string(model.num_triangles()) + " (not the same model)");
   }
   std::vector<SphericalPolygon> regions;
-  if (vector_flux && lighting.use_env) {
-    regions = EnvironmentRegionPolygons(lighting.env, options.vector_flux);
+  std::unique_ptr<FaceAdjacency> adjacency;
+  std::unique_ptr<SkyPatchTree> tree;
+  std::unique_ptr<SkyTreeRadiance> sky_tree;
+  if (vector_flux) {
+    if (lighting.use_env) {
+      regions = EnvironmentRegionPolygons(lighting.env, options.vector_flux);
+    } else {
+      tree = std::make_unique<SkyPatchTree>(options.vector_flux.sky_tree_levels);
+      sky_tree = std::make_unique<SkyTreeRadiance>(*tree, lighting.sky, options.vector_flux);
+    }
+    if (options.vector_flux.select_occluders) {
+      adjacency = std::make_unique<FaceAdjacency>(*options.mesh);
+    }
   }
 
   SlotIrradiance irr;
@@ -207,7 +220,14 @@ SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache&
       }
       if (vector_flux) {
         // App. A: vector flux of the visible sky patches / environment regions.
-        const PointVisibility vis(*options.mesh, origin, p.normal, p.triangle);
+        // The faces in front of the point: an id buffer cast with Embree, or all of them.
+        const auto visibility = [&]() {
+          if (!adjacency) return PointVisibility(*options.mesh, origin, p.normal, p.triangle);
+          return PointVisibility(*options.mesh, origin, p.normal, p.triangle,
+                                 SelectOccluders(*options.mesh, model, *adjacency, origin,
+                                                 p.normal, p.triangle, options.vector_flux.select));
+        };
+        const PointVisibility vis = visibility();
         if (lighting.use_env) {
           std::vector<ConvexSpherical> shadow;
           if (ground_shadow && origin.z() > ground_z) {
@@ -217,7 +237,10 @@ SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache&
               vis, lighting.env, p.position.z(), regions, ground_shadow ? &shadow : nullptr,
               shadow_ratio);
         } else {
-          irr.direct_se[i] = SkyIrradianceVectorFlux(vis, lighting.sky, options.vector_flux);
+          // The sky tree clipped for this point, against the sky integrated once per lighting.
+          PointFluxCache c;
+          CacheSky(vis, *tree, &c);
+          irr.direct_se[i] = EvaluateSky(c, *sky_tree);
         }
         continue;
       }

@@ -100,7 +100,8 @@ struct IrradianceOptions {
 
 // E_sun[i] = L_sun Omega max(0, n.s) V and E_se[i] = (pi/K) sum over escaped directions of L
 // (kMonteCarlo), or sum over visible sky patches / environment regions of L n.Phi
-// (kVectorFlux; sky patches subdivided until L is nearly uniform over each).
+// (kVectorFlux; the sky as the SkyPatchTree clipped per point against the sky integrated once
+// per call, solve/vector_flux_cache.h).
 SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache& cache,
                                  const RayCaster& model, const Lighting& lighting,
                                  const IrradianceOptions& options = {});

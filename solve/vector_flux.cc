@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <string>
+#include <unordered_map>
 
 #include "core/error.h"
 
@@ -127,30 +128,41 @@ bool ConvexSpherical::Set(const SphericalPolygon& ccw) {
   return true;
 }
 
-void SubtractConvex(const SphericalPolygon& p, const ConvexSpherical& q,
-                    std::vector<SphericalPolygon>* outside, std::vector<SphericalPolygon>* inside) {
-  if (p.size() < 3) return;
+namespace {
+
+// Cheap tests that `p` (edges great arcs shorter than pi) and the convex `q` are disjoint:
+// bounding caps apart, or every vertex of p outside one edge of q (or, when p is convex, every
+// vertex of q outside one edge of p).
+// A bounding cap of a polygon's vertices (about their normalised mean); `valid` false when
+// it is not smaller than a hemisphere.
+struct Cap {
+  Eigen::Vector3d centre;
+  double cos = -1, sin = 0;
+  bool valid = false;
+  explicit Cap(const SphericalPolygon& p) {
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    for (const auto& v : p) c += v;
+    const double len = c.norm();
+    if (!(len > 1e-9)) return;
+    centre = c / len;
+    double m = 1;
+    for (const auto& v : p) m = std::min(m, centre.dot(v));
+    m -= 1e-12;
+    if (!(m > 0)) return;
+    cos = m;
+    sin = std::sqrt(std::max(0.0, 1 - m * m));
+    valid = true;
+  }
+};
+
+bool Disjoint(const SphericalPolygon& p, const Cap& pcap, const ConvexSpherical& q,
+              bool p_convex) {
   // Bounding caps apart (valid for caps smaller than a hemisphere): the angle between the
   // centres exceeds the sum of the radii.
-  if (q.cap_radius < kPi / 2) {
-    Eigen::Vector3d pc = Eigen::Vector3d::Zero();
-    for (const auto& v : p) pc += v;
-    const double len = pc.norm();
-    if (len > 1e-9) {
-      pc /= len;
-      double pcos = 1;
-      for (const auto& v : p) pcos = std::min(pcos, pc.dot(v));
-      pcos -= 1e-12;
-      if (pcos > 0) {
-        const double psin = std::sqrt(std::max(0.0, 1 - pcos * pcos));
-        if (pc.dot(q.cap_centre) < pcos * q.cap_cos - psin * q.cap_sin) {
-          outside->push_back(p);
-          return;
-        }
-      }
-    }
+  if (pcap.valid && q.cap_radius < kPi / 2 &&
+      pcap.centre.dot(q.cap_centre) < pcap.cos * q.cap_cos - pcap.sin * q.cap_sin) {
+    return true;
   }
-  // Entirely on the outer side of one edge's great circle: disjoint from q.
   for (const auto& m : q.edge_normal) {
     bool all_out = true;
     for (const auto& v : p) {
@@ -159,10 +171,45 @@ void SubtractConvex(const SphericalPolygon& p, const ConvexSpherical& q,
         break;
       }
     }
-    if (all_out) {
-      outside->push_back(p);
-      return;
+    if (all_out) return true;
+  }
+  if (p_convex) {
+    const size_t n = p.size();
+    for (size_t i = 0; i < n; ++i) {
+      const Eigen::Vector3d m = p[i].cross(p[(i + 1) % n]);
+      const double s = m.norm();
+      if (!(s > 1e-14)) continue;
+      bool all_out = true;
+      for (const auto& v : q.vertices) {
+        if (m.dot(v) > kSideEps * s) {
+          all_out = false;
+          break;
+        }
+      }
+      if (all_out) return true;
     }
+  }
+  return false;
+}
+
+// Every vertex of `p` inside the convex `q`: p lies inside q.
+bool Inside(const SphericalPolygon& p, const ConvexSpherical& q) {
+  for (const auto& m : q.edge_normal) {
+    for (const auto& v : p) {
+      if (m.dot(v) < -kSideEps) return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+void SubtractConvex(const SphericalPolygon& p, const ConvexSpherical& q,
+                    std::vector<SphericalPolygon>* outside, std::vector<SphericalPolygon>* inside) {
+  if (p.size() < 3) return;
+  if (Disjoint(p, Cap(p), q, false)) {
+    outside->push_back(p);
+    return;
   }
   SphericalPolygon rest = p;
   for (const auto& m : q.edge_normal) {
@@ -207,32 +254,253 @@ bool ProjectPolygon(const std::vector<Eigen::Vector3d>& points, const Eigen::Vec
   return out->Set(s);
 }
 
+FaceAdjacency::FaceAdjacency(const Mesh& mesh) {
+  const int nt = static_cast<int>(mesh.triangles.size());
+  const int nv = static_cast<int>(mesh.vertices.size());
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
+  for (const auto& v : mesh.vertices) {
+    if (!v.allFinite()) continue;
+    lo = lo.cwiseMin(v);
+    hi = hi.cwiseMax(v);
+  }
+  const double extent = (hi - lo).allFinite() ? std::max((hi - lo).norm(), 1e-9) : 1.0;
+  const double q = 1e-9 * extent;
+  // Weld: vertex -> representative id by quantised position.
+  struct KeyHash {
+    size_t operator()(const std::array<int64_t, 3>& k) const {
+      return std::hash<int64_t>()(k[0] * 73856093 ^ k[1] * 19349663 ^ k[2] * 83492791);
+    }
+  };
+  std::unordered_map<std::array<int64_t, 3>, int, KeyHash> ids;
+  std::vector<int> weld(nv, -1);
+  for (int i = 0; i < nv; ++i) {
+    const Eigen::Vector3d& v = mesh.vertices[i];
+    if (!v.allFinite()) continue;
+    const std::array<int64_t, 3> key = {std::llround((v.x() - lo.x()) / q),
+                                        std::llround((v.y() - lo.y()) / q),
+                                        std::llround((v.z() - lo.z()) / q)};
+    weld[i] = ids.emplace(key, static_cast<int>(ids.size())).first->second;
+  }
+  std::vector<std::vector<int>> faces_of(ids.size());
+  for (int t = 0; t < nt; ++t) {
+    for (int k = 0; k < 3; ++k) {
+      const int v = mesh.triangles[t][k];
+      if (v >= 0 && v < nv && weld[v] >= 0) faces_of[weld[v]].push_back(t);
+    }
+  }
+  offset_.assign(nt + 1, 0);
+  std::vector<int> nb;
+  for (int t = 0; t < nt; ++t) {
+    nb.clear();
+    for (int k = 0; k < 3; ++k) {
+      const int v = mesh.triangles[t][k];
+      if (v < 0 || v >= nv || weld[v] < 0) continue;
+      for (int f : faces_of[weld[v]]) {
+        if (f != t) nb.push_back(f);
+      }
+    }
+    std::sort(nb.begin(), nb.end());
+    nb.erase(std::unique(nb.begin(), nb.end()), nb.end());
+    list_.insert(list_.end(), nb.begin(), nb.end());
+    offset_[t + 1] = static_cast<int>(list_.size());
+  }
+}
+
+void OccluderSelectOptions::Validate() const {
+  if (resolution < 1 || resolution > 4096) {
+    throw Error("OccluderSelectOptions: resolution must be in 1..4096, got " +
+                std::to_string(resolution));
+  }
+  if (grow_rings < 0 || grow_rings > 8) {
+    throw Error("OccluderSelectOptions: grow_rings must be in 0..8, got " +
+                std::to_string(grow_rings));
+  }
+}
+
+std::vector<int> SelectOccluders(const Mesh& mesh, const RayCaster& model,
+                                 const FaceAdjacency& adjacency, const Eigen::Vector3d& origin,
+                                 const Eigen::Vector3d& normal, int own_triangle,
+                                 const OccluderSelectOptions& options, int* rays) {
+  const int nt = static_cast<int>(mesh.triangles.size());
+  if (adjacency.num_faces() != nt) {
+    throw Error("occluder selection: the adjacency has " + std::to_string(adjacency.num_faces()) +
+                " faces but the mesh " + std::to_string(nt));
+  }
+  // Tangent frame about the normal.
+  Eigen::Vector3d t = std::abs(normal.x()) < 0.9 ? Eigen::Vector3d::UnitX()
+                                                 : Eigen::Vector3d::UnitY();
+  t = (t - t.dot(normal) * normal).normalized();
+  const Eigen::Vector3d b = normal.cross(t);
+  // Polar angle and azimuth about the normal in equal steps: n_theta x n_phi = resolution^2
+  // pixels; near the tangent plane (faces low on the horizon) the pixels are thin in polar
+  // angle, where a projected-solid-angle layout would leave wide gaps.
+  const int res = options.resolution;
+  const int n_theta = std::max(1, res / 2), n_phi = (res * res + n_theta - 1) / n_theta;
+  std::vector<int> ids(static_cast<size_t>(n_theta) * n_phi, -1);
+  std::vector<Eigen::Vector3d> dirs(ids.size());
+  std::vector<int> hit;
+  for (int i = 0; i < n_theta; ++i) {
+    const double theta = (i + 0.5) / n_theta * (kPi / 2);
+    const double st = std::sin(theta), ct = std::cos(theta);
+    for (int j = 0; j < n_phi; ++j) {
+      const double phi = (j + 0.5) / n_phi * (2 * kPi);
+      const Eigen::Vector3d d =
+          (st * std::cos(phi) * t + st * std::sin(phi) * b + ct * normal).normalized();
+      const RayHit h = model.Intersect(origin, d, 0.0);
+      dirs[static_cast<size_t>(i) * n_phi + j] = d;
+      if (h.hit && h.triangle >= 0 && h.triangle < nt) {
+        hit.push_back(h.triangle);
+        ids[static_cast<size_t>(i) * n_phi + j] = h.triangle;
+      }
+    }
+  }
+  if (rays) *rays = n_theta * n_phi;
+  std::sort(hit.begin(), hit.end());
+  hit.erase(std::unique(hit.begin(), hit.end()), hit.end());
+  // Silhouette pixels (an id differing from a neighbour's): faces no ray hit can only show
+  // between pixel centres there -- or inside one pixel anywhere. Every face in front whose
+  // bounding cap reaches a silhouette pixel is added.
+  struct EdgePixel {
+    Eigen::Vector3d dir;
+    double radius;
+  };
+  std::vector<EdgePixel> edges;
+  const double dtheta = (kPi / 2) / n_theta, dphi = 2 * kPi / n_phi;
+  for (int i = 0; i < n_theta; ++i) {
+    const double smax = std::sin(std::min(kPi / 2, (i + 1) * dtheta));
+    const double radius = 1.05 * std::hypot(dtheta / 2, smax * dphi / 2);
+    for (int j = 0; j < n_phi; ++j) {
+      const int id = ids[static_cast<size_t>(i) * n_phi + j];
+      bool edge = ids[static_cast<size_t>(i) * n_phi + (j + 1) % n_phi] != id ||
+                  ids[static_cast<size_t>(i) * n_phi + (j + n_phi - 1) % n_phi] != id;
+      if (i > 0) edge |= ids[static_cast<size_t>(i - 1) * n_phi + j] != id;
+      if (i + 1 < n_theta) edge |= ids[static_cast<size_t>(i + 1) * n_phi + j] != id;
+      if (edge) edges.push_back({dirs[static_cast<size_t>(i) * n_phi + j], radius});
+    }
+  }
+  if (!edges.empty()) {
+    std::vector<int> extra;
+    for (int f = 0; f < nt; ++f) {
+      if (f == own_triangle || std::binary_search(hit.begin(), hit.end(), f)) continue;
+      const Eigen::Vector3i& tri = mesh.triangles[f];
+      if (tri.minCoeff() < 0 || tri.maxCoeff() >= static_cast<int>(mesh.vertices.size())) continue;
+      const std::vector<Eigen::Vector3d> pts = {mesh.vertices[tri[0]], mesh.vertices[tri[1]],
+                                                mesh.vertices[tri[2]]};
+      bool front = false;
+      for (const auto& v : pts) front |= normal.dot(v - origin) > 0;
+      if (!front) continue;
+      ConvexSpherical cs;
+      if (!ProjectPolygon(pts, origin, normal, &cs)) continue;
+      for (const auto& e : edges) {
+        if (e.dir.dot(cs.cap_centre) >= std::cos(std::min(kPi, cs.cap_radius + e.radius))) {
+          extra.push_back(f);
+          break;
+        }
+      }
+    }
+    std::vector<int> merged;
+    std::merge(hit.begin(), hit.end(), extra.begin(), extra.end(), std::back_inserter(merged));
+    hit.swap(merged);
+  }
+  std::vector<int> ring = hit, next;
+  for (int g = 0; g < options.grow_rings && !ring.empty(); ++g) {
+    next.clear();
+    for (int f : ring) next.insert(next.end(), adjacency.begin(f), adjacency.end(f));
+    std::sort(next.begin(), next.end());
+    next.erase(std::unique(next.begin(), next.end()), next.end());
+    ring.clear();
+    std::set_difference(next.begin(), next.end(), hit.begin(), hit.end(),
+                        std::back_inserter(ring));
+    std::vector<int> merged;
+    std::merge(hit.begin(), hit.end(), ring.begin(), ring.end(), std::back_inserter(merged));
+    hit.swap(merged);
+  }
+  if (own_triangle >= 0) {
+    auto it = std::lower_bound(hit.begin(), hit.end(), own_triangle);
+    if (it != hit.end() && *it == own_triangle) hit.erase(it);
+  }
+  return hit;
+}
+
+void PointVisibility::Add(const Mesh& mesh, int t, std::vector<Candidate>* found) const {
+  const Eigen::Vector3i& tri = mesh.triangles[t];
+  const int nv = static_cast<int>(mesh.vertices.size());
+  if (tri.minCoeff() < 0 || tri.maxCoeff() >= nv) return;
+  const std::vector<Eigen::Vector3d> pts = {mesh.vertices[tri[0]], mesh.vertices[tri[1]],
+                                            mesh.vertices[tri[2]]};
+  bool front = false;
+  for (const auto& v : pts) front |= normal_.dot(v - origin_) > 0;
+  if (!front) return;
+  Candidate c;
+  if (!ProjectPolygon(pts, origin_, normal_, &c.cs)) return;
+  c.omega = std::abs(SolidAngle(c.cs.vertices));
+  if (!(c.omega > 0)) return;
+  c.plane_n = (pts[1] - pts[0]).cross(pts[2] - pts[0]).normalized();
+  c.plane_d = c.plane_n.dot(pts[0]);
+  c.corners = {pts[0], pts[1], pts[2]};
+  found->push_back(std::move(c));
+}
+
+void PointVisibility::Finish(std::vector<Candidate>* found) {
+  std::sort(found->begin(), found->end(),
+            [](const Candidate& a, const Candidate& b) { return a.omega > b.omega; });
+  std::vector<int> kept;
+  for (int k = 0; k < static_cast<int>(found->size()); ++k) {
+    const Candidate& f = (*found)[k];
+    bool hidden = false;
+    for (int j : kept) {
+      const Candidate& q = (*found)[j];
+      const double so = q.plane_n.dot(origin_) - q.plane_d;  // the origin's side of q
+      if (!(std::abs(so) > 0)) continue;
+      bool behind = true;
+      const double tol = 1e-9 * (1 + std::abs(q.plane_d));
+      for (const auto& v : f.corners) {
+        const double sv = q.plane_n.dot(v) - q.plane_d;
+        if (so > 0 ? sv > tol : sv < -tol) {
+          behind = false;
+          break;
+        }
+      }
+      if (behind && Inside(f.cs.vertices, q.cs)) {
+        hidden = true;
+        break;
+      }
+    }
+    if (hidden) {
+      ++culled_;
+    } else {
+      kept.push_back(k);
+    }
+  }
+  occluders_.reserve(kept.size());
+  for (int k : kept) occluders_.push_back(std::move((*found)[k].cs));
+}
+
 PointVisibility::PointVisibility(const Mesh& mesh, const Eigen::Vector3d& origin,
                                  const Eigen::Vector3d& normal, int own_triangle)
     : origin_(origin), normal_(normal) {
-  std::vector<std::pair<double, ConvexSpherical>> found;
+  std::vector<Candidate> found;
   const int nt = static_cast<int>(mesh.triangles.size());
   for (int t = 0; t < nt; ++t) {
-    if (t == own_triangle) continue;
-    const Eigen::Vector3i& tri = mesh.triangles[t];
-    const std::vector<Eigen::Vector3d> pts = {mesh.vertices[tri[0]], mesh.vertices[tri[1]],
-                                              mesh.vertices[tri[2]]};
-    bool front = false;
-    for (const auto& v : pts) front |= normal.dot(v - origin) > 0;
-    if (!front) continue;
-    ConvexSpherical cs;
-    if (!ProjectPolygon(pts, origin, normal, &cs)) continue;
-    const double omega = std::abs(SolidAngle(cs.vertices));
-    if (!(omega > 0)) continue;
-    found.emplace_back(omega, std::move(cs));
+    if (t != own_triangle) Add(mesh, t, &found);
   }
-  std::sort(found.begin(), found.end(),
-            [](const auto& a, const auto& b) { return a.first > b.first; });
-  occluders_.reserve(found.size());
-  for (auto& f : found) occluders_.push_back(std::move(f.second));
+  Finish(&found);
 }
 
-void PointVisibility::Clip(const SphericalPolygon& patch, std::vector<SphericalPolygon>* out) const {
+PointVisibility::PointVisibility(const Mesh& mesh, const Eigen::Vector3d& origin,
+                                 const Eigen::Vector3d& normal, int own_triangle,
+                                 const std::vector<int>& candidates)
+    : origin_(origin), normal_(normal) {
+  std::vector<Candidate> found;
+  const int nt = static_cast<int>(mesh.triangles.size());
+  for (int t : candidates) {
+    if (t >= 0 && t < nt && t != own_triangle) Add(mesh, t, &found);
+  }
+  Finish(&found);
+}
+
+void PointVisibility::Clip(const SphericalPolygon& patch,
+                           std::vector<SphericalPolygon>* out) const {
   SphericalPolygon front = ClipToHalfSpace(patch, normal_);
   if (front.empty()) return;
   std::vector<SphericalPolygon> pieces = {std::move(front)}, next;
@@ -243,6 +511,58 @@ void PointVisibility::Clip(const SphericalPolygon& patch, std::vector<SphericalP
     if (pieces.empty()) return;
   }
   for (auto& p : pieces) out->push_back(std::move(p));
+}
+
+void PointVisibility::ClipWith(const SphericalPolygon& patch, const std::vector<int>& subset,
+                               std::vector<SphericalPolygon>* out) const {
+  SphericalPolygon front = ClipToHalfSpace(patch, normal_);
+  if (front.empty()) return;
+  std::vector<SphericalPolygon> pieces = {std::move(front)}, next;
+  for (int k : subset) {
+    next.clear();
+    for (const auto& p : pieces) SubtractConvex(p, occluders_[k], &next);
+    pieces.swap(next);
+    if (pieces.empty()) return;
+  }
+  for (auto& p : pieces) out->push_back(std::move(p));
+}
+
+PointVisibility::Cover PointVisibility::Classify(const SphericalPolygon& patch,
+                                                 const std::vector<int>* subset, bool convex,
+                                                 std::vector<int>* overlapping) const {
+  bool all_front = true, all_back = true;
+  for (const auto& v : patch) {
+    const double d = normal_.dot(v);
+    all_front &= d >= 0;
+    all_back &= d <= kSideEps;
+  }
+  if (all_back) return Cover::kHidden;
+  const size_t start = overlapping->size();
+  const Cap cap(patch);
+  auto test = [&](int k) {
+    const ConvexSpherical& q = occluders_[k];
+    if (Disjoint(patch, cap, q, convex)) return false;
+    if (Inside(patch, q)) return true;
+    overlapping->push_back(k);
+    return false;
+  };
+  if (subset != nullptr) {
+    for (int k : *subset) {
+      if (test(k)) {
+        overlapping->resize(start);
+        return Cover::kHidden;
+      }
+    }
+  } else {
+    for (int k = 0; k < num_occluders(); ++k) {
+      if (test(k)) {
+        overlapping->resize(start);
+        return Cover::kHidden;
+      }
+    }
+  }
+  if (all_front && overlapping->size() == start) return Cover::kFull;
+  return Cover::kPartial;
 }
 
 void VectorFluxOptions::Validate() const {
@@ -262,6 +582,11 @@ void VectorFluxOptions::Validate() const {
   if (env_parallel_segments < 1 || env_parallel_segments > 64) {
     throw Error("VectorFluxOptions: env_parallel_segments must be in 1..64");
   }
+  if (sky_tree_levels < 0 || sky_tree_levels > 9) {
+    throw Error("VectorFluxOptions: sky_tree_levels must be in 0..9, got " +
+                std::to_string(sky_tree_levels));
+  }
+  select.Validate();
 }
 
 namespace {
@@ -401,10 +726,19 @@ Eigen::Vector3d EnvironmentIrradianceVectorFlux(
   const Eigen::Vector3d& n = vis.normal();
   Eigen::Vector3d e = Eigen::Vector3d::Zero();
   std::vector<SphericalPolygon> visible, rest, next, inside;
+  std::vector<int> overlap;
   double el0, el1, az0, az1;
   for (int r = 0; r < env.num_regions(); ++r) {
     visible.clear();
-    vis.Clip(regions[r], &visible);
+    overlap.clear();
+    // Cheap whole-region tests first (behind the plane, inside one occluder, or untouched).
+    const PointVisibility::Cover cover = vis.Classify(regions[r], nullptr, false, &overlap);
+    if (cover == PointVisibility::Cover::kHidden) continue;
+    if (cover == PointVisibility::Cover::kFull) {
+      visible.push_back(regions[r]);
+    } else {
+      vis.ClipWith(regions[r], overlap, &visible);
+    }
     if (visible.empty()) continue;
     env.RegionBounds(r, &el0, &el1, &az0, &az1);
     const Eigen::Vector3d l = env.Radiance(Direction((el0 + el1) / 2, (az0 + az1) / 2), z);
@@ -414,10 +748,12 @@ Eigen::Vector3d EnvironmentIrradianceVectorFlux(
     if (stats) stats->patches += static_cast<int>(visible.size());
     if (ground_shadow == nullptr || ground_shadow->empty() || el0 >= 0) continue;
     // Shadowed ground: the union of the (overlapping) shadow polygons, taken apart piece by
-    // piece so no direction counts twice.
+    // piece so no direction counts twice; shadows clear of the whole region are skipped.
     Eigen::Vector3d phi_shadow = Eigen::Vector3d::Zero();
+    const Cap region_cap(regions[r]);
     rest = visible;
     for (const auto& s : *ground_shadow) {
+      if (Disjoint(regions[r], region_cap, s, false)) continue;
       next.clear();
       inside.clear();
       for (const auto& p : rest) SubtractConvex(p, s, &next, &inside);

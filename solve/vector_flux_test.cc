@@ -266,6 +266,12 @@ TEST(VectorFluxTest, OptionsValidate) {
   o = VectorFluxOptions();
   o.sky_initial_split = 9;
   EXPECT_THROW(o.Validate(), Error);
+  o = VectorFluxOptions();
+  o.sky_tree_levels = 10;
+  EXPECT_THROW(o.Validate(), Error);
+  o = VectorFluxOptions();
+  o.select.resolution = 0;
+  EXPECT_THROW(o.Validate(), Error);
 }
 
 }  // namespace
