@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <cassert>
 #include <chrono>
 #include <cmath>
@@ -47,6 +48,9 @@ constexpr double kStarts[][6] = {
 constexpr size_t kScreenSamples = 2000;
 constexpr int kScreenIterations = 60;
 constexpr size_t kRefined = 2;
+// Reweighting steps of the p < 2 objective (IrlsSolve): when screening, when refining.
+constexpr int kIrlsScreenOuter = 12;
+constexpr int kIrlsOuter = 60;
 
 double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
@@ -71,7 +75,7 @@ double ZenithGradation(const double* p) { return 1 + p[1] * std::exp(p[2]); }
 // Levenberg-Marquardt from `p` (modified in place), with the box bounds; `a_lower` replaces
 // the lower bound of a.
 StartResult Solve(const std::vector<SkyPoint>& points, const double* start, double a_lower,
-                  int max_iterations, const SkyFitOptions& options) {
+                  int max_iterations, const SkyFitOptions& options, double norm_p) {
   StartResult r;
   double* p = r.params;
   std::copy(start, start + 7, p);
@@ -82,7 +86,7 @@ StartResult Solve(const std::vector<SkyPoint>& points, const double* start, doub
   ceres::Problem::Options po;
   po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
   ceres::Problem problem(po);
-  problem.AddResidualBlock(new SkyCost(points, fixed_h), nullptr, p);
+  problem.AddResidualBlock(new SkyCost(points, fixed_h, norm_p, options.norm_eps), nullptr, p);
   for (int k = 0; k < n; ++k) {
     problem.SetParameterLowerBound(p, k, k == 1 ? a_lower : kLower[k]);
     if (std::isfinite(kUpper[k])) problem.SetParameterUpperBound(p, k, kUpper[k]);
@@ -113,17 +117,59 @@ StartResult Solve(const std::vector<SkyPoint>& points, const double* start, doub
 // result whose zenith gradation is not positive is refitted with a >= -0.999 (then
 // exp(b / cos xi) < 1 keeps it positive everywhere).
 StartResult RunStart(const std::vector<SkyPoint>& points, const double* start, int max_iterations,
-                     const SkyFitOptions& options) {
-  StartResult r = Solve(points, start, kLower[1], max_iterations, options);
+                     const SkyFitOptions& options, double norm_p = 2) {
+  StartResult r = Solve(points, start, kLower[1], max_iterations, options, norm_p);
   if (std::isfinite(r.final_cost) && ZenithGradation(r.params) < 1e-3) {
     const int used = r.iterations;
     const double initial = r.initial_cost;
-    r = Solve(points, r.params, -0.999, max_iterations, options);
+    r = Solve(points, r.params, -0.999, max_iterations, options, norm_p);
     r.iterations += used;
     r.initial_cost = initial;
   }
   if (ZenithGradation(r.params) <= 0) r.final_cost = std::numeric_limits<double>::infinity();
   return r;
+}
+
+// The smoothed p-norm objective sum rho(r_i) / 2 (SkyFitOptions::norm_p) at parameters p.
+double NormObjective(const std::vector<SkyPoint>& points, const double* p, double norm_p,
+                     double eps) {
+  double sum = 0;
+  for (const SkyPoint& q : points) {
+    const double r = q.s * (q.y - internal::SkyModelAt(p, q, nullptr));
+    sum += std::pow(eps, norm_p) * std::expm1(0.5 * norm_p * std::log1p(r * r / (eps * eps)));
+  }
+  return std::isfinite(sum) ? 0.5 * sum : std::numeric_limits<double>::infinity();
+}
+
+// p < 2: iteratively reweighted least squares, a majorise-minimise scheme (rho is concave in
+// r^2, so the weighted squares with weights rho'(r0^2) at the current residuals bound it from
+// above and each weighted fit lowers the objective). More reliable than LM on the transformed
+// residuals, whose curvature is poor where residuals cross eps.
+StartResult IrlsSolve(const std::vector<SkyPoint>& points, const double* start,
+                      const SkyFitOptions& options, int max_outer) {
+  constexpr double kRelTol = 1e-7;
+  const double p = options.norm_p, eps = options.norm_eps;
+  StartResult best;
+  std::copy(start, start + 7, best.params);
+  best.final_cost = best.initial_cost = NormObjective(points, best.params, p, eps);
+  std::vector<SkyPoint> weighted = points;
+  for (int it = 0; it < max_outer; ++it) {
+    for (size_t i = 0; i < points.size(); ++i) {
+      const SkyPoint& q = points[i];
+      const double r = q.s * (q.y - internal::SkyModelAt(best.params, q, nullptr));
+      weighted[i].s = q.s * std::pow(r * r + eps * eps, 0.25 * (p - 2));
+    }
+    StartResult r = RunStart(weighted, best.params, options.max_iterations, options);
+    if (!std::isfinite(r.final_cost)) break;
+    const double cost = NormObjective(points, r.params, p, eps);
+    best.iterations += r.iterations;
+    if (!(cost < best.final_cost)) break;
+    const double gain = best.final_cost - cost;
+    std::copy(r.params, r.params + 7, best.params);
+    best.final_cost = cost;
+    if (gain < kRelTol * cost) break;
+  }
+  return best;
 }
 
 // A start vector for a shape, with Lz in closed form (weighted linear least squares).
@@ -236,6 +282,16 @@ void SkyFitOptions::Validate() const {
   }
   if (!std::isfinite(function_tolerance) || function_tolerance <= 0) {
     throw Error("SkyFitOptions: function_tolerance must be positive");
+  }
+  if (!std::isfinite(norm_p) || norm_p < 1 || norm_p > 16) {
+    throw Error("SkyFitOptions: norm_p must be in [1, 16], got " + std::to_string(norm_p));
+  }
+  if (!std::isfinite(norm_eps) || norm_eps <= 0 || norm_eps > 0.1) {
+    throw Error("SkyFitOptions: norm_eps must be in (0, 0.1], got " + std::to_string(norm_eps));
+  }
+  if (random_starts < 0 || random_starts > 1000) {
+    throw Error("SkyFitOptions: random_starts must be in [0, 1000], got " +
+                std::to_string(random_starts));
   }
 }
 
@@ -407,7 +463,22 @@ SkyFitSummary FitSky(const std::vector<SkySample>& samples, const Eigen::Vector3
       summary.channel[c].seconds = Seconds(t0);
     }
   } else {
-    const int n_starts = options.multiple_starts ? static_cast<int>(std::size(kStarts)) : 1;
+    const int n_fixed = options.multiple_starts ? static_cast<int>(std::size(kStarts)) : 1;
+    const int n_starts = n_fixed + options.random_starts;
+    // Random shapes over the range that clear to hazy skies span (the same for every channel).
+    std::vector<std::array<double, 6>> shapes;
+    for (int k = 0; k < n_fixed; ++k) {
+      shapes.push_back({kStarts[k][0], kStarts[k][1], kStarts[k][2], kStarts[k][3], kStarts[k][4],
+                        kStarts[k][5]});
+    }
+    std::mt19937_64 rng(options.seed);
+    std::uniform_real_distribution<double> u(0, 1);
+    for (int k = 0; k < options.random_starts; ++k) {
+      const double a = -1.5 + 2.5 * u(rng), b = -2.0 + 1.9 * u(rng);
+      const double c = std::exp(std::log(0.5) + (std::log(150.0) - std::log(0.5)) * u(rng));
+      const double d = -8.0 + 7.5 * u(rng), e = -0.5 + 2.0 * u(rng), h = 0.5 + 1.0 * u(rng);
+      shapes.push_back({a, b, c, d, e, h});
+    }
     tbb::parallel_for(0, 3, [&](int c) {
       const auto t0 = std::chrono::steady_clock::now();
       const std::vector<SkyPoint>& pts = points[c];
@@ -418,7 +489,7 @@ SkyFitSummary FitSky(const std::vector<SkySample>& samples, const Eigen::Vector3
       std::vector<StartResult> screened;
       for (int k = 0; k < n_starts; ++k) {
         double p0[7];
-        MakeStart(subset, kStarts[k], p0);
+        MakeStart(subset, shapes[k].data(), p0);
         if (options.model == SkyModelKind::kPerez5) p0[6] = 1;
         screened.push_back(stride > 1 ? RunStart(subset, p0, kScreenIterations, options)
                                       : RunStart(pts, p0, options.max_iterations, options));
@@ -436,6 +507,45 @@ SkyFitSummary FitSky(const std::vector<SkySample>& samples, const Eigen::Vector3
           StartResult r = RunStart(pts, screened[k].params, options.max_iterations, options);
           r.iterations += screened[k].iterations;
           if (r.final_cost < b.final_cost) b = r;
+        }
+      }
+      // The p-norm objective has its own local minima: it starts from the least-squares
+      // optimum and from every starting shape, each on the subset; the best kRefined continue
+      // on all samples.
+      if (options.norm_p != 2 && std::isfinite(b.final_cost)) {
+        // Screening: a few reweightings (or kScreenIterations) per start; refinement: up to
+        // kIrlsOuter reweightings (the objective change then stops them much earlier).
+        auto solve_p = [&](const std::vector<SkyPoint>& on, const double* from, bool screen) {
+          StartResult r =
+              options.norm_p < 2
+                  ? IrlsSolve(on, from, options, screen ? kIrlsScreenOuter : kIrlsOuter)
+                  : RunStart(on, from, screen ? kScreenIterations : options.max_iterations,
+                             options, options.norm_p);
+          if (std::isfinite(r.final_cost)) {
+            r.final_cost = NormObjective(on, r.params, options.norm_p, options.norm_eps);
+          }
+          return r;
+        };
+        std::vector<StartResult> cands;
+        cands.push_back(solve_p(subset, b.params, stride > 1));
+        for (int k = 0; k < n_starts; ++k) {
+          double p0[7];
+          MakeStart(subset, shapes[k].data(), p0);
+          if (options.model == SkyModelKind::kPerez5) p0[6] = 1;
+          cands.push_back(solve_p(subset, p0, stride > 1));
+        }
+        std::sort(cands.begin(), cands.end(), [](const StartResult& x, const StartResult& y) {
+          return x.final_cost < y.final_cost;
+        });
+        StartResult bp;
+        for (size_t k = 0; k < std::min<size_t>(kRefined, cands.size()); ++k) {
+          if (!std::isfinite(cands[k].final_cost)) break;
+          StartResult r = stride > 1 ? solve_p(pts, cands[k].params, false) : cands[k];
+          if (r.final_cost < bp.final_cost) bp = r;
+        }
+        if (std::isfinite(bp.final_cost)) {
+          bp.iterations += b.iterations;
+          b = bp;
         }
       }
       best[c] = b;

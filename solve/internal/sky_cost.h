@@ -53,13 +53,39 @@ inline double SkyModelAt(const double* p, const SkyPoint& q, double* grad) {
 
 // Residual i = (y_i - Ls_i) / sigma_i with sigma_i = y_i / log y_i (eq. 10); one block of
 // seven parameters {Lz, a, b, c, d, e, h}. With `fixed_h` (Perez et al. 1993's five-parameter
-// form) the block has six parameters {Lz, a, b, c, d, e} and h = 1.
+// form) the block has six parameters {Lz, a, b, c, d, e} and h = 1. With `norm_p` != 2 the
+// residual is sign(r_i) sqrt(rho(r_i)), rho(r) = (r^2 + eps^2)^(p/2) - eps^p (a smoothed
+// |r|^p, eps = `norm_eps`), so that half the sum of squares is half sum rho(r_i).
 class SkyCost : public ceres::CostFunction {
  public:
-  explicit SkyCost(std::vector<SkyPoint> points, bool fixed_h = false)
-      : points_(std::move(points)), n_(fixed_h ? kNumSkyParams - 1 : kNumSkyParams) {
+  explicit SkyCost(std::vector<SkyPoint> points, bool fixed_h = false, double norm_p = 2,
+                   double norm_eps = 1e-3)
+      : points_(std::move(points)),
+        n_(fixed_h ? kNumSkyParams - 1 : kNumSkyParams),
+        half_p_(0.5 * norm_p),
+        eps2_(norm_eps * norm_eps),
+        eps_p_(std::pow(norm_eps, norm_p)) {
     set_num_residuals(static_cast<int>(points_.size()));
     mutable_parameter_block_sizes()->push_back(n_);
+  }
+
+  // The transformed residual t(r) = sign(r) sqrt(rho(r)) and dt/dr.
+  void Transform(double r, double* t, double* dt) const {
+    if (half_p_ == 1) {
+      *t = r;
+      *dt = 1;
+      return;
+    }
+    const double u = r * r / eps2_;
+    // rho = eps^p ((1 + u)^(p/2) - 1), written to keep precision at small u.
+    const double rho = eps_p_ * std::expm1(half_p_ * std::log1p(u));
+    const double root = std::sqrt(rho);
+    *t = r < 0 ? -root : root;
+    // d rho / dr = p r (r^2 + eps^2)^(p/2 - 1); dt/dr = |d rho / dr| / (2 sqrt(rho)), with its
+    // limit sqrt(p/2) eps^(p/2 - 1) at r = 0.
+    const double a = std::pow(r * r + eps2_, half_p_ - 1);
+    *dt = root > 0 ? half_p_ * std::abs(r) * a / root
+                   : std::sqrt(half_p_) * std::pow(eps2_, 0.5 * (half_p_ - 1));
   }
 
   bool Evaluate(double const* const* parameters, double* residuals,
@@ -71,10 +97,11 @@ class SkyCost : public ceres::CostFunction {
     for (size_t i = 0; i < points_.size(); ++i) {
       const SkyPoint& q = points_[i];
       const double l = SkyModelAt(p, q, jac ? grad : nullptr);
-      residuals[i] = q.s * (q.y - l);
+      double dr = 1;  // d residual / d r
+      Transform(q.s * (q.y - l), &residuals[i], &dr);
       if (!std::isfinite(residuals[i])) return false;
       if (jac) {
-        for (int k = 0; k < n_; ++k) jac[i * n_ + k] = -q.s * grad[k];
+        for (int k = 0; k < n_; ++k) jac[i * n_ + k] = -dr * q.s * grad[k];
       }
     }
     return true;
@@ -83,6 +110,7 @@ class SkyCost : public ceres::CostFunction {
  private:
   std::vector<SkyPoint> points_;
   int n_;
+  double half_p_, eps2_, eps_p_;
 };
 
 }  // namespace rouen::internal
