@@ -105,16 +105,7 @@ void RunFit(const SkyFitArgs& a) {
   std::vector<uint8_t> mask;
   std::string mask_source;
   if (!a.mask.empty()) {
-    const Image m = ReadImage(a.mask);
-    if (m.width != img.width || m.height != img.height) {
-      throw Error(a.mask + ": mask is " + std::to_string(m.width) + "x" +
-                  std::to_string(m.height) + " but the image " + a.image + " is " +
-                  std::to_string(img.width) + "x" + std::to_string(img.height));
-    }
-    mask.assign(np, 0);
-    for (size_t p = 0; p < np; ++p)
-      for (int c = 0; c < m.channels; ++c)
-        if (m.data[p * m.channels + c] != 0) mask[p] = 1;
+    mask = ReadMask(a.mask, img.width, img.height, "the image " + a.image);
     mask_source = "user";
   } else if (!a.no_segment) {
     SkySegmentOptions so;

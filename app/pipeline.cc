@@ -10,6 +10,7 @@
 #include "calib/vignetting.h"
 #include "core/error.h"
 #include "core/files.h"
+#include "solve/sky_segment.h"
 
 namespace rouen {
 namespace {
@@ -118,82 +119,66 @@ Image MergeLdrFrames(const std::vector<Image>& images, const std::vector<double>
 }
 
 // HDR frames (kRadiance, already divided by seconds x gain as `rouen import` stores them,
-// not by the ND filter): per channel a weighted mean of value / transmission. A frame whose
-// channel maximum is shared by many pixels is clipped there (RAW white level); its weight
-// falls linearly to zero over the top 10% below that level. Weights grow with the exposure
-// (seconds x gain x transmission; 1 when unknown), the shot-noise-optimal choice for linear
-// data. A pixel saturated in every frame takes the least-exposed frame's value (a lower
-// bound) and is marked invalid, like non-finite values.
+// not by the ND filter): calib's MergeRadiance; its errors are given the frames' ids.
 Image MergeRadianceFrames(const std::vector<Image>& images,
                           const std::vector<const FrameRecord*>& frames,
                           const std::vector<double>& exposures,
                           const std::vector<std::array<double, 3>>& transmission,
                           std::vector<uint8_t>* valid) {
-  const Image& f0 = images.front();
-  const int nc = f0.channels;
-  if (nc != 3 && nc != 1)
-    throw Error("frame " + std::to_string(frames[0]->id) + ": HDR frames must have 1 or 3 "
-                "channels");
-  const size_t npix = static_cast<size_t>(f0.width) * f0.height;
-  for (size_t k = 0; k < images.size(); ++k) {
-    const Image& im = images[k];
-    if (im.units != PixelUnits::kRadiance)
-      throw Error("frame " + std::to_string(frames[k]->id) + " is marked HDR but holds "
-                  "digital numbers");
-    if (im.width != f0.width || im.height != f0.height || im.channels != nc)
-      throw Error("frame " + std::to_string(frames[k]->id) + ": size or channels differ from "
-                  "frame " + std::to_string(frames[0]->id) + " of the same bracket");
+  std::vector<const Image*> ptrs;
+  for (const Image& im : images) ptrs.push_back(&im);
+  try {
+    return MergeRadiance(ptrs, exposures, transmission, RadianceMergeOptions{}, valid);
+  } catch (const Error& e) {
+    std::string ids;
+    for (const FrameRecord* f : frames) ids += (ids.empty() ? "" : ", ") + std::to_string(f->id);
+    throw Error("HDR frames " + ids + ": " + e.what());
   }
-  // Clip level per frame and channel (infinite when the frame shows no clipping).
-  const size_t min_clipped = std::max<size_t>(16, npix / 2000);
-  std::vector<std::array<double, 3>> clip(images.size());
-  std::vector<double> weight(images.size());
-  for (size_t k = 0; k < images.size(); ++k) {
-    for (int c = 0; c < nc; ++c) {
-      double mx = 0;
-      for (size_t i = 0; i < npix; ++i) {
-        const double v = images[k].data[i * nc + c];
-        if (std::isfinite(v)) mx = std::max(mx, v);
-      }
-      size_t at_max = 0;
-      for (size_t i = 0; i < npix; ++i)
-        if (images[k].data[i * nc + c] >= 0.999 * mx) ++at_max;
-      clip[k][c] = mx > 0 && at_max >= min_clipped ? mx : HUGE_VAL;
-    }
-    const double t = (transmission[k][0] + transmission[k][1] + transmission[k][2]) / 3;
-    weight[k] = (exposures[k] > 0 && std::isfinite(exposures[k]) ? exposures[k] : 1.0) * t;
-  }
-  Image out(f0.width, f0.height, nc, PixelUnits::kRadiance);
-  if (valid) valid->assign(npix, 1);
-  for (size_t i = 0; i < npix; ++i) {
-    for (int c = 0; c < nc; ++c) {
-      double sw = 0, swv = 0, fallback = 0, fallback_w = HUGE_VAL;
-      for (size_t k = 0; k < images.size(); ++k) {
-        const double v = images[k].data[i * nc + c];
-        if (!std::isfinite(v)) continue;
-        const double l = v / transmission[k][nc == 3 ? c : 0];
-        if (weight[k] < fallback_w) {
-          fallback_w = weight[k];
-          fallback = l;
-        }
-        const double top = clip[k][c];
-        const double w =
-            weight[k] * (std::isfinite(top) ? std::clamp((top - v) / (0.1 * top), 0.0, 1.0) : 1.0);
-        sw += w;
-        swv += w * l;
-      }
-      if (sw > 0) {
-        out.data[i * nc + c] = static_cast<float>(swv / sw);
-      } else {
-        out.data[i * nc + c] = static_cast<float>(std::max(0.0, fallback));
-        if (valid) (*valid)[i] = 0;
-      }
-    }
-  }
-  return out;
 }
 
 }  // namespace
+
+std::vector<uint8_t> SkyMaskFor(const Session& session, const HdrGroup& group,
+                                const Eigen::Vector3d& sun_dir, std::string* source) {
+  const std::string json = (session.dir() / "session.json").string();
+  const size_t np = static_cast<size_t>(group.radiance.width) * group.radiance.height;
+  if (group.valid.size() != np)
+    throw Error(group.name + ": the valid mask does not match the merged image");
+  const nlohmann::json& extra = session.info().extra;
+  std::string key;
+  if (extra.contains("sky_masks")) {
+    const nlohmann::json& m = extra["sky_masks"];
+    if (!m.is_object()) throw Error(json + ": extra.sky_masks must map group names to masks");
+    if (m.contains(group.name)) key = group.name;
+    else if (m.contains("*")) key = "*";
+  }
+  std::vector<uint8_t> mask;
+  if (key.empty()) {
+    mask.assign(np, 1);
+    if (source) *source = "all";
+  } else {
+    const nlohmann::json& entry = extra["sky_masks"][key];
+    if (!entry.is_string())
+      throw Error(json + ": extra.sky_masks." + key + " must be an image file name or \"auto\"");
+    if (entry == "auto") {
+      try {
+        mask = SegmentSky(group.radiance, group.intrinsics, group.pose, sun_dir,
+                          SkySegmentOptions{});
+      } catch (const Error& e) {
+        throw Error(group.name + ": " + e.what() + " (give a mask file in " + json +
+                    " extra.sky_masks." + key + ")");
+      }
+      if (source) *source = "automatic";
+    } else {
+      const std::string path = ResolveInside(session.dir(), entry.get<std::string>()).string();
+      mask = ReadMask(path, group.radiance.width, group.radiance.height,
+                      "the merged " + group.name);
+      if (source) *source = path;
+    }
+  }
+  for (size_t p = 0; p < np; ++p) mask[p] = mask[p] && group.valid[p];
+  return mask;
+}
 
 Site SessionSite(const Session& session) {
   double lat = 0, lon = 0, h = 0;
@@ -369,14 +354,19 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
                                  at_sun_frame.DirectionEnu(), at_sun_frame.SolidAngleSr(),
                                  SunOptions{});
     // §3.2: the seven-parameter sky per channel.
+    std::string mask_source;
+    const std::vector<uint8_t> sky_mask = SkyMaskFor(session, *sky_g, sun_dir, &mask_source);
     SkySampleOptions so;
-    std::vector<SkySample> samples = ExtractSkySamples(sky_g->radiance, &sky_g->valid,
+    std::vector<SkySample> samples = ExtractSkySamples(sky_g->radiance, &sky_mask,
                                                        sky_g->intrinsics, sky_g->pose, sun_dir, so);
     SkyModel sky;
     // Relative residuals (sigma = y) fit the physically based sky better than eq. 10's
     // sigma = y / log y (bench/sky_bench.cc); SkyWeighting::kPaper gives the paper's weights.
+    // Their L1 norm (robust) keeps the horizon and inner aureole, which eq. 9 cannot follow
+    // exactly, from pulling the fit of the rest of the sky (bench/sky_bench.cc error study).
     SkyFitOptions sky_fit_options;
     sky_fit_options.weighting = SkyWeighting::kRelative;
+    sky_fit_options.norm_p = 1;
     ss.sky_summary = FitSky(samples, sun_dir, sky_fit_options, &sky);
     // §3.3: the environment from the landscape panoramas, one layer per height (e.g. from the
     // ground and from a mast at the top of the building).
@@ -391,7 +381,8 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
     ss.lighting.sky = sky;
     ss.lighting.env = std::move(env);
     Log(options, "slot " + std::to_string(s) + ": sun elevation " +
-                     std::to_string(ss.sun.elevation_deg) + " deg, sky fit median error " +
+                     std::to_string(ss.sun.elevation_deg) + " deg, sky pixels " + mask_source +
+                     ", sky fit median error " +
                      std::to_string(ss.sky_summary.channel[1].rel_error_median));
     r.slots.push_back(std::move(ss));
   }

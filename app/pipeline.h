@@ -85,6 +85,17 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
 // interreflection from the recovered albedos, computed as SolveSession computed the slots'.
 SlotIrradiance IrradianceFor(const SolveResult& solved, const Lighting& lighting);
 
+// The sky pixels of a sky photo for the §3.2 fit (the paper masks buildings and trees out),
+// as session.json's extra.sky_masks says for the group's name (or for "*"): an image file
+// inside the session folder (nonzero = sky), or "auto" for automatic segmentation
+// (solve/sky_segment.h, the sun excluded). Without an entry every pixel counts: the sky
+// camera looks up at open sky, and segmentation of such a photo also drops steep parts of the
+// real sky (the low aureole, the horizon band), which raised the demo's sky p90 from 3.6% to
+// 5.5%. Always within the photo's valid pixels. `source` gets "all", "automatic" or the mask's
+// path. Throws rouen::Error naming session.json, the mask file or the group.
+std::vector<uint8_t> SkyMaskFor(const Session& session, const HdrGroup& group,
+                                const Eigen::Vector3d& sun_dir, std::string* source = nullptr);
+
 // Site of a session: the GPS fixes' mean when there are any, else session.json's site.
 Site SessionSite(const Session& session);
 

@@ -9,16 +9,16 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <functional>
 #include <opencv2/core.hpp>
 #include <opencv2/photo.hpp>
-#include <sstream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "calib/hdr.h"
 #include "calib/response.h"
+#include "calib/test_util.h"
 #include "core/image.h"
 
 namespace rouen {
@@ -28,44 +28,41 @@ namespace fs = std::filesystem;
 
 struct DataSet {
   std::string name;
-  Bracket bracket;              // rouen frames (RGB, kDigital)
+  // One bracket of rouen frames (RGB, kDigital), held in the vector RecoverResponse takes so
+  // the timed calls do not copy it (St Louis: 285 MB of frames).
+  std::vector<Bracket> brackets;
   std::vector<cv::Mat> cv;      // the same pixels, 8-bit BGR
   std::vector<float> cv_times;  // seconds
   double input_mp = 0;          // megapixels over all frames
 };
 
-// Reads `exposures.txt` (filename seconds) in `dir`; crops each frame by the given margins.
+// The bracket in `dir` (calib/test_util.h's loader, cropped by the given margins) and the
+// same pixels as 8-bit BGR for OpenCV.
 DataSet Load(const std::string& name, const fs::path& dir, int top, int bottom, int left,
              int right) {
   DataSet d;
   d.name = name;
-  std::ifstream list(dir / "exposures.txt");
-  if (!list) throw std::runtime_error("cannot read " + (dir / "exposures.txt").string());
-  std::string line;
-  while (std::getline(list, line)) {
-    if (line.empty() || line[0] == '#') continue;
-    std::istringstream in(line);
-    std::string file;
-    double seconds = 0;
-    in >> file >> seconds;
-    const Image full = ReadImage((dir / file).string());
-    const int w = full.width - left - right, h = full.height - top - bottom;
-    Image crop(w, h, 3, PixelUnits::kDigital);
-    cv::Mat mat(h, w, CV_8UC3);
-    for (int y = 0; y < h; ++y) {
-      for (int x = 0; x < w; ++x) {
+  d.brackets.push_back(testing::LoadBracket(dir, top, bottom, left, right));
+  if (d.brackets[0].frames.empty()) {
+    throw std::runtime_error("no frames listed in " + (dir / "exposures.txt").string());
+  }
+  for (size_t j = 0; j < d.brackets[0].frames.size(); ++j) {
+    Image& f = d.brackets[0].frames[j];
+    if (f.channels != 3 || f.units != PixelUnits::kDigital) {
+      throw std::runtime_error(dir.string() + ": frame " + std::to_string(j) +
+                               " is not 3-channel digital numbers");
+    }
+    cv::Mat mat(f.height, f.width, CV_8UC3);
+    for (int y = 0; y < f.height; ++y) {
+      for (int x = 0; x < f.width; ++x) {
         for (int c = 0; c < 3; ++c) {
-          const float v = full.at(x + left, y + top, full.channels == 3 ? c : 0);
-          crop.at(x, y, c) = v;
-          mat.at<cv::Vec3b>(y, x)[2 - c] = static_cast<uint8_t>(std::lround(v));
+          mat.at<cv::Vec3b>(y, x)[2 - c] = static_cast<uint8_t>(std::lround(f.at(x, y, c)));
         }
       }
     }
-    d.input_mp += w * static_cast<double>(h) * 1e-6;
-    d.bracket.frames.push_back(std::move(crop));
-    d.bracket.exposures.push_back(seconds);
+    d.input_mp += f.width * static_cast<double>(f.height) * 1e-6;
     d.cv.push_back(mat);
-    d.cv_times.push_back(static_cast<float>(seconds));
+    d.cv_times.push_back(static_cast<float>(d.brackets[0].exposures[j]));
   }
   return d;
 }
@@ -195,8 +192,8 @@ void PrintTable(std::vector<DataSet>& sets) {
       ResponseSummary s1;
       ResponseCurve c1, c2;
       try {
-        const double t = Time(3, [&] { c1 = RecoverResponse({d.bracket}, Samples(200, m), &s1); });
-        c2 = RecoverResponse({d.bracket}, Samples(400, m), nullptr);
+        const double t = Time(3, [&] { c1 = RecoverResponse(d.brackets, Samples(200, m), &s1); });
+        c2 = RecoverResponse(d.brackets, Samples(400, m), nullptr);
         const std::string name = std::string("rouen ") + ResponseMethodName(m);
         std::printf("%-28s %10.1f %10.2f %12.3f %9s %10.3f", name.c_str(), t * 1e3, t_cv_dm / t,
                     MaxDelta(c1, c2), Monotone(c1) && Monotone(c2) ? "yes" : "NO",
@@ -224,18 +221,18 @@ void PrintTable(std::vector<DataSet>& sets) {
     auto merge = cv::createMergeDebevec();
     cv::Mat cv_hdr;
     Image hdr;
-    const auto ptrs = Pointers(d.bracket);
+    const auto ptrs = Pointers(d.brackets[0]);
     const double t_cv = Time(5, [&] { merge->process(d.cv, cv_hdr, d.cv_times, resp); });
     const double t_new =
-        Time(5, [&] { hdr = MergeHdr(ptrs, d.bracket.exposures, dm, MergeOptions{}); });
+        Time(5, [&] { hdr = MergeHdr(ptrs, d.brackets[0].exposures, dm, MergeOptions{}); });
     Image reused;
     const double t_r = Time(
-        5, [&] { MergeHdrInto(ptrs, d.bracket.exposures, dm, MergeOptions{}, &reused); });
+        5, [&] { MergeHdrInto(ptrs, d.brackets[0].exposures, dm, MergeOptions{}, &reused); });
     MergeOptions ghost;
     ghost.ghost_removal = true;
     MergeSummary gs;
     const double t_g = Time(
-        3, [&] { MergeHdrInto(ptrs, d.bracket.exposures, dm, ghost, &reused, &gs); });
+        3, [&] { MergeHdrInto(ptrs, d.brackets[0].exposures, dm, ghost, &reused, &gs); });
     int64_t used = 0;
     const double corr = LogLumCorrelation(hdr, cv_hdr, &used);
     std::printf("%-28s %10s %12s %10s\n", "HDR merge (same curve)", "time ms", "input MP/s",
@@ -257,7 +254,7 @@ void PrintTable(std::vector<DataSet>& sets) {
 void BM_Response(benchmark::State& state, int set, ResponseMethod m) {
   const DataSet& d = (*g_sets)[set];
   for (auto _ : state) {
-    benchmark::DoNotOptimize(RecoverResponse({d.bracket}, Samples(200, m), nullptr));
+    benchmark::DoNotOptimize(RecoverResponse(d.brackets, Samples(200, m), nullptr));
   }
 }
 
@@ -277,11 +274,11 @@ void BM_CvCalibrateRobertson(benchmark::State& state, int set) {
 
 void BM_MergeHdr(benchmark::State& state, int set) {
   const DataSet& d = (*g_sets)[set];
-  const ResponseCurve curve = RecoverResponse({d.bracket}, ResponseOptions{}, nullptr);
-  const auto ptrs = Pointers(d.bracket);
+  const ResponseCurve curve = RecoverResponse(d.brackets, ResponseOptions{}, nullptr);
+  const auto ptrs = Pointers(d.brackets[0]);
   Image out;
   for (auto _ : state) {
-    MergeHdrInto(ptrs, d.bracket.exposures, curve, MergeOptions{}, &out);
+    MergeHdrInto(ptrs, d.brackets[0].exposures, curve, MergeOptions{}, &out);
     benchmark::DoNotOptimize(out.data.data());
   }
   state.counters["input_MP/s"] =
@@ -290,7 +287,7 @@ void BM_MergeHdr(benchmark::State& state, int set) {
 
 void BM_CvMergeDebevec(benchmark::State& state, int set) {
   const DataSet& d = (*g_sets)[set];
-  const cv::Mat resp = ToCv(RecoverResponse({d.bracket}, ResponseOptions{}, nullptr));
+  const cv::Mat resp = ToCv(RecoverResponse(d.brackets, ResponseOptions{}, nullptr));
   auto merge = cv::createMergeDebevec();
   cv::Mat out;
   for (auto _ : state) merge->process(d.cv, out, d.cv_times, resp);

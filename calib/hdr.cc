@@ -7,7 +7,12 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <string>
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#include <immintrin.h>
+#endif
 
 #include "core/error.h"
 
@@ -17,6 +22,7 @@ namespace {
 // Tables are indexed by digital number in steps of 1/16 so 16-bit inputs keep precision.
 constexpr int kSteps = 16;
 constexpr int kTable = 255 * kSteps + 1;
+constexpr unsigned kLast = kTable - 1;
 // ln of the largest finite float, minus a margin.
 constexpr double kMaxLog = 88.0;
 
@@ -43,64 +49,188 @@ void CheckCurve(const ResponseCurve& curve) {
 // 0..255, with NaN mapped to 0 (std::clamp would pass NaN through to the index).
 inline float Clamp255(float z) { return z > 0.f ? (z < 255.f ? z : 255.f) : 0.f; }
 
-struct WeightedLog {
-  float weight;   // w(z)
-  float log_sum;  // g_c(z) - ln X_j
+int Level(float z) { return static_cast<int>(Clamp255(z) * kSteps + 0.5f); }
+
+// What the per-sample sums need, shared by all frames: at each 1/16-DN level k and channel c,
+// {w(k), g_c(k)} (interleaved, entry k * nc + c: 98 KB for 3 channels, but integer inputs
+// touch one cache line per DN, 16 KB, so it stays in L1). A frame's term is then
+// w(k) (g_c(k) - ln X_j), with ln X_j one constant per frame pass.
+struct Levels {
+  struct Entry {
+    float w;  // hat weight w(k)
+    float g;  // g_c(k), ln exposure
+  };
+  std::vector<Entry> e;
+  int nc = 3;
+  float dark = 0, sat = 255;  // MergeOptions' levels, DN
+
+  // w(k) = max(0, min(z - dark, sat - z)) at z = k / 16 DN, the table's w (the AVX2 kernel
+  // computes it with these same float operations instead of loading it). z is exact in float;
+  // for levels that are multiples of 1/16 DN (the defaults 5 and 250) so are both
+  // differences, so this equals the double-precision hat; otherwise it differs only by the
+  // rounding of the levels to float (relative 6e-8).
+  float HatWeight(unsigned k) const {
+    const float z = static_cast<float>(k) * (1.f / kSteps);
+    return std::max(std::min(z - dark, sat - z), 0.f);
+  }
+  const Entry& At(unsigned k, int c) const { return e[static_cast<size_t>(k) * nc + c]; }
+  float Weight(unsigned k) const { return e[static_cast<size_t>(k) * nc].w; }
+  float G(unsigned k, int c) const { return At(k, c).g; }
 };
 
-// Adds F frames' rows to the per-value sums num += w (g - ln X), den += w; returns true when
-// some value was outside 0..255 (by more than half a table step, 1/32 DN) or not finite.
-template <int NC, int F>
-bool AccumulateRows(const float* const* s, const WeightedLog* const* tables, size_t row_len,
-                    float* num, float* den) {
-  // Branch-free: the table index is clamped as an unsigned integer (negative values and NaN,
-  // which converts to INT_MIN, become huge), and out-of-range values are flagged.
-  constexpr unsigned kLast = kTable - 1;
+// Per-sample level: v = z * 16 + 0.5 truncated. The sample is valid when v lies in
+// (-1, kTable), i.e. z in (-3/32, 255 + 1/32) DN (the half-step rounding margin, and the
+// truncation toward zero at the bottom); NaN is invalid. Invalid samples use level 0 and set
+// *bad. This is exactly what the AVX2 kernel's truncating conversion and unsigned clamp do.
+inline unsigned SampleLevel(float z, unsigned* bad) {
+  const float v = z * kSteps + 0.5f;
+  const bool ok = v > -1.f && v < static_cast<float>(kTable);
+  *bad |= !ok;
+  return ok ? static_cast<unsigned>(static_cast<int>(v)) : 0u;
+}
+
+// Adds one frame's row to the per-value sums num += w (g - ln X), den += w. Returns true when
+// some value was outside 0..255 (see SampleLevel) or not finite.
+template <int NC>
+bool AccumulateRow(const float* s, const Levels& lv, float log_x, size_t row_len, float* num,
+                   float* den) {
   unsigned bad = 0;
   for (size_t i = 0; i < row_len; i += NC) {
     for (int c = 0; c < NC; ++c) {
-      float n = num[i + c], d = den[i + c];
-      for (int f = 0; f < F; ++f) {
-        const unsigned k = static_cast<unsigned>(static_cast<int>(s[f][i + c] * kSteps + 0.5f));
-        bad |= k > kLast;
-        const WeightedLog e = tables[f][static_cast<size_t>(std::min(k, kLast)) * NC + c];
-        n += e.weight * e.log_sum;
-        d += e.weight;
-      }
-      num[i + c] = n;
-      den[i + c] = d;
+      const Levels::Entry& e = lv.At(SampleLevel(s[i + c], &bad), c);
+      num[i + c] = num[i + c] + e.w * (e.g - log_x);
+      den[i + c] = den[i + c] + e.w;
     }
   }
   return bad != 0;
 }
 
-// All frames, one streaming pass each (consecutive values are independent sums, so the
-// lookups overlap; accumulating several frames per value instead chains the additions).
+// Adds the rows of frames 0..nf-1 (s[j], ln X_j = log_x[j]) to num/den, frame by frame in
+// order; returns the last frame holding bad values, or -1. Portable kernel.
 template <int NC>
-bool AccumulateAll(const std::vector<const float*>& src, const std::vector<WeightedLog>& table,
-                   size_t table_stride, size_t row_len, float* num, float* den, int* bad_frame) {
-  bool any = false;
-  for (size_t j = 0; j < src.size(); ++j) {
-    const WeightedLog* t = &table[j * table_stride];
-    if (AccumulateRows<NC, 1>(&src[j], &t, row_len, num, den)) {
-      any = true;
-      *bad_frame = static_cast<int>(j);
-    }
+int AccumulateRows(const float* const* s, const float* log_x, int nf, const Levels& lv,
+                   size_t row_len, float* num, float* den) {
+  int bad = -1;
+  for (int j = 0; j < nf; ++j) {
+    if (AccumulateRow<NC>(s[j], lv, log_x[j], row_len, num, den)) bad = j;
   }
-  return any;
+  return bad;
 }
 
-int Level(float z) {
-  return static_cast<int>(Clamp255(z) * kSteps + 0.5f);
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define ROUEN_HDR_AVX2 1
+// F frames' rows at once, 8 values per instruction, for CPUs with AVX2 (checked at run time):
+// each value's sums are loaded once, the F frames' terms added in frame order, and stored
+// once. The operations are those of the portable kernel in the same order, without FMA
+// contraction (the target is "avx2" only and the build uses -ffp-contract=off, ISO C++), so
+// the results are the same floats. Whole groups of 24 values (8 pixels of 3 channels, or 24 of
+// 1) go through the vector loop, the rest through the portable kernel. The weight is computed
+// as Levels::HatWeight does, only g is gathered.
+template <int NC, int F>
+__attribute__((target("avx2"))) int AccumulatePassAvx2(const float* const* s, const float* log_x,
+                                                        const Levels& lv, size_t row_len,
+                                                        float* num, float* den) {
+  const __m256 steps = _mm256_set1_ps(kSteps), half = _mm256_set1_ps(0.5f);
+  const __m256 inv_steps = _mm256_set1_ps(1.f / kSteps);
+  const __m256 dark = _mm256_set1_ps(lv.dark), sat = _mm256_set1_ps(lv.sat);
+  const __m256 zero = _mm256_setzero_ps();
+  const __m256i last = _mm256_set1_epi32(kLast);
+  __m256 lx[F];
+  for (int f = 0; f < F; ++f) lx[f] = _mm256_set1_ps(log_x[f]);
+  // Channel of each lane in the three vectors of a 24-value group (phases 0, 2, 1 of 3).
+  const __m256i ch[3] = {
+      NC == 3 ? _mm256_setr_epi32(0, 1, 2, 0, 1, 2, 0, 1) : _mm256_setzero_si256(),
+      NC == 3 ? _mm256_setr_epi32(2, 0, 1, 2, 0, 1, 2, 0) : _mm256_setzero_si256(),
+      NC == 3 ? _mm256_setr_epi32(1, 2, 0, 1, 2, 0, 1, 2) : _mm256_setzero_si256()};
+  // Largest raw level seen per frame, unsigned: NaN and values beyond int convert to
+  // INT_MIN (0x80000000) and negative levels wrap, so all invalid samples exceed kLast.
+  __m256i top[F];
+  for (int f = 0; f < F; ++f) top[f] = _mm256_setzero_si256();
+  const size_t vec_len = row_len - row_len % 24;
+  for (size_t i = 0; i < vec_len; i += 24) {
+    for (int v = 0; v < 3; ++v) {
+      const size_t o = i + 8 * v;
+      __m256 n = _mm256_loadu_ps(num + o), d = _mm256_loadu_ps(den + o);
+      for (int f = 0; f < F; ++f) {
+        const __m256 z = _mm256_loadu_ps(s[f] + o);
+        const __m256i raw = _mm256_cvttps_epi32(_mm256_add_ps(_mm256_mul_ps(z, steps), half));
+        top[f] = _mm256_max_epu32(top[f], raw);
+        const __m256i k = _mm256_min_epu32(raw, last);
+        const __m256i idx =
+            NC == 3 ? _mm256_add_epi32(_mm256_add_epi32(_mm256_slli_epi32(k, 1), k), ch[v]) : k;
+        // g from the {w, g} entries: 8-byte stride, 4 bytes in.
+        const __m256 g = _mm256_i32gather_ps(&lv.e[0].g, idx, 8);
+        const __m256 zk = _mm256_mul_ps(_mm256_cvtepi32_ps(k), inv_steps);
+        const __m256 w =
+            _mm256_max_ps(_mm256_min_ps(_mm256_sub_ps(zk, dark), _mm256_sub_ps(sat, zk)), zero);
+        n = _mm256_add_ps(n, _mm256_mul_ps(w, _mm256_sub_ps(g, lx[f])));
+        d = _mm256_add_ps(d, w);
+      }
+      _mm256_storeu_ps(num + o, n);
+      _mm256_storeu_ps(den + o, d);
+    }
+  }
+  int bad = -1;
+  for (int f = 0; f < F; ++f) {
+    // Any lane above kLast (unsigned)?
+    const __m256i ok = _mm256_cmpeq_epi32(_mm256_max_epu32(top[f], last), last);
+    if (_mm256_movemask_epi8(ok) != -1) bad = f;
+  }
+  // Clear the upper register halves before SSE code runs again (GCC does not always insert
+  // this for target-attribute functions; without it the caller's scalar code, expf in the
+  // finishing pass, slows down several times).
+  _mm256_zeroupper();
+  for (int f = 0; f < F; ++f) {
+    if (AccumulateRow<NC>(s[f] + vec_len, lv, log_x[f], row_len - vec_len, num + vec_len,
+                          den + vec_len)) {
+      bad = std::max(bad, f);
+    }
+  }
+  return bad;
+}
+
+// All frames, kAvx2Frames per pass and the remainder one by one; the result as
+// AccumulateRows.
+constexpr int kAvx2Frames = 4;
+template <int NC>
+__attribute__((target("avx2"))) int AccumulateRowsAvx2(const float* const* s, const float* log_x,
+                                                        int nf, const Levels& lv, size_t row_len,
+                                                        float* num, float* den) {
+  int bad = -1;
+  int j = 0;
+  for (; j + kAvx2Frames <= nf; j += kAvx2Frames) {
+    const int b = AccumulatePassAvx2<NC, kAvx2Frames>(s + j, log_x + j, lv, row_len, num, den);
+    if (b >= 0) bad = j + b;
+  }
+  for (; j < nf; ++j) {
+    if (AccumulatePassAvx2<NC, 1>(s + j, log_x + j, lv, row_len, num, den) >= 0) bad = j;
+  }
+  return bad;
+}
+#endif
+
+using RowsKernel = int (*)(const float* const*, const float*, int, const Levels&, size_t, float*,
+                           float*);
+
+// The AVX2 kernel where the CPU has it and `simd` allows it, else the portable one.
+RowsKernel ChooseKernel(int nc, bool simd) {
+#ifdef ROUEN_HDR_AVX2
+  if (simd && __builtin_cpu_supports("avx2")) {
+    return nc == 3 ? AccumulateRowsAvx2<3> : AccumulateRowsAvx2<1>;
+  }
+#endif
+  (void)simd;
+  return nc == 3 ? AccumulateRows<3> : AccumulateRows<1>;
 }
 
 // Ghost removal over one row (see MergeOptions::ghost_removal): subtracts the contributions
 // of frames that disagree with the pixel's reference frame from num/den. Returns the number
 // of pixels where some frame was left out.
 int64_t RemoveGhosts(const std::vector<const float*>& src, const std::vector<int>& by_median,
-                     const std::vector<WeightedLog>& table, size_t table_stride,
-                     const std::vector<float>& slope, int nc, int w, const MergeOptions& o,
-                     float* num, float* den, uint8_t* ghost_row) {
+                     const Levels& lv, const std::vector<float>& log_x,
+                     const std::vector<float>& slope, int w, const MergeOptions& o, float* num,
+                     float* den, uint8_t* ghost_row) {
+  const int nc = lv.nc;
   int64_t count = 0;
   const float thr = static_cast<float>(o.ghost_threshold);
   const float noise = static_cast<float>(o.ghost_noise_dn);
@@ -109,10 +239,7 @@ int64_t RemoveGhosts(const std::vector<const float*>& src, const std::vector<int
     int ref = -1;
     for (int j : by_median) {
       bool well = true;
-      for (int c = 0; c < nc && well; ++c) {
-        well = table[j * table_stride + static_cast<size_t>(Level(src[j][off + c])) * nc + c]
-                   .weight > 0;
-      }
+      for (int c = 0; c < nc && well; ++c) well = lv.Weight(Level(src[j][off + c])) > 0;
       if (well) {
         ref = j;
         break;
@@ -124,14 +251,12 @@ int64_t RemoveGhosts(const std::vector<const float*>& src, const std::vector<int
       if (j == ref) continue;
       bool differs = false;
       for (int c = 0; c < nc && !differs; ++c) {
-        const size_t kj = static_cast<size_t>(Level(src[j][off + c])) * nc + c;
-        const size_t kr = static_cast<size_t>(Level(src[ref][off + c])) * nc + c;
-        const WeightedLog& ej = table[j * table_stride + kj];
-        const WeightedLog& er = table[ref * table_stride + kr];
+        const int kj = Level(src[j][off + c]), kr = Level(src[ref][off + c]);
         // A clipped or dark reading says only "at least" / "at most": compare it one-sided.
-        const float d = ej.log_sum - er.log_sum;
-        const float allowed = thr + noise * (slope[kj] + slope[kr]);
-        if (ej.weight > 0) {
+        const float d = (lv.G(kj, c) - log_x[j]) - (lv.G(kr, c) - log_x[ref]);
+        const float allowed = thr + noise * (slope[static_cast<size_t>(kj) * nc + c] +
+                                             slope[static_cast<size_t>(kr) * nc + c]);
+        if (lv.Weight(kj) > 0) {
           differs = std::abs(d) > allowed;
         } else {
           const float z = src[j][off + c];
@@ -141,10 +266,10 @@ int64_t RemoveGhosts(const std::vector<const float*>& src, const std::vector<int
       if (!differs) continue;
       any = true;
       for (int c = 0; c < nc; ++c) {
-        const size_t kj = static_cast<size_t>(Level(src[j][off + c])) * nc + c;
-        const WeightedLog& ej = table[j * table_stride + kj];
-        num[off + c] -= ej.weight * ej.log_sum;
-        den[off + c] -= ej.weight;
+        const int kj = Level(src[j][off + c]);
+        const float wj = lv.Weight(kj);
+        num[off + c] -= wj * (lv.G(kj, c) - log_x[j]);
+        den[off + c] -= wj;
       }
     }
     if (any) {
@@ -226,35 +351,27 @@ void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<dou
   const int longest =
       static_cast<int>(std::max_element(exposures.begin(), exposures.end()) - exposures.begin());
 
-  // Per-z tables: weight and g(z) per channel.
-  std::vector<float> weight(kTable);
-  std::vector<float> gtab(static_cast<size_t>(kTable) * nc);
+  // w and g_c per 1/16-DN level (g linear between the curve's integer entries); see Levels.
+  Levels lv;
+  lv.nc = nc;
+  lv.dark = static_cast<float>(options.dark_level);
+  lv.sat = static_cast<float>(options.saturation_level);
+  lv.e.resize(static_cast<size_t>(kTable) * nc);
   for (int k = 0; k < kTable; ++k) {
     const double z = static_cast<double>(k) / kSteps;
-    weight[k] = static_cast<float>(
-        std::max(0.0, std::min(z - options.dark_level, options.saturation_level - z)));
     const int z0 = std::min(254, k / kSteps);
     const double t = z - z0;
     for (int c = 0; c < nc; ++c) {
       const auto& g = curve.g[nc == 1 ? 1 : c];
-      gtab[static_cast<size_t>(k) * nc + c] = static_cast<float>((1 - t) * g[z0] + t * g[z0 + 1]);
+      lv.e[static_cast<size_t>(k) * nc + c] = {
+          lv.HatWeight(k), static_cast<float>((1 - t) * g[z0] + t * g[z0 + 1])};
     }
   }
   std::vector<float> log_x(nf);
   for (int j = 0; j < nf; ++j) log_x[j] = static_cast<float>(std::log(exposures[j]));
-  const float sat_level = static_cast<float>(options.saturation_level);
-  const float dark_level = static_cast<float>(options.dark_level);
-  std::vector<float> g255(nc);
-  for (int c = 0; c < nc; ++c) g255[c] = gtab[static_cast<size_t>(kTable - 1) * nc + c];
-
-  // Per frame, level and channel: {w(z), g_c(z) - ln X_j}, the same floats the sums use.
-  const size_t table_stride = static_cast<size_t>(kTable) * nc;
-  std::vector<WeightedLog> table(table_stride * nf);
-  for (int j = 0; j < nf; ++j) {
-    for (size_t e = 0; e < table_stride; ++e) {
-      table[j * table_stride + e] = {weight[e / nc], gtab[e] - log_x[j]};
-    }
-  }
+  const float sat_level = lv.sat;
+  const float dark_level = lv.dark;
+  const RowsKernel accumulate = ChooseKernel(nc, options.use_simd);
 
   if (out_image == nullptr) throw Error("hdr merge: no output image given");
   Image& out = *out_image;
@@ -270,7 +387,7 @@ void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<dou
   std::vector<float> slope;
   std::vector<int> by_median;
   if (options.ghost_removal) {
-    slope.resize(gtab.size());
+    slope.resize(lv.e.size());
     for (int k = 0; k < kTable; ++k) {
       const int z0 = std::clamp(k / kSteps, 1, 254);
       for (int c = 0; c < nc; ++c) {
@@ -294,9 +411,9 @@ void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<dou
   std::atomic<int> bad_frame{-1};
   std::atomic<bool> overflow{false};
 
-  // Row by row: frames in the outer loop stream through each row (accumulating in the
-  // same frame order as a per-pixel loop, so the sums are the same floats), then one pass
-  // per pixel finishes it.
+  // Row by row: the kernel streams the frames through each row (a few frames per pass,
+  // adding in the same frame order as a per-pixel loop, so the sums are the same floats),
+  // then one pass per pixel finishes it.
   tbb::parallel_for(tbb::blocked_range<int>(0, h), [&](const tbb::blocked_range<int>& rows) {
     int64_t local_sat = 0, local_dark = 0, local_ghosts = 0;
     const size_t row_len = static_cast<size_t>(w) * nc;
@@ -308,15 +425,12 @@ void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<dou
       float* dst = out.data.data() + static_cast<size_t>(y) * w * nc;
       std::fill(num.begin(), num.end(), 0.f);
       std::fill(den.begin(), den.end(), 0.f);
-      int bad_j = -1;
-      const bool bad = nc == 3 ? AccumulateAll<3>(src, table, table_stride, row_len, num.data(),
-                                                  den.data(), &bad_j)
-                               : AccumulateAll<1>(src, table, table_stride, row_len, num.data(),
-                                                  den.data(), &bad_j);
-      if (bad) bad_frame.store(bad_j);
+      const int bad = accumulate(src.data(), log_x.data(), nf, lv, row_len, num.data(),
+                                 den.data());
+      if (bad >= 0) bad_frame.store(bad);
       if (options.ghost_removal) {
-        local_ghosts += RemoveGhosts(src, by_median, table, table_stride, slope, nc, w,
-                                     options, num.data(), den.data(),
+        local_ghosts += RemoveGhosts(src, by_median, lv, log_x, slope, w, options, num.data(),
+                                     den.data(),
                                      ghost_mask ? ghost_mask->data() + static_cast<size_t>(y) * w
                                                 : nullptr);
       }
@@ -339,11 +453,10 @@ void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<dou
             const float zs = src[shortest][off];
             const float zl = src[longest][off];
             if (zs >= sat_level || zmin >= sat_level) {
-              log_l = g255[c] - log_x[shortest];  // a lower bound
+              log_l = lv.G(kLast, c) - log_x[shortest];  // a lower bound
               pixel_sat = true;
             } else if (zl <= dark_level || zmax <= dark_level) {
-              const int k = static_cast<int>(Clamp255(zl) * kSteps + 0.5f);
-              log_l = gtab[static_cast<size_t>(k) * nc + c] - log_x[longest];
+              log_l = lv.G(Level(zl), c) - log_x[longest];
               pixel_dark = true;
             } else {
               // Saturated in long frames, dark in short ones, nothing in between: the
@@ -351,8 +464,7 @@ void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<dou
               float lower = -1e30f, upper = 1e30f;
               for (int j = 0; j < nf; ++j) {
                 const float z = Clamp255(src[j][off]);
-                const int k = static_cast<int>(z * kSteps + 0.5f);
-                const float est = gtab[static_cast<size_t>(k) * nc + c] - log_x[j];
+                const float est = lv.G(Level(z), c) - log_x[j];
                 if (z >= sat_level) lower = std::max(lower, est);
                 if (z <= dark_level) upper = std::min(upper, est);
               }
@@ -390,6 +502,117 @@ void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<dou
     summary->seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
+}
+
+}  // namespace rouen
+
+namespace rouen {
+
+void RadianceMergeOptions::Validate() const {
+  if (clip_min_pixels < 1 || clip_divisor < 1) {
+    throw Error("RadianceMergeOptions: clip_min_pixels and clip_divisor must be >= 1, got " +
+                std::to_string(clip_min_pixels) + " and " + std::to_string(clip_divisor));
+  }
+  if (!(clip_ramp > 0 && clip_ramp <= 1)) {
+    throw Error("RadianceMergeOptions: clip_ramp must be in (0, 1], got " +
+                std::to_string(clip_ramp));
+  }
+}
+
+Image MergeRadiance(const std::vector<const Image*>& frames, const std::vector<double>& exposures,
+                    const std::vector<std::array<double, 3>>& transmission,
+                    const RadianceMergeOptions& options, std::vector<uint8_t>* valid_mask) {
+  options.Validate();
+  if (frames.empty()) throw Error("radiance merge: no frames given");
+  if (exposures.size() != frames.size() || transmission.size() != frames.size()) {
+    throw Error("radiance merge: " + std::to_string(frames.size()) + " frames but " +
+                std::to_string(exposures.size()) + " exposures and " +
+                std::to_string(transmission.size()) + " transmissions");
+  }
+  for (size_t k = 0; k < frames.size(); ++k) {
+    if (frames[k] == nullptr) {
+      throw Error("radiance merge: frame " + std::to_string(k) + " is null");
+    }
+  }
+  const Image& f0 = *frames[0];
+  const int nc = f0.channels;
+  if (nc != 3 && nc != 1) {
+    throw Error("radiance merge: frames must have 1 or 3 channels, frame 0 has " +
+                std::to_string(nc));
+  }
+  if (f0.width <= 0 || f0.height <= 0) throw Error("radiance merge: frame 0 is empty");
+  const size_t npix = static_cast<size_t>(f0.width) * f0.height;
+  for (size_t k = 0; k < frames.size(); ++k) {
+    const Image& im = *frames[k];
+    const std::string fk = "radiance merge: frame " + std::to_string(k) + ": ";
+    if (im.units != PixelUnits::kRadiance) {
+      throw Error(fk + "holds digital numbers, not radiance (kRadiance)");
+    }
+    if (im.width != f0.width || im.height != f0.height || im.channels != nc) {
+      throw Error(fk + std::to_string(im.width) + "x" + std::to_string(im.height) + "x" +
+                  std::to_string(im.channels) + " differs from frame 0 (" +
+                  std::to_string(f0.width) + "x" + std::to_string(f0.height) + "x" +
+                  std::to_string(nc) + ")");
+    }
+    if (im.data.size() != npix * nc) throw Error(fk + "pixel buffer size does not match");
+    for (double t : transmission[k]) {
+      if (!(std::isfinite(t) && t > 0)) {
+        throw Error(fk + "transmission " + std::to_string(t) + " must be positive and finite");
+      }
+    }
+  }
+  // Clip level per frame and channel (infinite when the frame shows no clipping).
+  const size_t min_clipped = std::max<size_t>(static_cast<size_t>(options.clip_min_pixels),
+                                              npix / static_cast<size_t>(options.clip_divisor));
+  std::vector<std::array<double, 3>> clip(frames.size());
+  std::vector<double> weight(frames.size());
+  for (size_t k = 0; k < frames.size(); ++k) {
+    const std::vector<float>& data = frames[k]->data;
+    for (int c = 0; c < nc; ++c) {
+      double mx = 0;
+      for (size_t i = 0; i < npix; ++i) {
+        const double v = data[i * nc + c];
+        if (std::isfinite(v)) mx = std::max(mx, v);
+      }
+      size_t at_max = 0;
+      for (size_t i = 0; i < npix; ++i) {
+        if (data[i * nc + c] >= 0.999 * mx) ++at_max;
+      }
+      clip[k][c] = mx > 0 && at_max >= min_clipped ? mx : HUGE_VAL;
+    }
+    const double t = (transmission[k][0] + transmission[k][1] + transmission[k][2]) / 3;
+    weight[k] = (exposures[k] > 0 && std::isfinite(exposures[k]) ? exposures[k] : 1.0) * t;
+  }
+  Image out(f0.width, f0.height, nc, PixelUnits::kRadiance);
+  if (valid_mask) valid_mask->assign(npix, 1);
+  for (size_t i = 0; i < npix; ++i) {
+    for (int c = 0; c < nc; ++c) {
+      double sw = 0, swv = 0, fallback = 0, fallback_w = HUGE_VAL;
+      for (size_t k = 0; k < frames.size(); ++k) {
+        const double v = frames[k]->data[i * nc + c];
+        if (!std::isfinite(v)) continue;
+        const double l = v / transmission[k][nc == 3 ? c : 0];
+        if (weight[k] < fallback_w) {
+          fallback_w = weight[k];
+          fallback = l;
+        }
+        const double top = clip[k][c];
+        const double w =
+            weight[k] *
+            (std::isfinite(top) ? std::clamp((top - v) / (options.clip_ramp * top), 0.0, 1.0)
+                                : 1.0);
+        sw += w;
+        swv += w * l;
+      }
+      if (sw > 0) {
+        out.data[i * nc + c] = static_cast<float>(swv / sw);
+      } else {
+        out.data[i * nc + c] = static_cast<float>(std::max(0.0, fallback));
+        if (valid_mask) (*valid_mask)[i] = 0;
+      }
+    }
+  }
+  return out;
 }
 
 }  // namespace rouen

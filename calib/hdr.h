@@ -2,6 +2,7 @@
 // Yu & Malik 1998 §3).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -26,6 +27,10 @@ struct MergeOptions {
   bool ghost_removal = false;
   double ghost_threshold = 0.15;  // ln units, besides the noise term
   double ghost_noise_dn = 3.0;    // reading noise allowance, DN
+
+  // Use the AVX2 kernel when the CPU has it (checked at run time). It gives the same floats as
+  // the portable kernel; false forces the portable one (tests compare the two).
+  bool use_simd = true;
 
   void Validate() const;  // throws rouen::Error explaining the bad field
 };
@@ -58,5 +63,32 @@ void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<dou
                   const ResponseCurve& curve, const MergeOptions& options, Image* out,
                   MergeSummary* summary = nullptr, std::vector<uint8_t>* valid_mask = nullptr,
                   std::vector<uint8_t>* ghost_mask = nullptr);
+
+// Merging frames that already hold radiance (kRadiance: imported RAW/EXR divided by seconds x
+// gain), which need no response curve.
+struct RadianceMergeOptions {
+  // A frame's channel counts as clipped at its maximum M (a RAW white level) when at least
+  // max(clip_min_pixels, pixels / clip_divisor) pixels are >= 0.999 M; its weight then falls
+  // linearly from 1 to 0 over the top clip_ramp x M.
+  int64_t clip_min_pixels = 16;
+  int64_t clip_divisor = 2000;
+  double clip_ramp = 0.1;
+
+  void Validate() const;  // throws rouen::Error explaining the bad field
+};
+
+// Per channel a weighted mean of value / transmission_j,c. The weight of frame j is its
+// exposure (seconds x gain, or 1 when not positive and finite) times its mean transmission --
+// the shot-noise-optimal choice for linear data -- times the clipping ramp above. Non-finite
+// values are skipped. A value with no weight (clipped, or non-finite, in every frame) takes the
+// least-weighted frame's finite value (a lower bound; 0 when none) and its pixel gets 0 in
+// `valid_mask` (width x height entries, 1 elsewhere). `transmission` holds each frame's
+// filter transmission per R, G, B (1-channel frames use R). Throws rouen::Error for no frames,
+// mismatched sizes or channel counts, frames that are not kRadiance, list sizes that differ,
+// non-positive or non-finite transmissions, or invalid options.
+Image MergeRadiance(const std::vector<const Image*>& frames, const std::vector<double>& exposures,
+                    const std::vector<std::array<double, 3>>& transmission,
+                    const RadianceMergeOptions& options,
+                    std::vector<uint8_t>* valid_mask = nullptr);
 
 }  // namespace rouen

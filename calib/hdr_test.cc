@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "calib/test_util.h"
@@ -226,6 +227,87 @@ TEST(MergeHdr, IntoReusesTheOutputAndMatchesTheReturningForm) {
   EXPECT_THROW(bad.Validate(), Error);
   EXPECT_THROW(MergeHdrInto(Pointers(b), exposures, TrueCurve(), MergeOptions{}, nullptr),
                Error);
+}
+
+// The AVX2 kernel (used where the CPU has it) must give the same floats as the portable one
+// the CI machine may run: fractional (16-bit) and integer values, 0 and 255 exactly, 1 and 3
+// channels, widths that leave a tail for the portable kernel, ghost removal on and off.
+TEST(MergeHdr, SimdKernelMatchesThePortableOne) {
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+  if (!__builtin_cpu_supports("avx2")) GTEST_SKIP() << "this CPU has no AVX2";
+#else
+  GTEST_SKIP() << "no AVX2 kernel on this architecture";
+#endif
+  std::mt19937_64 rng(17);
+  std::uniform_real_distribution<float> u(0.f, 255.f);
+  // 6 frames: the AVX2 kernel adds 4 per pass, then the rest one by one.
+  const std::vector<double> exposures = {0.01, 0.03, 0.08, 0.2, 0.6, 5.0};
+  for (int nc : {1, 3}) {
+    for (int w : {37, 64}) {
+      const int h = 9;
+      std::vector<Image> frames;
+      for (size_t j = 0; j < exposures.size(); ++j) {
+        Image f(w, h, nc, PixelUnits::kDigital);
+        for (size_t i = 0; i < f.data.size(); ++i) {
+          const float z = u(rng);
+          f.data[i] = i % 7 == 0 ? 0.f : i % 11 == 0 ? 255.f : i % 2 ? std::round(z) : z;
+        }
+        frames.push_back(std::move(f));
+      }
+      std::vector<const Image*> ptrs;
+      for (const Image& f : frames) ptrs.push_back(&f);
+      for (bool ghost : {false, true}) {
+        MergeOptions simd, portable;
+        simd.ghost_removal = portable.ghost_removal = ghost;
+        portable.use_simd = false;
+        MergeSummary ss, sp;
+        std::vector<uint8_t> vs, vp;
+        const Image a = MergeHdr(ptrs, exposures, TrueCurve(), simd, &ss, &vs);
+        const Image b = MergeHdr(ptrs, exposures, TrueCurve(), portable, &sp, &vp);
+        EXPECT_EQ(a.data, b.data) << "nc " << nc << " w " << w << " ghost " << ghost;
+        EXPECT_EQ(vs, vp);
+        EXPECT_EQ(ss.saturated_pixels, sp.saturated_pixels);
+        EXPECT_EQ(ss.dark_pixels, sp.dark_pixels);
+        EXPECT_EQ(ss.ghost_pixels, sp.ghost_pixels);
+      }
+    }
+  }
+}
+
+// Values are accepted up to the rounding margin of the 1/16-DN levels, z in (-3/32, 255 +
+// 1/32); beyond it, or NaN, both kernels name the frame, whether the value falls in the
+// vector part of a row or its tail, in a frame merged in a pass of 4 frames or alone.
+TEST(MergeHdr, BothKernelsRejectOutOfRangeValuesNamingTheFrame) {
+  const ResponseCurve curve = TrueCurve();
+  const int w = 13;  // 39 values a row: 24 through the vector loop, 15 in the tail
+  const std::vector<double> exposures = {1, 2, 3, 4, 5};
+  const Image good(w, 2, 3, PixelUnits::kDigital, 100.f);
+  for (bool simd : {true, false}) {
+    MergeOptions o;
+    o.use_simd = simd;
+    for (int j : {2, 4}) {
+      for (int x : {2, 11}) {  // value 6 or 33 of the row
+        std::vector<Image> frames(exposures.size(), good);
+        std::vector<const Image*> ptrs;
+        for (const Image& f : frames) ptrs.push_back(&f);
+        for (float bad : {-0.1f, 255.04f, std::nanf(""), 1e10f, -1e10f}) {
+          frames[j].at(x, 1, 0) = bad;
+          try {
+            MergeHdr(ptrs, exposures, curve, o, nullptr);
+            ADD_FAILURE() << "accepted " << bad << " at x " << x << " simd " << simd;
+          } catch (const Error& e) {
+            EXPECT_NE(std::string(e.what()).find("frame " + std::to_string(j)),
+                      std::string::npos)
+                << e.what();
+          }
+        }
+        for (float edge : {-0.09f, 255.03f}) {
+          frames[j].at(x, 1, 0) = edge;
+          EXPECT_NO_THROW(MergeHdr(ptrs, exposures, curve, o, nullptr)) << edge;
+        }
+      }
+    }
+  }
 }
 
 }  // namespace

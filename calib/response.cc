@@ -15,6 +15,7 @@
 #include <numeric>
 #include <random>
 #include <string>
+#include <type_traits>
 
 #include "core/error.h"
 
@@ -111,37 +112,53 @@ std::vector<size_t> SelectSamples(const Bracket& b, size_t index, const Response
   std::atomic<int> bad_frame{-1};
   const float tol = static_cast<float>(o.monotone_tolerance);
   const float inv = 1.f / static_cast<float>(b.frames.size() * nc);
+  // Frames' pixel data in order of exposure, hoisted out of the per-pixel loop (the compiler
+  // cannot, as the stores to key/ok might alias them).
+  std::vector<const float*> data_by_exposure;
+  for (int j : order) data_by_exposure.push_back(b.frames[j].data.data());
+  const int nf = static_cast<int>(order.size());
+  // One grid row; NC is the channel count (a constant, so the channel loop unrolls).
+  auto scan_row = [&](auto channels, int k) {
+    constexpr int NC = decltype(channels)::value;
+    const float* const* fd = data_by_exposure.data();
+    const size_t row = static_cast<size_t>(k) * s * w;
+    for (int i = 0; i < gw; ++i) {
+      const size_t p = row + static_cast<size_t>(i) * s;
+      float running[NC];
+      for (int c = 0; c < NC; ++c) running[c] = -1.f;
+      float acc = 0.f;
+      bool usable = true;
+      int informative = 0;
+      for (int r = 0; r < nf; ++r) {
+        const float* d = fd[r] + p * NC;
+        float sum = 0;
+        for (int c = 0; c < NC; ++c) {
+          const float v = d[c];
+          if (!(v >= 0.f && v <= 255.f)) {
+            bad_pixel.store(static_cast<int64_t>(p));
+            bad_frame.store(order[r]);
+            usable = false;
+            continue;
+          }
+          if (v < running[c] - tol) usable = false;
+          running[c] = std::max(running[c], v);
+          sum += v;
+        }
+        acc += sum * inv;
+        const float mean = sum / NC;
+        if (mean >= 2.f && mean <= 253.f) ++informative;
+      }
+      const size_t g = static_cast<size_t>(k) * gw + i;
+      key[g] = acc;
+      ok[g] = usable && informative >= 2 && (b.mask.empty() || b.mask[p] != 0);
+    }
+  };
   tbb::parallel_for(tbb::blocked_range<int>(0, gh), [&](const tbb::blocked_range<int>& rows) {
     for (int k = rows.begin(); k != rows.end(); ++k) {
-      const size_t row = static_cast<size_t>(k) * s * w;
-      for (int i = 0; i < gw; ++i) {
-        const size_t p = row + static_cast<size_t>(i) * s;
-        float running[3] = {-1.f, -1.f, -1.f};
-        float acc = 0.f;
-        bool usable = true;
-        int informative = 0;
-        for (int j : order) {
-          const float* d = b.frames[j].data.data() + p * nc;
-          float sum = 0;
-          for (int c = 0; c < nc; ++c) {
-            const float v = d[c];
-            if (!(v >= 0.f && v <= 255.f)) {
-              bad_pixel.store(static_cast<int64_t>(p));
-              bad_frame.store(j);
-              usable = false;
-              continue;
-            }
-            if (v < running[c] - tol) usable = false;
-            running[c] = std::max(running[c], v);
-            sum += v;
-          }
-          acc += sum * inv;
-          const float mean = sum / nc;
-          if (mean >= 2.f && mean <= 253.f) ++informative;
-        }
-        const size_t g = static_cast<size_t>(k) * gw + i;
-        key[g] = acc;
-        ok[g] = usable && informative >= 2 && (b.mask.empty() || b.mask[p] != 0);
+      if (nc == 3) {
+        scan_row(std::integral_constant<int, 3>(), k);
+      } else {
+        scan_row(std::integral_constant<int, 1>(), k);
       }
     }
   });

@@ -1,4 +1,5 @@
-// Synthetic brackets for the calib tests: a known response applied to a known radiance field.
+// Synthetic brackets for the calib tests: a known response applied to a known radiance field;
+// loaders of the real brackets in ../shared/data/hdr (also used by bench/calib_bench).
 #pragma once
 
 #include <algorithm>
@@ -113,7 +114,7 @@ inline Bracket MakeBracket(const Image& radiance, const std::vector<double>& exp
   return b;
 }
 
-// ---- Real data: Debevec's Memorial Church bracket (ROUEN_SHARED_DIR, tests only). ----
+// ---- Real data under ROUEN_SHARED_DIR (tests and bench only): Debevec's Memorial Church. ----
 
 // Two stops apart; radiance e^-5..e^4 is well exposed somewhere for both curve shapes.
 inline const std::vector<double> kTwoStopExposures = {1.0 / 64, 1.0 / 16, 1.0 / 4, 1.0, 4.0,
@@ -130,11 +131,12 @@ inline std::filesystem::path MemorialDir() {
   return std::filesystem::path(ROUEN_SHARED_DIR) / "data" / "hdr" / "memorial";
 }
 
-// Loads the 16 frames cropped as the data set's README says (top 30, bottom 20, left 3,
-// right 4 px) to remove the blue registration padding.
-inline Bracket LoadMemorial() {
+// Loads the bracket listed in `dir`/exposures.txt (lines "filename seconds"; '#' comments),
+// each frame cropped by the given margins in pixels. Empty when the list cannot be read.
+inline Bracket LoadBracket(const std::filesystem::path& dir, int top, int bottom, int left,
+                           int right) {
   Bracket b;
-  std::ifstream list(MemorialDir() / "exposures.txt");
+  std::ifstream list(dir / "exposures.txt");
   std::string line;
   while (std::getline(list, line)) {
     if (line.empty() || line[0] == '#') continue;
@@ -142,12 +144,12 @@ inline Bracket LoadMemorial() {
     std::string file;
     double seconds = 0;
     in >> file >> seconds;
-    const Image full = ReadImage((MemorialDir() / file).string());
-    const int x0 = 3, y0 = 30, w = full.width - 3 - 4, h = full.height - 30 - 20;
+    const Image full = ReadImage((dir / file).string());
+    const int w = full.width - left - right, h = full.height - top - bottom;
     Image crop(w, h, full.channels, full.units);
     for (int y = 0; y < h; ++y) {
       for (int x = 0; x < w; ++x) {
-        for (int c = 0; c < full.channels; ++c) crop.at(x, y, c) = full.at(x + x0, y + y0, c);
+        for (int c = 0; c < full.channels; ++c) crop.at(x, y, c) = full.at(x + left, y + top, c);
       }
     }
     b.frames.push_back(std::move(crop));
@@ -155,5 +157,9 @@ inline Bracket LoadMemorial() {
   }
   return b;
 }
+
+// Loads the 16 frames cropped as the data set's README says (top 30, bottom 20, left 3,
+// right 4 px) to remove the blue registration padding.
+inline Bracket LoadMemorial() { return LoadBracket(MemorialDir(), 30, 20, 3, 4); }
 
 }  // namespace rouen::testing

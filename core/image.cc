@@ -92,6 +92,21 @@ Image ReadImage(const std::string& path) {
   return img;
 }
 
+std::vector<uint8_t> ReadMask(const std::string& path, int width, int height,
+                              const std::string& for_what) {
+  const Image m = ReadImage(path);
+  if (m.width != width || m.height != height) {
+    throw Error(path + ": mask is " + std::to_string(m.width) + "x" + std::to_string(m.height) +
+                " but " + for_what + " is " + std::to_string(width) + "x" +
+                std::to_string(height));
+  }
+  std::vector<uint8_t> mask(static_cast<size_t>(width) * height, 0);
+  for (size_t p = 0; p < mask.size(); ++p)
+    for (int c = 0; c < m.channels; ++c)
+      if (m.data[p * m.channels + c] != 0) mask[p] = 1;
+  return mask;
+}
+
 void WriteImage(const std::string& path, const Image& image, StoredType type) {
   if (image.width <= 0 || image.height <= 0 || image.channels <= 0 ||
       image.data.size() != static_cast<size_t>(image.width) * image.height * image.channels) {

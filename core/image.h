@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -37,6 +38,11 @@ enum class StoredType { kUint8, kUint16, kHalf, kFloat };
 // Reads any format OpenImageIO knows. 8/16-bit files come back as digital numbers on a
 // 0..255 scale (kDigital), float/half files as kRadiance. Throws rouen::Error naming the file.
 Image ReadImage(const std::string& path);
+// A mask image (any format ReadImage reads): width x height entries, 1 where some channel is
+// nonzero. Throws rouen::Error naming the file when it is unreadable or not width x height
+// (`for_what` names the image it must match).
+std::vector<uint8_t> ReadMask(const std::string& path, int width, int height,
+                              const std::string& for_what);
 // Writes through OpenImageIO, choosing the format from the extension. Integer types clamp
 // and round the values (0..255 scale for kUint8; for kUint16 values on the same 0..255 scale
 // are stored x257 as 0..65535, so ReadImage gives them back). The file is written under a
