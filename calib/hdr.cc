@@ -252,7 +252,9 @@ int64_t RemoveGhosts(const std::vector<const float*>& src, const std::vector<int
       bool differs = false;
       for (int c = 0; c < nc && !differs; ++c) {
         const int kj = Level(src[j][off + c]), kr = Level(src[ref][off + c]);
-        // A clipped or dark reading says only "at least" / "at most": compare it one-sided.
+        // A clipped or dark reading says only "at least" / "at most": compare it one-sided
+        // (a clipped frame contradicts the reference only when its lower bound lies above
+        // it, a dark one only when its upper bound lies below it).
         const float d = (lv.G(kj, c) - log_x[j]) - (lv.G(kr, c) - log_x[ref]);
         const float allowed = thr + noise * (slope[static_cast<size_t>(kj) * nc + c] +
                                              slope[static_cast<size_t>(kr) * nc + c]);
@@ -260,7 +262,7 @@ int64_t RemoveGhosts(const std::vector<const float*>& src, const std::vector<int
           differs = std::abs(d) > allowed;
         } else {
           const float z = src[j][off + c];
-          differs = z >= 128.f ? d < -allowed : d > allowed;
+          differs = z >= 128.f ? d > allowed : d < -allowed;
         }
       }
       if (!differs) continue;
