@@ -180,6 +180,28 @@ std::vector<uint8_t> SkyMaskFor(const Session& session, const HdrGroup& group,
   return mask;
 }
 
+std::vector<SkySample> SlotSkySamples(const Session& session, const CalibResult& calib, int slot,
+                                      const Eigen::Vector3d& sun_dir, std::string* sources) {
+  std::vector<SkySample> samples;
+  if (sources) sources->clear();
+  for (int v = 0;; ++v) {
+    const auto it = calib.groups.find("slot" + std::to_string(slot) + "/sky/view" +
+                                      std::to_string(v));
+    if (it == calib.groups.end()) break;
+    const HdrGroup& g = it->second;
+    std::string source;
+    const std::vector<uint8_t> mask = SkyMaskFor(session, g, sun_dir, &source);
+    const std::vector<SkySample> part =
+        ExtractSkySamples(g.radiance, &mask, g.intrinsics, g.pose, sun_dir, SkySampleOptions{});
+    samples.insert(samples.end(), part.begin(), part.end());
+    if (sources) *sources += (v ? ", " : "") + g.name + ": " + source;
+  }
+  if (samples.empty())
+    throw Error(session.dir().string() + ": slot " + std::to_string(slot) +
+                " has no sky pixels to fit (no sky photo, or masks that leave nothing)");
+  return samples;
+}
+
 Site SessionSite(const Session& session) {
   double lat = 0, lon = 0, h = 0;
   int n = 0;
@@ -353,12 +375,9 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
     ss.sun_measured = MeasureSun(sun_g->radiance, sun_g->intrinsics, sun_g->pose,
                                  at_sun_frame.DirectionEnu(), at_sun_frame.SolidAngleSr(),
                                  SunOptions{});
-    // §3.2: the seven-parameter sky per channel.
+    // §3.2: the seven-parameter sky per channel, from every sky photo of the slot.
     std::string mask_source;
-    const std::vector<uint8_t> sky_mask = SkyMaskFor(session, *sky_g, sun_dir, &mask_source);
-    SkySampleOptions so;
-    std::vector<SkySample> samples = ExtractSkySamples(sky_g->radiance, &sky_mask,
-                                                       sky_g->intrinsics, sky_g->pose, sun_dir, so);
+    const std::vector<SkySample> samples = SlotSkySamples(session, calib, s, sun_dir, &mask_source);
     SkyModel sky;
     // Relative residuals (sigma = y) fit the physically based sky better than eq. 10's
     // sigma = y / log y (bench/sky_bench.cc); SkyWeighting::kPaper gives the paper's weights.
@@ -381,7 +400,7 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
     ss.lighting.sky = sky;
     ss.lighting.env = std::move(env);
     Log(options, "slot " + std::to_string(s) + ": sun elevation " +
-                     std::to_string(ss.sun.elevation_deg) + " deg, sky pixels " + mask_source +
+                     std::to_string(ss.sun.elevation_deg) + " deg, sky from " + mask_source +
                      ", sky fit median error " +
                      std::to_string(ss.sky_summary.channel[1].rel_error_median));
     r.slots.push_back(std::move(ss));

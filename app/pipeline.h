@@ -96,6 +96,14 @@ SlotIrradiance IrradianceFor(const SolveResult& solved, const Lighting& lighting
 std::vector<uint8_t> SkyMaskFor(const Session& session, const HdrGroup& group,
                                 const Eigen::Vector3d& sun_dir, std::string* source = nullptr);
 
+// The sky samples of a slot for the §3.2 fit: the pixels SkyMaskFor keeps in each of the
+// slot's sky photos (slot<N>/sky/view0, view1, ...; the aureole brackets merge into view0),
+// spread over solid angle per photo and fitted together. `sources` gets "group: mask source"
+// per photo. Throws rouen::Error when no photo gives a sample.
+std::vector<SkySample> SlotSkySamples(const Session& session, const CalibResult& calib, int slot,
+                                      const Eigen::Vector3d& sun_dir,
+                                      std::string* sources = nullptr);
+
 // Site of a session: the GPS fixes' mean when there are any, else session.json's site.
 Site SessionSite(const Session& session);
 

@@ -151,6 +151,46 @@ TEST(SkyMaskTest, TheSessionsOwnMaskOverridesSegmentation) {
   fs::remove_all(dir);
 }
 
+TEST(SkyMaskTest, TheSlotsSkyPhotosAreFittedTogether) {
+  const fs::path dir = TempDir("skymask_slot");
+  const fs::path sdir = dir / "session";
+  const Session s = MakeSession(sdir, {{"slot0/sky/view0", "left.png"}});
+  Image png(kSize, kSize, 1, PixelUnits::kDigital);
+  for (int y = 0; y < kSize; ++y)
+    for (int x = 0; x < kSize / 2; ++x) png.at(x, y, 0) = 255;
+  WriteImage((sdir / "left.png").string(), png, StoredType::kUint8);
+  CalibResult calib;
+  HdrGroup up = SkyPhoto();
+  HdrGroup west = SkyPhoto();
+  west.name = "slot0/sky/view1";
+  west.pose = Pose::Level(Eigen::Vector3d::Zero(), 270, 30);
+  calib.groups[up.name] = up;
+  calib.groups[west.name] = west;
+  const Eigen::Vector3d sun = Eigen::Vector3d(0, -1, 1).normalized();
+  std::string sources;
+  const std::vector<SkySample> both = SlotSkySamples(s, calib, 0, sun, &sources);
+  EXPECT_EQ(sources, "slot0/sky/view0: " + (sdir / "left.png").string() +
+                         ", slot0/sky/view1: all");
+  const std::vector<uint8_t> left = SkyMaskFor(s, up, sun);
+  const size_t n0 =
+      ExtractSkySamples(up.radiance, &left, up.intrinsics, up.pose, sun, SkySampleOptions{}).size();
+  const size_t n1 = ExtractSkySamples(west.radiance, &west.valid, west.intrinsics, west.pose, sun,
+                                      SkySampleOptions{})
+                        .size();
+  ASSERT_GT(n0, 100u);
+  ASSERT_GT(n1, 100u);
+  EXPECT_EQ(both.size(), n0 + n1);
+  // A slot without a sky photo has nothing to fit.
+  try {
+    SlotSkySamples(s, calib, 1, sun);
+    ADD_FAILURE() << "slot 1 has no sky photo";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("slot 1 has no sky pixels"), std::string::npos)
+        << e.what();
+  }
+  fs::remove_all(dir);
+}
+
 TEST(SkyMaskTest, BadMasksNameTheFileOrTheSessionEntry) {
   const fs::path dir = TempDir("skymask_bad");
   const HdrGroup g = SkyPhoto();
