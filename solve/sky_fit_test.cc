@@ -13,6 +13,7 @@
 #include "solve/internal/sky_cost.h"
 #include "solve/sky_cie.h"
 #include "solve/sky_model.h"
+#include "solve/sky_test_util.h"
 
 namespace rouen {
 namespace {
@@ -182,29 +183,9 @@ TEST(FitSky, AnalyticJacobianMatchesCentralDifferences) {
   const std::vector<internal::SkyPoint> points = JacobianPoints();
   const internal::SkyCost cost(points);
   const int n = static_cast<int>(points.size());
+  // Step ~ cbrt(eps) x scale: truncation and rounding errors both ~1e-10 relative.
   for (const auto& p0 : kJacobianProbes) {
-    double p[7];
-    std::copy(p0, p0 + 7, p);
-    std::vector<double> r(n), jac(n * 7), rp(n), rm(n);
-    double* jacs[1] = {jac.data()};
-    const double* params[1] = {p};
-    ASSERT_TRUE(cost.Evaluate(params, r.data(), jacs));
-    for (int k = 0; k < 7; ++k) {
-      // Step ~ cbrt(eps) x scale: truncation and rounding errors both ~1e-10 relative.
-      const double h = 1e-5 * std::max(1.0, std::abs(p0[k]));
-      double q[7];
-      std::copy(p0, p0 + 7, q);
-      const double* qparams[1] = {q};
-      q[k] = p0[k] + h;
-      ASSERT_TRUE(cost.Evaluate(qparams, rp.data(), nullptr));
-      q[k] = p0[k] - h;
-      ASSERT_TRUE(cost.Evaluate(qparams, rm.data(), nullptr));
-      for (int i = 0; i < n; ++i) {
-        const double numeric = (rp[i] - rm[i]) / (2 * h);
-        EXPECT_NEAR(jac[i * 7 + k], numeric, 1e-6 * std::max(1.0, std::abs(numeric)))
-            << "residual " << i << " parameter " << k;
-      }
-    }
+    testing::ExpectJacobianMatchesCentralDifferences(cost, n, p0, 1e-5, 1e-6, "");
   }
 }
 

@@ -1,9 +1,10 @@
-// Small meshes shared by the solve tests (not part of the library API).
+// Small meshes and skies shared by the solve tests (not part of the library API).
 #pragma once
 
 #include <Eigen/Core>
 
 #include "core/mesh.h"
+#include "solve/sky_model.h"
 
 namespace rouen::testing {
 
@@ -34,6 +35,23 @@ inline void AddBox(Mesh* m, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi
   m->AddPolygon({{x1, y1, z0}, {x0, y1, z0}, {x0, y1, z1}, {x1, y1, z1}}, block);  // north
   m->AddPolygon({{x0, y1, z0}, {x0, y0, z0}, {x0, y0, z1}, {x0, y1, z1}}, block);  // west
   if (bottom) m->AddPolygon({{x0, y0, z0}, {x0, y1, z0}, {x1, y1, z0}, {x1, y0, z0}}, block);
+}
+
+// A sky of uniform radiance l in every channel (eq. 9 with a = c = e = 0).
+inline SkyModel UniformSkyModel(double l) {
+  SkyModel m;
+  for (auto& c : m.channel) c = SkyParams{l, 0, 0, 0, 0, 0, 1};
+  return m;
+}
+
+// A CIE-like clear sky with a strong circumsolar peak, the sun towards `sun`.
+inline SkyModel ClearSky(const Eigen::Vector3d& sun) {
+  SkyModel m;
+  m.channel[0] = SkyParams{1.0, -1.0, -0.32, 10, -3, 0.45, 1};
+  m.channel[1] = SkyParams{1.2, -1.0, -0.4, 12, -3.2, 0.5, 1};
+  m.channel[2] = SkyParams{1.5, -1.0, -0.5, 8, -2.5, 0.3, 1};
+  m.sun_dir = sun.normalized();
+  return m;
 }
 
 }  // namespace rouen::testing

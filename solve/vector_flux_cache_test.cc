@@ -16,21 +16,6 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-SkyModel UniformSkyModel(double l) {
-  SkyModel m;
-  for (auto& c : m.channel) c = SkyParams{l, 0, 0, 0, 0, 0, 1};
-  return m;
-}
-
-SkyModel ClearSky(const Eigen::Vector3d& sun) {
-  SkyModel m;
-  m.channel[0] = SkyParams{1.0, -1.0, -0.32, 10, -3, 0.45, 1};
-  m.channel[1] = SkyParams{1.2, -1.0, -0.4, 12, -3.2, 0.5, 1};
-  m.channel[2] = SkyParams{1.5, -1.0, -0.5, 8, -2.5, 0.3, 1};
-  m.sun_dir = sun.normalized();
-  return m;
-}
-
 // Two buildings on a plaza: a tall box, a low box behind it, a small box hidden inside the
 // tall one's shadow region seen from the test points, and the ground.
 Mesh Street() {
@@ -70,7 +55,7 @@ TEST(VectorFluxCacheTest, UniformSkyIsExactWithOccluders) {
                    (2 * kPi);
   const PointVisibility pv(m, Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ());
   const SkyPatchTree tree(5);
-  const SkyTreeRadiance sky(tree, UniformSkyModel(2), VectorFluxOptions());
+  const SkyTreeRadiance sky(tree, testing::UniformSkyModel(2), VectorFluxOptions());
   PointFluxCache c;
   CacheSky(pv, tree, &c);
   EXPECT_GT(c.partial_nodes, 0);
@@ -91,7 +76,7 @@ TEST(VectorFluxCacheTest, UniformSkyIsExactWithOccluders) {
 
 TEST(VectorFluxCacheTest, CachedSkyMatchesAdaptiveUncached) {
   const Mesh m = Street();
-  const SkyModel sky = ClearSky(Eigen::Vector3d(0.4, -0.5, 0.5));
+  const SkyModel sky = testing::ClearSky(Eigen::Vector3d(0.4, -0.5, 0.5));
   VectorFluxOptions fine;
   fine.sky_tolerance = 0.02;
   const SkyPatchTree tree(6);
@@ -145,7 +130,7 @@ TEST(VectorFluxCacheTest, OccluderSelectionAgreesWithAllFaces) {
   const Mesh m = Street();
   const RayCaster rc(m);
   const FaceAdjacency adj(m);
-  const SkyModel sky = UniformSkyModel(1);
+  const SkyModel sky = testing::UniformSkyModel(1);
   const SkyPatchTree tree(5);
   const SkyTreeRadiance st(tree, sky, VectorFluxOptions());
   OccluderSelectOptions so;
@@ -197,7 +182,7 @@ TEST(VectorFluxCacheTest, ComputeIrradianceWithIdBufferAgreesWithAllFaces) {
   const HemisphereCache cache = BuildHemisphereCache(grid, rc, ho);
   for (bool use_env : {false, true}) {
     Lighting l;
-    l.sky = ClearSky(Eigen::Vector3d(0.4, -0.5, 0.5));
+    l.sky = testing::ClearSky(Eigen::Vector3d(0.4, -0.5, 0.5));
     l.sun_dir = l.sky.sun_dir;
     l.sun_radiance = Eigen::Vector3d(1e4, 1e4, 1e4);
     l.env = EnvironmentMap::FromSky(EnvOptions(), l.sky, Eigen::Vector3d(0.3, 0.3, 0.3));

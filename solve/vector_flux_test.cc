@@ -18,22 +18,6 @@ SphericalPolygon UpperHemisphere() {
           -Eigen::Vector3d::UnitY()};
 }
 
-SkyModel UniformSkyModel(double l) {
-  SkyModel m;
-  for (auto& c : m.channel) c = SkyParams{l, 0, 0, 0, 0, 0, 1};
-  return m;
-}
-
-// A CIE-like clear sky with a strong circumsolar peak.
-SkyModel ClearSky(const Eigen::Vector3d& sun) {
-  SkyModel m;
-  m.channel[0] = SkyParams{1.0, -1.0, -0.32, 10, -3, 0.45, 1};
-  m.channel[1] = SkyParams{1.2, -1.0, -0.4, 12, -3.2, 0.5, 1};
-  m.channel[2] = SkyParams{1.5, -1.0, -0.5, 8, -2.5, 0.3, 1};
-  m.sun_dir = sun.normalized();
-  return m;
-}
-
 TEST(VectorFluxTest, UpperHemisphereGivesPiOnHorizontalPlane) {
   const Eigen::Vector3d phi = VectorFlux(UpperHemisphere());
   EXPECT_NEAR((phi - kPi * Eigen::Vector3d::UnitZ()).norm(), 0, 1e-14);
@@ -82,7 +66,7 @@ TEST(VectorFluxTest, TiltedPlaneUnderUniformUpperHemisphere) {
     EXPECT_NEAR(n.dot(phi), expected, 1e-12) << tilt_deg;
     // Through the sky path with a uniform sky model (radiance 2).
     const PointVisibility pv(empty, Eigen::Vector3d::Zero(), n);
-    const Eigen::Vector3d e = SkyIrradianceVectorFlux(pv, UniformSkyModel(2), VectorFluxOptions());
+    const Eigen::Vector3d e = SkyIrradianceVectorFlux(pv, testing::UniformSkyModel(2), VectorFluxOptions());
     EXPECT_NEAR(e.x(), 2 * expected, 1e-12) << tilt_deg;
   }
 }
@@ -147,7 +131,7 @@ TEST(VectorFluxTest, CeilingRectangleMatchesFormFactor) {
   EXPECT_EQ(pv.num_occluders(), 2);
   FluxStats st;
   const Eigen::Vector3d e =
-      SkyIrradianceVectorFlux(pv, UniformSkyModel(1), VectorFluxOptions(), &st);
+      SkyIrradianceVectorFlux(pv, testing::UniformSkyModel(1), VectorFluxOptions(), &st);
   EXPECT_NEAR(e.y(), kPi * (1 - F), 1e-12);
   EXPECT_EQ(st.occluders, 2);
   // Seen from its back (the ceiling faces down here, so from above it is a back face): still
@@ -155,7 +139,7 @@ TEST(VectorFluxTest, CeilingRectangleMatchesFormFactor) {
   Mesh up;
   testing::AddHorizontalRect(&up, 0, a, 0, b, h, true, up.AddBlock("c"));
   const PointVisibility pv2(up, Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ());
-  EXPECT_NEAR(SkyIrradianceVectorFlux(pv2, UniformSkyModel(1), VectorFluxOptions()).z(),
+  EXPECT_NEAR(SkyIrradianceVectorFlux(pv2, testing::UniformSkyModel(1), VectorFluxOptions()).z(),
               kPi * (1 - F), 1e-12);
 }
 
@@ -208,7 +192,7 @@ TEST(VectorFluxTest, EnvironmentUniformHorizontalPlaneIsPiL) {
 
 TEST(VectorFluxTest, AdaptiveSkyMatchesFineQuadrature) {
   const Eigen::Vector3d sun = Eigen::Vector3d(0.3, 0.5, 0.6).normalized();
-  const SkyModel sky = ClearSky(sun);
+  const SkyModel sky = testing::ClearSky(sun);
   const Mesh empty;
   for (const Eigen::Vector3d& n :
        {Eigen::Vector3d(0, 0, 1), Eigen::Vector3d(0.6, 0.8, 0), Eigen::Vector3d(-0.6, 0, 0.8)}) {
