@@ -81,16 +81,17 @@ Image AverageRadiance(const LoadedList& l) {
   return out;
 }
 
-// Updates session.json's "extra" through the session reader and writer's JSON form.
+// Updates session.json's "extra" as the session's one writer (refused while a capture holds
+// the session, whose own session.json updates would otherwise undo this one).
 void UpdateSessionExtra(const std::string& dir, const std::string& key, const std::string& name,
                         const json& value) {
-  const Session s = Session::Load(dir);
-  SessionInfo info = s.info();
+  SessionWriter w = SessionWriter::Resume(dir);
+  SessionInfo info = w.info();
   if (info.extra.contains(key) && !info.extra[key].is_object())
     throw Error((fs::path(dir) / "session.json").string() + ": extra." + key +
                 " is not an object");
   info.extra[key][name] = value;
-  WriteFileAtomic(fs::path(dir) / "session.json", json(info).dump(2) + "\n");
+  w.UpdateInfo(info);
 }
 
 void RunNd(const NdArgs& a) {

@@ -149,22 +149,36 @@ CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
   std::shared_ptr<void> usb_watch;
   if (!rig.simulated() && rig.kind != "replay")
     usb_watch = WatchUsb([&line](const std::string& m) { line.Message(m); });
-  CaptureSummary s = controller.Run(
-      *writer,
-      [&](const CaptureProgress& p) {
-        if (!p.event.empty()) {
-          line.Message(p.event);
-          return;
-        }
-        char buf[256];
-        std::snprintf(buf, sizeof buf,
-                      "slot %d/%d  %-12s view %d  frames %5d  exposure %9.6f s  saturated %5.2f%%  "
-                      "GPS %s",
-                      p.slot + 1, p.slots, TargetName(p.target), p.view, p.frames_total,
-                      p.exposure_s, 100 * p.saturated_fraction, p.gps_status.c_str());
-        line.Update(buf);
-      },
-      &g_stop);
+  CaptureSummary s;
+  try {
+    s = controller.Run(
+        *writer,
+        [&](const CaptureProgress& p) {
+          if (!p.event.empty()) {
+            line.Message(p.event);
+            return;
+          }
+          char buf[256];
+          std::snprintf(
+              buf, sizeof buf,
+              "slot %d/%d  %-12s view %d  frames %5d  exposure %9.6f s  saturated %5.2f%%  "
+              "GPS %s",
+              p.slot + 1, p.slots, TargetName(p.target), p.view, p.frames_total, p.exposure_s,
+              100 * p.saturated_fraction, p.gps_status.c_str());
+          line.Update(buf);
+        },
+        &g_stop);
+  } catch (const Error& e) {
+    // A full disk, a read-only disk: everything journalled so far is whole and stays.
+    std::signal(SIGINT, old_int);
+    std::signal(SIGTERM, old_term);
+    line.Done();
+    throw Error(std::string(e.what()) + "\n" + out.string() + ": the " +
+                std::to_string(writer->frames().size()) +
+                " frames journalled so far are kept; once the problem is fixed, continue with "
+                "`rouen capture --rig ... --out " +
+                out.string() + " --resume`");
+  }
   usb_watch.reset();
   std::signal(SIGINT, old_int);
   std::signal(SIGTERM, old_term);

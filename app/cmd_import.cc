@@ -462,6 +462,18 @@ void RunImport(const ImportArgs& a) {
   const fs::path tmp =
       out.parent_path() / (out.filename().string() + ".tmp-" + std::to_string(::getpid()));
   std::error_code ec;
+  // An import of the same folder killed earlier left its temporary session: no process holds
+  // it any more, so it goes (one still being written is another import's, and stays).
+  const std::string prefix = out.filename().string() + ".tmp-";
+  for (const auto& e : fs::directory_iterator(
+           out.parent_path().empty() ? fs::path(".") : out.parent_path(), ec)) {
+    if (e.is_directory(ec) && e.path().filename().string().rfind(prefix, 0) == 0 &&
+        !SessionInUse(e.path())) {
+      std::fprintf(stderr, "rouen import: removing %s, left by an import that was interrupted\n",
+                   e.path().c_str());
+      fs::remove_all(e.path(), ec);
+    }
+  }
   fs::remove_all(tmp, ec);
   int slots = 0, groups = 0, hdr = 0;
   try {

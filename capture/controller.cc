@@ -103,7 +103,9 @@ CaptureController::CaptureController(CaptureDevices devices, CapturePlan plan, S
 void CaptureController::PollGps(SessionWriter& writer) {
   if (!dev_.gps) return;
   try {
-    if (auto fix = dev_.gps->Poll()) {
+    std::optional<GpsFix> fix = dev_.gps->Poll();
+    gps_error_.clear();
+    if (fix) {
       // A receiver that loses its fix keeps the last good position (the site does not move).
       if (fix->valid()) {
         last_fix_ = *fix;
@@ -113,6 +115,7 @@ void CaptureController::PollGps(SessionWriter& writer) {
       clock_offset_.Add(*fix);
     }
   } catch (const DeviceError& e) {
+    gps_error_ = e.what();
     progress_.gps_status = std::string("error: ") + e.what();
   }
   // Field rigs: frame times are the laptop's; record its offset from GPS time as it firms up.
@@ -126,6 +129,29 @@ void CaptureController::PollGps(SessionWriter& writer) {
     writer.UpdateInfo(info);
   }
 }
+
+namespace {
+
+// A frame a driver hands over cut short or with impossible metadata is a device failure (the
+// bracket is redone after a reconnect or on --resume), never a journalled frame.
+void CheckGrabbedFrame(const CapturedFrame& f, const std::string& camera,
+                       const std::string& group) {
+  const Image& im = f.image;
+  const size_t expected = static_cast<size_t>(std::max(im.width, 0)) * std::max(im.height, 0) *
+                          std::max(im.channels, 0);
+  if (im.width <= 0 || im.height <= 0 || im.channels <= 0 || im.data.size() != expected) {
+    throw DeviceError(camera + ": " + group + ": partial frame (" + std::to_string(im.width) + "x" +
+                      std::to_string(im.height) + "x" + std::to_string(im.channels) + ", " +
+                      std::to_string(im.data.size()) + " values)");
+  }
+  if (!(f.exposure_s >= 0) || !std::isfinite(f.exposure_s) || !(f.gain > 0) ||
+      !std::isfinite(f.gain)) {
+    throw DeviceError(camera + ": " + group + ": frame with impossible exposure " +
+                      std::to_string(f.exposure_s) + " s or gain " + std::to_string(f.gain));
+  }
+}
+
+}  // namespace
 
 bool CaptureController::Recover(const DeviceError& e, const std::string& group,
                                 CaptureSummary& summary) {
@@ -232,7 +258,10 @@ FrameRecord CaptureController::Journal(SessionWriter& writer, const CapturedFram
   if (last_fix_ && last_fix_->valid()) {
     r.gps = *last_fix_;
     site = Site{last_fix_->lat_deg, last_fix_->lon_deg, last_fix_->height_m};
-    progress_.gps_status = "3D fix, " + std::to_string(last_fix_->satellites) + " satellites";
+    progress_.gps_status =
+        gps_error_.empty()
+            ? "3D fix, " + std::to_string(last_fix_->satellites) + " satellites"
+            : "error: " + gps_error_ + " (frames keep the last fix; the site does not move)";
   } else if (progress_.gps_status.rfind("error", 0) != 0) {
     progress_.gps_status = "no fix (fallback site)";
   }
@@ -254,6 +283,7 @@ bool CaptureController::CaptureGroup(SessionWriter& writer, int slot, Target tar
   auto grab = [&](double exposure) -> CapturedFrame {
     double applied = cam.SetExposure(exposure);
     CapturedFrame f = cam.Grab();
+    CheckGrabbedFrame(f, cam.Id(), group);
     if (std::abs(f.exposure_s - applied) > 1e-6 * applied)
       summary.warnings.push_back(group + ": camera reported exposure " +
                                  std::to_string(f.exposure_s) + " s for a requested " +

@@ -117,6 +117,7 @@ class CaptureController {
   const std::atomic<bool>* stop_ = nullptr;
   CaptureProgress progress_;
   std::optional<GpsFix> last_fix_;
+  std::string gps_error_;  // the receiver's last error, cleared by the next answer
   DeviceLossOptions loss_;
   ClockOffsetEstimator clock_offset_;
 };

@@ -7,8 +7,10 @@
 #include <filesystem>
 #include <map>
 #include <set>
+#include <tuple>
 
 #include "core/error.h"
+#include "core/fault_io.h"
 #include "core/files.h"
 
 namespace rouen {
@@ -355,6 +357,204 @@ TEST(ClockOffsetTest, IgnoresFixesWithoutLaptopTimeAndGlitches) {
   ASSERT_TRUE(est.Offset());
   EXPECT_NEAR(*est.Offset(), 1.0 - 0.2, 1e-9);
   EXPECT_EQ(est.count(), 4);
+}
+
+std::set<std::string> GroupsOf(const std::vector<FrameRecord>& frames) {
+  std::set<std::string> groups;
+  for (const FrameRecord& f : frames) groups.insert(f.group);
+  return groups;
+}
+
+// Every journalled frame is whole (sha256 and decode, through LoadFrame) and frames/ holds
+// nothing else.
+void ExpectWholeSession(const std::filesystem::path& dir) {
+  Session s = Session::Load(dir);
+  for (const FrameRecord& f : s.frames()) {
+    Image im = s.LoadFrame(f);
+    EXPECT_EQ(im.width, 64) << f.file;
+  }
+  size_t files = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir / "frames")) {
+    (void)e;
+    ++files;
+  }
+  EXPECT_EQ(files, s.frames().size());
+}
+
+// Resumes `dir` with a working disk and camera and checks the plan completes.
+void ExpectResumeCompletes(const std::filesystem::path& dir, const std::set<std::string>& groups) {
+  RampCamera cam;
+  JumpClock clock;
+  {
+    SessionWriter w = SessionWriter::Resume(dir);
+    CaptureSummary s =
+        CaptureController({&cam, nullptr, &clock}, OneSlotPlan(), Site{}).Run(w, nullptr, nullptr);
+    EXPECT_FALSE(s.stopped);
+  }
+  EXPECT_EQ(GroupsOf(Session::Load(dir).frames()), groups);
+  ExpectWholeSession(dir);
+}
+
+TEST(ControllerTest, DiskFullOrReadOnlyAtEveryWriteLeavesAResumableSession) {
+  JumpClock clock;
+  auto ref_dir = TempDir("full_ref");
+  FaultyFileIo counter;
+  std::set<std::string> ref_groups;
+  {
+    RampCamera cam;
+    ScopedFileIo use(counter);
+    SessionWriter w = SessionWriter::Create(ref_dir, SessionInfo{});
+    CaptureController({&cam, nullptr, &clock}, OneSlotPlan(), Site{}).Run(w, nullptr, nullptr);
+    ref_groups = GroupsOf(w.frames());
+  }
+  std::filesystem::remove_all(ref_dir);
+  const long calls = counter.calls();
+  ASSERT_GT(calls, 50);
+  // Hundreds of captures: on a memory file system when there is one (fsync is then cheap).
+  const std::filesystem::path shm = "/dev/shm";
+  auto dir = std::filesystem::is_directory(shm)
+                 ? shm / ("rouen_controller_test_full_" + std::to_string(::getpid()))
+                 : TempDir("full");
+  // The disk fills at call k and stays full: every k of the whole capture. A disk that turns
+  // read-only (EROFS) behaves the same; every 7th k of it.
+  for (const auto& [err, words, stride] :
+       {std::tuple{ENOSPC, "the disk is full", 1L}, std::tuple{EROFS, "read-only", 7L}})
+    for (long k = 0; k < calls; k += stride) {
+      SCOPED_TRACE(std::string(words) + " from durable-write call " + std::to_string(k) + " of " +
+                   std::to_string(calls));
+      std::filesystem::remove_all(dir);
+      RampCamera cam;
+      FaultyFileIo full(k, err);
+      try {
+        ScopedFileIo use(full);
+        SessionWriter w = SessionWriter::Create(dir, SessionInfo{});
+        CaptureController({&cam, nullptr, &clock}, OneSlotPlan(), Site{}).Run(w, nullptr, nullptr);
+        ADD_FAILURE() << "the capture finished on a failing disk";
+      } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find(words), std::string::npos) << e.what();
+      }
+      if (!std::filesystem::exists(dir / "session.json")) {
+        // Full before the session existed: a new capture may use the folder.
+        RampCamera again;
+        SessionWriter w = SessionWriter::Create(dir, SessionInfo{});
+        CaptureController({&again, nullptr, &clock}, OneSlotPlan(), Site{})
+            .Run(w, nullptr, nullptr);
+        EXPECT_EQ(GroupsOf(w.frames()), ref_groups);
+        continue;
+      }
+      ExpectWholeSession(dir);
+      ExpectResumeCompletes(dir, ref_groups);
+    }
+  std::filesystem::remove_all(dir);
+}
+
+// A RampCamera whose grab number `at` fails as `how` says.
+class FaultyCamera : public RampCamera {
+ public:
+  enum class Fault { kTimeout, kPartialFrame, kBadExposure };
+  int at = 0;
+  Fault how = Fault::kTimeout;
+  CapturedFrame Grab() override {
+    const bool fail = static_cast<int>(grabs.size()) == at;
+    CapturedFrame f = RampCamera::Grab();
+    if (!fail) return f;
+    switch (how) {
+      case Fault::kTimeout:
+        throw DeviceError("ramp: timed out waiting for a frame (ETIMEDOUT)");
+      case Fault::kPartialFrame:
+        f.image.data.resize(f.image.data.size() / 3);  // the transfer stopped a third of the way
+        break;
+      case Fault::kBadExposure:
+        f.exposure_s = std::nan("");
+        break;
+    }
+    return f;
+  }
+};
+
+TEST(ControllerTest, CameraTimeoutOrPartialFrameStopsWithAConsistentResumableSession) {
+  JumpClock clock;
+  std::set<std::string> ref_groups;
+  {
+    RampCamera ref;
+    auto ref_dir = TempDir("fault_ref");
+    SessionWriter w = SessionWriter::Create(ref_dir, SessionInfo{});
+    CaptureController({&ref, nullptr, &clock}, OneSlotPlan(), Site{}).Run(w, nullptr, nullptr);
+    ref_groups = GroupsOf(w.frames());
+    std::filesystem::remove_all(ref_dir);
+  }
+  const std::pair<FaultyCamera::Fault, const char*> faults[] = {
+      {FaultyCamera::Fault::kTimeout, "timed out"},
+      {FaultyCamera::Fault::kPartialFrame, "partial frame"},
+      {FaultyCamera::Fault::kBadExposure, "impossible exposure"}};
+  for (const auto& [fault, words] : faults) {
+    for (int at : {0, 3, 9}) {  // the first frame, inside the sun bracket, a later bracket
+      SCOPED_TRACE(std::string(words) + " at grab " + std::to_string(at));
+      FaultyCamera cam;
+      cam.how = fault;
+      cam.at = at;
+      auto dir = TempDir("fault");
+      CaptureSummary s;
+      {
+        SessionWriter w = SessionWriter::Create(dir, SessionInfo{});
+        s = CaptureController({&cam, nullptr, &clock}, OneSlotPlan(), Site{})
+                .Run(w, nullptr, nullptr);
+      }
+      EXPECT_TRUE(s.stopped);
+      EXPECT_TRUE(s.camera_lost);
+      ASSERT_FALSE(s.warnings.empty());
+      EXPECT_NE(s.warnings.back().find(words), std::string::npos) << s.warnings.back();
+      EXPECT_NE(s.warnings.back().find("ramp"), std::string::npos) << s.warnings.back();
+      EXPECT_EQ(Session::Load(dir).frames().size(), static_cast<size_t>(at));
+      ExpectWholeSession(dir);
+      ExpectResumeCompletes(dir, ref_groups);
+      std::filesystem::remove_all(dir);
+    }
+  }
+}
+
+// A receiver that answers a few polls, then fails like a GPS pulled out.
+class VanishingGps : public Gps {
+ public:
+  int good_polls = 3, polls = 0;
+  std::string Id() const override { return "gps0"; }
+  std::optional<GpsFix> Poll() override {
+    if (polls++ >= good_polls) throw DeviceError("gps0: /dev/ttyACM0: no such device");
+    GpsFix f;
+    f.utc = ParseIso8601("2026-08-25T20:00:00Z").PlusSeconds(polls);
+    f.lat_deg = 48.4431;
+    f.lon_deg = 1.0892;
+    f.height_m = 140;
+    f.mode = 3;
+    f.satellites = 8;
+    return f;
+  }
+};
+
+TEST(ControllerTest, GpsLostMidCaptureKeepsTheLastFixAndSaysSo) {
+  RampCamera cam;
+  VanishingGps gps;
+  JumpClock clock;
+  auto dir = TempDir("gps_lost");
+  std::vector<std::string> statuses;
+  CaptureSummary s;
+  {
+    SessionWriter w = SessionWriter::Create(dir, SessionInfo{});
+    s = CaptureController({&cam, &gps, &clock}, OneSlotPlan(), Site{})
+            .Run(
+                w, [&](const CaptureProgress& p) { statuses.push_back(p.gps_status); }, nullptr);
+  }
+  EXPECT_FALSE(s.stopped);  // the site does not move: the capture goes on
+  Session done = Session::Load(dir);
+  ASSERT_GT(done.frames().size(), static_cast<size_t>(gps.good_polls));
+  for (const FrameRecord& f : done.frames()) {
+    ASSERT_TRUE(f.gps.has_value()) << f.file;
+    EXPECT_DOUBLE_EQ(f.gps->lat_deg, 48.4431);
+  }
+  ASSERT_FALSE(statuses.empty());
+  EXPECT_NE(statuses.back().find("no such device"), std::string::npos) << statuses.back();
+  ExpectWholeSession(dir);
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

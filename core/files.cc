@@ -4,8 +4,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include <atomic>
 #include <array>
+#include <atomic>
 #include <cerrno>
 #include <cstdint>
 #include <cstring>
@@ -24,10 +24,10 @@ std::string Errno() { return std::strerror(errno); }
 void FsyncPath(const fs::path& p, bool directory) {
   const int fd = ::open(p.c_str(), (directory ? O_RDONLY | O_DIRECTORY : O_RDONLY) | O_CLOEXEC);
   if (fd < 0) throw Error(p.string() + ": cannot open for fsync: " + Errno());
-  if (::fsync(fd) != 0) {
-    const std::string e = Errno();
+  if (CurrentFileIo().Fsync(fd) != 0) {
+    const int err = errno;
     ::close(fd);
-    throw Error(p.string() + ": fsync failed: " + e);
+    throw Error(IoErrorMessage(p, "fsync failed", err));
   }
   ::close(fd);
 }
@@ -110,8 +110,7 @@ class Sha256 {
       const uint32_t s1 = Rotr(w[t - 2], 17) ^ Rotr(w[t - 2], 19) ^ (w[t - 2] >> 10);
       w[t] = w[t - 16] + s0 + w[t - 7] + s1;
     }
-    uint32_t a = h_[0], b = h_[1], c = h_[2], d = h_[3], e = h_[4], f = h_[5], g = h_[6],
-             h = h_[7];
+    uint32_t a = h_[0], b = h_[1], c = h_[2], d = h_[3], e = h_[4], f = h_[5], g = h_[6], h = h_[7];
     for (int t = 0; t < 64; ++t) {
       const uint32_t big_s1 = Rotr(e, 6) ^ Rotr(e, 11) ^ Rotr(e, 25);
       const uint32_t ch = (e & f) ^ (~e & g);
@@ -152,45 +151,90 @@ fs::path TempPathFor(const fs::path& path, std::string_view suffix) {
          std::to_string(counter.fetch_add(1)) + std::string(suffix);
 }
 
-void WriteFileAtomic(const fs::path& path, std::string_view bytes) {
-  const fs::path tmp = TempPathFor(path);
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) throw Error(path.string() + ": cannot create temporary file: " + Errno());
+int FileIo::Open(const char* path, int flags, mode_t mode) { return ::open(path, flags, mode); }
+ssize_t FileIo::Write(int fd, const void* data, size_t n) { return ::write(fd, data, n); }
+int FileIo::Fsync(int fd) { return ::fsync(fd); }
+int FileIo::Rename(const char* from, const char* to) { return ::rename(from, to); }
+
+namespace {
+FileIo g_system_io;
+std::atomic<FileIo*> g_io{&g_system_io};
+}  // namespace
+
+FileIo& CurrentFileIo() { return *g_io.load(); }
+ScopedFileIo::ScopedFileIo(FileIo& io) : previous_(g_io.exchange(&io)) {}
+ScopedFileIo::~ScopedFileIo() { g_io.store(previous_); }
+
+std::string IoErrorMessage(const fs::path& path, std::string_view what, int err) {
+  std::string m = path.string() + ": " + std::string(what) + ": " + std::strerror(err);
+  if (err == ENOSPC || err == EDQUOT) m += " (the disk is full)";
+  if (err == EROFS) m += " (the disk is mounted read-only)";
+  return m;
+}
+
+void WriteAll(int fd, std::string_view bytes, const fs::path& path) {
+  FileIo& io = CurrentFileIo();
   size_t done = 0;
   while (done < bytes.size()) {
-    const ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      const std::string e = Errno();
-      ::close(fd);
-      ::unlink(tmp.c_str());
-      throw Error(path.string() + ": write failed: " + e);
+    const ssize_t n = io.Write(fd, bytes.data() + done, bytes.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      // write() returning 0 for a non-empty request means no progress: treat it as full.
+      const int err = n == 0 ? ENOSPC : errno;
+      const std::string m = IoErrorMessage(path,
+                                           "write failed after " + std::to_string(done) + " of " +
+                                               std::to_string(bytes.size()) + " bytes",
+                                           err);
+      errno = err;
+      throw Error(m);
     }
     done += static_cast<size_t>(n);
   }
-  if (::fsync(fd) != 0) {
-    const std::string e = Errno();
-    ::close(fd);
+}
+
+void WriteFileAtomic(const fs::path& path, std::string_view bytes) {
+  FileIo& io = CurrentFileIo();
+  const fs::path tmp = TempPathFor(path);
+  const int fd = io.Open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) throw Error(IoErrorMessage(path, "cannot create a temporary file", errno));
+  auto fail = [&](const std::string& message) {
+    if (fd >= 0) ::close(fd);
     ::unlink(tmp.c_str());
-    throw Error(path.string() + ": fsync failed: " + e);
+    throw Error(message);
+  };
+  try {
+    WriteAll(fd, bytes, path);
+  } catch (const Error& e) {
+    fail(e.what());
+  }
+  if (io.Fsync(fd) != 0) fail(IoErrorMessage(path, "fsync failed", errno));
+  struct stat st {};
+  if (::fstat(fd, &st) != 0) fail(IoErrorMessage(path, "cannot stat the written file", errno));
+  if (static_cast<uint64_t>(st.st_size) != bytes.size()) {
+    fail(path.string() + ": the file on disk has " + std::to_string(st.st_size) +
+         " bytes after writing " + std::to_string(bytes.size()));
   }
   if (::close(fd) != 0) {
-    const std::string e = Errno();
+    const int err = errno;
     ::unlink(tmp.c_str());
-    throw Error(path.string() + ": close failed: " + e);
+    throw Error(IoErrorMessage(path, "close failed", err));
   }
-  if (::rename(tmp.c_str(), path.c_str()) != 0) {
-    const std::string e = Errno();
+  if (io.Rename(tmp.c_str(), path.c_str()) != 0) {
+    const int err = errno;
     ::unlink(tmp.c_str());
-    throw Error(path.string() + ": rename failed: " + e);
+    throw Error(IoErrorMessage(path, "rename failed", err));
   }
-  FsyncPath(ParentOrDot(path), true);
+  try {
+    FsyncPath(ParentOrDot(path), true);
+  } catch (const Error& e) {
+    throw Error(path.string() + ": written, but its folder could not be made durable: " + e.what());
+  }
 }
 
 void CommitFile(const fs::path& tmp, const fs::path& path) {
   FsyncPath(tmp, false);
-  if (::rename(tmp.c_str(), path.c_str()) != 0) {
-    throw Error(path.string() + ": rename from " + tmp.string() + " failed: " + Errno());
+  if (CurrentFileIo().Rename(tmp.c_str(), path.c_str()) != 0) {
+    throw Error(IoErrorMessage(path, "rename from " + tmp.string() + " failed", errno));
   }
   FsyncPath(ParentOrDot(path), true);
 }

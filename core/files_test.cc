@@ -1,14 +1,16 @@
 #include "core/files.h"
 
+#include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <filesystem>
 #include <fstream>
 #include <string>
 
-#include <gtest/gtest.h>
-
 #include "core/error.h"
+#include "core/fault_io.h"
+#include "core/image.h"
 
 namespace fs = std::filesystem;
 
@@ -16,8 +18,8 @@ namespace rouen {
 namespace {
 
 fs::path TempDir(const std::string& name) {
-  const fs::path d = fs::temp_directory_path() /
-                     ("rouen_core_" + name + "_" + std::to_string(::getpid()));
+  const fs::path d =
+      fs::temp_directory_path() / ("rouen_core_" + name + "_" + std::to_string(::getpid()));
   fs::remove_all(d);
   fs::create_directories(d);
   return d;
@@ -92,6 +94,77 @@ TEST(FilesTest, ResolveInsideRefusesEscapes) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("../x.png"), std::string::npos);
   }
+  fs::remove_all(d);
+}
+
+TEST(FilesTest, AtomicWriteFailingAtAnyCallKeepsTheOldFileAndNoTemporary) {
+  const fs::path d = TempDir("faulty");
+  const std::string old_text = "old contents";
+  const std::string new_text(100000, 'n');
+  long calls = 0;
+  {
+    FaultyFileIo counter;
+    ScopedFileIo use(counter);
+    WriteFileAtomic(d / "a.txt", old_text);
+    calls = counter.calls();
+  }
+  ASSERT_GE(calls, 4);  // open, write, fsync, rename, directory fsync
+  for (int err : {ENOSPC, EROFS, EIO}) {
+    for (long k = 0; k < calls; ++k) {
+      SCOPED_TRACE("errno " + std::to_string(err) + " from call " + std::to_string(k));
+      WriteFileAtomic(d / "a.txt", old_text);
+      FaultyFileIo faulty(k, err);
+      {
+        ScopedFileIo use(faulty);
+        try {
+          WriteFileAtomic(d / "a.txt", new_text);
+          ADD_FAILURE() << "the write succeeded";
+        } catch (const Error& e) {
+          const std::string m = e.what();
+          EXPECT_NE(m.find((d / "a.txt").string()), std::string::npos) << m;
+          if (err == ENOSPC) {
+            EXPECT_NE(m.find("the disk is full"), std::string::npos) << m;
+          } else if (err == EROFS) {
+            EXPECT_NE(m.find("read-only"), std::string::npos) << m;
+          }
+        }
+      }
+      // Up to the rename the old file stands; a failing directory fsync after it leaves the
+      // whole new file (and still reports the error).
+      const std::string now = ReadFileToString(d / "a.txt");
+      EXPECT_TRUE(now == old_text || (k == calls - 1 && now == new_text));
+      for (const auto& e : fs::directory_iterator(d))
+        EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
+    }
+  }
+  fs::remove_all(d);
+}
+
+TEST(FilesTest, ImagesAreEncodedInMemoryAndWrittenThroughTheCheckedWriter) {
+  const fs::path d = TempDir("image_io");
+  Image im(5, 3, 3, PixelUnits::kDigital);
+  for (size_t i = 0; i < im.data.size(); ++i) im.data[i] = static_cast<float>((i * 37) % 256);
+  for (const char* name : {"f.png", "f.exr", "f.tif"}) {
+    const fs::path p = d / name;
+    const StoredType type = std::string(name) == "f.exr" ? StoredType::kHalf : StoredType::kUint8;
+    const std::string bytes = EncodeImage(p.string(), im, type);
+    FaultyFileIo counter;
+    {
+      ScopedFileIo use(counter);
+      WriteImage(p.string(), im, type);
+    }
+    EXPECT_GE(counter.calls(), 4) << name;  // every byte went through the seam
+    EXPECT_EQ(ReadFileToString(p), bytes) << name;
+    EXPECT_EQ(ReadImage(p.string()).data, im.data) << name;
+    // A full disk leaves no file at all (the encoder never writes one itself).
+    fs::remove(p);
+    FaultyFileIo full(1, ENOSPC);
+    ScopedFileIo use(full);
+    EXPECT_THROW(WriteImage(p.string(), im, type), Error) << name;
+    EXPECT_FALSE(fs::exists(p)) << name;
+  }
+  for (const auto& e : fs::directory_iterator(d))
+    EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
   fs::remove_all(d);
 }
 

@@ -1,5 +1,7 @@
 #include "core/image.h"
 
+#include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imageio.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -7,8 +9,6 @@
 #include <cstdint>
 #include <filesystem>
 #include <memory>
-
-#include <OpenImageIO/imageio.h>
 
 #include "core/error.h"
 #include "core/files.h"
@@ -97,8 +97,7 @@ std::vector<uint8_t> ReadMask(const std::string& path, int width, int height,
   const Image m = ReadImage(path);
   if (m.width != width || m.height != height) {
     throw Error(path + ": mask is " + std::to_string(m.width) + "x" + std::to_string(m.height) +
-                " but " + for_what + " is " + std::to_string(width) + "x" +
-                std::to_string(height));
+                " but " + for_what + " is " + std::to_string(width) + "x" + std::to_string(height));
   }
   std::vector<uint8_t> mask(static_cast<size_t>(width) * height, 0);
   for (size_t p = 0; p < mask.size(); ++p)
@@ -107,7 +106,7 @@ std::vector<uint8_t> ReadMask(const std::string& path, int width, int height,
   return mask;
 }
 
-void WriteImage(const std::string& path, const Image& image, StoredType type) {
+std::string EncodeImage(const std::string& path, const Image& image, StoredType type) {
   if (image.width <= 0 || image.height <= 0 || image.channels <= 0 ||
       image.data.size() != static_cast<size_t>(image.width) * image.height * image.channels) {
     throw Error(path + ": cannot write an empty or inconsistent image (" +
@@ -147,8 +146,8 @@ void WriteImage(const std::string& path, const Image& image, StoredType type) {
       format = OIIO::TypeDesc::UINT16;
       u16.resize(image.data.size());
       for (size_t i = 0; i < u16.size(); ++i) {
-        u16[i] = static_cast<uint16_t>(
-            std::lround(std::clamp(image.data[i] * 257.0, 0.0, 65535.0)));
+        u16[i] =
+            static_cast<uint16_t>(std::lround(std::clamp(image.data[i] * 257.0, 0.0, 65535.0)));
       }
       pixels = u16.data();
       pixel_type = OIIO::TypeDesc::UINT16;
@@ -160,36 +159,53 @@ void WriteImage(const std::string& path, const Image& image, StoredType type) {
       format = OIIO::TypeDesc::FLOAT;
       break;
   }
-  const std::filesystem::path target(path);
-  const std::string ext = target.extension().string();
-  const std::filesystem::path tmp = TempPathFor(target, ext);
-  auto out = OIIO::ImageOutput::create(tmp.string());
-  if (!out) {
-    throw Error(path + ": cannot write image: " + OIIO::geterror());
+  // Encoded in memory, so every byte reaches the disk through WriteFileAtomic's checked writes
+  // (an encoder writing its own file may not report a full disk).
+  std::vector<unsigned char> bytes;
+  OIIO::Filesystem::IOVecOutput sink(bytes);
+  auto out = OIIO::ImageOutput::create(path);
+  if (!out) throw Error(path + ": cannot write image: " + OIIO::geterror());
+  if (!out->supports("ioproxy")) {
+    throw Error(path + ": cannot write image: the " + out->format_name() +
+                " writer cannot encode to memory");
   }
   OIIO::ImageSpec spec(image.width, image.height, image.channels, format);
   if (image.channels == 4) {
     spec.alpha_channel = 3;
     spec.attribute("oiio:UnassociatedAlpha", 1);  // store colours as given
   }
+  void* proxy = &sink;
+  spec.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy);
   auto fail = [&](const std::string& what) {
-    std::string msg = out->geterror();
-    out.reset();
-    std::error_code ec;
-    std::filesystem::remove(tmp, ec);
-    throw Error(path + ": " + what + ": " + msg);
+    const std::string msg = out->geterror();
+    throw Error(path + ": " + what + (msg.empty() ? "" : ": " + msg));
   };
-  if (!out->open(tmp.string(), spec)) fail("cannot open for writing");
-  if (!out->write_image(pixel_type, pixels)) fail("cannot write pixels");
-  if (!out->close()) fail("cannot finish the file");
+  if (!out->open(path, spec)) fail("cannot start encoding");
+  if (!out->write_image(pixel_type, pixels)) fail("cannot encode the pixels");
+  if (!out->close()) fail("cannot finish encoding");
   out.reset();
-  try {
-    CommitFile(tmp, target);
-  } catch (...) {
-    std::error_code ec;
-    std::filesystem::remove(tmp, ec);
-    throw;
+  // What was encoded decodes to the same layout (the file is written only if it does).
+  OIIO::Filesystem::IOMemReader source(bytes.data(), bytes.size());
+  OIIO::ImageSpec config;
+  void* in_proxy = &source;
+  config.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &in_proxy);
+  auto in = OIIO::ImageInput::open(path, &config);
+  if (!in) throw Error(path + ": the encoded image does not decode: " + OIIO::geterror());
+  const OIIO::ImageSpec& back = in->spec();
+  if (back.width != image.width || back.height != image.height ||
+      back.nchannels != image.channels) {
+    throw Error(path + ": the encoded image decodes as " + std::to_string(back.width) + "x" +
+                std::to_string(back.height) + "x" + std::to_string(back.nchannels));
   }
+  std::vector<float> check(image.data.size());
+  if (!in->read_image(0, 0, 0, image.channels, OIIO::TypeDesc::FLOAT, check.data())) {
+    throw Error(path + ": the encoded image does not decode: " + in->geterror());
+  }
+  return std::string(bytes.begin(), bytes.end());
+}
+
+void WriteImage(const std::string& path, const Image& image, StoredType type) {
+  WriteFileAtomic(path, EncodeImage(path, image, type));
 }
 
 }  // namespace rouen

@@ -43,10 +43,15 @@ Image ReadImage(const std::string& path);
 // (`for_what` names the image it must match).
 std::vector<uint8_t> ReadMask(const std::string& path, int width, int height,
                               const std::string& for_what);
+// Encodes through OpenImageIO in memory, choosing the format from `path`'s extension, and
+// checks that the bytes decode to the same width, height and channels. Same value rules as
+// WriteImage; throws rouen::Error naming `path`.
+std::string EncodeImage(const std::string& path, const Image& image, StoredType type);
 // Writes through OpenImageIO, choosing the format from the extension. Integer types clamp
 // and round the values (0..255 scale for kUint8; for kUint16 values on the same 0..255 scale
-// are stored x257 as 0..65535, so ReadImage gives them back). The file is written under a
-// temporary name, fsynced and renamed, so a crash never leaves a partial file. Non-finite
+// are stored x257 as 0..65535, so ReadImage gives them back). The encoded bytes are written by
+// WriteFileAtomic (every write checked, fsynced, size checked, renamed), so a crash or a full
+// disk never leaves a partial file. Non-finite
 // values, and values beyond 65504 for kHalf, are refused with rouen::Error.
 void WriteImage(const std::string& path, const Image& image, StoredType type);
 

@@ -1,6 +1,7 @@
 #include "core/session.h"
 
 #include <fcntl.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -128,16 +129,61 @@ void FsyncDir(const fs::path& dir) {
   ::close(fd);
 }
 
+constexpr const char* kLockName = "session.lock";
+
+// One writer per session (flock on <dir>/session.lock, released when the fd closes, also on a
+// crash). The holder writes its pid into the file so a second writer can name it.
+int LockSession(const fs::path& dir) {
+  const fs::path p = dir / kLockName;
+  const int fd = ::open(p.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (fd < 0) throw Error(IoErrorMessage(p, "cannot open the session lock", errno));
+  if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+    const int err = errno;
+    char buf[32] = {};
+    const ssize_t n = ::pread(fd, buf, sizeof buf - 1, 0);
+    ::close(fd);
+    if (err == EWOULDBLOCK) {
+      std::string holder = n > 0 ? std::string(buf, static_cast<size_t>(n)) : "";
+      while (!holder.empty() && (holder.back() == '\n' || holder.back() == ' ')) holder.pop_back();
+      throw Error(dir.string() + ": the session is in use by another rouen process" +
+                  (holder.empty() ? "" : " (pid " + holder + ")") +
+                  "; one capture or import writes a session at a time: wait for it to finish "
+                  "or stop it, then run again");
+    }
+    throw Error(IoErrorMessage(p, "cannot lock the session", err));
+  }
+  const std::string pid = std::to_string(::getpid()) + "\n";
+  if (::ftruncate(fd, 0) != 0 || ::pwrite(fd, pid.data(), pid.size(), 0) < 0) {
+    // The pid is only for the message of a second writer; the lock itself holds.
+  }
+  return fd;
+}
+
 }  // namespace
+
+bool SessionInUse(const fs::path& dir) {
+  const fs::path p = dir / kLockName;
+  const int fd = ::open(p.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return false;
+  const bool held = ::flock(fd, LOCK_EX | LOCK_NB) != 0 && errno == EWOULDBLOCK;
+  ::close(fd);  // releases the probe's lock, if it got one
+  return held;
+}
 
 const char* TargetName(Target t) {
   switch (t) {
-    case Target::kSun: return "sun";
-    case Target::kAureole: return "aureole";
-    case Target::kSky: return "sky";
-    case Target::kLandscape: return "landscape";
-    case Target::kArchitecture: return "architecture";
-    case Target::kCalibration: return "calibration";
+    case Target::kSun:
+      return "sun";
+    case Target::kAureole:
+      return "aureole";
+    case Target::kSky:
+      return "sky";
+    case Target::kLandscape:
+      return "landscape";
+    case Target::kArchitecture:
+      return "architecture";
+    case Target::kCalibration:
+      return "calibration";
   }
   return "architecture";
 }
@@ -185,16 +231,13 @@ void from_json(const json& j, FrameRecord& f) {
   r.id = NeedInt(j, "id", what);
   r.device = NeedString(j, "device", what);
   r.target = ParseTarget(NeedString(j, "target", what));
-  r.group = Optional<std::string>(j, "group", "", [&](const json& x, const char* k) {
-    return NeedString(x, k, what);
-  });
-  r.slot = static_cast<int>(Optional<int64_t>(j, "slot", 0, [&](const json& x, const char* k) {
-    return NeedInt(x, k, what);
-  }));
+  r.group = Optional<std::string>(
+      j, "group", "", [&](const json& x, const char* k) { return NeedString(x, k, what); });
+  r.slot = static_cast<int>(Optional<int64_t>(
+      j, "slot", 0, [&](const json& x, const char* k) { return NeedInt(x, k, what); }));
   r.utc = NeedTime(j, "utc", what);
-  r.hdr = Optional<bool>(j, "hdr", false, [&](const json& x, const char* k) {
-    return NeedBool(x, k, what);
-  });
+  r.hdr = Optional<bool>(j, "hdr", false,
+                         [&](const json& x, const char* k) { return NeedBool(x, k, what); });
   r.exposure_s = NeedNumber(j, "exposure_s", what);
   r.gain = NeedNumber(j, "gain", what);
   r.aperture_f = NeedNumber(j, "aperture_f", what);
@@ -239,17 +282,17 @@ void from_json(const json& j, FrameRecord& f) {
 }
 
 void to_json(json& j, const SessionInfo& s) {
-  j = json{{"format_version", s.format_version},
-           {"site", {{"lat_deg", s.site.lat_deg},
-                     {"lon_deg", s.site.lon_deg},
-                     {"height_m", s.site.height_m}}},
-           {"site_source", s.site_source},
-           {"rig", s.rig},
-           {"created_utc", s.created_utc},
-           {"clock_offset_s", s.clock_offset_s},
-           {"model", s.model},
-           {"notes", s.notes},
-           {"extra", s.extra}};
+  j = json{
+      {"format_version", s.format_version},
+      {"site",
+       {{"lat_deg", s.site.lat_deg}, {"lon_deg", s.site.lon_deg}, {"height_m", s.site.height_m}}},
+      {"site_source", s.site_source},
+      {"rig", s.rig},
+      {"created_utc", s.created_utc},
+      {"clock_offset_s", s.clock_offset_s},
+      {"model", s.model},
+      {"notes", s.notes},
+      {"extra", s.extra}};
 }
 
 void from_json(const json& j, SessionInfo& s) {
@@ -271,8 +314,7 @@ void from_json(const json& j, SessionInfo& s) {
   r.site_source = Optional<std::string>(j, "site_source", r.site_source, str);
   r.rig = Optional<std::string>(j, "rig", "", str);
   r.created_utc = Optional<std::string>(j, "created_utc", "", str);
-  r.clock_offset_s = Optional<double>(j, "clock_offset_s", 0.0, [&](const json& x,
-                                                                     const char* k) {
+  r.clock_offset_s = Optional<double>(j, "clock_offset_s", 0.0, [&](const json& x, const char* k) {
     return NeedNumber(x, k, what);
   });
   r.model = Optional<std::string>(j, "model", "", str);
@@ -358,14 +400,13 @@ fs::path Session::PathOf(const FrameRecord& f) const {
   }
 }
 
-Image Session::LoadFrame(const FrameRecord& f, bool verify) const {
+Image Session::LoadFrame(const FrameRecord& f) const {
   const fs::path p = PathOf(f);
-  if (verify) {
-    const std::string actual = Sha256File(p);
-    if (actual != f.sha256) {
-      throw Error(p.string() + ": sha256 mismatch (journal " + f.sha256 + ", file " + actual +
-                  ")");
-    }
+  const std::string actual = Sha256File(p);
+  if (actual != f.sha256) {
+    throw Error(p.string() + ": frame " + std::to_string(f.id) + " (" + f.group +
+                ") does not match its journal entry: sha256 " + actual + ", journalled " +
+                f.sha256 + " (the file was changed or damaged after capture)");
   }
   return ReadImage(p.string());
 }
@@ -375,18 +416,28 @@ Image Session::LoadFrame(const FrameRecord& f, bool verify) const {
 
 SessionWriter SessionWriter::Create(const fs::path& dir, const SessionInfo& info) {
   std::error_code ec;
-  if (fs::exists(dir, ec)) {
-    if (!fs::is_directory(dir)) throw Error(dir.string() + ": exists and is not a directory");
+  if (fs::exists(dir, ec) && !fs::is_directory(dir)) {
+    throw Error(dir.string() + ": exists and is not a directory");
+  }
+  fs::create_directories(dir, ec);
+  if (ec) throw Error(dir.string() + ": cannot create the session folder: " + ec.message());
+  SessionWriter w;
+  w.lock_fd_ = LockSession(dir);
+  {
     // A folder left by a crash before its session.json was written holds no data: only an
-    // empty frames/ folder and temporary files. Anything else is refused.
+    // empty frames/ folder, an empty journal, the lock and temporary files. Anything else is
+    // refused.
     for (const auto& entry : fs::directory_iterator(dir)) {
       const std::string name = entry.path().filename().string();
-      const bool leftover = name.find(".tmp-") != std::string::npos ||
-                            (name == "frames" && fs::is_directory(entry.path()) &&
-                             fs::is_empty(entry.path()));
+      const bool leftover =
+          name.find(".tmp-") != std::string::npos || name == kLockName ||
+          (name == "frames.jsonl" && fs::is_regular_file(entry.path()) &&
+           fs::file_size(entry.path()) == 0) ||
+          (name == "frames" && fs::is_directory(entry.path()) && fs::is_empty(entry.path()));
       if (!leftover)
-        throw Error(dir.string() + ": refusing to create a session in a non-empty folder "
-                                   "(use resume to continue it)");
+        throw Error(dir.string() +
+                    ": refusing to create a session in a non-empty folder "
+                    "(use resume to continue it)");
     }
     for (const auto& entry : fs::directory_iterator(dir))
       if (entry.path().filename().string().find(".tmp-") != std::string::npos)
@@ -394,14 +445,15 @@ SessionWriter SessionWriter::Create(const fs::path& dir, const SessionInfo& info
   }
   fs::create_directories(dir / "frames", ec);
   if (ec) throw Error(dir.string() + ": cannot create the session folder: " + ec.message());
-  SessionWriter w;
   w.dir_ = dir;
   w.info_ = info;
   if (w.info_.created_utc.empty()) w.info_.created_utc = NowUtc().Iso8601(3);
-  WriteFileAtomic(dir / "session.json", json(w.info_).dump(2) + "\n");
+  // The empty journal first: once session.json exists, the session loads.
   w.journal_fd_ = OpenJournal(dir);
-  if (::fsync(w.journal_fd_) != 0) throw Error(JournalPath(dir) + ": fsync failed: " + Errno());
-  FsyncDir(dir);
+  if (CurrentFileIo().Fsync(w.journal_fd_) != 0) {
+    throw Error(IoErrorMessage(JournalPath(dir), "fsync failed", errno));
+  }
+  WriteFileAtomic(dir / "session.json", json(w.info_).dump(2) + "\n");
   if (dir.has_parent_path()) FsyncDir(dir.parent_path());
   return w;
 }
@@ -410,6 +462,8 @@ SessionWriter SessionWriter::Resume(const fs::path& dir) {
   if (!fs::is_regular_file(dir / "session.json")) {
     throw Error(dir.string() + ": cannot resume: no session.json");
   }
+  SessionWriter w;
+  w.lock_fd_ = LockSession(dir);
   // A journal line cut short by a crash: keep it if it is complete but for the newline,
   // otherwise truncate it away.
   const std::string journal = JournalPath(dir);
@@ -456,7 +510,6 @@ SessionWriter SessionWriter::Resume(const fs::path& dir) {
   }
   fs::create_directories(dir / "frames");
   Session s = Session::Load(dir);
-  SessionWriter w;
   w.dir_ = dir;
   w.info_ = s.info();
   w.frames_ = s.frames();
@@ -465,8 +518,12 @@ SessionWriter SessionWriter::Resume(const fs::path& dir) {
   return w;
 }
 
-SessionWriter::~SessionWriter() {
+SessionWriter::~SessionWriter() { Close(); }
+
+void SessionWriter::Close() {
   if (journal_fd_ >= 0) ::close(journal_fd_);
+  if (lock_fd_ >= 0) ::close(lock_fd_);
+  journal_fd_ = lock_fd_ = -1;
 }
 
 SessionWriter::SessionWriter(SessionWriter&& o) noexcept
@@ -474,19 +531,21 @@ SessionWriter::SessionWriter(SessionWriter&& o) noexcept
       info_(std::move(o.info_)),
       frames_(std::move(o.frames_)),
       journal_fd_(o.journal_fd_),
+      lock_fd_(o.lock_fd_),
       next_id_(o.next_id_) {
-  o.journal_fd_ = -1;
+  o.journal_fd_ = o.lock_fd_ = -1;
 }
 
 SessionWriter& SessionWriter::operator=(SessionWriter&& o) noexcept {
   if (this != &o) {
-    if (journal_fd_ >= 0) ::close(journal_fd_);
+    Close();
     dir_ = std::move(o.dir_);
     info_ = std::move(o.info_);
     frames_ = std::move(o.frames_);
     journal_fd_ = o.journal_fd_;
+    lock_fd_ = o.lock_fd_;
     next_id_ = o.next_id_;
-    o.journal_fd_ = -1;
+    o.journal_fd_ = o.lock_fd_ = -1;
   }
   return *this;
 }
@@ -511,20 +570,30 @@ FrameRecord SessionWriter::Append(FrameRecord meta, const Image& pixels) {
       }
     }
   }
-  WriteImage(path.string(), pixels, type);
-  meta.sha256 = Sha256File(path);
+  // The frame enters the journal only once its whole file is on disk: encoded and decoded
+  // back in memory, every write checked, fsynced, its size checked, renamed into place.
+  const std::string bytes = EncodeImage(path.string(), pixels, type);
+  meta.sha256 = Sha256Hex(bytes);
   const std::string line = json(meta).dump() + "\n";
-  const off_t before = ::lseek(journal_fd_, 0, SEEK_END);
-  const ssize_t n = ::write(journal_fd_, line.data(), line.size());
-  if (n != static_cast<ssize_t>(line.size())) {
-    const std::string e = n < 0 ? Errno() : "short write";
-    if (before >= 0 && ::ftruncate(journal_fd_, before) != 0) {
-      // The journal may end in a partial line; Load and Resume tolerate that.
+  const std::string journal = JournalPath(dir_);
+  off_t before = -1;
+  try {
+    WriteFileAtomic(path, bytes);
+    before = ::lseek(journal_fd_, 0, SEEK_END);
+    if (before < 0) throw Error(IoErrorMessage(journal, "cannot seek", errno));
+    WriteAll(journal_fd_, line, journal);
+    if (CurrentFileIo().Fsync(journal_fd_) != 0) {
+      throw Error(IoErrorMessage(journal, "fsync failed", errno));
     }
-    throw Error(JournalPath(dir_) + ": cannot append frame " + std::to_string(meta.id) + ": " +
-                e);
+  } catch (const Error& e) {
+    // The journal ends at the previous frame again (Load and Resume also tolerate a cut last
+    // line), and the unjournalled file goes: the session stays consistent for --resume.
+    if (before >= 0 && ::ftruncate(journal_fd_, before) == 0) ::fsync(journal_fd_);
+    ::unlink(path.c_str());
+    throw Error(std::string(e.what()) + " (frame " + std::to_string(meta.id) + ", " + meta.group +
+                ", was not journalled; the session keeps its first " +
+                std::to_string(frames_.size()) + " frames)");
   }
-  if (::fsync(journal_fd_) != 0) throw Error(JournalPath(dir_) + ": fsync failed: " + Errno());
   ++next_id_;
   frames_.push_back(meta);
   return meta;

@@ -4,11 +4,10 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "core/camera.h"
 #include "core/image.h"
@@ -41,11 +40,11 @@ struct FrameRecord {
   std::string group;  // bracket this frame belongs to, e.g. "slot2/architecture/view1"
   int slot = 0;       // index of the time-of-day slot in the capture plan
   UtcTime utc;
-  bool hdr = false;         // true: linear radiance EXR; false: 8-bit LDR digital numbers
-  double exposure_s = 0;    // LDR only
-  double gain = 1;          // linear gain (ISO / base ISO)
-  double aperture_f = 0;    // 0 = unknown / fixed
-  double nd_density = 0;    // optical density of the ND filter in front (0 = none)
+  bool hdr = false;       // true: linear radiance EXR; false: 8-bit LDR digital numbers
+  double exposure_s = 0;  // LDR only
+  double gain = 1;        // linear gain (ISO / base ISO)
+  double aperture_f = 0;  // 0 = unknown / fixed
+  double nd_density = 0;  // optical density of the ND filter in front (0 = none)
   std::optional<GpsFix> gps;
   double sun_azimuth_deg = 0, sun_elevation_deg = 0;  // at `utc` for the session site
   std::optional<Intrinsics> intrinsics;
@@ -60,8 +59,8 @@ struct SessionInfo {
   std::string site_source = "rig";  // "gps" or "rig" (fallback, stated)
   std::string rig;                  // rig file name
   std::string created_utc;
-  double clock_offset_s = 0;        // GPS time minus laptop clock, applied to frame times
-  std::string model;                // optional relative path to the building model (OBJ)
+  double clock_offset_s = 0;  // GPS time minus laptop clock, applied to frame times
+  std::string model;          // optional relative path to the building model (OBJ)
   std::string notes;
   nlohmann::json extra = nlohmann::json::object();
 };
@@ -84,8 +83,9 @@ class Session {
   const std::vector<FrameRecord>& frames() const { return frames_; }
   const std::vector<std::string>& warnings() const { return warnings_; }
   std::filesystem::path PathOf(const FrameRecord& f) const;  // checked to stay inside
-  // Reads a frame's pixels; verifies the sha256 when `verify` is set.
-  Image LoadFrame(const FrameRecord& f, bool verify = false) const;
+  // Reads a frame's pixels after checking the file's sha256 against the journal; a mismatch
+  // is a rouen::Error naming the file, the frame and its bracket.
+  Image LoadFrame(const FrameRecord& f) const;
 
  private:
   std::filesystem::path dir_;
@@ -94,8 +94,14 @@ class Session {
   std::vector<std::string> warnings_;
 };
 
+// True while some process holds `dir`'s writer lock (a writer that crashed holds none).
+bool SessionInUse(const std::filesystem::path& dir);
+
 // Appends frames to a session folder. Create() makes a new folder (refusing a non-empty
-// one); Resume() reopens an existing one and continues its ids.
+// one); Resume() reopens an existing one and continues its ids. One writer per session: the
+// writer holds an advisory lock (flock on <dir>/session.lock) from Create/Resume until it is
+// closed or destroyed; a second writer, in this process or another, gets a rouen::Error
+// naming the folder and the holder's pid.
 class SessionWriter {
  public:
   static SessionWriter Create(const std::filesystem::path& dir, const SessionInfo& info);
@@ -107,11 +113,14 @@ class SessionWriter {
   const std::filesystem::path& dir() const { return dir_; }
   const std::vector<FrameRecord>& frames() const { return frames_; }
   // Writes the pixels (LDR -> 8-bit PNG, HDR -> half EXR) durably, then journals `meta`
-  // with id, file and sha256 filled in. Returns the journalled record.
+  // with id, file and sha256 filled in. Returns the journalled record. On any failure (a full
+  // disk, say) nothing of the frame stays: the journal and folder end at the previous frame.
   FrameRecord Append(FrameRecord meta, const Image& pixels);
   // Rewrites session.json atomically (e.g. after the GPS fix arrived).
   void UpdateInfo(const SessionInfo& info);
   const SessionInfo& info() const { return info_; }
+  // Releases the journal and the session lock (the destructor does too).
+  void Close();
 
  private:
   SessionWriter() = default;
@@ -119,6 +128,7 @@ class SessionWriter {
   SessionInfo info_;
   std::vector<FrameRecord> frames_;
   int journal_fd_ = -1;
+  int lock_fd_ = -1;
   int64_t next_id_ = 1;
 };
 

@@ -1,13 +1,15 @@
 #include "core/session.h"
 
+#include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 #include <string>
 
-#include <gtest/gtest.h>
-
 #include "core/error.h"
+#include "core/fault_io.h"
 #include "core/files.h"
 
 namespace fs = std::filesystem;
@@ -151,24 +153,24 @@ TEST_F(SessionTest, RoundTrip) {
   EXPECT_EQ(s.frames()[2].target, Target::kSun);
 
   // Pixels: LDR exactly, HDR within half precision, beyond-half HDR stored as float.
-  const Image ldr = s.LoadFrame(a, true);
+  const Image ldr = s.LoadFrame(a);
   EXPECT_EQ(ldr.units, PixelUnits::kDigital);
   EXPECT_EQ(ldr.data, Pixels(false, 1).data);
-  const Image sky = s.LoadFrame(s.frames()[1], true);
+  const Image sky = s.LoadFrame(s.frames()[1]);
   EXPECT_EQ(sky.units, PixelUnits::kRadiance);
   const Image want = Pixels(true, 0.5f);
   for (size_t i = 0; i < want.data.size(); ++i) {
     EXPECT_NEAR(sky.data[i], want.data[i], want.data[i] / 2048);
   }
-  EXPECT_EQ(s.LoadFrame(s.frames()[2], true).data, Pixels(true, 1e5f).data);
+  EXPECT_EQ(s.LoadFrame(s.frames()[2]).data, Pixels(true, 1e5f).data);
 
   // The journal: one compact object per line with the documented keys.
   const auto lines = Lines();
   ASSERT_EQ(lines.size(), 3u);
   const json j = json::parse(lines[0]);
-  for (const char* key : {"id", "device", "target", "group", "slot", "utc", "hdr", "exposure_s",
-                          "gain", "aperture_f", "nd_density", "gps", "sun", "intrinsics", "pose",
-                          "file", "sha256"}) {
+  for (const char* key :
+       {"id", "device", "target", "group", "slot", "utc", "hdr", "exposure_s", "gain", "aperture_f",
+        "nd_density", "gps", "sun", "intrinsics", "pose", "file", "sha256"}) {
     EXPECT_TRUE(j.contains(key)) << key;
   }
   EXPECT_EQ(j["utc"], "2024-06-21T09:15:00.123456789Z");
@@ -282,9 +284,8 @@ TEST_F(SessionTest, MissingFileAndShaMismatch) {
     Image other = Pixels(false, 1);
     other.data[0] = 200;
     WriteImage((dir_ / "frames" / "000001.png").string(), other, StoredType::kUint8);
-    EXPECT_NO_THROW(s.LoadFrame(s.frames()[0], false));
     try {
-      s.LoadFrame(s.frames()[0], true);
+      s.LoadFrame(s.frames()[0]);
       ADD_FAILURE();
     } catch (const Error& e) {
       EXPECT_NE(std::string(e.what()).find("sha256"), std::string::npos) << e.what();
@@ -356,6 +357,116 @@ TEST_F(SessionTest, BadInputsAreRefused) {
   info.erase("format_version");
   WriteFileAtomic(dir_ / "session.json", info.dump());
   ExpectLoadError("\"format_version\"");
+}
+
+// Every journalled frame's file is whole: its sha256 matches and it decodes to its size.
+void ExpectWholeFrames(const Session& s, int width, int height) {
+  for (const FrameRecord& f : s.frames()) {
+    const Image im = s.LoadFrame(f);  // checks the sha256
+    EXPECT_EQ(im.width, width) << f.file;
+    EXPECT_EQ(im.height, height) << f.file;
+  }
+}
+
+// Regular files in frames/ (temporaries included).
+size_t FilesIn(const fs::path& folder) {
+  size_t n = 0;
+  for (const auto& e : fs::directory_iterator(folder)) n += e.is_regular_file();
+  return n;
+}
+
+TEST_F(SessionTest, DiskFullAtAnyCallOfAnAppendLosesNothingJournalled) {
+  // How many durable-write calls one append makes (image: open, writes, fsync, rename,
+  // directory fsync; journal: write, fsync).
+  long calls_per_append = 0;
+  {
+    SessionWriter w = SessionWriter::Create(dir_, Info());
+    w.Append(Meta(Target::kSky, false, 0.01), Pixels(false, 1));
+    FaultyFileIo counter;
+    ScopedFileIo use(counter);
+    w.Append(Meta(Target::kSky, true, 0), Pixels(true, 1));
+    calls_per_append = counter.calls();
+  }
+  ASSERT_GE(calls_per_append, 6);
+  for (bool hdr : {false, true}) {
+    for (long k = 0; k < calls_per_append; ++k) {
+      SCOPED_TRACE((hdr ? "HDR" : "LDR") + std::string(" frame, disk full from call ") +
+                   std::to_string(k));
+      fs::remove_all(dir_);
+      {
+        SessionWriter w = SessionWriter::Create(dir_, Info());
+        w.Append(Meta(Target::kSky, false, 0.01), Pixels(false, 1));
+        w.Append(Meta(Target::kSky, false, 0.02), Pixels(false, 2));
+        FaultyFileIo full(k, ENOSPC);
+        ScopedFileIo use(full);
+        try {
+          w.Append(Meta(Target::kSky, hdr, hdr ? 0 : 0.04), Pixels(hdr, 3));
+          ADD_FAILURE() << "the append succeeded on a full disk";
+        } catch (const Error& e) {
+          const std::string m = e.what();
+          EXPECT_NE(m.find("the disk is full"), std::string::npos) << m;
+          EXPECT_NE(m.find(dir_.string()), std::string::npos) << m;
+        }
+        EXPECT_EQ(w.frames().size(), 2u);
+      }
+      // Nothing of the failed frame stays: the journal, the files and the ids end at frame 2.
+      Session s = Session::Load(dir_);
+      ASSERT_EQ(s.frames().size(), 2u);
+      EXPECT_TRUE(s.warnings().empty()) << s.warnings().front();
+      ExpectWholeFrames(s, 6, 4);
+      EXPECT_EQ(FilesIn(dir_ / "frames"), 2u);
+      // Space is back: the session resumes and continues its ids.
+      SessionWriter w = SessionWriter::Resume(dir_);
+      EXPECT_EQ(w.Append(Meta(Target::kSky, hdr, hdr ? 0 : 0.04), Pixels(hdr, 3)).id, 3);
+      w.Close();
+      ExpectWholeFrames(Session::Load(dir_), 6, 4);
+    }
+  }
+}
+
+TEST_F(SessionTest, ReadOnlyOrBrokenDiskIsNamedAndLeavesTheSessionConsistent) {
+  for (int err : {EROFS, EIO}) {
+    fs::remove_all(dir_);
+    SessionWriter w = SessionWriter::Create(dir_, Info());
+    w.Append(Meta(Target::kSky, false, 0.01), Pixels(false, 1));
+    FaultyFileIo broken(0, err, /*short_first_write=*/false);
+    ScopedFileIo use(broken);
+    try {
+      w.Append(Meta(Target::kSky, false, 0.02), Pixels(false, 2));
+      ADD_FAILURE();
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(std::strerror(err)), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(Session::Load(dir_).frames().size(), 1u);
+  }
+}
+
+TEST_F(SessionTest, OneWriterPerSession) {
+  SessionWriter first = SessionWriter::Create(dir_, Info());
+  first.Append(Meta(Target::kSky, false, 0.01), Pixels(false, 1));
+  // A second writer (resume or create) on the same folder is refused, naming the folder and
+  // the holder's pid; the session is untouched.
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    try {
+      if (attempt == 0) {
+        SessionWriter::Resume(dir_);
+      } else {
+        SessionWriter::Create(dir_, Info());
+      }
+      ADD_FAILURE() << "a second writer got the session";
+    } catch (const Error& e) {
+      const std::string m = e.what();
+      EXPECT_NE(m.find(dir_.string()), std::string::npos) << m;
+      EXPECT_NE(m.find("in use"), std::string::npos) << m;
+      EXPECT_NE(m.find("pid " + std::to_string(::getpid())), std::string::npos) << m;
+    }
+  }
+  EXPECT_EQ(first.Append(Meta(Target::kSky, false, 0.02), Pixels(false, 2)).id, 2);
+  first.Close();
+  // Released: the next writer continues.
+  SessionWriter next = SessionWriter::Resume(dir_);
+  EXPECT_EQ(next.Append(Meta(Target::kSky, false, 0.04), Pixels(false, 3)).id, 3);
+  ExpectWholeFrames(Session::Load(dir_), 6, 4);
 }
 
 }  // namespace

@@ -1,12 +1,25 @@
 // Running the `rouen` binary from the integration tests.
 #pragma once
 
+#include <fcntl.h>
+#include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <regex>
+#include <sstream>
 #include <string>
+#include <vector>
+
+#include "core/error.h"
+#include "core/files.h"
+
+extern char** environ;
 
 namespace rouen::cli_test {
 
@@ -46,6 +59,56 @@ inline std::filesystem::path TempDir(const std::string& name) {
   fs::remove_all(p);
   fs::create_directories(p);
   return p;
+}
+
+// Starts `args` (argv[0] a path) in the background, stdout and stderr appended to `log`,
+// stdin from /dev/null.
+inline pid_t Spawn(const std::vector<std::string>& args, const std::filesystem::path& log) {
+  std::vector<char*> argv;
+  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t fa;
+  posix_spawn_file_actions_init(&fa);
+  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+  posix_spawn_file_actions_adddup2(&fa, 1, 2);
+  posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
+  pid_t pid = -1;
+  const int rc = posix_spawn(&pid, argv[0], &fa, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&fa);
+  if (rc != 0) throw Error(std::string("cannot start ") + argv[0] + ": " + std::strerror(rc));
+  return pid;
+}
+
+// The exit code of `pid`, or minus the signal that ended it.
+inline int Wait(pid_t pid) {
+  int status = 0;
+  while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  }
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -WTERMSIG(status);
+}
+
+inline std::string LogOf(const std::filesystem::path& log) {
+  std::ifstream in(log);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+// The shipped simulated rig cut down to one time of day, so one capture takes a few seconds.
+inline std::string OneSlotRig() {
+  std::string text = ReadFileToString(std::filesystem::path(ROUEN_SOURCE_DIR) / "rigs/sim.toml");
+  text = std::regex_replace(text, std::regex("\ntimes = \\[[^\\]]*\\]"), "\ntimes = [\"16:00\"]");
+  text = std::regex_replace(text, std::regex("\nheldout = [^\n]*"), "");
+  return text;
+}
+
+// `rouen capture` of `rig` into `out` (quick, no prompts), as argv for Spawn.
+inline std::vector<std::string> CaptureArgs(const std::filesystem::path& rig,
+                                            const std::filesystem::path& out, bool resume) {
+  std::vector<std::string> a = {ROUEN_BINARY, "capture",    "--rig",  rig.string(),
+                                "--out",      out.string(), "--quick"};
+  if (resume) a.push_back("--resume");
+  return a;
 }
 
 }  // namespace rouen::cli_test

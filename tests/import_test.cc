@@ -143,7 +143,7 @@ TEST(ImportTest, StLouisExposuresAndTimesFromExif) {
   EXPECT_EQ(seen.size(), 4u);
   // Pixels are the JPEG's decoded values, unchanged (8-bit PNG is lossless).
   const FrameRecord& f0 = s.frames().front();
-  const Image stored = s.LoadFrame(f0, /*verify=*/true);
+  const Image stored = s.LoadFrame(f0);
   const Image source =
       ReadImage((photos / sources.at(f0.id).at("source").get<std::string>()).string());
   ASSERT_EQ(stored.data.size(), source.data.size());

@@ -93,7 +93,7 @@ RunResult RunCapture(bool through_aravis, const std::string& name) {
   }
   Session s = Session::Load(dir);
   r.frames = s.frames();
-  for (const FrameRecord& f : r.frames) r.images.push_back(s.LoadFrame(f, true));
+  for (const FrameRecord& f : r.frames) r.images.push_back(s.LoadFrame(f));
   r.stats = AravisStatsOf(*cam);
   std::filesystem::remove_all(dir);
   return r;

@@ -106,7 +106,7 @@ CapturedFrame ReplayCamera::Grab() {
     throw DeviceError("replay: bracket " + group + " has no frame with ND density " +
                       std::to_string(nd_));
   CapturedFrame out;
-  out.image = src_->session().LoadFrame(*best, /*verify=*/true);
+  out.image = src_->session().LoadFrame(*best);
   out.hdr = best->hdr;
   out.exposure_s = best->exposure_s;
   out.gain = best->gain;
