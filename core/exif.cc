@@ -113,6 +113,7 @@ bool IsRawFileName(const std::string& path) {
 }
 
 PhotoMetadata ReadPhotoMetadata(const std::string& path) {
+  internal::CheckImageFileHeader(path);
   auto in = OIIO::ImageInput::open(path);
   if (!in) {
     std::string msg = OIIO::geterror();
@@ -218,6 +219,7 @@ Image ReadRawLinear(const std::string& path) {
   config.attribute("raw:use_camera_wb", 1);
   config.attribute("raw:auto_bright", 0);    // no automatic brightening
   config.attribute("raw:HighlightMode", 0);  // clip
+  internal::CheckImageFileHeader(path);
   auto in = OIIO::ImageInput::open(path, &config);
   if (!in) {
     std::string msg = OIIO::geterror();

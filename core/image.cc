@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 
 #include <OpenImageIO/imageio.h>
@@ -50,6 +51,52 @@ void CheckImageSize(const std::string& path, int width, int height, int channels
 
 namespace internal {
 
+void CheckImageFileHeader(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return;  // OpenImageIO says why
+  auto read_int = [&](int32_t* v) {
+    unsigned char b[4];
+    if (!in.read(reinterpret_cast<char*>(b), 4)) return false;
+    *v = static_cast<int32_t>(b[0] | b[1] << 8 | b[2] << 16 | uint32_t{b[3]} << 24);
+    return true;
+  };
+  int32_t magic = 0, version = 0;
+  if (!read_int(&magic) || magic != 20000630 || !read_int(&version)) return;  // not OpenEXR
+  in.seekg(0, std::ios::end);
+  const int64_t size = in.tellg();
+  in.seekg(8);
+  // Headers (several when multi-part, then an empty one): attributes "name\0type\0" + int32
+  // size + value, ended by an empty name. Only what is parsed is checked; OpenEXR reports
+  // other damage itself.
+  const bool multipart = version & 0x1000;
+  auto read_name = [&](std::string* s) {
+    s->clear();
+    for (char c; in.get(c);) {
+      if (c == '\0') return true;
+      if (s->size() == 255) return false;
+      s->push_back(c);
+    }
+    return false;
+  };
+  std::string name, type;
+  while (true) {
+    int attributes = 0;
+    while (read_name(&name) && !name.empty()) {
+      int32_t claimed = 0;
+      if (!read_name(&type) || !read_int(&claimed)) return;
+      const int64_t left = size - in.tellg();
+      if (claimed < 0 || claimed > left) {
+        throw Error(path + ": OpenEXR header attribute \"" + name + "\" claims " +
+                    std::to_string(claimed) + " bytes; the file has " + std::to_string(left) +
+                    " left (a corrupt header)");
+      }
+      in.seekg(claimed, std::ios::cur);
+      ++attributes;
+    }
+    if (!in || !multipart || attributes == 0) return;
+  }
+}
+
 bool ReadRowBands(OIIO::ImageInput& in, OIIO::TypeDesc type,
                   const std::function<void(int first_row, int rows, const void* data)>& band) {
   const OIIO::ImageSpec& spec = in.spec();
@@ -83,6 +130,7 @@ Image ReadImage(const std::string& path) {
   // Colour values as stored: no premultiplication by an alpha channel (alpha is dropped).
   OIIO::ImageSpec config;
   config.attribute("oiio:UnassociatedAlpha", 1);
+  internal::CheckImageFileHeader(path);
   auto in = OIIO::ImageInput::open(path, &config);
   if (!in) {
     std::string msg = OIIO::geterror();

@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include "core/error.h"
+#include "core/exif.h"
 #include "core/files.h"
 
 namespace fs = std::filesystem;
@@ -185,6 +186,47 @@ TEST_F(ImageTest, TruncatedLargeImageFailsWithoutAllocatingItsClaimedSize) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find(P("big.ppm")), std::string::npos) << e.what();
   }
+  ::getrusage(RUSAGE_SELF, &after);
+  EXPECT_LT(after.ru_maxrss - before.ru_maxrss, 256 * 1024) << "KiB of peak memory";
+}
+
+TEST_F(ImageTest, ExrAttributeClaimingMoreThanTheFileIsRefused) {
+  // Found by tests/fuzz/image_fuzz: OpenEXR 3.1 allocates and clears an attribute's claimed
+  // size before reading it (a 700-byte file cost 1.9 GB and 10 s, then "cannot read image").
+  std::string exr("\x76\x2f\x31\x01\x02\x00\x00\x00", 8);
+  exr += std::string("comments\0string\0", 16) + std::string("\x00\x00\x00\x70", 4) + "abc";
+  WriteFileAtomic(P("claims.exr"), exr);
+  WriteFileAtomic(P("claims.png"), exr);  // the content decides, not the name
+  rusage before{}, after{};
+  ::getrusage(RUSAGE_SELF, &before);
+  for (const char* name : {"claims.exr", "claims.png"}) {
+    try {
+      ReadImage(P(name));
+      ADD_FAILURE() << name;
+    } catch (const Error& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(P(name)), std::string::npos) << msg;
+      EXPECT_NE(msg.find("attribute \"comments\" claims 1879048192 bytes"), std::string::npos)
+          << msg;
+    }
+  }
+  // Valid files pass the check: a two-part EXR with a 100 kB attribute.
+  {
+    const Image img = Ramp(8, 4, 3, PixelUnits::kRadiance, 2.f);
+    OIIO::ImageSpec specs[2] = {OIIO::ImageSpec(8, 4, 3, OIIO::TypeDesc::HALF),
+                                OIIO::ImageSpec(8, 4, 3, OIIO::TypeDesc::HALF)};
+    specs[0].attribute("ImageDescription", std::string(100000, 'x'));
+    specs[1].attribute("oiio:subimagename", "second");
+    auto out = OIIO::ImageOutput::create(P("two.exr"));
+    ASSERT_TRUE(out && out->open(P("two.exr"), 2, specs));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, img.data.data()));
+    ASSERT_TRUE(out->open(P("two.exr"), specs[1], OIIO::ImageOutput::AppendSubimage));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, img.data.data()));
+    ASSERT_TRUE(out->close());
+    EXPECT_EQ(ReadImage(P("two.exr")).width, 8);
+  }
+  EXPECT_THROW(ReadPhotoMetadata(P("claims.exr")), Error);
+  EXPECT_THROW(ReadRawLinear(P("claims.exr")), Error);
   ::getrusage(RUSAGE_SELF, &after);
   EXPECT_LT(after.ru_maxrss - before.ru_maxrss, 256 * 1024) << "KiB of peak memory";
 }
