@@ -14,6 +14,7 @@
 #include "core/error.h"
 #include "core/files.h"
 #include "core/image.h"
+#include "core/list_file.h"
 #include "core/response_curve.h"
 
 namespace rouen {
@@ -23,20 +24,11 @@ void ForEachListLine(const std::string& list,
                                               const std::string& where)>& line) {
   std::ifstream in(list);
   if (!in) throw Error(list + ": cannot open the list file");
-  std::string text;
-  int lineno = 0, listed = 0;
-  while (std::getline(in, text)) {
-    ++lineno;
-    const size_t hash = text.find('#');
-    if (hash != std::string::npos) text.resize(hash);
-    std::istringstream ss(text);
-    std::vector<std::string> words;
-    for (std::string w; ss >> w;) words.push_back(w);
-    if (words.empty()) continue;
-    line(words, list + ":" + std::to_string(lineno));
-    ++listed;
-  }
-  if (listed == 0) throw Error(list + ": no images listed");
+  std::ostringstream text;
+  text << in.rdbuf();
+  const std::vector<ListLine> lines = ParseListText(text.str(), list);
+  if (lines.empty()) throw Error(list + ": no images listed");
+  for (const ListLine& l : lines) line(l.words, l.where);
 }
 
 nlohmann::json ReadJsonFile(const std::string& path, const char* what) {
@@ -52,14 +44,9 @@ nlohmann::json ReadJsonFile(const std::string& path, const char* what) {
 // A pose file: {"rotation": 3x3, "position": [x, y, z], ...} (as `rouen calib pose` and
 // `rouen calib orient` write them).
 Pose ReadPose(const std::string& path) {
-  const nlohmann::json j = ReadJsonFile(path, "pose");
-  try {
-    return j.get<Pose>();
-  } catch (const Error& e) {
-    throw Error(path + ": " + e.what());
-  } catch (const nlohmann::json::exception& e) {
-    throw Error(path + ": " + e.what());
-  }
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) throw Error(path + ": no such pose file");
+  return ParsePose(ReadFileToString(path), path);
 }
 
 std::vector<ListedExposure> ReadExposureList(const std::string& list) {

@@ -268,6 +268,14 @@ RigConfig ParseRig(const std::string& text, const std::string& name) {
       r.Number(t_plan, "plan", "start_exposure_s", rig.plan.start_exposure_s);
   rig.plan.sun_start_exposure_s =
       r.Number(t_plan, "plan", "sun_start_exposure_s", rig.plan.sun_start_exposure_s);
+  // The checks CapturePlan::Validate runs before the first frame, here with file and line.
+  for (const auto& [key, value] :
+       {std::pair{"start_exposure_s", rig.plan.start_exposure_s},
+        std::pair{"sun_start_exposure_s", rig.plan.sun_start_exposure_s}}) {
+    if (!(value > 0)) {
+      r.Fail(t_plan->get(key), std::string("[plan] '") + key + "' must be positive seconds");
+    }
+  }
   rig.plan.aureole_exposures_s =
       r.Numbers(t_plan, "plan", "aureole_exposures_s", rig.plan.aureole_exposures_s);
   std::vector<std::string> targets = r.Strings(t_plan, "plan", "targets");

@@ -66,6 +66,12 @@ TEST(RigTest, MalformedRigsNameFileAndLine) {
   bad_step.replace(bad_step.find("1.5"), 3, "9.0");
   ExpectErrorAt(bad_step, "step_stops");
   ExpectErrorAt("[site]\nlat_deg = 1\n", "missing table [rig]");
+  // Found by tests/fuzz/rig_fuzz: a zero start exposure passed ParseRig and failed only when
+  // the capture validated its plan, naming neither file nor line.
+  ExpectErrorAt(std::string(kGood) + "sun_start_exposure_s = 0.000\n",
+                "bad.toml:17: [plan] 'sun_start_exposure_s' must be positive seconds");
+  ExpectErrorAt(std::string(kGood) + "start_exposure_s = -0.004\n",
+                "bad.toml:17: [plan] 'start_exposure_s' must be positive seconds");
 }
 
 TEST(RigTest, ShippedRigsLoad) {

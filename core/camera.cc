@@ -326,4 +326,20 @@ void from_json(const nlohmann::json& j, Pose& p) {
   p = r;
 }
 
+Pose ParsePose(std::string_view text, const std::string& name) {
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(text);
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(name + ": not valid JSON (" + e.what() + ")");
+  }
+  try {
+    return j.get<Pose>();
+  } catch (const Error& e) {
+    throw Error(name + ": " + e.what());
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(name + ": " + e.what());
+  }
+}
+
 }  // namespace rouen

@@ -4,6 +4,7 @@
 
 #include <optional>
 #include <string>
+#include <string_view>
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
@@ -57,5 +58,9 @@ void to_json(nlohmann::json& j, const Intrinsics& k);
 void from_json(const nlohmann::json& j, Intrinsics& k);
 void to_json(nlohmann::json& j, const Pose& p);
 void from_json(const nlohmann::json& j, Pose& p);
+
+// The text of a pose file: {"rotation": 3x3, "position": [x, y, z], ...} (as `rouen calib
+// pose` and `rouen calib orient` write them). Throws rouen::Error naming `name` (the file).
+Pose ParsePose(std::string_view text, const std::string& name);
 
 }  // namespace rouen

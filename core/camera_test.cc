@@ -220,5 +220,20 @@ TEST(CameraTest, BadJsonNamesTheKey) {
   EXPECT_THROW(nlohmann::json::array().get<Pose>(), Error);
 }
 
+TEST(CameraTest, ParsePoseNamesTheFile) {
+  const Pose p = ParsePose(R"({"rotation": [1, 0, 0, 0, 1, 0, 0, 0, 1], "position": [1, 2, 3],
+                               "reprojection": {"rms_px": 0.5}})",
+                           "pose.json");
+  EXPECT_EQ(p.position, Eigen::Vector3d(1, 2, 3));
+  for (const char* text : {"{", R"({"rotation": [1, 0, 0], "position": [0, 0, 0]})", "[]"}) {
+    try {
+      ParsePose(text, "pose.json");
+      ADD_FAILURE() << text;
+    } catch (const Error& e) {
+      EXPECT_EQ(std::string(e.what()).rfind("pose.json: ", 0), 0u) << e.what();
+    }
+  }
+}
+
 }  // namespace
 }  // namespace rouen

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/internal/image_input.h"
 
 namespace rouen {
 namespace {
@@ -112,6 +113,7 @@ bool IsRawFileName(const std::string& path) {
 }
 
 PhotoMetadata ReadPhotoMetadata(const std::string& path) {
+  internal::CheckImageFileHeader(path);
   auto in = OIIO::ImageInput::open(path);
   if (!in) {
     std::string msg = OIIO::geterror();
@@ -217,6 +219,7 @@ Image ReadRawLinear(const std::string& path) {
   config.attribute("raw:use_camera_wb", 1);
   config.attribute("raw:auto_bright", 0);    // no automatic brightening
   config.attribute("raw:HighlightMode", 0);  // clip
+  internal::CheckImageFileHeader(path);
   auto in = OIIO::ImageInput::open(path, &config);
   if (!in) {
     std::string msg = OIIO::geterror();
@@ -225,22 +228,35 @@ Image ReadRawLinear(const std::string& path) {
   const OIIO::ImageSpec spec = in->spec();
   const int w = spec.width, h = spec.height, nch = spec.nchannels;
   if (w <= 0 || h <= 0 || nch <= 0) throw Error(path + ": RAW image has no pixels");
-  std::vector<float> raw(static_cast<size_t>(w) * h * nch);
+  if (spec.depth > 1) throw Error(path + ": RAW image is a volume");
+  // Before any pixel memory: the header may claim far more than the file holds.
+  CheckImageSize(path, w, h, nch);
+  const int out_ch = nch >= 3 ? 3 : nch;
+  Image img;
+  img.width = w;
+  img.height = h;
+  img.channels = out_ch;
+  img.units = PixelUnits::kRadiance;
+  const size_t total = static_cast<size_t>(w) * h * out_ch;
   // Integer data come through OIIO's 0..1 normalisation: the white level maps to 1.
-  if (!in->read_image(0, 0, 0, nch, OIIO::TypeDesc::FLOAT, raw.data())) {
+  const bool ok =
+      internal::ReadRowBands(*in, OIIO::TypeDesc::FLOAT, [&](int y0, int rows, const void* data) {
+        const float* raw = static_cast<const float*>(data);
+        const size_t first = static_cast<size_t>(y0) * w, count = static_cast<size_t>(rows) * w;
+        internal::GrowTo(&img.data, (first + count) * out_ch, total);
+        for (size_t i = 0; i < count; ++i) {
+          for (int c = 0; c < out_ch; ++c) {
+            const float v = raw[i * nch + c];
+            if (!std::isfinite(v)) throw Error(path + ": RAW pixel value is not finite");
+            img.data[(first + i) * out_ch + c] = std::max(v, 0.f);
+          }
+        }
+      });
+  if (!ok) {
     std::string msg = in->geterror();
     throw Error(path + ": cannot read RAW pixels: " + (msg.empty() ? "read failed" : msg));
   }
   in->close();
-  const int out_ch = nch >= 3 ? 3 : nch;
-  Image img(w, h, out_ch, PixelUnits::kRadiance);
-  for (size_t p = 0; p < static_cast<size_t>(w) * h; ++p) {
-    for (int c = 0; c < out_ch; ++c) {
-      const float v = raw[p * nch + c];
-      if (!std::isfinite(v)) throw Error(path + ": RAW pixel value is not finite");
-      img.data[p * out_ch + c] = std::max(v, 0.f);
-    }
-  }
   return img;
 }
 

@@ -8,10 +8,12 @@
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 
 #include "core/error.h"
 #include "core/files.h"
+#include "core/internal/image_input.h"
 
 namespace rouen {
 namespace {
@@ -32,10 +34,103 @@ float Image::Sample(double x, double y, int c) const {
   return static_cast<float>((1 - ay) * top + ay * bottom);
 }
 
+void CheckImageSize(const std::string& path, int width, int height, int channels) {
+  const std::string claimed = std::to_string(width) + "x" + std::to_string(height) + ", " +
+                              std::to_string(channels) + " channels";
+  if (width <= 0 || height <= 0 || channels <= 0) {
+    throw Error(path + ": unsupported image layout (" + claimed + ")");
+  }
+  if (width > kMaxImageSide || height > kMaxImageSide ||
+      static_cast<int64_t>(width) * height > kMaxImagePixels || channels > kMaxImageChannels) {
+    throw Error(path + ": image of " + claimed + " is beyond the limit of " +
+                std::to_string(kMaxImageSide) + " pixels a side, " +
+                std::to_string(kMaxImagePixels) + " pixels and " +
+                std::to_string(kMaxImageChannels) + " channels (a corrupt header?)");
+  }
+}
+
+namespace internal {
+
+void CheckImageFileHeader(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return;  // OpenImageIO says why
+  auto read_int = [&](int32_t* v) {
+    unsigned char b[4];
+    if (!in.read(reinterpret_cast<char*>(b), 4)) return false;
+    *v = static_cast<int32_t>(b[0] | b[1] << 8 | b[2] << 16 | uint32_t{b[3]} << 24);
+    return true;
+  };
+  int32_t magic = 0, version = 0;
+  if (!read_int(&magic) || magic != 20000630 || !read_int(&version)) return;  // not OpenEXR
+  in.seekg(0, std::ios::end);
+  const int64_t size = in.tellg();
+  in.seekg(8);
+  // Headers (several when multi-part, then an empty one): attributes "name\0type\0" + int32
+  // size + value, ended by an empty name. Only what is parsed is checked; OpenEXR reports
+  // other damage itself.
+  const bool multipart = version & 0x1000;
+  auto read_name = [&](std::string* s) {
+    s->clear();
+    for (char c; in.get(c);) {
+      if (c == '\0') return true;
+      if (s->size() == 255) return false;
+      s->push_back(c);
+    }
+    return false;
+  };
+  std::string name, type;
+  while (true) {
+    int attributes = 0;
+    while (read_name(&name) && !name.empty()) {
+      int32_t claimed = 0;
+      if (!read_name(&type) || !read_int(&claimed)) return;
+      const int64_t left = size - in.tellg();
+      if (claimed < 0 || claimed > left) {
+        throw Error(path + ": OpenEXR header attribute \"" + name + "\" claims " +
+                    std::to_string(claimed) + " bytes; the file has " + std::to_string(left) +
+                    " left (a corrupt header)");
+      }
+      in.seekg(claimed, std::ios::cur);
+      ++attributes;
+    }
+    if (!in || !multipart || attributes == 0) return;
+  }
+}
+
+bool ReadRowBands(OIIO::ImageInput& in, OIIO::TypeDesc type,
+                  const std::function<void(int first_row, int rows, const void* data)>& band) {
+  const OIIO::ImageSpec& spec = in.spec();
+  const int w = spec.width, h = spec.height, nch = spec.nchannels;
+  const size_t row_samples = static_cast<size_t>(w) * nch;
+  int rows = static_cast<int>(std::clamp<size_t>(kBandSamples / row_samples, 1, h));
+  const bool tiled = spec.tile_width > 0;
+  if (tiled) {
+    // read_tiles wants whole rows of tiles (the last one may end at the image's bottom).
+    const int th = std::max(1, spec.tile_height);
+    rows = static_cast<int>(std::min<int64_t>((rows + int64_t{th} - 1) / th * th, h));
+  }
+  std::vector<unsigned char> buf;
+  for (int y = 0; y < h; y += rows) {
+    const int n = std::min(rows, h - y);
+    buf.resize(static_cast<size_t>(n) * row_samples * type.size());
+    const int y0 = spec.y + y;
+    const bool ok = tiled
+                        ? in.read_tiles(0, 0, spec.x, spec.x + w, y0, y0 + n, spec.z,
+                                        spec.z + std::max(1, spec.depth), 0, nch, type, buf.data())
+                        : in.read_scanlines(0, 0, y0, y0 + n, spec.z, 0, nch, type, buf.data());
+    if (!ok) return false;
+    band(y, n, buf.data());
+  }
+  return true;
+}
+
+}  // namespace internal
+
 Image ReadImage(const std::string& path) {
   // Colour values as stored: no premultiplication by an alpha channel (alpha is dropped).
   OIIO::ImageSpec config;
   config.attribute("oiio:UnassociatedAlpha", 1);
+  internal::CheckImageFileHeader(path);
   auto in = OIIO::ImageInput::open(path, &config);
   if (!in) {
     std::string msg = OIIO::geterror();
@@ -43,52 +138,59 @@ Image ReadImage(const std::string& path) {
   }
   const OIIO::ImageSpec spec = in->spec();
   const int w = spec.width, h = spec.height, nch = spec.nchannels;
-  if (w <= 0 || h <= 0 || nch <= 0 || spec.depth > 1) {
-    throw Error(path + ": unsupported image layout (" + std::to_string(w) + "x" +
-                std::to_string(h) + ", " + std::to_string(nch) + " channels)");
+  if (spec.depth > 1) {
+    throw Error(path + ": unsupported image layout (a volume of depth " +
+                std::to_string(spec.depth) + ")");
   }
+  // Before any pixel memory: the header may claim far more than the file holds.
+  CheckImageSize(path, w, h, nch);
   const auto base = static_cast<OIIO::TypeDesc::BASETYPE>(spec.format.basetype);
   const bool is_float = base == OIIO::TypeDesc::HALF || base == OIIO::TypeDesc::FLOAT ||
                         base == OIIO::TypeDesc::DOUBLE;
+  // Drop alpha: RGBA -> RGB, gray+alpha -> gray; other layouts are kept as stored.
+  int out_ch = nch;
+  if (nch == 4) out_ch = 3;
+  if (nch == 2 && spec.alpha_channel == 1) out_ch = 1;
+  Image img;
+  img.width = w;
+  img.height = h;
+  img.channels = out_ch;
+  img.units = is_float ? PixelUnits::kRadiance : PixelUnits::kDigital;
   // 8- and 16-bit data are read as stored and mapped exactly (16-bit: /257) onto 0..255;
   // other integer types come through OIIO's 0..1 normalisation.
-  const size_t n = static_cast<size_t>(w) * h * nch;
-  std::vector<float> raw(n);
-  bool ok;
-  if (base == OIIO::TypeDesc::UINT8) {
-    std::vector<uint8_t> buf(n);
-    ok = in->read_image(0, 0, 0, nch, OIIO::TypeDesc::UINT8, buf.data());
-    for (size_t i = 0; i < n; ++i) raw[i] = buf[i];
-  } else if (base == OIIO::TypeDesc::UINT16) {
-    std::vector<uint16_t> buf(n);
-    ok = in->read_image(0, 0, 0, nch, OIIO::TypeDesc::UINT16, buf.data());
-    for (size_t i = 0; i < n; ++i) raw[i] = static_cast<float>(buf[i] / 257.0);
-  } else {
-    ok = in->read_image(0, 0, 0, nch, OIIO::TypeDesc::FLOAT, raw.data());
-    if (!is_float) {
-      for (float& v : raw) v *= 255.f;
+  const OIIO::TypeDesc type = base == OIIO::TypeDesc::UINT8    ? OIIO::TypeDesc::UINT8
+                              : base == OIIO::TypeDesc::UINT16 ? OIIO::TypeDesc::UINT16
+                                                               : OIIO::TypeDesc::FLOAT;
+  const size_t total = static_cast<size_t>(w) * h * out_ch;
+  const bool ok = internal::ReadRowBands(*in, type, [&](int y0, int rows, const void* data) {
+    const size_t first = static_cast<size_t>(y0) * w, count = static_cast<size_t>(rows) * w;
+    internal::GrowTo(&img.data, (first + count) * out_ch, total);
+    for (size_t i = 0; i < count; ++i) {
+      for (int c = 0; c < out_ch; ++c) {
+        const size_t s = i * nch + c;
+        float v;
+        if (type == OIIO::TypeDesc::UINT8) {
+          v = static_cast<const uint8_t*>(data)[s];
+        } else if (type == OIIO::TypeDesc::UINT16) {
+          v = static_cast<float>(static_cast<const uint16_t*>(data)[s] / 257.0);
+        } else {
+          v = static_cast<const float*>(data)[s];
+          if (!is_float) v *= 255.f;
+        }
+        if (!std::isfinite(v)) {
+          const size_t p = first + i;
+          throw Error(path + ": pixel (" + std::to_string(p % w) + ", " + std::to_string(p / w) +
+                      ") is not finite");
+        }
+        img.data[(first + i) * out_ch + c] = v;
+      }
     }
-  }
+  });
   if (!ok) {
     std::string msg = in->geterror();
     throw Error(path + ": cannot read image: " + (msg.empty() ? "read failed" : msg));
   }
   in->close();
-  // Drop alpha: RGBA -> RGB, gray+alpha -> gray; other layouts are kept as stored.
-  int out_ch = nch;
-  if (nch == 4) out_ch = 3;
-  if (nch == 2 && spec.alpha_channel == 1) out_ch = 1;
-  Image img(w, h, out_ch, is_float ? PixelUnits::kRadiance : PixelUnits::kDigital);
-  for (size_t p = 0; p < static_cast<size_t>(w) * h; ++p) {
-    for (int c = 0; c < out_ch; ++c) {
-      const float v = raw[p * nch + c];
-      if (!std::isfinite(v)) {
-        throw Error(path + ": pixel (" + std::to_string(p % w) + ", " + std::to_string(p / w) +
-                    ") is not finite");
-      }
-      img.data[p * out_ch + c] = v;
-    }
-  }
   return img;
 }
 

@@ -35,8 +35,19 @@ struct Image {
 
 enum class StoredType { kUint8, kUint16, kHalf, kFloat };
 
+// The largest image a file may claim: ReadImage and ReadRawLinear check the header against
+// these before allocating any pixel memory (a 167-byte file can claim 100000 x 100000), and
+// then allocate as decoded rows arrive, so a truncated file fails before it costs memory.
+constexpr int kMaxImageSide = 65536;                   // pixels, width and height each
+constexpr int64_t kMaxImagePixels = int64_t{1} << 28;  // 268 megapixels (16384 x 16384)
+constexpr int kMaxImageChannels = 64;
+// Throws rouen::Error naming `path`, the claimed size and the limit when width x height x
+// channels is empty or beyond the limits above.
+void CheckImageSize(const std::string& path, int width, int height, int channels);
+
 // Reads any format OpenImageIO knows. 8/16-bit files come back as digital numbers on a
-// 0..255 scale (kDigital), float/half files as kRadiance. Throws rouen::Error naming the file.
+// 0..255 scale (kDigital), float/half files as kRadiance. Throws rouen::Error naming the file
+// (also for a file claiming more than kMaxImageSide / kMaxImagePixels / kMaxImageChannels).
 Image ReadImage(const std::string& path);
 // A mask image (any format ReadImage reads): width x height entries, 1 where some channel is
 // nonzero. Throws rouen::Error naming the file when it is unreadable or not width x height

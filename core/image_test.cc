@@ -1,5 +1,6 @@
 #include "core/image.h"
 
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -7,9 +8,11 @@
 #include <fstream>
 #include <string>
 
+#include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
 
 #include "core/error.h"
+#include "core/exif.h"
 #include "core/files.h"
 
 namespace fs = std::filesystem;
@@ -139,6 +142,114 @@ TEST_F(ImageTest, CorruptFilesGiveErrorsNamingTheFile) {
     } catch (const Error& e) {
       EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
     }
+  }
+}
+
+// A binary PPM header claiming width x height pixels, followed by 100 bytes of pixels.
+std::string ClaimedPpm(int64_t width, int64_t height) {
+  return "P6\n" + std::to_string(width) + " " + std::to_string(height) + "\n255\n" +
+         std::string(100, '\x80');
+}
+
+TEST_F(ImageTest, HeaderClaimingAHugeImageIsRefusedNamingFileAndLimit) {
+  // Before the limit, 100000x100000 ended in std::bad_alloc (3e10 floats) naming no file.
+  for (const auto& [w, h] : {std::pair{100000, 100000}, std::pair{20000, 20000}}) {
+    WriteFileAtomic(P("huge.ppm"), ClaimedPpm(w, h));
+    try {
+      ReadImage(P("huge.ppm"));
+      ADD_FAILURE() << w << "x" << h;
+    } catch (const Error& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(P("huge.ppm")), std::string::npos) << msg;
+      EXPECT_NE(msg.find(std::to_string(w) + "x" + std::to_string(h)), std::string::npos) << msg;
+      EXPECT_NE(msg.find(std::to_string(kMaxImageSide) + " pixels a side"), std::string::npos)
+          << msg;
+      EXPECT_NE(msg.find(std::to_string(kMaxImagePixels) + " pixels"), std::string::npos) << msg;
+    }
+  }
+  EXPECT_NO_THROW(CheckImageSize("a.dng", kMaxImageSide, kMaxImagePixels / kMaxImageSide, 3));
+  EXPECT_THROW(CheckImageSize("a.dng", kMaxImageSide + 1, 1, 3), Error);
+  EXPECT_THROW(CheckImageSize("a.dng", 1, kMaxImageSide + 1, 3), Error);
+  EXPECT_THROW(CheckImageSize("a.dng", 16, 16, kMaxImageChannels + 1), Error);
+  EXPECT_THROW(CheckImageSize("a.dng", 0, 16, 3), Error);
+}
+
+TEST_F(ImageTest, TruncatedLargeImageFailsWithoutAllocatingItsClaimedSize) {
+  // 15000x15000 is within the limits, but the file holds 100 bytes of it: memory follows the
+  // rows decoded (before, 3.4 GB were allocated and zero-filled up front for 167 bytes).
+  WriteFileAtomic(P("big.ppm"), ClaimedPpm(15000, 15000));
+  rusage before{}, after{};
+  ::getrusage(RUSAGE_SELF, &before);
+  try {
+    ReadImage(P("big.ppm"));
+    ADD_FAILURE();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find(P("big.ppm")), std::string::npos) << e.what();
+  }
+  ::getrusage(RUSAGE_SELF, &after);
+  EXPECT_LT(after.ru_maxrss - before.ru_maxrss, 256 * 1024) << "KiB of peak memory";
+}
+
+TEST_F(ImageTest, ExrAttributeClaimingMoreThanTheFileIsRefused) {
+  // Found by tests/fuzz/image_fuzz: OpenEXR 3.1 allocates and clears an attribute's claimed
+  // size before reading it (a 700-byte file cost 1.9 GB and 10 s, then "cannot read image").
+  std::string exr("\x76\x2f\x31\x01\x02\x00\x00\x00", 8);
+  exr += std::string("comments\0string\0", 16) + std::string("\x00\x00\x00\x70", 4) + "abc";
+  WriteFileAtomic(P("claims.exr"), exr);
+  WriteFileAtomic(P("claims.png"), exr);  // the content decides, not the name
+  rusage before{}, after{};
+  ::getrusage(RUSAGE_SELF, &before);
+  for (const char* name : {"claims.exr", "claims.png"}) {
+    try {
+      ReadImage(P(name));
+      ADD_FAILURE() << name;
+    } catch (const Error& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(P(name)), std::string::npos) << msg;
+      EXPECT_NE(msg.find("attribute \"comments\" claims 1879048192 bytes"), std::string::npos)
+          << msg;
+    }
+  }
+  // Valid files pass the check: a two-part EXR with a 100 kB attribute.
+  {
+    const Image img = Ramp(8, 4, 3, PixelUnits::kRadiance, 2.f);
+    OIIO::ImageSpec specs[2] = {OIIO::ImageSpec(8, 4, 3, OIIO::TypeDesc::HALF),
+                                OIIO::ImageSpec(8, 4, 3, OIIO::TypeDesc::HALF)};
+    specs[0].attribute("ImageDescription", std::string(100000, 'x'));
+    specs[1].attribute("oiio:subimagename", "second");
+    auto out = OIIO::ImageOutput::create(P("two.exr"));
+    ASSERT_TRUE(out && out->open(P("two.exr"), 2, specs));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, img.data.data()));
+    ASSERT_TRUE(out->open(P("two.exr"), specs[1], OIIO::ImageOutput::AppendSubimage));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, img.data.data()));
+    ASSERT_TRUE(out->close());
+    EXPECT_EQ(ReadImage(P("two.exr")).width, 8);
+  }
+  EXPECT_THROW(ReadPhotoMetadata(P("claims.exr")), Error);
+  EXPECT_THROW(ReadRawLinear(P("claims.exr")), Error);
+  ::getrusage(RUSAGE_SELF, &after);
+  EXPECT_LT(after.ru_maxrss - before.ru_maxrss, 256 * 1024) << "KiB of peak memory";
+}
+
+TEST_F(ImageTest, ReadsTiledAndScanlineFilesInBands) {
+  // More samples than one band (internal::kBandSamples): the bands join seamlessly.
+  const Image img = Ramp(1500, 1000, 3, PixelUnits::kRadiance, 4.f);
+  WriteImage(P("lines.exr"), img, StoredType::kFloat);
+  {
+    auto out = OIIO::ImageOutput::create(P("tiles.exr"));
+    ASSERT_TRUE(out);
+    OIIO::ImageSpec spec(img.width, img.height, 3, OIIO::TypeDesc::FLOAT);
+    spec.tile_width = spec.tile_height = 64;
+    ASSERT_TRUE(out->open(P("tiles.exr"), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, img.data.data()));
+    ASSERT_TRUE(out->close());
+  }
+  for (const char* name : {"lines.exr", "tiles.exr"}) {
+    const Image back = ReadImage(P(name));
+    EXPECT_EQ(back.width, img.width);
+    EXPECT_EQ(back.height, img.height);
+    EXPECT_EQ(back.data.capacity(), back.data.size()) << name;
+    EXPECT_TRUE(back.data == img.data) << name;
   }
 }
 

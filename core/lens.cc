@@ -100,9 +100,13 @@ void RemoveVignetting(const VignettingModel& model, Image* radiance) {
 LensFile ReadLensFile(const std::string& path) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) throw Error(path + ": no such lens file");
+  return ParseLensFile(ReadFileToString(path), path);
+}
+
+LensFile ParseLensFile(std::string_view text, const std::string& path) {
   LensFile lens;
   try {
-    const nlohmann::json j = nlohmann::json::parse(ReadFileToString(path));
+    const nlohmann::json j = nlohmann::json::parse(text);
     if (!j.is_object()) throw Error("a lens file is a JSON object");
     lens.intrinsics = j.get<Intrinsics>();
     lens.intrinsics.Validate();

@@ -6,6 +6,7 @@
 #include <array>
 #include <optional>
 #include <string>
+#include <string_view>
 
 #include <nlohmann/json_fwd.hpp>
 
@@ -54,5 +55,7 @@ struct LensFile {
 // Reads and validates a lens file; throws rouen::Error naming the file and the problem
 // (missing, not JSON, bad intrinsics, a bad "max_field_deg" or "vignetting").
 LensFile ReadLensFile(const std::string& path);
+// The same from the text of a lens file; `name` (the file) is used in messages.
+LensFile ParseLensFile(std::string_view text, const std::string& name);
 
 }  // namespace rouen

@@ -84,8 +84,9 @@ void Mesh::AddPolygon(const std::vector<Eigen::Vector3d>& points, int block) {
   }
 }
 
-Mesh ReadObj(const std::string& path) {
-  const std::string text = ReadFileToString(path);
+Mesh ReadObj(const std::string& path) { return ParseObj(ReadFileToString(path), path); }
+
+Mesh ParseObj(std::string_view text, const std::string& path) {
   Mesh mesh;
   std::map<std::string, int> block_index;
   std::string current = "default";

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
@@ -25,6 +26,8 @@ struct Mesh {
 // Throws rouen::Error with file and line for malformed input (bad indices, bad numbers,
 // faces with fewer than 3 vertices, degenerate triangles).
 Mesh ReadObj(const std::string& path);
+// The same from the text of an OBJ file; `name` (the file) is used in messages.
+Mesh ParseObj(std::string_view text, const std::string& name);
 void WriteObj(const std::string& path, const Mesh& mesh);
 
 }  // namespace rouen

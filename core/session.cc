@@ -100,21 +100,6 @@ void CheckFrameFinite(const FrameRecord& f) {
 
 std::string JournalPath(const fs::path& dir) { return (dir / "frames.jsonl").string(); }
 
-// Parses one journal line into a record; throws rouen::Error without location.
-FrameRecord ParseRecord(std::string_view line) {
-  json j;
-  try {
-    j = json::parse(line);
-  } catch (const json::exception& e) {
-    throw Error(std::string("not valid JSON: ") + e.what());
-  }
-  try {
-    return j.get<FrameRecord>();
-  } catch (const json::exception& e) {
-    throw Error(e.what());
-  }
-}
-
 int OpenJournal(const fs::path& dir) {
   const std::string p = JournalPath(dir);
   const int fd = ::open(p.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
@@ -327,6 +312,36 @@ void from_json(const json& j, SessionInfo& s) {
   s = std::move(r);
 }
 
+FrameRecord ParseJournalLine(std::string_view line) {
+  json j;
+  try {
+    j = json::parse(line);
+  } catch (const json::exception& e) {
+    throw Error(std::string("not valid JSON: ") + e.what());
+  }
+  try {
+    return j.get<FrameRecord>();
+  } catch (const json::exception& e) {
+    throw Error(e.what());
+  }
+}
+
+SessionInfo ParseSessionInfo(std::string_view text, const std::string& name) {
+  json j;
+  try {
+    j = json::parse(text);
+  } catch (const json::exception& e) {
+    throw Error(name + ": not valid JSON: " + e.what());
+  }
+  try {
+    return j.get<SessionInfo>();
+  } catch (const Error& e) {
+    throw Error(name + ": " + e.what());
+  } catch (const json::exception& e) {
+    throw Error(name + ": " + e.what());
+  }
+}
+
 // ---------------------------------------------------------------------------------------
 // Session
 
@@ -337,22 +352,7 @@ Session Session::Load(const fs::path& dir) {
   if (!fs::is_directory(dir)) {
     throw Error(dir.string() + ": not a session folder (no such directory)");
   }
-  {
-    const std::string text = ReadFileToString(info_path);
-    json j;
-    try {
-      j = json::parse(text);
-    } catch (const json::exception& e) {
-      throw Error(info_path.string() + ": not valid JSON: " + e.what());
-    }
-    try {
-      s.info_ = j.get<SessionInfo>();
-    } catch (const Error& e) {
-      throw Error(info_path.string() + ": " + e.what());
-    } catch (const json::exception& e) {
-      throw Error(info_path.string() + ": " + e.what());
-    }
-  }
+  s.info_ = ParseSessionInfo(ReadFileToString(info_path), info_path.string());
   const std::string journal = JournalPath(dir);
   const std::string text = ReadFileToString(journal);
   std::set<int64_t> ids;
@@ -368,7 +368,7 @@ Session Session::Load(const fs::path& dir) {
     const std::string where = journal + ":" + std::to_string(line_no) + ": ";
     if (line.find_first_not_of(" \t\r") == std::string_view::npos) continue;
     try {
-      FrameRecord f = ParseRecord(line);
+      FrameRecord f = ParseJournalLine(line);
       fs::path p;
       try {
         p = ResolveInside(dir, f.file);
@@ -479,7 +479,7 @@ SessionWriter SessionWriter::Resume(const fs::path& dir) {
       const size_t start = last_nl == std::string::npos ? 0 : last_nl + 1;
       bool complete = false;
       try {
-        const FrameRecord f = ParseRecord(std::string_view(text).substr(start));
+        const FrameRecord f = ParseJournalLine(std::string_view(text).substr(start));
         complete = fs::is_regular_file(ResolveInside(dir, f.file));
       } catch (const Error&) {
         complete = false;

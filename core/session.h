@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/camera.h"
@@ -70,6 +71,12 @@ void to_json(nlohmann::json& j, const FrameRecord& f);
 void from_json(const nlohmann::json& j, FrameRecord& f);
 void to_json(nlohmann::json& j, const SessionInfo& s);
 void from_json(const nlohmann::json& j, SessionInfo& s);
+
+// One line of frames.jsonl (without its newline) as a record; throws rouen::Error saying what
+// is wrong (the caller adds file and line).
+FrameRecord ParseJournalLine(std::string_view line);
+// The text of a session.json; throws rouen::Error naming `name` (the file) and the problem.
+SessionInfo ParseSessionInfo(std::string_view text, const std::string& name);
 
 // Reads a session. Validates session.json, every journal line (JSON, keys, relative paths
 // that stay inside the folder, files that exist). A last line cut short by a crash is

@@ -11,6 +11,7 @@ namespace {
 
 constexpr int64_t kNsPerSecond = 1000000000LL;
 constexpr int64_t kNsPerDay = 86400LL * kNsPerSecond;
+constexpr int kMinYear = 1678, kMaxYear = 2261;  // ParseIso8601
 
 // Days since 1970-01-01 of a proleptic Gregorian date (Hinnant's days_from_civil).
 int64_t DaysFromCivil(int64_t y, int m, int d) {
@@ -120,6 +121,12 @@ UtcTime ParseIso8601(std::string_view text) {
   Parser p(text);
   if (text.empty()) p.Fail("empty");
   const int year = p.Digits(4, "year");
+  // Nanoseconds in an int64 span 1677-09-21 .. 2262-04-11; whole years inside that (an
+  // offset moves the instant by less than a day).
+  if (year < kMinYear || year > kMaxYear) {
+    p.Fail("year " + std::to_string(year) + " is outside " + std::to_string(kMinYear) + ".." +
+           std::to_string(kMaxYear) + " (the range of rouen's nanosecond times)");
+  }
   p.Expect('-', "after the year");
   const int month = p.Digits(2, "month");
   p.Expect('-', "after the month");

@@ -19,7 +19,8 @@ struct UtcTime {
 };
 
 // Parses "YYYY-MM-DDTHH:MM:SS[.fff...](Z|+HH:MM|-HH:MM|+HHMM)" (also a space instead of T).
-// A time without an offset is refused: field times must say which zone they are in.
+// A time without an offset is refused: field times must say which zone they are in. Years
+// outside 1678..2261 (beyond the int64 nanoseconds of UtcTime) are refused.
 // Throws rouen::Error naming the string and the problem.
 UtcTime ParseIso8601(std::string_view text);
 

@@ -63,6 +63,26 @@ TEST(TimeTest, RefusesBadInput) {
             ParseIso8601("2020-03-01T12:00:00Z").ns - 86400 * kS);
 }
 
+TEST(TimeTest, RefusesYearsBeyondNanosecondTimes) {
+  // Found by tests/fuzz/list_fuzz and journal_fuzz: 9999-12-31 overflowed int64 nanoseconds
+  // (undefined behaviour; in practice a wrapped, wrong instant accepted silently).
+  for (const char* s : {"9999-12-31T23:59:59Z", "2262-04-12T00:00:00Z", "1013-03-05T10:00:00Z",
+                        "0000-01-01T00:00:00+01:00"}) {
+    try {
+      ParseIso8601(s);
+      ADD_FAILURE() << "accepted \"" << s << "\"";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("outside 1678..2261"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(s), std::string::npos) << e.what();
+    }
+  }
+  // The extreme years accepted print and parse back to the same instant.
+  for (const char* s : {"1678-01-01T00:00:00-23:59", "2261-12-31T23:59:59.999999999+00:00"}) {
+    const UtcTime t = ParseIso8601(s);
+    EXPECT_EQ(ParseIso8601(t.Iso8601(9)), t) << s;
+  }
+}
+
 TEST(TimeTest, FormatsAndRoundTrips) {
   const UtcTime t = ParseIso8601("2024-06-21T17:45:12.123456789Z");
   EXPECT_EQ(t.Iso8601(9), "2024-06-21T17:45:12.123456789Z");

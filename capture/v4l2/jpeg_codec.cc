@@ -46,13 +46,18 @@ void EmitMessage(j_common_ptr cinfo, int level) {
   }
 }
 
-// The decoding steps that may longjmp; returns false on a libjpeg error.
+// The decoding steps that may longjmp; returns false on a libjpeg error, or with `*w` x `*h`
+// set and nothing allocated when the header's size is not `width` x `height`.
 bool DecodeRaw(jpeg_decompress_struct* cinfo, ErrorManager* err, const uint8_t* data, size_t size,
-               std::vector<uint8_t>* rgb, int* w, int* h) {
+               int width, int height, std::vector<uint8_t>* rgb, int* w, int* h) {
   if (setjmp(err->jump)) return false;
   jpeg_create_decompress(cinfo);
   jpeg_mem_src(cinfo, data, static_cast<unsigned long>(size));
   jpeg_read_header(cinfo, TRUE);
+  // A damaged header can claim up to 65500 x 65500: compare before decoding allocates.
+  *w = static_cast<int>(cinfo->image_width);
+  *h = static_cast<int>(cinfo->image_height);
+  if (*w != width || *h != height) return true;
   cinfo->out_color_space = JCS_RGB;
   jpeg_start_decompress(cinfo);
   *w = static_cast<int>(cinfo->output_width);
@@ -121,7 +126,7 @@ bool DecodeJpeg(const uint8_t* data, size_t size, int width, int height, Image* 
   err.pub.emit_message = EmitMessage;
   std::vector<uint8_t> rgb;
   int w = 0, h = 0;
-  const bool ok = DecodeRaw(&cinfo, &err, data, size, &rgb, &w, &h);
+  const bool ok = DecodeRaw(&cinfo, &err, data, size, width, height, &rgb, &w, &h);
   const int damaging = err.damaging_warnings;
   jpeg_destroy_decompress(&cinfo);
   if (!ok) {

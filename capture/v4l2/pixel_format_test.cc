@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 #include <linux/videodev2.h>
+#include <sys/resource.h>
 
 #include <algorithm>
 #include <vector>
@@ -173,6 +174,30 @@ TEST(V4l2Jpeg, RoundTripWithoutHuffmanTables) {
     EXPECT_FALSE(DecodeJpeg(garbage.data(), garbage.size(), w, h, &out, &error));
     EXPECT_FALSE(error.empty());
   }
+}
+
+TEST(V4l2Jpeg, HeaderClaimingAHugeFrameIsRefusedBeforeDecoding) {
+  if (!JpegAvailable()) GTEST_SKIP() << "built without libjpeg";
+  const int w = 32, h = 16;
+  const std::vector<uint8_t> rgb(w * h * 3, 128);
+  std::vector<uint8_t> jpeg = EncodeJpeg(rgb.data(), w, h, 90, true);
+  // SOF0: FF C0, length (2), precision (1), height (2), width (2): claim 16000 x 16000.
+  size_t sof = 0;
+  while (sof + 8 < jpeg.size() && !(jpeg[sof] == 0xFF && jpeg[sof + 1] == 0xC0)) ++sof;
+  ASSERT_LT(sof + 8, jpeg.size());
+  for (size_t i : {sof + 5, sof + 7}) {
+    jpeg[i] = 16000 >> 8;
+    jpeg[i + 1] = 16000 & 0xFF;
+  }
+  rusage before{}, after{};
+  ::getrusage(RUSAGE_SELF, &before);
+  Image out;
+  std::string error;
+  EXPECT_FALSE(DecodeJpeg(jpeg.data(), jpeg.size(), w, h, &out, &error));
+  EXPECT_NE(error.find("JPEG is 16000x16000, expected 32x16"), std::string::npos) << error;
+  ::getrusage(RUSAGE_SELF, &after);
+  // Before, the frame was decoded into 768 MB before its size was compared.
+  EXPECT_LT(after.ru_maxrss - before.ru_maxrss, 64 * 1024) << "KiB of peak memory";
 }
 
 }  // namespace

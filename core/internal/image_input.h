@@ -1,0 +1,38 @@
+// Internal to rouen_core: reading the pixels of a file opened with OpenImageIO a band of rows
+// at a time (ReadImage, ReadRawLinear), so memory follows the rows actually decoded.
+#pragma once
+
+#include <OpenImageIO/imageio.h>
+
+#include <algorithm>
+#include <cstddef>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace rouen::internal {
+
+// Checks what OpenImageIO's readers would trust blindly, before the file is opened with
+// OpenImageIO: the attribute sizes of an OpenEXR header (OpenEXR 3.1 allocates and clears a
+// claimed size of up to 2 GB before reading it; a 700-byte file took 1.9 GB and 10 s). Other
+// files pass. Throws rouen::Error naming the file.
+void CheckImageFileHeader(const std::string& path);
+
+// Samples (pixels x channels) per band; a band is at least one row (or one row of tiles).
+constexpr size_t kBandSamples = size_t{1} << 22;
+
+// Reads every pixel of the open subimage (a 2D image: depth 1) as `type`, all channels
+// interleaved, and calls `band(first_row, rows, data)` for each band of whole rows, top to
+// bottom (row 0 = the top of the data window). Returns false when OpenImageIO fails
+// (in.geterror() says why); exceptions from `band` propagate.
+bool ReadRowBands(OIIO::ImageInput& in, OIIO::TypeDesc type,
+                  const std::function<void(int first_row, int rows, const void* data)>& band);
+
+// Resizes `v` to `size` entries (a band more), growing its capacity geometrically but never
+// beyond `total` (the size it ends at), so the finished image holds no slack.
+inline void GrowTo(std::vector<float>* v, size_t size, size_t total) {
+  if (size > v->capacity()) v->reserve(std::min(total, std::max(size, 2 * v->capacity())));
+  v->resize(size);
+}
+
+}  // namespace rouen::internal
