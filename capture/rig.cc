@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <sstream>
 
@@ -52,15 +53,19 @@ class RigReader {
       Fail(n, std::string("[") + section + "] '" + key + "' must be true or false");
     return *n->value<bool>();
   }
-  int Int(const toml::table* t, const char* section, const char* key, int def, int lo,
-          int hi) const {
+  int64_t Int64(const toml::table* t, const char* section, const char* key, int64_t def, int64_t lo,
+                int64_t hi) const {
     const toml::node* n = t ? t->get(key) : nullptr;
     if (!n) return def;
     std::optional<int64_t> v = n->is_integer() ? n->value<int64_t>() : std::nullopt;
     if (!v || *v < lo || *v > hi)
       Fail(n, std::string("[") + section + "] '" + key + "' must be an integer within " +
                   std::to_string(lo) + ".." + std::to_string(hi));
-    return static_cast<int>(*v);
+    return *v;
+  }
+  int Int(const toml::table* t, const char* section, const char* key, int def, int lo,
+          int hi) const {
+    return static_cast<int>(Int64(t, section, key, def, lo, hi));
   }
   std::string String(const toml::table* t, const char* section, const char* key,
                      const std::string& def, bool required = false) const {
@@ -179,7 +184,8 @@ RigConfig ParseRig(const std::string& text, const std::string& name) {
   }
   const bool field = !rig.simulated() && rig.kind != "replay";
   rig.quick = r.Bool(t_rig, "rig", "quick", false);
-  rig.seed = static_cast<uint64_t>(r.Number(t_rig, "rig", "seed", 1));
+  rig.seed = static_cast<uint64_t>(
+      r.Int64(t_rig, "rig", "seed", 1, 0, std::numeric_limits<int64_t>::max()));
 
   const toml::table* t_site = r.Table("site", rig.simulated() || field);
   rig.site.lat_deg = r.Number(t_site, "site", "lat_deg", rig.site.lat_deg);

@@ -72,6 +72,17 @@ TEST(RigTest, MalformedRigsNameFileAndLine) {
                 "bad.toml:17: [plan] 'sun_start_exposure_s' must be positive seconds");
   ExpectErrorAt(std::string(kGood) + "start_exposure_s = -0.004\n",
                 "bad.toml:17: [plan] 'start_exposure_s' must be positive seconds");
+  // Found by tests/fuzz/rig_fuzz: "seed = 1e308" (or -1) was converted to an unsigned integer
+  // out of its range, undefined behaviour.
+  for (const char* seed : {"1e308", "-1", "2.5"}) {
+    std::string bad_seed = kGood;
+    bad_seed.replace(bad_seed.find("kind = \"sim\""), 12,
+                     "kind = \"sim\"\nseed = " + std::string(seed));
+    ExpectErrorAt(bad_seed, "bad.toml:5: [rig] 'seed' must be an integer within 0..");
+  }
+  std::string big_seed = kGood;
+  big_seed.replace(big_seed.find("kind = \"sim\""), 12, "kind = \"sim\"\nseed = 9007199254740993");
+  EXPECT_EQ(ParseRig(big_seed, "big.toml").seed, 9007199254740993u);  // not rounded to a double
 }
 
 TEST(RigTest, ShippedRigsLoad) {

@@ -1,6 +1,7 @@
 #include "core/camera.h"
 
 #include <algorithm>
+#include <climits>
 #include <cmath>
 #include <string>
 
@@ -60,6 +61,13 @@ T GetKey(const nlohmann::json& j, const char* key, const char* what) {
   } else if constexpr (std::is_same_v<T, int>) {
     if (!it->is_number_integer()) {
       throw Error(std::string(what) + ": key \"" + key + "\" is not an integer");
+    }
+    // Not truncated to 32 bits: 4294967936 is no width of 640.
+    const bool in_range = it->is_number_unsigned() ? it->template get<uint64_t>() <= INT_MAX
+                                                   : it->template get<int64_t>() >= INT_MIN &&
+                                                         it->template get<int64_t>() <= INT_MAX;
+    if (!in_range) {
+      throw Error(std::string(what) + ": key \"" + key + "\" is out of range");
     }
   } else if constexpr (std::is_same_v<T, std::string>) {
     if (!it->is_string()) throw Error(std::string(what) + ": key \"" + key + "\" is not a string");

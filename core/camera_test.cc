@@ -206,6 +206,12 @@ TEST(CameraTest, BadJsonNamesTheKey) {
   j = DistortedPinhole();
   j["fy"] = 0;
   EXPECT_THROW(j.get<Intrinsics>(), Error);
+  for (nlohmann::json width : {nlohmann::json(4294967936LL), nlohmann::json(-4294967296LL),
+                               nlohmann::json(18446744073709551615ULL)}) {
+    j = DistortedPinhole();
+    j["width"] = width;  // not truncated to 640, 0 or -1
+    EXPECT_THROW(j.get<Intrinsics>(), Error) << width;
+  }
   nlohmann::json pj = Pose();
   pj.erase("position");
   try {

@@ -20,6 +20,12 @@ namespace {
 
 constexpr float kHalfMax = 65504.0f;
 
+// A little-endian int32 (OpenEXR headers).
+int32_t Le32(const char* p) {
+  const auto* b = reinterpret_cast<const unsigned char*>(p);
+  return static_cast<int32_t>(b[0] | b[1] << 8 | b[2] << 16 | uint32_t{b[3]} << 24);
+}
+
 }  // namespace
 
 float Image::Sample(double x, double y, int c) const {
@@ -55,9 +61,9 @@ void CheckImageFileHeader(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return;  // OpenImageIO says why
   auto read_int = [&](int32_t* v) {
-    unsigned char b[4];
-    if (!in.read(reinterpret_cast<char*>(b), 4)) return false;
-    *v = static_cast<int32_t>(b[0] | b[1] << 8 | b[2] << 16 | uint32_t{b[3]} << 24);
+    char b[4];
+    if (!in.read(b, 4)) return false;
+    *v = Le32(b);
     return true;
   };
   int32_t magic = 0, version = 0;
@@ -90,7 +96,25 @@ void CheckImageFileHeader(const std::string& path) {
                     std::to_string(claimed) + " bytes; the file has " + std::to_string(left) +
                     " left (a corrupt header)");
       }
-      in.seekg(claimed, std::ios::cur);
+      if (type == "chlist") {
+        // Channels: "name\0", int32 pixel type (0 uint, 1 half, 2 float), 12 more bytes.
+        // OpenImageIO 2.4 aborts the process on another pixel type.
+        std::string list(claimed, '\0');
+        if (!in.read(list.data(), claimed)) return;
+        for (size_t pos = 0; pos < list.size() && list[pos] != '\0';) {
+          const size_t end = list.find('\0', pos);
+          if (end == std::string::npos || end + 17 > list.size()) break;
+          const int32_t pixel_type = Le32(list.data() + end + 1);
+          if (pixel_type < 0 || pixel_type > 2) {
+            throw Error(path + ": OpenEXR channel \"" + list.substr(pos, end - pos) +
+                        "\" has unknown pixel type " + std::to_string(pixel_type) +
+                        " (a corrupt header)");
+          }
+          pos = end + 17;
+        }
+      } else {
+        in.seekg(claimed, std::ios::cur);
+      }
       ++attributes;
     }
     if (!in || !multipart || attributes == 0) return;

@@ -231,6 +231,27 @@ TEST_F(ImageTest, ExrAttributeClaimingMoreThanTheFileIsRefused) {
   EXPECT_LT(after.ru_maxrss - before.ru_maxrss, 256 * 1024) << "KiB of peak memory";
 }
 
+TEST_F(ImageTest, ExrChannelOfUnknownPixelTypeIsRefused) {
+  // Found by tests/fuzz/image_fuzz: OpenImageIO 2.4 aborts the process ("Unknown
+  // Imf::PixelType 3") on such a channel.
+  WriteImage(P("ok.exr"), Ramp(4, 2, 3, PixelUnits::kRadiance, 1.f), StoredType::kHalf);
+  std::string bytes = ReadFileToString(P("ok.exr"));
+  const size_t chlist = bytes.find(std::string("chlist\0", 7));
+  ASSERT_NE(chlist, std::string::npos);
+  // After "chlist\0": int32 size, then the first channel "B\0" and its int32 pixel type.
+  ASSERT_EQ(bytes.substr(chlist + 11, 2), std::string("B\0", 2));
+  bytes[chlist + 13] = 3;
+  WriteFileAtomic(P("bad.exr"), bytes);
+  try {
+    ReadImage(P("bad.exr"));
+    ADD_FAILURE();
+  } catch (const Error& e) {
+    EXPECT_EQ(std::string(e.what()),
+              P("bad.exr") + ": OpenEXR channel \"B\" has unknown pixel type 3 (a corrupt header)");
+  }
+  EXPECT_THROW(ReadPhotoMetadata(P("bad.exr")), Error);
+}
+
 TEST_F(ImageTest, ReadsTiledAndScanlineFilesInBands) {
   // More samples than one band (internal::kBandSamples): the bands join seamlessly.
   const Image img = Ramp(1500, 1000, 3, PixelUnits::kRadiance, 4.f);

@@ -1,7 +1,9 @@
 #include "core/lens.h"
 
 #include <algorithm>
+#include <climits>
 #include <cmath>
+#include <cstdint>
 #include <filesystem>
 #include <string>
 
@@ -61,10 +63,19 @@ void from_json(const nlohmann::json& j, VignettingModel& v) {
   if (!j.is_object()) throw Error("vignetting: expected an object");
   if (j.contains("model") && j["model"] != "radial-even-6")
     throw Error("vignetting: unknown model (expected \"radial-even-6\")");
+  // Sizes are integers that fit an int (a float or a huge number is not converted).
+  auto size = [&](const char* key) {
+    const nlohmann::json& n = j.at(key);
+    if (!n.is_number_integer() || (n.is_number_unsigned() && n.get<uint64_t>() > INT_MAX) ||
+        (!n.is_number_unsigned() && (n.get<int64_t>() < INT_MIN || n.get<int64_t>() > INT_MAX))) {
+      throw Error(std::string("vignetting: \"") + key + "\" must be an integer number of pixels");
+    }
+    return n.get<int>();
+  };
   VignettingModel r;
   try {
-    r.width = j.at("width").get<int>();
-    r.height = j.at("height").get<int>();
+    r.width = size("width");
+    r.height = size("height");
     r.cx = j.at("cx").get<double>();
     r.cy = j.at("cy").get<double>();
     const auto& a = j.at("a");

@@ -136,6 +136,20 @@ TEST(LensTest, BadLensFilesNameTheFileAndTheProblem) {
   j["vignetting"] = v;
   const std::string vig = write("vig.json", j.dump());
   EXPECT_EQ(ErrorOf(vig).rfind(vig + ": vignetting: the fall-off drops", 0), 0u) << ErrorOf(vig);
+  // Found by tests/fuzz/lens_pose_fuzz: a vignetting width of 1e36 was converted to int
+  // (undefined behaviour); 640.5 became 640, and an intrinsics width of 4294967936 became 640.
+  for (const char* width : {"1e36", "640.5", "4294967936"}) {
+    nlohmann::json w = Intrinsics::PinholeFov(64, 48, 60);
+    w["vignetting"] = Model();
+    w["vignetting"]["width"] = nlohmann::json::parse(width);
+    const std::string file = write("width.json", w.dump());
+    EXPECT_EQ(ErrorOf(file), file + ": vignetting: \"width\" must be an integer number of pixels");
+  }
+  nlohmann::json wide = Intrinsics::PinholeFov(64, 48, 60);
+  wide["width"] = 4294967936LL;
+  const std::string wide_file = write("wide.json", wide.dump());
+  EXPECT_NE(ErrorOf(wide_file).find("key \"width\" is out of range"), std::string::npos)
+      << ErrorOf(wide_file);
   const std::string array = write("array.json", "[1, 2]");
   EXPECT_EQ(ErrorOf(array), array + ": a lens file is a JSON object");
   fs::remove_all(dir);

@@ -7,9 +7,11 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <climits>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <set>
 
 #include "core/error.h"
@@ -39,12 +41,28 @@ double NeedNumber(const json& j, const char* key, const char* what) {
   return v.get<double>();
 }
 
-int64_t NeedInt(const json& j, const char* key, const char* what) {
+// An integer within [lo, hi] (by default any int64; unsigned values above it are refused,
+// not wrapped).
+int64_t NeedInt(const json& j, const char* key, const char* what,
+                int64_t lo = std::numeric_limits<int64_t>::min(),
+                int64_t hi = std::numeric_limits<int64_t>::max()) {
   const json& v = Need(j, key, what);
   if (!v.is_number_integer()) {
     throw Error(std::string(what) + ": key \"" + key + "\" is not an integer");
   }
+  const bool in_range = v.is_number_unsigned()
+                            ? v.get<uint64_t>() <= static_cast<uint64_t>(hi) && hi >= 0
+                            : v.get<int64_t>() >= lo && v.get<int64_t>() <= hi;
+  if (!in_range) {
+    throw Error(std::string(what) + ": key \"" + key + "\" is " + v.dump() + ", outside " +
+                std::to_string(lo) + ".." + std::to_string(hi));
+  }
   return v.get<int64_t>();
+}
+
+// An integer that fits an int (not truncated: slot 4294967296 is no slot 0).
+int NeedInt32(const json& j, const char* key, const char* what) {
+  return static_cast<int>(NeedInt(j, key, what, INT_MIN, INT_MAX));
 }
 
 std::string NeedString(const json& j, const char* key, const char* what) {
@@ -216,10 +234,11 @@ void from_json(const json& j, FrameRecord& f) {
   r.id = NeedInt(j, "id", what);
   r.device = NeedString(j, "device", what);
   r.target = ParseTarget(NeedString(j, "target", what));
-  r.group = Optional<std::string>(
-      j, "group", "", [&](const json& x, const char* k) { return NeedString(x, k, what); });
-  r.slot = static_cast<int>(Optional<int64_t>(
-      j, "slot", 0, [&](const json& x, const char* k) { return NeedInt(x, k, what); }));
+  r.group = Optional<std::string>(j, "group", "", [&](const json& x, const char* k) {
+    return NeedString(x, k, what);
+  });
+  r.slot = Optional<int>(j, "slot", 0,
+                         [&](const json& x, const char* k) { return NeedInt32(x, k, what); });
   r.utc = NeedTime(j, "utc", what);
   r.hdr = Optional<bool>(j, "hdr", false,
                          [&](const json& x, const char* k) { return NeedBool(x, k, what); });
@@ -236,8 +255,8 @@ void from_json(const json& j, FrameRecord& f) {
     g.lat_deg = NeedNumber(gps, "lat_deg", gw);
     g.lon_deg = NeedNumber(gps, "lon_deg", gw);
     g.height_m = NeedNumber(gps, "height_m", gw);
-    g.mode = static_cast<int>(NeedInt(gps, "mode", gw));
-    g.satellites = static_cast<int>(NeedInt(gps, "satellites", gw));
+    g.mode = NeedInt32(gps, "mode", gw);
+    g.satellites = NeedInt32(gps, "satellites", gw);
     g.hdop = NeedNumber(gps, "hdop", gw);
     if (gps.contains("received_utc")) g.received_utc = NeedTime(gps, "received_utc", gw);
     r.gps = g;
@@ -283,7 +302,7 @@ void to_json(json& j, const SessionInfo& s) {
 void from_json(const json& j, SessionInfo& s) {
   const char* what = "session info";
   SessionInfo r;
-  r.format_version = static_cast<int>(NeedInt(j, "format_version", what));
+  r.format_version = NeedInt32(j, "format_version", what);
   if (r.format_version < 1 || r.format_version > kFormatVersion) {
     throw Error("session info: format_version " + std::to_string(r.format_version) +
                 " is not supported (this build reads " + std::to_string(kFormatVersion) + ")");

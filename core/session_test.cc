@@ -469,5 +469,48 @@ TEST_F(SessionTest, OneWriterPerSession) {
   ExpectWholeFrames(Session::Load(dir_), 6, 4);
 }
 
+
+TEST_F(SessionTest, IntegersOutOfRangeAreRefusedNotTruncated) {
+  FrameRecord f = Meta(Target::kSky, false, 0.01);
+  f.gps = GpsFix{};
+  f.gps->mode = 3;
+  f.file = "frames/000001.png";
+  const json good = f;
+  EXPECT_EQ(ParseJournalLine(good.dump()).slot, 1);
+  auto error_of = [](const std::string& line) -> std::string {
+    try {
+      ParseJournalLine(line);
+    } catch (const Error& e) {
+      return e.what();
+    }
+    return "accepted";
+  };
+  // Before, slot 4294967297 read as slot 1, gps mode 4294967299 as mode 3, and id
+  // 18446744073709551615 as -1.
+  json j = good;
+  j["slot"] = 4294967297LL;
+  EXPECT_NE(error_of(j.dump()).find("\"slot\" is 4294967297, outside"), std::string::npos)
+      << error_of(j.dump());
+  j = good;
+  j["gps"]["mode"] = 4294967299LL;
+  EXPECT_NE(error_of(j.dump()).find("\"mode\" is 4294967299"), std::string::npos);
+  j = good;
+  j["gps"]["satellites"] = -4294967296LL;
+  EXPECT_NE(error_of(j.dump()).find("\"satellites\""), std::string::npos);
+  j = good;
+  j["id"] = 18446744073709551615ULL;
+  EXPECT_NE(error_of(j.dump()).find("\"id\" is 18446744073709551615"), std::string::npos);
+  json info = Info();
+  info["format_version"] = 4294967297LL;
+  try {
+    ParseSessionInfo(info.dump(), "s/session.json");
+    ADD_FAILURE();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("s/session.json: session info: key \"format_version\""),
+              std::string::npos)
+        << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace rouen
