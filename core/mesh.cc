@@ -11,6 +11,7 @@
 
 #include "core/error.h"
 #include "core/files.h"
+#include "core/text.h"
 
 namespace rouen {
 namespace {
@@ -85,7 +86,8 @@ void Mesh::AddPolygon(const std::vector<Eigen::Vector3d>& points, int block) {
 }
 
 Mesh ReadObj(const std::string& path) {
-  const std::string text = ReadFileToString(path);
+  const std::string all = ReadFileToString(path);
+  const std::string_view text = WithoutUtf8Bom(all);
   Mesh mesh;
   std::map<std::string, int> block_index;
   std::string current = "default";
@@ -172,6 +174,10 @@ Mesh ReadObj(const std::string& path) {
       }
     }
     // vt, vn, usemtl, mtllib, s, l, p and unknown statements are ignored.
+  }
+  if (mesh.triangles.empty()) {
+    throw Error(path + ": no faces (" + std::to_string(mesh.vertices.size()) +
+                " vertices, no 'f' lines): the file is empty, only comments, or not a model");
   }
   return mesh;
 }
