@@ -47,7 +47,8 @@ std::vector<uint8_t> ReadMask(const std::string& path, int width, int height,
 // and round the values (0..255 scale for kUint8; for kUint16 values on the same 0..255 scale
 // are stored x257 as 0..65535, so ReadImage gives them back). The file is written under a
 // temporary name, fsynced and renamed, so a crash never leaves a partial file. Non-finite
-// values, and values beyond 65504 for kHalf, are refused with rouen::Error.
+// values, values beyond 65504 for kHalf, and kHalf/kFloat to a format that cannot store
+// them (IsFloatImageFormat in core/outputs.h: PNG, JPEG, ...) are refused with rouen::Error.
 void WriteImage(const std::string& path, const Image& image, StoredType type);
 
 }  // namespace rouen
