@@ -1,12 +1,23 @@
 // Running the `rouen` binary from the integration tests.
 #pragma once
 
+#include <fcntl.h>
+#include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
+#include <regex>
 #include <string>
+#include <vector>
+
+#include "core/error.h"
+#include "core/files.h"
+
+extern char** environ;
 
 namespace rouen::cli_test {
 
@@ -46,6 +57,40 @@ inline std::filesystem::path TempDir(const std::string& name) {
   fs::remove_all(p);
   fs::create_directories(p);
   return p;
+}
+
+// Starts `args` (args[0] the program) with stdout and stderr appended to `log` and stdin
+// from /dev/null; returns its pid.
+inline pid_t Spawn(const std::vector<std::string>& args, const std::filesystem::path& log) {
+  std::vector<char*> argv;
+  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t fa;
+  posix_spawn_file_actions_init(&fa);
+  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+  posix_spawn_file_actions_adddup2(&fa, 1, 2);
+  posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
+  pid_t pid = -1;
+  int rc = posix_spawn(&pid, argv[0], &fa, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&fa);
+  if (rc != 0) throw Error(std::string("cannot start ") + argv[0] + ": " + std::strerror(rc));
+  return pid;
+}
+
+// Waits for `pid`: its exit code, or minus the signal that ended it.
+inline int Wait(pid_t pid) {
+  int status = 0;
+  while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  }
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -WTERMSIG(status);
+}
+
+// The shipped simulated rig cut down to one time of day, so one capture takes a few seconds.
+inline std::string OneSlotRig() {
+  std::string text = ReadFileToString(std::filesystem::path(ROUEN_SOURCE_DIR) / "rigs/sim.toml");
+  text = std::regex_replace(text, std::regex("\ntimes = \\[[^\\]]*\\]"), "\ntimes = [\"16:00\"]");
+  text = std::regex_replace(text, std::regex("\nheldout = [^\n]*"), "");
+  return text;
 }
 
 }  // namespace rouen::cli_test

@@ -24,8 +24,7 @@
 #include "core/error.h"
 #include "core/files.h"
 #include "core/session.h"
-
-extern char** environ;
+#include "tests/cli_util.h"
 
 namespace rouen {
 namespace {
@@ -35,36 +34,9 @@ namespace fs = std::filesystem;
 constexpr int kShards = 5;
 constexpr int kRunsPerShard = 10;
 
-// The shipped simulated rig cut down to one time of day, so one run takes a few seconds.
-std::string OneSlotRig() {
-  std::string text = ReadFileToString(fs::path(ROUEN_SOURCE_DIR) / "rigs/sim.toml");
-  text = std::regex_replace(text, std::regex("\ntimes = \\[[^\\]]*\\]"), "\ntimes = [\"16:00\"]");
-  text = std::regex_replace(text, std::regex("\nheldout = [^\n]*"), "");
-  return text;
-}
-
-pid_t Spawn(const std::vector<std::string>& args, const fs::path& log) {
-  std::vector<char*> argv;
-  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-  argv.push_back(nullptr);
-  posix_spawn_file_actions_t fa;
-  posix_spawn_file_actions_init(&fa);
-  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-  posix_spawn_file_actions_adddup2(&fa, 1, 2);
-  posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
-  pid_t pid = -1;
-  int rc = posix_spawn(&pid, argv[0], &fa, nullptr, argv.data(), environ);
-  posix_spawn_file_actions_destroy(&fa);
-  if (rc != 0) throw Error(std::string("cannot start ") + argv[0] + ": " + std::strerror(rc));
-  return pid;
-}
-
-int Wait(pid_t pid) {
-  int status = 0;
-  while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-  }
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -WTERMSIG(status);
-}
+using cli_test::OneSlotRig;
+using cli_test::Spawn;
+using cli_test::Wait;
 
 size_t JournalLines(const fs::path& session) {
   std::ifstream in(session / "frames.jsonl");
