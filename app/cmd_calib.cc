@@ -2,31 +2,33 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <sstream>
 
 #include <nlohmann/json.hpp>
 
 #include "app/commands.h"
+#include "app/options.h"
 #include "calib/hdr.h"
 #include "calib/response.h"
 #include "core/camera.h"
 #include "core/error.h"
 #include "core/files.h"
 #include "core/image.h"
+#include "core/limits.h"
 #include "core/list_file.h"
+#include "core/outputs.h"
 #include "core/response_curve.h"
+#include "core/text.h"
 
 namespace rouen {
 
 void ForEachListLine(const std::string& list,
                      const std::function<void(const std::vector<std::string>& words,
                                               const std::string& where)>& line) {
-  std::ifstream in(list);
-  if (!in) throw Error(list + ": cannot open the list file");
-  std::ostringstream text;
-  text << in.rdbuf();
-  const std::vector<ListLine> lines = ParseListText(text.str(), list);
+  std::error_code ec;
+  if (std::filesystem::is_directory(list, ec)) throw Error(list + ": is a folder, not a list file");
+  if (!std::filesystem::is_regular_file(list, ec)) throw Error(list + ": cannot open the list file");
+  const std::vector<ListLine> lines = ParseListText(ReadFileToString(list), list);
   if (lines.empty()) throw Error(list + ": no images listed");
   for (const ListLine& l : lines) line(l.words, l.where);
 }
@@ -62,7 +64,7 @@ std::vector<ListedExposure> ReadExposureList(const std::string& list) {
     } catch (const std::exception&) {
       throw Error(where + ": exposure '" + words[1] + "' is not a number of seconds");
     }
-    if (!(s > 0) || !std::isfinite(s)) throw Error(where + ": exposure must be positive seconds");
+    Require(ExposureProblem(s), where);
     std::filesystem::path p(words[0]);
     if (p.is_relative()) p = base / p;
     out.push_back({p.string(), s});
@@ -98,7 +100,6 @@ struct HdrArgs {
 };
 
 void RunResponse(const ResponseArgs& a) {
-  std::vector<Bracket> brackets{LoadBracket(ReadExposureList(a.list))};
   ResponseOptions opts;
   if (a.samples > 0) opts.samples_per_bracket = a.samples;
   if (a.lambda > 0) opts.lambda = a.lambda;
@@ -111,9 +112,13 @@ void RunResponse(const ResponseArgs& a) {
   } else {
     throw Error("--method '" + a.method + "': expected debevec, robertson or mitsunaga");
   }
+  OutputSet outputs;
+  const std::string out = outputs.Add("--out", a.out, OutputKind::kFile);
+  std::vector<Bracket> brackets{LoadBracket(ReadExposureList(a.list))};
   ResponseSummary summary;
   ResponseCurve curve = RecoverResponse(brackets, opts, &summary);
-  WriteResponseCurve(a.out, curve);
+  WriteResponseCurve(out, curve);
+  outputs.Commit();
   std::printf(
       "%s: %s response curve from %zu images, %d samples, fit residual %.4f (ln units; "
       "method's own residual %.4g), %.2f s\n",
@@ -122,13 +127,16 @@ void RunResponse(const ResponseArgs& a) {
 }
 
 void RunHdr(const HdrArgs& a) {
+  OutputSet outputs;
+  const std::string out = outputs.Add("--out", a.out, OutputKind::kRadiance);
   ResponseCurve curve = ReadResponseCurve(a.response);
   Bracket b = LoadBracket(ReadExposureList(a.list));
   std::vector<const Image*> frames;
   for (const Image& im : b.frames) frames.push_back(&im);
   MergeSummary summary;
   Image hdr = MergeHdr(frames, b.exposures, curve, MergeOptions{}, &summary);
-  WriteImage(a.out, hdr, StoredType::kFloat);
+  WriteImage(out, hdr, StoredType::kFloat);
+  outputs.Commit();
   std::printf("%s: %dx%d radiance from %zu exposures; %lld pixels saturated in every frame\n",
               a.out.c_str(), hdr.width, hdr.height, frames.size(),
               static_cast<long long>(summary.saturated_pixels));
@@ -143,7 +151,7 @@ void AddHdrCommand(CLI::App& parent, const std::string& example_prefix) {
   c->add_option("--list", a->list, "Exposure list file ('image seconds' per line)")->required();
   c->add_option("--response", a->response, "Response curve JSON (rouen calib response)")
       ->required();
-  c->add_option("--out", a->out, "Radiance EXR to write")->required();
+  c->add_option("--out", a->out, "Radiance to write (.exr, or .hdr, .pfm, .tif)")->required();
   c->callback([a] { RunHdr(*a); });
 }
 
@@ -161,8 +169,9 @@ void RegisterCalib(CLI::App& app) {
       "Example: rouen calib response --list memorial/exposures.txt --out response.json");
   c->add_option("--list", r->list, "Exposure list file")->required();
   c->add_option("--out", r->out, "Response curve JSON to write")->required();
-  c->add_option("--samples", r->samples, "Pixel samples (default: automatic)");
-  c->add_option("--lambda", r->lambda, "Smoothness weight (default: automatic)");
+  c->add_option("--samples", r->samples, "Pixel samples per bracket (default: automatic)")
+      ->check(CLI::Range(1, 1000000));
+  c->add_option("--lambda", r->lambda, "Smoothness weight (default: automatic)")->check(Positive());
   c->add_option("--method", r->method,
                 "debevec (Debevec-Malik 1997, sparse least squares), robertson (Robertson et "
                 "al. 2003, iterative) or mitsunaga (Mitsunaga-Nayar 1999, polynomial)")

@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/commands.h"
+#include "app/options.h"
 #include "calib/envmap.h"
 #include "calib/sky_orientation.h"
 #include "core/camera.h"
@@ -18,6 +19,8 @@
 #include "core/files.h"
 #include "core/image.h"
 #include "core/lens.h"
+#include "core/limits.h"
+#include "core/outputs.h"
 #include "core/solar.h"
 #include "core/time.h"
 
@@ -69,6 +72,15 @@ void RunEnvmap(const EnvmapArgs& a) {
     double max_field_deg;
     std::string name;
   };
+  const std::string mask_path = a.mask.empty() ? Beside(a.out, ".mask.png") : a.mask;
+  const std::string cov_path = a.coverage.empty() ? Beside(a.out, ".coverage.exr") : a.coverage;
+  const std::string sum_path = a.summary.empty() ? Beside(a.out, ".json") : a.summary;
+  // The four outputs are checked now and written together at the end.
+  OutputSet outputs;
+  const std::string out_tmp = outputs.Add("--out", a.out, OutputKind::kRadiance);
+  const std::string cov_tmp = outputs.Add("--coverage", cov_path, OutputKind::kRadiance);
+  const std::string mask_tmp = outputs.Add("--mask", mask_path, OutputKind::kImage);
+  const std::string sum_tmp = outputs.Add("--summary", sum_path, OutputKind::kFile);
   std::vector<Loaded> loaded;
   const fs::path base = fs::path(a.list).parent_path();
   auto resolve = [&](const std::string& w) {
@@ -116,19 +128,17 @@ void RunEnvmap(const EnvmapArgs& a) {
   } catch (const Error& e) {
     throw Error(a.list + ": " + e.what());
   }
-  const std::string mask_path = a.mask.empty() ? Beside(a.out, ".mask.png") : a.mask;
-  const std::string cov_path = a.coverage.empty() ? Beside(a.out, ".coverage.exr") : a.coverage;
-  const std::string sum_path = a.summary.empty() ? Beside(a.out, ".json") : a.summary;
   Image mask(r.coverage.width, r.coverage.height, 1, PixelUnits::kDigital, 0.f);
   for (size_t i = 0; i < mask.data.size(); ++i) mask.data[i] = r.coverage.data[i] > 0 ? 255.f : 0.f;
-  WriteImage(a.out, r.radiance, StoredType::kFloat);
-  WriteImage(cov_path, r.coverage, StoredType::kFloat);
-  WriteImage(mask_path, mask, StoredType::kUint8);
+  WriteImage(out_tmp, r.radiance, StoredType::kFloat);
+  WriteImage(cov_tmp, r.coverage, StoredType::kFloat);
+  WriteImage(mask_tmp, mask, StoredType::kUint8);
   nlohmann::json j = EnvmapSummaryJson(r, photos);
   j["radiance"] = a.out;
   j["coverage"] = cov_path;
   j["mask"] = mask_path;
-  WriteFileAtomic(sum_path, j.dump(2) + "\n");
+  WriteFileAtomic(sum_tmp, j.dump(2) + "\n");
+  outputs.Commit();
   std::printf("%s: %dx%d lat-long radiance from %zu photos; %.1f%% of the sphere seen "
               "(%.1f%% of the sky), %.2f s (%.1f output Mpx/s)\n",
               a.out.c_str(), r.radiance.width, r.radiance.height, photos.size(),
@@ -151,11 +161,11 @@ void RunOrient(const OrientArgs& a) {
                 "roll about the sun axis free)");
   }
   const std::vector<double> s = ParseNumbers(a.site, 3, "--site");
-  if (std::abs(s[0]) > 90 || std::abs(s[1]) > 180) {
-    throw Error("--site '" + a.site + "': latitude must be within +-90, longitude +-180");
-  }
   const Site site{s[0], s[1], s[2]};
+  CheckSite(site, "--site '" + a.site + "'");
   const UtcTime t = ParseIso8601(a.time);
+  OutputSet outputs;
+  const std::string out = outputs.Add("--out", a.out, OutputKind::kFile);
   const SunPosition sun = ComputeSunPosition(t, site);
   if (sun.elevation_deg < -1) {
     throw Error("calib orient: the sun is " + std::to_string(sun.elevation_deg) +
@@ -206,7 +216,8 @@ void RunOrient(const OrientArgs& a) {
       {"level_residual_deg", o.level_residual_deg},
       {"rotation_sigma_deg", o.rotation_sigma_deg},
       {"mirror_solution", o.had_mirror_solution}};
-  WriteFileAtomic(a.out, j.dump(2) + "\n");
+  WriteFileAtomic(out, j.dump(2) + "\n");
+  outputs.Commit();
   double az, el;
   AzElFromEnu(o.pose.rotation.col(2), &az, &el);
   std::printf("%s: sun at pixel (%.2f, %.2f) (radius %.2f px, expected %.2f); camera looks at "
@@ -240,13 +251,17 @@ void RegisterCalibEnvmap(CLI::App* calib) {
       "ENV.mask.png (255 seen, 0 never seen; radiance 0 there) and ENV.json (summary).\n"
       "Example: rouen calib envmap --list env/photos.txt --width 1024 --out env.exr");
   c->add_option("--list", e->list, "Photo list file")->required();
-  c->add_option("--out", e->out, "Radiance EXR to write")->required();
-  c->add_option("--width", e->width, "Map width in pixels (even; height = width/2)")
+  c->add_option("--out", e->out, "Radiance to write (.exr, or .hdr, .pfm, .tif)")->required();
+  // The ranges of EnvmapOptions::Validate, told before the photos are read.
+  c->add_option("--width", e->width, "Map width in pixels (even, 8..65536; height = width/2)")
+      ->check(CLI::Range(8, 65536))
       ->capture_default_str();
   c->add_option("--supersample", e->supersample, "Sub-samples per pixel and axis (1..8)")
+      ->check(CLI::Range(1, 8))
       ->capture_default_str();
   c->add_option("--feather", e->feather,
                 "Fraction of each photo's half-size over which its weight falls to its edge")
+      ->check(Within(0, 1))
       ->capture_default_str();
   c->add_option("--mask", e->mask, "Mask PNG (default: OUT with .mask.png)");
   c->add_option("--coverage", e->coverage, "Coverage count EXR (default: OUT with .coverage.exr)");
@@ -273,8 +288,10 @@ void RegisterCalibEnvmap(CLI::App* calib) {
   r->add_option("--horizon", o->horizon, "u,v of a horizon pixel (repeatable)");
   r->add_flag("--level", o->level, "Assume the camera is level (image rows horizontal)");
   r->add_option("--landmark-sigma", o->landmark_sigma, "Landmark uncertainty, deg")
+      ->check(Within(1e-6, 90, "deg"))
       ->capture_default_str();
   r->add_option("--horizon-sigma", o->horizon_sigma, "Horizon point uncertainty, deg")
+      ->check(Within(1e-6, 90, "deg"))
       ->capture_default_str();
   r->add_option("--position", o->position, "Camera position x,y,z in ENU metres (default 0)");
   r->add_option("--out", o->out, "Pose JSON to write")->required();

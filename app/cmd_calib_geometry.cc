@@ -10,11 +10,13 @@
 #include <nlohmann/json.hpp>
 
 #include "app/commands.h"
+#include "app/options.h"
 #include "calib/intrinsics.h"
 #include "calib/pose.h"
 #include "core/error.h"
 #include "core/files.h"
 #include "core/lens.h"
+#include "core/outputs.h"
 
 namespace rouen {
 namespace {
@@ -73,8 +75,11 @@ void RunIntrinsics(const IntrinsicsArgs& a) {
   }
   opt.board = BoardSpec::Parse(a.board);
   opt.min_views = a.min_views;
+  OutputSet outputs;
+  const std::string out = outputs.Add("--out", a.out, OutputKind::kFile);
   const IntrinsicsSummary s = CalibrateIntrinsicsFromFiles(ImagePaths(a.images), opt);
-  WriteLensFile(a.out, s);
+  WriteLensFile(out, s);
+  outputs.Commit();
   const Intrinsics& k = s.intrinsics;
   std::printf("%s: %s %dx%d, fx %.2f fy %.2f cx %.2f cy %.2f, k1 %.5f k2 %.5f k3 %.5f",
               a.out.c_str(), a.model.c_str(), k.width, k.height, k.fx, k.fy, k.cx, k.cy, k.k1,
@@ -92,6 +97,8 @@ void RunIntrinsics(const IntrinsicsArgs& a) {
 }
 
 void RunPose(const PoseArgs& a) {
+  OutputSet outputs;
+  const std::string out = outputs.Add("--out", a.out, OutputKind::kFile);
   const Intrinsics k = ReadLensFile(a.lens).intrinsics;
   const LandmarkFile lm = ReadLandmarks(a.points);
   PoseOptions opt;
@@ -102,7 +109,8 @@ void RunPose(const PoseArgs& a) {
   } catch (const Error& e) {
     throw Error(a.points + ": " + e.what());
   }
-  WriteFileAtomic(a.out, PoseJson(s).dump(2) + "\n");
+  WriteFileAtomic(out, PoseJson(s).dump(2) + "\n");
+  outputs.Commit();
   const Eigen::Vector3d& c = s.pose.position;
   std::printf("%s: camera at (%.3f, %.3f, %.3f) m; reprojection RMS %.3f px, max %.3f px, "
               "%d of %zu landmarks inliers, %.1f ms\n",
@@ -138,7 +146,8 @@ void RegisterCalibGeometry(CLI::App* calib) {
                                       "charuco:COLSxROWS:SQUARE_M:MARKER_M:DICT")
       ->required();
   c->add_option("--model", ia->model, "pinhole or fisheye")->capture_default_str();
-  c->add_option("--min-views", ia->min_views, "Images in which the board must be found")
+  c->add_option("--min-views", ia->min_views, "Images in which the board must be found (>= 2)")
+      ->check(CLI::Range(2, 10000))
       ->capture_default_str();
   c->add_option("--out", ia->out, "Lens JSON to write")->required();
   c->callback([ia] { RunIntrinsics(*ia); });
@@ -159,6 +168,7 @@ void RegisterCalibGeometry(CLI::App* calib) {
       ->required();
   p->add_option("--out", pa->out, "Pose JSON to write")->required();
   p->add_option("--threshold", pa->threshold_px, "Inlier threshold, pixels")
+      ->check(Positive())
       ->capture_default_str();
   p->callback([pa] { RunPose(*pa); });
 }

@@ -11,12 +11,14 @@
 #include <nlohmann/json.hpp>
 
 #include "app/commands.h"
+#include "app/options.h"
 #include "calib/nd.h"
 #include "calib/vignetting.h"
 #include "core/camera.h"
 #include "core/error.h"
 #include "core/files.h"
 #include "core/image.h"
+#include "core/outputs.h"
 #include "core/response_curve.h"
 #include "core/session.h"
 
@@ -97,6 +99,8 @@ void UpdateSessionExtra(const std::string& dir, const std::string& key, const st
 void RunNd(const NdArgs& a) {
   if (a.out.empty() && a.session.empty())
     throw Error("give --out ND.json and/or --session DIR to store the result");
+  OutputSet outputs;
+  const std::string out = a.out.empty() ? "" : outputs.Add("--out", a.out, OutputKind::kFile);
   const LoadedList with = LoadList(a.with, "--with");
   const LoadedList without = LoadList(a.without, "--without");
   NdOptions opts;
@@ -134,11 +138,12 @@ void RunNd(const NdArgs& a) {
   json j = cal;
   j["with"] = a.with;
   j["without"] = a.without;
-  if (!a.out.empty()) WriteFileAtomic(a.out, j.dump(2) + "\n");
+  if (!a.out.empty()) WriteFileAtomic(out, j.dump(2) + "\n");
   if (!a.session.empty())
     UpdateSessionExtra(a.session, "nd_filters", a.filter,
                        json::array({cal.channel[0].density, cal.channel[1].density,
                                     cal.channel[2].density}));
+  outputs.Commit();
   std::printf(
       "%s: ND density R %.4f G %.4f B %.4f (95%% +-%.4f %.4f %.4f; transmission %.3g %.3g "
       "%.3g) from %lld pixels\n",
@@ -156,6 +161,8 @@ void RunVignetting(const VignettingArgs& a) {
     throw Error("give --out V.json, --lens LENS.json and/or --session DIR to store the result");
   if (!a.session.empty() && a.camera.empty())
     throw Error("--session needs --camera (the frames' device, device/target, or *)");
+  OutputSet outputs;
+  const std::string out = a.out.empty() ? "" : outputs.Add("--out", a.out, OutputKind::kFile);
   std::vector<std::string> paths;
   if (!a.flat.empty())
     for (const ListedExposure& e : ReadExposureList(a.flat)) paths.push_back(e.path);
@@ -206,8 +213,9 @@ void RunVignetting(const VignettingArgs& a) {
     lens["vignetting"] = m;
     WriteFileAtomic(a.lens, lens.dump(2) + "\n");
   }
-  if (!a.out.empty()) WriteFileAtomic(a.out, json(m).dump(2) + "\n");
+  if (!a.out.empty()) WriteFileAtomic(out, json(m).dump(2) + "\n");
   if (!a.session.empty()) UpdateSessionExtra(a.session, "vignetting", a.camera, json(m));
+  outputs.Commit();
   std::printf(
       "vignetting from %d flat frame%s (%d bins): V = 1 %+.4f r^2 %+.4f r^4 %+.4f r^6 about "
       "(%.1f, %.1f) px; corner fall-off %.3f; residual %.4f rms (relative)\n",
@@ -241,7 +249,8 @@ void RegisterCalibPhotometric(CLI::App* calib) {
   c->add_option("--session", n->session, "Session folder whose nd_filters to update");
   c->add_option("--filter", n->filter, "Filter name in the session (default: sun)");
   c->add_option("--min-level", n->min_level,
-                "Ignore pixels below this fraction of the image median (default 0.05)");
+                "Ignore pixels below this fraction of the image median (default 0.05)")
+      ->check(Within(0, 0.999));
   c->callback([n] { RunNd(*n); });
 
   auto v = std::make_shared<VignettingArgs>();
@@ -266,7 +275,8 @@ void RegisterCalibPhotometric(CLI::App* calib) {
   d->add_option("--lens", v->lens, "Lens JSON to add the model to (rewritten atomically)");
   d->add_option("--session", v->session, "Session folder to store the model in");
   d->add_option("--camera", v->camera, "With --session: device id, device/target or *");
-  d->add_option("--bin", v->bin, "Bin size in pixels (default 8)");
+  d->add_option("--bin", v->bin, "Bin size in pixels, 1..256 (default 8)")
+      ->check(CLI::Range(1, 256));
   d->add_flag("--no-gradient", v->no_gradient, "Do not fit an illumination gradient");
   d->add_flag("--fit-centre", v->fit_centre, "Fit the optical centre (needs --no-gradient)");
   d->callback([v] { RunVignetting(*v); });

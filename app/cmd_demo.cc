@@ -16,6 +16,7 @@
 #include "capture/sim/sim_devices.h"
 #include "core/error.h"
 #include "core/files.h"
+#include "core/temporaries.h"
 #include "render/metrics.h"
 #include "render/render.h"
 #include "render/tonemap.h"
@@ -67,6 +68,7 @@ void PrepareOut(const std::filesystem::path& out) {
     for (const char* sub : {"session", "work"}) fs::remove_all(out / sub);
   }
   fs::create_directories(out);
+  WatchForTemporaries(out);  // its images and reports: removed on Ctrl-C
   WriteFileAtomic(out / ".rouen-demo", "This folder was written by `rouen demo`.\n");
 }
 

@@ -19,7 +19,8 @@
 //   slot, each --list group=NAME (default: one unnamed group) and target is one bracket
 //   "slot<k>/<target>/view<v>", views numbered in order of first capture.
 // - Output: written into OUT.tmp-<pid> (a sibling) and renamed to OUT at the end; on any
-//   error the temporary folder is deleted, so no half-written session is left behind.
+//   error, Ctrl-C or SIGTERM the temporary folder is deleted, so no half-written session is
+//   left behind.
 #include <unistd.h>
 
 #include <algorithm>
@@ -44,8 +45,10 @@
 #include "core/exif.h"
 #include "core/files.h"
 #include "core/image.h"
+#include "core/limits.h"
 #include "core/session.h"
 #include "core/solar.h"
+#include "core/temporaries.h"
 #include "core/time.h"
 
 namespace fs = std::filesystem;
@@ -135,10 +138,7 @@ Site ParseSite(const std::string& text) {
   s.lat_deg = ParseNumber(parts[0], where, "latitude");
   s.lon_deg = ParseNumber(parts[1], where, "longitude");
   s.height_m = ParseNumber(parts[2], where, "height");
-  if (std::abs(s.lat_deg) > 90) throw Error(where + ": latitude must be within [-90, 90]");
-  if (std::abs(s.lon_deg) > 180) throw Error(where + ": longitude must be within [-180, 180]");
-  if (s.height_m < -500 || s.height_m > 10000)
-    throw Error(where + ": height must be metres above the ellipsoid (-500 .. 10000)");
+  CheckSite(s, where);
   return s;
 }
 
@@ -152,7 +152,7 @@ std::vector<ListEntry> ReadImportList(const std::string& list) {
     e.name = words[0];
     if (words[1] != "-") {
       const double s = ParseNumber(words[1], where, "exposure");
-      if (!(s > 0)) throw Error(where + ": exposure must be positive seconds");
+      Require(ExposureProblem(s), where);
       e.seconds = s;
     }
     for (size_t i = 2; i < words.size(); ++i) {
@@ -271,6 +271,7 @@ std::vector<Photo> PlanImport(const ImportArgs& a, const Target default_target,
       p.exposure_s = *le->seconds;
     } else if (p.meta.exposure_s) {
       p.exposure_s = *p.meta.exposure_s;
+      Require(ExposureProblem(p.exposure_s), name + ": EXIF ExposureTime");
     } else if (p.kind != Kind::kHdr) {
       throw Error(name + ": no exposure time in EXIF and not in --list");
     }
@@ -475,6 +476,7 @@ void RunImport(const ImportArgs& a) {
     }
   }
   fs::remove_all(tmp, ec);
+  WatchForTemporaries(tmp.parent_path().empty() ? fs::path(".") : tmp.parent_path());
   int slots = 0, groups = 0, hdr = 0;
   try {
     SessionWriter writer = SessionWriter::Create(tmp, info);
@@ -556,8 +558,8 @@ void RegisterImport(CLI::App& app) {
       "EXR/HDR are HDR frames as they are; DNG/RAW are read linear (libraw) and stored as\n"
       "HDR radiance divided by exposure x ISO/100.\n"
       "POSES: {\"IMG_1.jpg\": {\"intrinsics\": {...}, \"pose\": {...}}, ...} (core/camera.h).\n"
-      "The session is written to OUT.tmp-<pid> and renamed at the end; on error nothing is "
-      "left.\n"
+      "The session is written to OUT.tmp-<pid> and renamed at the end; on error or Ctrl-C "
+      "nothing is left.\n"
       "Example: rouen import --photos stlouis_arch --site 38.6247,-90.1848,147 --out s1\n"
       "         rouen import --photos memorial --list memorial/exposures.txt \\\n"
       "           --time 1997-03-01T12:00:00-08:00 --site 37.4275,-122.1697,30 --out s2");

@@ -9,11 +9,13 @@
 #include <nlohmann/json.hpp>
 
 #include "app/commands.h"
+#include "app/options.h"
 #include "app/pipeline.h"
 #include "core/error.h"
 #include "core/files.h"
 #include "core/image.h"
 #include "core/lens.h"
+#include "core/outputs.h"
 #include "core/solar.h"
 #include "core/time.h"
 #include "render/render.h"
@@ -25,7 +27,8 @@ namespace {
 
 struct RenderArgs {
   std::string session, work, out, png;
-  int slot = -1;
+  int slot = 0;
+  bool have_slot = false;
   std::string time;
   std::string view;
   std::string lens, pose;
@@ -38,28 +41,44 @@ struct RenderArgs {
 
 void Run(const RenderArgs& a) {
   namespace fs = std::filesystem;
-  if ((a.slot >= 0) == !a.time.empty())
+  // Arguments first (CLI11 has checked each option's range and the options that exclude
+  // each other), then the outputs and the working folder, then the inputs: every mistake is
+  // told before minutes of solving.
+  if (a.have_slot == !a.time.empty())
     throw Error("give exactly one of --slot (a captured time of day) or --time (any other)");
   if (!a.lens.empty() != !a.pose.empty()) throw Error("--lens and --pose go together");
   if (!a.view.empty() && !a.lens.empty()) throw Error("give --view or --lens/--pose, not both");
-  if (a.slot >= 0 && (a.pbs > 0 || !a.overcast_colour.empty() || a.overcast_brightness != 1))
-    throw Error("--pbs and --overcast-colour apply to a predicted time (--time)");
-  if (!(a.pbs >= 0 && a.pbs <= 1)) throw Error("--pbs must be within 0..1");
   if (!a.overcast_colour.empty() && a.overcast_colour.size() != 3)
     throw Error("--overcast-colour takes three numbers R,G,B");
+  UtcTime when;
+  if (!a.time.empty()) {
+    try {
+      when = ParseIso8601(a.time);
+    } catch (const Error& e) {
+      throw Error(std::string("--time: ") + e.what());
+    }
+  }
+  OutputSet outputs;
+  const std::string out = outputs.Add("--out", a.out, OutputKind::kRadiance);
+  const std::string png = a.png.empty() ? "" : outputs.Add("--png", a.png, OutputKind::kImage);
+  fs::path session_dir = fs::path(a.session).lexically_normal();
+  if (!session_dir.has_filename()) session_dir = session_dir.parent_path();  // "s/" -> "s"
+  const fs::path work =
+      a.work.empty() ? fs::path(session_dir.string() + ".work") : fs::path(a.work);
+  CheckWritableFolder(a.work.empty() ? "the working folder" : "--work", work.string());
   auto say = [](const std::string& s) { std::fprintf(stderr, "render: %s\n", s.c_str()); };
 
   Session session = Session::Load(a.session);
-  // A bad time fails now, before minutes of solving.
-  UtcTime when;
+  const Site site = SessionSite(session);
   if (!a.time.empty()) {
-    when = ParseIso8601(a.time);
-    const SunPosition sun = ComputeSunPosition(when, SessionSite(session));
+    const SunPosition sun = ComputeSunPosition(when, site);
     if (!(sun.elevation_deg > 0))
       throw Error("--time " + a.time + ": the sun is below the horizon there (elevation " +
                   std::to_string(sun.elevation_deg) + " deg); rouen renders daylight only");
   }
-  // A camera from files is read before the long solve, so a bad file fails at once.
+  // The model and a camera from files are read before the long solve, so a bad file fails at
+  // once (SolveSession reads the model again).
+  ReadSessionModel(session);
   Intrinsics intrinsics;
   Pose pose;
   if (!a.lens.empty()) {
@@ -67,9 +86,7 @@ void Run(const RenderArgs& a) {
     pose = ReadPose(a.pose);
   }
   PipelineOptions po;
-  fs::path session_dir = fs::path(a.session).lexically_normal();
-  if (!session_dir.has_filename()) session_dir = session_dir.parent_path();  // "s/" -> "s"
-  po.work_dir = a.work.empty() ? fs::path(session_dir.string() + ".work") : fs::path(a.work);
+  po.work_dir = work;
   po.quick = a.quick;
   po.log = say;
   CalibResult calib = CalibrateSession(session, po);
@@ -95,7 +112,7 @@ void Run(const RenderArgs& a) {
 
   Lighting lighting;
   SlotIrradiance irr;
-  if (a.slot >= 0) {
+  if (a.have_slot) {
     if (a.slot >= static_cast<int>(solved.slots.size()))
       throw Error(a.session + ": slot " + std::to_string(a.slot) + " does not exist (the session has " +
                   std::to_string(solved.slots.size()) + ")");
@@ -114,21 +131,24 @@ void Run(const RenderArgs& a) {
     LightingPredictor predictor(std::move(measured), ro);
     say(predictor.environment().summary.BriefReport());
     RelightSummary rs;
-    lighting = predictor.At(when, SessionSite(session), &rs);
+    lighting = predictor.At(when, site, &rs);
     say(rs.Describe());
     irr = IrradianceFor(solved, lighting);
   }
   say("rendering " + std::to_string(intrinsics.width) + "x" + std::to_string(intrinsics.height));
   Image image = RenderView(solved.mesh, solved.grid, *solved.caster, solved.albedo, lighting, irr,
                            intrinsics, pose, RenderOptions{});
-  WriteImage(a.out, image, StoredType::kFloat);
-  std::printf("%s: radiance %dx%d\n", a.out.c_str(), image.width, image.height);
+  WriteImage(out, image, StoredType::kFloat);
+  double exposure = 0;
   if (!a.png.empty()) {
-    double exposure = a.exposure > 0 ? a.exposure : AutoExposure(image, calib.response);
-    WriteImage(a.png, ToDigital(image, calib.response, exposure), StoredType::kUint8);
+    exposure = a.exposure > 0 ? a.exposure : AutoExposure(image, calib.response);
+    WriteImage(png, ToDigital(image, calib.response, exposure), StoredType::kUint8);
+  }
+  outputs.Commit();
+  std::printf("%s: radiance %dx%d\n", a.out.c_str(), image.width, image.height);
+  if (!a.png.empty())
     std::printf("%s: through the recovered response, exposure factor %.4g\n", a.png.c_str(),
                 exposure);
-  }
 }
 
 }  // namespace
@@ -151,23 +171,38 @@ void RegisterRender(CLI::App& app) {
       "--png sunset.png");
   c->add_option("--session", a->session, "Session folder")->required();
   c->add_option("--work", a->work, "Working folder (default: SESSION.work)");
-  c->add_option("--slot", a->slot, "Render under the lighting of this captured slot");
+  CLI::Option* slot = c->add_option("--slot", a->slot,
+                                    "Render under the lighting of this captured slot (0, 1, ...)")
+                          ->check(Within(0, INFINITY));
   c->add_option("--time", a->time, "Render at this time (ISO 8601 with offset, e.g. 2026-08-25T19:40:00-07:00)");
   c->add_option("--view", a->view, "Camera of this bracket (e.g. slot0/architecture/view1; default: the first)");
   c->add_option("--lens", a->lens, "Camera intrinsics JSON (with --pose)");
   c->add_option("--pose", a->pose, "Camera pose JSON (with --lens)");
+  // The predicted sky's options have no meaning for a captured slot's lighting.
   c->add_option("--pbs", a->pbs, "Blocked sunlight fraction 0..1 (0 clear, 1 overcast)")
+      ->check(Within(0, 1))
+      ->excludes(slot)
       ->capture_default_str();
   c->add_option("--overcast-colour", a->overcast_colour, "Overcast sky colour R,G,B (relative)")
-      ->delimiter(',');
+      ->delimiter(',')
+      ->check(Positive())
+      ->excludes(slot);
   c->add_option("--overcast-brightness", a->overcast_brightness,
                 "Overcast sky's horizontal irradiance as a multiple of the clear sky's")
+      ->check(Positive())
+      ->excludes(slot)
       ->capture_default_str();
-  c->add_option("--out", a->out, "Radiance EXR to write")->required();
-  c->add_option("--png", a->png, "Also write an 8-bit PNG through the recovered response");
-  c->add_option("--exposure", a->exposure, "Exposure factor for --png (default: automatic)");
+  c->add_option("--out", a->out, "Radiance to write (.exr, or .hdr, .pfm, .tif)")->required();
+  CLI::Option* png =
+      c->add_option("--png", a->png, "Also write an 8-bit PNG through the recovered response");
+  c->add_option("--exposure", a->exposure, "Exposure factor for --png (default: automatic)")
+      ->check(Positive())
+      ->needs(png);
   c->add_flag("--quick", a->quick, "Fewer samples (faster, rougher)");
-  c->callback([a] { Run(*a); });
+  c->callback([a, slot] {
+    a->have_slot = slot->count() > 0;
+    Run(*a);
+  });
 }
 
 }  // namespace rouen

@@ -11,10 +11,12 @@
 #include <nlohmann/json.hpp>
 
 #include "app/commands.h"
+#include "app/options.h"
 #include "core/camera.h"
 #include "core/error.h"
 #include "core/files.h"
 #include "core/image.h"
+#include "core/outputs.h"
 #include "core/solar.h"
 #include "solve/sky_cie.h"
 #include "solve/sky_fit.h"
@@ -74,6 +76,10 @@ void RunFit(const SkyFitArgs& a) {
   } else {
     throw Error("sky fit: --weighting '" + a.weighting + "' is not one of paper, relative");
   }
+  OutputSet outputs;
+  const std::string out = outputs.Add("--out", a.out, OutputKind::kFile);
+  const std::string residuals =
+      a.residuals.empty() ? "" : outputs.Add("--residuals", a.residuals, OutputKind::kRadiance);
   Image img = ReadImage(a.image);
   if (img.units != PixelUnits::kRadiance) {
     throw Error(a.image + ": not a floating-point radiance image (use EXR or HDR, not 8/16-bit)");
@@ -183,10 +189,11 @@ void RunFit(const SkyFitArgs& a) {
   j["rel_error_median"] = Percentile(pooled, 0.5);
   j["rel_error_p90"] = Percentile(pooled, 0.9);
   if (!a.residuals.empty()) {
-    WriteImage(a.residuals, res, StoredType::kFloat);
+    WriteImage(residuals, res, StoredType::kFloat);
     j["residual_map"] = a.residuals;
   }
-  WriteFileAtomic(a.out, j.dump(2) + "\n");
+  WriteFileAtomic(out, j.dump(2) + "\n");
+  outputs.Commit();
   std::printf("sky fit (%s): %d samples, %zu fitted pixels (mask: %s)\n",
               SkyModelKindName(summary.model), summary.samples, rel[0].size(),
               mask_source.c_str());
@@ -208,6 +215,8 @@ void RunRender(const SkyRenderArgs& a) {
   if (a.width < 8 || a.width > 16384 || a.width % 2 != 0)
     throw Error("sky render: --width must be even and in [8, 16384], got " +
                 std::to_string(a.width));
+  OutputSet outputs;
+  const std::string out = outputs.Add("--out", a.out, OutputKind::kRadiance);
   nlohmann::json j;
   try {
     j = nlohmann::json::parse(ReadFileToString(a.fit));
@@ -237,7 +246,8 @@ void RunRender(const SkyRenderArgs& a) {
       }
     }
   }
-  WriteImage(a.out, img, StoredType::kFloat);
+  WriteImage(out, img, StoredType::kFloat);
+  outputs.Commit();
   std::printf("wrote %s (%dx%d)\n", a.out.c_str(), w, h);
 }
 
@@ -269,15 +279,19 @@ void RegisterSky(CLI::App& app) {
   c->add_option("--sun-elevation", f->sun_elevation, "Sun elevation, degrees (>= -5)")
       ->required();
   c->add_option("--azimuth-offset", f->azimuth_offset,
-                "Azimuth of the image's left edge, degrees (rotates the panorama)");
+                "Azimuth of the image's left edge, degrees (rotates the panorama)")
+      ->check(Within(-360, 360, "deg"));
   c->add_option("--mask", f->mask, "Sky mask PNG of the image's size, nonzero = sky");
   c->add_flag("--no-segment", f->no_segment, "Without --mask: use every pixel, no segmentation");
   c->add_option("--model", f->model, "7 (eq. 9), perez5 (h = 1) or cie (best CIE standard sky)");
   c->add_option("--weighting", f->weighting,
                 "paper (eq. 10, sigma = y / log y) or relative (sigma = y)");
-  c->add_option("--min-elevation", f->min_elevation, "Skip pixels below this elevation, deg");
-  c->add_option("--sun-exclusion", f->sun_exclusion, "Skip pixels this close to the sun, deg");
-  c->add_option("--max-samples", f->max_samples, "Pixels fitted, spread over solid angle");
+  c->add_option("--min-elevation", f->min_elevation, "Skip pixels below this elevation, deg")
+      ->check(Within(-90, 90, "deg"));
+  c->add_option("--sun-exclusion", f->sun_exclusion, "Skip pixels this close to the sun, deg")
+      ->check(Within(0, 180, "deg"));
+  c->add_option("--max-samples", f->max_samples, "Pixels fitted, spread over solid angle")
+      ->check(CLI::Range(1, 100000000));
   c->add_option("--residuals", f->residuals,
                 "Write the residual map (model - y) / y per channel here (EXR; 0 = not fitted)");
   c->add_option("--out", f->out, "FIT.json to write")->required();
@@ -288,9 +302,12 @@ void RegisterSky(CLI::App& app) {
   rc->footer("Example: rouen sky render fit.json --out sky.exr --width 1024\n"
              "Below the horizon each column shows its horizon value.");
   rc->add_option("fit", r->fit, "FIT.json from `rouen sky fit`")->required();
-  rc->add_option("--out", r->out, "Radiance EXR to write")->required();
-  rc->add_option("--width", r->width, "Panorama width in pixels (height = width / 2)");
-  rc->add_option("--azimuth-offset", r->azimuth_offset, "Azimuth of the left edge, degrees");
+  rc->add_option("--out", r->out, "Radiance to write (.exr, or .hdr, .pfm, .tif)")->required();
+  rc->add_option("--width", r->width,
+                 "Panorama width in pixels, even, 8..16384 (height = width / 2)")
+      ->check(CLI::Range(8, 16384));
+  rc->add_option("--azimuth-offset", r->azimuth_offset, "Azimuth of the left edge, degrees")
+      ->check(Within(-360, 360, "deg"));
   rc->callback([r] { RunRender(*r); });
 }
 

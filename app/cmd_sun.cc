@@ -1,13 +1,15 @@
 // rouen sun: solar position for a place and time, or for a CSV batch.
 #include <cstdio>
-#include <fstream>
 #include <sstream>
 
 #include <nlohmann/json.hpp>
 
 #include "app/commands.h"
+#include "app/options.h"
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/solar.h"
+#include "core/text.h"
 
 namespace rouen {
 namespace {
@@ -26,12 +28,10 @@ std::string Trim(const std::string& s) {
 }
 
 void RunBatch(const SunArgs& a) {
-  std::ifstream in(a.batch);
-  if (!in) throw Error(a.batch + ": cannot open");
-  std::string line;
+  const std::vector<std::string> lines = ReadTextLines(a.batch, "the CSV file");
   int lineno = 0;
   std::printf("utc,lat,lon,elev_m,azimuth_deg,elevation_deg,elevation_true_deg\n");
-  while (std::getline(in, line)) {
+  for (const std::string& line : lines) {
     ++lineno;
     std::string t = Trim(line);
     if (t.empty() || t[0] == '#') continue;
@@ -55,8 +55,7 @@ void RunBatch(const SunArgs& a) {
     } catch (const std::exception&) {
       throw Error(a.batch + ":" + std::to_string(lineno) + ": lat, lon and elev_m must be numbers");
     }
-    if (std::abs(site.lat_deg) > 90 || std::abs(site.lon_deg) > 180)
-      throw Error(a.batch + ":" + std::to_string(lineno) + ": latitude/longitude out of range");
+    CheckSite(site, a.batch + ":" + std::to_string(lineno));
     UtcTime t0;
     try {
       t0 = ParseIso8601(cols[0]);
@@ -73,8 +72,6 @@ void Run(const SunArgs& a) {
   if (!a.batch.empty()) return RunBatch(a);
   if (a.time.empty() || !a.have_lat || !a.have_lon)
     throw Error("sun: give --lat, --lon and --time (or --batch FILE.csv)");
-  if (std::abs(a.lat) > 90 || std::abs(a.lon) > 180)
-    throw Error("sun: latitude/longitude out of range");
   UtcTime t = ParseIso8601(a.time);
   Site site{a.lat, a.lon, a.height};
   SunPosition p = ComputeSunPosition(t, site, {a.pressure, a.temperature});
@@ -114,15 +111,22 @@ void RegisterSun(CLI::App& app) {
       "  rouen sun --lat 37.8722 --lon -122.2578 --height 60 --time 2026-08-25T13:30:00-07:00\n"
       "  rouen sun --batch fixes.csv      (columns utc,lat,lon,elev_m; prints CSV with\n"
       "                                    azimuth_deg,elevation_deg,elevation_true_deg)");
-  CLI::Option* lat = c->add_option("--lat", a->lat, "Latitude, degrees north");
-  CLI::Option* lon = c->add_option("--lon", a->lon, "Longitude, degrees east (west is negative)");
-  c->add_option("--height", a->height, "Height above the WGS84 ellipsoid, metres");
+  CLI::Option* lat =
+      c->add_option("--lat", a->lat, "Latitude, degrees north")->check(Obeys(LatitudeProblem));
+  CLI::Option* lon = c->add_option("--lon", a->lon, "Longitude, degrees east (west is negative)")
+                         ->check(Obeys(LongitudeProblem));
+  c->add_option("--height", a->height, "Height above the WGS84 ellipsoid, metres (-500..9000)")
+      ->check(Obeys(HeightProblem));
   c->add_option("--time", a->time, "ISO 8601 time with a zone, e.g. 2026-08-25T13:30:00Z");
   c->add_option("--batch", a->batch, "CSV file with columns utc,lat,lon,elev_m");
   c->add_flag("--json", a->json, "Print JSON");
+  // From no air (0: no refraction) past the highest sea-level pressure (1084 mbar); from
+  // below the coldest to above the hottest air measured (-89 C, 57 C).
   c->add_option("--pressure", a->pressure, "Air pressure for refraction, mbar")
+      ->check(Within(0, 1100, "mbar"))
       ->capture_default_str();
   c->add_option("--temperature", a->temperature, "Air temperature for refraction, Celsius")
+      ->check(Within(-100, 70, "C"))
       ->capture_default_str();
   c->callback([a, lat, lon] {
     a->have_lat = lat->count() > 0;

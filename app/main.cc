@@ -1,9 +1,11 @@
 // rouen: capture and relight architecture (Yu & Malik 1998).
 #include <cstdio>
 #include <exception>
+#include <filesystem>
 
 #include "app/commands.h"
 #include "core/error.h"
+#include "core/temporaries.h"
 
 int main(int argc, char** argv) {
   CLI::App app{
@@ -21,11 +23,17 @@ int main(int argc, char** argv) {
   rouen::RegisterImport(app);
   rouen::RegisterSky(app);
   rouen::RegisterRender(app);
+  // Ctrl-C or SIGTERM removes the temporaries of the files being written.
+  rouen::RemoveTemporariesOnSignal();
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   } catch (const rouen::Error& e) {
+    std::fprintf(stderr, "rouen: error: %s\n", e.what());
+    return 1;
+  } catch (const std::filesystem::filesystem_error& e) {
+    // A disk problem (read-only, full, a file where a folder belongs): the message names it.
     std::fprintf(stderr, "rouen: error: %s\n", e.what());
     return 1;
   } catch (const std::exception& e) {

@@ -10,6 +10,8 @@
 #include "calib/vignetting.h"
 #include "core/error.h"
 #include "core/files.h"
+#include "core/limits.h"
+#include "core/temporaries.h"
 #include "solve/sky_segment.h"
 
 namespace rouen {
@@ -23,6 +25,29 @@ void Log(const PipelineOptions& o, const std::string& s) {
 std::string MergeKey(const FrameRecord& f) {
   if (f.target == Target::kAureole) return "slot" + std::to_string(f.slot) + "/sky/view0";
   return f.group;
+}
+
+// "<session>/frames.jsonl: frame <id> (<file>, bracket <group>)", for messages.
+std::string FrameWhere(const Session& session, const FrameRecord& f) {
+  return (session.dir() / "frames.jsonl").string() + ": frame " + std::to_string(f.id) + " (" +
+         f.file + ", bracket " + f.group + ")";
+}
+
+std::string SizeOf(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
+
+// A frame's pixels, checked against the size its intrinsics give and, when `first` is given,
+// against the first frame of its bracket (`first_frame`).
+Image LoadCheckedFrame(const Session& session, const FrameRecord& f, const Image* first = nullptr,
+                       const FrameRecord* first_frame = nullptr) {
+  Image im = session.LoadFrame(f);
+  if (f.intrinsics && (im.width != f.intrinsics->width || im.height != f.intrinsics->height))
+    throw Error(FrameWhere(session, f) + ": the image is " + SizeOf(im.width, im.height) +
+                " but its intrinsics are " + SizeOf(f.intrinsics->width, f.intrinsics->height));
+  if (first && (im.width != first->width || im.height != first->height))
+    throw Error(FrameWhere(session, f) + ": the image is " + SizeOf(im.width, im.height) +
+                " but frame " + std::to_string(first_frame->id) + " of the bracket is " +
+                SizeOf(first->width, first->height));
+  return im;
 }
 
 double EffectiveExposure(const FrameRecord& f) {
@@ -213,11 +238,34 @@ Site SessionSite(const Session& session) {
       ++n;
     }
   }
-  if (n == 0) return session.info().site;
-  return Site{lat / n, lon / n, h / n};
+  if (n == 0) {
+    CheckSite(session.info().site, (session.dir() / "session.json").string() + ": site");
+    return session.info().site;
+  }
+  const Site mean{lat / n, lon / n, h / n};
+  CheckSite(mean, (session.dir() / "frames.jsonl").string() + ": the mean of " + std::to_string(n) +
+                      " GPS fixes");
+  return mean;
+}
+
+void CheckSessionFrames(const Session& session) {
+  for (const FrameRecord& f : session.frames()) {
+    // HDR frames are radiance already; their exposure is provenance, unused.
+    if (!f.hdr) Require(ExposureProblem(f.exposure_s), FrameWhere(session, f));
+    Require(NdDensityProblem(f.nd_density), FrameWhere(session, f));
+    if (!(f.gain > 0) || !std::isfinite(f.gain))
+      throw Error(FrameWhere(session, f) + ": gain " + FormatNumber(f.gain) + " is not positive");
+  }
+}
+
+Mesh ReadSessionModel(const Session& session) {
+  if (session.info().model.empty())
+    throw Error(session.dir().string() + "/session.json: no building model ('model') given");
+  return ReadObj(ResolveInside(session.dir(), session.info().model).string());
 }
 
 CalibResult CalibrateSession(const Session& session, const PipelineOptions& options) {
+  CheckSessionFrames(session);
   CalibResult out;
   const std::string where = session.dir().string();
   std::map<std::string, std::vector<const FrameRecord*>> groups;
@@ -262,8 +310,10 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
     for (size_t i = 0; i < names.size() && brackets.size() < max_brackets;
          i += std::max<size_t>(1, names.size() / max_brackets)) {
       Bracket br;
-      for (const FrameRecord* f : groups[names[i]]) {
-        br.frames.push_back(session.LoadFrame(*f));
+      const std::vector<const FrameRecord*>& frames = groups[names[i]];
+      for (const FrameRecord* f : frames) {
+        br.frames.push_back(
+            LoadCheckedFrame(session, *f, br.frames.empty() ? nullptr : &br.frames[0], frames[0]));
         br.exposures.push_back(EffectiveExposure(*f));
       }
       brackets.push_back(std::move(br));
@@ -278,6 +328,8 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
     Log(options, "all frames are HDR: no response curve needed");
   }
   std::filesystem::create_directories(options.work_dir / "calib" / "hdr");
+  WatchForTemporaries(options.work_dir / "calib");
+  WatchForTemporaries(options.work_dir / "calib" / "hdr");
   if (out.response.valid())
     WriteResponseCurve((options.work_dir / "calib" / "response.json").string(), out.response);
 
@@ -290,7 +342,7 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
     const VignettingModel* vmodel = nullptr;
     for (size_t k = 0; k < frames.size(); ++k) {
       const FrameRecord* f = frames[k];
-      images.push_back(session.LoadFrame(*f));
+      images.push_back(LoadCheckedFrame(session, *f, k ? &images[0] : nullptr, frames[0]));
       exposures.push_back(f->exposure_s * f->gain);
       transmission.push_back(NdTransmissionRgb(f->nd_density, nd_filters));
       times.push_back(f->utc);
@@ -341,9 +393,7 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
 SolveResult SolveSession(const Session& session, const CalibResult& calib,
                          const PipelineOptions& options) {
   SolveResult r;
-  if (session.info().model.empty())
-    throw Error(session.dir().string() + "/session.json: no building model ('model') given");
-  r.mesh = ReadObj(ResolveInside(session.dir(), session.info().model).string());
+  r.mesh = ReadSessionModel(session);
   r.caster = std::make_unique<RayCaster>(r.mesh);
   const Site site = SessionSite(session);
 

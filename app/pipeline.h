@@ -54,8 +54,19 @@ struct CalibResult {
 
 // Response curve from the session's LDR brackets, then every bracket merged to radiance
 // (sky and aureole brackets of a slot merge together). Writes calib/response.json and
-// calib/hdr/<group>.exr.
+// calib/hdr/<group>.exr. First checks every frame record (CheckSessionFrames); a frame whose
+// image is not the size of its intrinsics is an error naming it.
 CalibResult CalibrateSession(const Session& session, const PipelineOptions& options);
+
+// Checks the journal's values the pipeline computes with: the exposure of LDR frames and the
+// ND density (core/limits.h), the gain. Throws rouen::Error naming frames.jsonl, the frame's
+// id, file and bracket.
+void CheckSessionFrames(const Session& session);
+
+// The session's building model (session.json "model", inside the session folder). Throws
+// rouen::Error naming session.json when there is none, or the model file when it is
+// malformed or has no faces.
+Mesh ReadSessionModel(const Session& session);
 
 struct SlotSolve {
   int slot = 0;
@@ -105,6 +116,8 @@ std::vector<SkySample> SlotSkySamples(const Session& session, const CalibResult&
                                       std::string* sources = nullptr);
 
 // Site of a session: the GPS fixes' mean when there are any, else session.json's site.
+// Throws rouen::Error naming frames.jsonl or session.json when it is outside core/limits.h's
+// ranges.
 Site SessionSite(const Session& session);
 
 }  // namespace rouen

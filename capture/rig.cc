@@ -10,9 +10,16 @@
 
 #include "core/error.h"
 #include "core/files.h"
+#include "core/limits.h"
 
 namespace rouen {
 namespace {
+
+// Bounds of the plan's lists: a rig asking for more is a typo or a runaway generator, and
+// would capture for hours before anyone noticed.
+constexpr size_t kMaxAureoleExposures = 32;  // as a bracket's max_frames
+constexpr size_t kMaxSlots = 48;             // one every half hour of a day
+constexpr size_t kMaxTargets = 6;            // every target once
 
 class RigReader {
  public:
@@ -77,27 +84,49 @@ class RigReader {
     if (!n->is_string()) Fail(n, std::string("[") + section + "] '" + key + "' must be a string");
     return *n->value<std::string>();
   }
-  std::vector<double> Numbers(const toml::table* t, const char* section, const char* key,
-                              std::vector<double> def) const {
+  // A number whose range is one of core/limits.h's rules: `problem` says what is wrong.
+  double Checked(const toml::table* t, const char* section, const char* key, double def,
+                 std::string (*problem)(double)) const {
+    const double v = Number(t, section, key, def);
+    const std::string p = problem(v);
+    if (!p.empty())
+      Fail(t ? t->get(key) : nullptr, std::string("[") + section + "] '" + key + "': " + p);
+    return v;
+  }
+  // An array of at most `max_count` entries.
+  const toml::array* Array(const toml::table* t, const char* section, const char* key,
+                           size_t max_count) const {
     const toml::node* n = t ? t->get(key) : nullptr;
-    if (!n) return def;
+    if (!n) return nullptr;
     if (!n->is_array()) Fail(n, std::string("[") + section + "] '" + key + "' must be an array");
+    const toml::array* a = n->as_array();
+    if (a->size() > max_count)
+      Fail(n, std::string("[") + section + "] '" + key + "' has " + std::to_string(a->size()) +
+                  " entries; at most " + std::to_string(max_count));
+    return a;
+  }
+  std::vector<double> Numbers(const toml::table* t, const char* section, const char* key,
+                              std::vector<double> def, size_t max_count,
+                              std::string (*problem)(double) = nullptr) const {
+    const toml::array* a = Array(t, section, key, max_count);
+    if (!a) return def;
     std::vector<double> out;
-    for (const toml::node& e : *n->as_array()) {
+    for (const toml::node& e : *a) {
       std::optional<double> v = e.value<double>();
       if (!v || !std::isfinite(*v) || *v <= 0)
         Fail(&e, std::string("[") + section + "] '" + key + "' must hold positive numbers");
+      const std::string p = problem ? problem(*v) : std::string();
+      if (!p.empty()) Fail(&e, std::string("[") + section + "] '" + key + "': " + p);
       out.push_back(*v);
     }
     return out;
   }
-  std::vector<std::string> Strings(const toml::table* t, const char* section,
-                                   const char* key) const {
-    const toml::node* n = t ? t->get(key) : nullptr;
-    if (!n) return {};
-    if (!n->is_array()) Fail(n, std::string("[") + section + "] '" + key + "' must be an array");
+  std::vector<std::string> Strings(const toml::table* t, const char* section, const char* key,
+                                   size_t max_count) const {
+    const toml::array* a = Array(t, section, key, max_count);
+    if (!a) return {};
     std::vector<std::string> out;
-    for (const toml::node& e : *n->as_array()) {
+    for (const toml::node& e : *a) {
       if (!e.is_string())
         Fail(&e, std::string("[") + section + "] '" + key + "' must hold strings");
       out.push_back(*e.value<std::string>());
@@ -188,11 +217,9 @@ RigConfig ParseRig(const std::string& text, const std::string& name) {
       r.Int64(t_rig, "rig", "seed", 1, 0, std::numeric_limits<int64_t>::max()));
 
   const toml::table* t_site = r.Table("site", rig.simulated() || field);
-  rig.site.lat_deg = r.Number(t_site, "site", "lat_deg", rig.site.lat_deg);
-  rig.site.lon_deg = r.Number(t_site, "site", "lon_deg", rig.site.lon_deg);
-  rig.site.height_m = r.Number(t_site, "site", "height_m", rig.site.height_m);
-  if (std::abs(rig.site.lat_deg) > 90 || std::abs(rig.site.lon_deg) > 180)
-    r.Fail(t_site, "site latitude/longitude out of range");
+  rig.site.lat_deg = r.Checked(t_site, "site", "lat_deg", rig.site.lat_deg, LatitudeProblem);
+  rig.site.lon_deg = r.Checked(t_site, "site", "lon_deg", rig.site.lon_deg, LongitudeProblem);
+  rig.site.height_m = r.Checked(t_site, "site", "height_m", rig.site.height_m, HeightProblem);
 
   const toml::table* t_cam = r.Table("camera", field);
   CameraConfig& cam = rig.camera;
@@ -248,7 +275,7 @@ RigConfig ParseRig(const std::string& text, const std::string& name) {
   const toml::table* t_nd = r.Table("nd", false);
   if (const toml::node* n = t_nd ? t_nd->get("sun_density") : nullptr) {
     if (n->is_array()) {
-      std::vector<double> d = r.Numbers(t_nd, "nd", "sun_density", {});
+      std::vector<double> d = r.Numbers(t_nd, "nd", "sun_density", {}, 3);
       if (d.size() != 3) r.Fail(n, "[nd] sun_density: one number, or three (R, G, B)");
       std::copy(d.begin(), d.end(), rig.sun_nd_density_rgb.begin());
     } else {
@@ -263,36 +290,34 @@ RigConfig ParseRig(const std::string& text, const std::string& name) {
   const toml::table* t_b = r.Table("bracket", false);
   BracketOptions& b = rig.plan.bracket;
   b.step_stops = r.Number(t_b, "bracket", "step_stops", b.step_stops);
-  b.min_exposure_s = r.Number(t_b, "bracket", "min_exposure_s", b.min_exposure_s);
-  b.max_exposure_s = r.Number(t_b, "bracket", "max_exposure_s", b.max_exposure_s);
+  b.min_exposure_s = r.Checked(t_b, "bracket", "min_exposure_s", b.min_exposure_s, ExposureProblem);
+  b.max_exposure_s = r.Checked(t_b, "bracket", "max_exposure_s", b.max_exposure_s, ExposureProblem);
   b.max_frames = r.Int(t_b, "bracket", "max_frames", b.max_frames, 1, 32);
   b.saturation_dn = r.Number(t_b, "bracket", "saturation_dn", b.saturation_dn);
   b.noise_floor_dn = r.Number(t_b, "bracket", "noise_floor_dn", b.noise_floor_dn);
 
   const toml::table* t_plan = r.Table("plan", rig.kind == "sim");
   rig.plan.start_exposure_s =
-      r.Number(t_plan, "plan", "start_exposure_s", rig.plan.start_exposure_s);
-  rig.plan.sun_start_exposure_s =
-      r.Number(t_plan, "plan", "sun_start_exposure_s", rig.plan.sun_start_exposure_s);
-  // The checks CapturePlan::Validate runs before the first frame, here with file and line.
-  for (const auto& [key, value] :
-       {std::pair{"start_exposure_s", rig.plan.start_exposure_s},
-        std::pair{"sun_start_exposure_s", rig.plan.sun_start_exposure_s}}) {
-    if (!(value > 0)) {
-      r.Fail(t_plan->get(key), std::string("[plan] '") + key + "' must be positive seconds");
-    }
-  }
+      r.Checked(t_plan, "plan", "start_exposure_s", rig.plan.start_exposure_s, ExposureProblem);
+  rig.plan.sun_start_exposure_s = r.Checked(t_plan, "plan", "sun_start_exposure_s",
+                                            rig.plan.sun_start_exposure_s, ExposureProblem);
   rig.plan.aureole_exposures_s =
-      r.Numbers(t_plan, "plan", "aureole_exposures_s", rig.plan.aureole_exposures_s);
-  std::vector<std::string> targets = r.Strings(t_plan, "plan", "targets");
+      r.Numbers(t_plan, "plan", "aureole_exposures_s", rig.plan.aureole_exposures_s,
+                kMaxAureoleExposures, ExposureProblem);
+  std::vector<std::string> targets = r.Strings(t_plan, "plan", "targets", kMaxTargets);
   if (!targets.empty()) {
     rig.plan.targets.clear();
     for (const std::string& s : targets) {
+      Target target;
       try {
-        rig.plan.targets.push_back(ParseTarget(s));
+        target = ParseTarget(s);
       } catch (const Error& e) {
         r.Fail(t_plan->get("targets"), e.what());
       }
+      if (std::find(rig.plan.targets.begin(), rig.plan.targets.end(), target) !=
+          rig.plan.targets.end())
+        r.Fail(t_plan->get("targets"), "[plan] targets: '" + s + "' is listed twice");
+      rig.plan.targets.push_back(target);
     }
   }
   if (const toml::node* n = t_plan ? t_plan->get("views") : nullptr) {
@@ -310,7 +335,7 @@ RigConfig ParseRig(const std::string& text, const std::string& name) {
     }
   }
   if (t_plan) {
-    rig.slot_labels = r.Strings(t_plan, "plan", "times");
+    rig.slot_labels = r.Strings(t_plan, "plan", "times", kMaxSlots);
     std::string date = r.String(t_plan, "plan", "date", "", !rig.slot_labels.empty());
     std::string zone = r.String(t_plan, "plan", "timezone", "Z");
     for (const std::string& hhmm : rig.slot_labels) {

@@ -41,6 +41,13 @@ TEST(RigTest, ParsesSiteBracketAndSlots) {
   ASSERT_EQ(r.plan.aureole_exposures_s.size(), 2u);
 }
 
+// `text` with its first `from` replaced by `to`.
+std::string Replaced(std::string text, const std::string& from, const std::string& to) {
+  const size_t at = text.find(from);
+  EXPECT_NE(at, std::string::npos) << from;
+  return at == std::string::npos ? text : text.replace(at, from.size(), to);
+}
+
 void ExpectErrorAt(const std::string& text, const std::string& where) {
   try {
     ParseRig(text, "bad.toml");
@@ -69,9 +76,9 @@ TEST(RigTest, MalformedRigsNameFileAndLine) {
   // Found by tests/fuzz/rig_fuzz: a zero start exposure passed ParseRig and failed only when
   // the capture validated its plan, naming neither file nor line.
   ExpectErrorAt(std::string(kGood) + "sun_start_exposure_s = 0.000\n",
-                "bad.toml:17: [plan] 'sun_start_exposure_s' must be positive seconds");
+                "bad.toml:17: [plan] 'sun_start_exposure_s': exposure 0 s is not positive");
   ExpectErrorAt(std::string(kGood) + "start_exposure_s = -0.004\n",
-                "bad.toml:17: [plan] 'start_exposure_s' must be positive seconds");
+                "bad.toml:17: [plan] 'start_exposure_s': exposure -0.004 s is not positive");
   // Found by tests/fuzz/rig_fuzz: "seed = 1e308" (or -1) was converted to an unsigned integer
   // out of its range, undefined behaviour.
   for (const char* seed : {"1e308", "-1", "2.5"}) {
@@ -150,10 +157,7 @@ TEST(RigTest, FieldRigCarriesDriverGpsNdAndPolicy) {
 
 TEST(RigTest, MalformedFieldRigsNameTheLine) {
   auto with = [](const std::string& from, const std::string& to) {
-    std::string t = kField;
-    size_t at = t.find(from);
-    EXPECT_NE(at, std::string::npos) << from;
-    return t.replace(at, from.size(), to);
+    return Replaced(kField, from, to);
   };
   ExpectErrorAt(with("baud = 38400", "baud = -3"), "bad.toml:21");
   ExpectErrorAt(with("source = \"nmea\"", "source = \"glonass\""), "unknown GPS source");
@@ -170,6 +174,39 @@ TEST(RigTest, MalformedFieldRigsNameTheLine) {
                 "bad.toml:22: unknown key 'baudrate' in [gps]");
   ExpectErrorAt(with("views =", "date = \"2026-01-01\"\ntimes = [\"10:00\"]\nviews ="),
                 "field rig captures one slot per run");
+}
+
+TEST(RigTest, PlanListsSitesAndExposuresAreBounded) {
+  auto with = [](const std::string& from, const std::string& to) {
+    return Replaced(kGood, from, to);
+  };
+  // 10000 aureole exposures would capture for hours: refused with the bound, at the key's line.
+  std::string many = "[";
+  for (int i = 0; i < 10000; ++i) many += (i ? ", " : "") + std::string("0.001");
+  many += "]";
+  ExpectErrorAt(with("[0.001, 0.002]", many),
+                "bad.toml:16: [plan] 'aureole_exposures_s' has 10000 entries; at most 32");
+  ExpectErrorAt(with("[0.001, 0.002]", "[0.001, 1e308]"),
+                "bad.toml:16: [plan] 'aureole_exposures_s': exposure 1e+308 s is outside "
+                "1e-09..86400 s");
+  std::string times = "[";
+  for (int i = 0; i < 49; ++i) times += (i ? ", " : "") + std::string("\"07:45\"");
+  times += "]";
+  ExpectErrorAt(with("[\"07:45\", \"16:00\"]", times), "'times' has 49 entries; at most 48");
+  ExpectErrorAt(with("heldout = \"16:00\"",
+                     "targets = [\"sky\", \"sun\", \"sky\", \"sky\", \"sky\", \"sky\", "
+                     "\"sky\"]"),
+                "'targets' has 7 entries; at most 6");
+  ExpectErrorAt(with("heldout = \"16:00\"", "targets = [\"sky\", \"sky\"]"),
+                "'sky' is listed twice");
+  // The site: one rule for heights (core/limits.h), latitude and longitude likewise.
+  ExpectErrorAt(with("height_m = 3", "height_m = 1e15"),
+                "bad.toml:8: [site] 'height_m': height 1e+15 m is outside -500..9000 m");
+  ExpectErrorAt(with("lon_deg = 20.25", "lon_deg = 200"),
+                "bad.toml:7: [site] 'lon_deg': longitude 200 deg is outside -180..180 deg");
+  ExpectErrorAt(with("[bracket]", "[bracket]\nmax_exposure_s = 1e9"),
+                "[bracket] 'max_exposure_s': exposure 1e+09 s is outside");
+  ExpectErrorAt(with("[rig]\n", "[rig]\nseed = -1\n"), "'seed' must be an integer within 0..");
 }
 
 TEST(RigTest, EveryShippedRigParses) {

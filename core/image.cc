@@ -14,6 +14,7 @@
 #include "core/error.h"
 #include "core/files.h"
 #include "core/internal/image_input.h"
+#include "core/outputs.h"
 
 namespace rouen {
 namespace {
@@ -233,6 +234,11 @@ std::vector<uint8_t> ReadMask(const std::string& path, int width, int height,
 }
 
 std::string EncodeImage(const std::string& path, const Image& image, StoredType type) {
+  if ((type == StoredType::kHalf || type == StoredType::kFloat) && !IsFloatImageFormat(path)) {
+    throw Error(path +
+                ": cannot store floating-point values in this format (it would clip "
+                "them); use .exr, .hdr, .pfm or .tif");
+  }
   if (image.width <= 0 || image.height <= 0 || image.channels <= 0 ||
       image.data.size() != static_cast<size_t>(image.width) * image.height * image.channels) {
     throw Error(path + ": cannot write an empty or inconsistent image (" +

@@ -62,8 +62,9 @@ std::string EncodeImage(const std::string& path, const Image& image, StoredType 
 // and round the values (0..255 scale for kUint8; for kUint16 values on the same 0..255 scale
 // are stored x257 as 0..65535, so ReadImage gives them back). The encoded bytes are written by
 // WriteFileAtomic (every write checked, fsynced, size checked, renamed), so a crash or a full
-// disk never leaves a partial file. Non-finite
-// values, and values beyond 65504 for kHalf, are refused with rouen::Error.
+// disk never leaves a partial file. Non-finite values, values beyond 65504 for kHalf, and
+// kHalf/kFloat to a format that cannot store them (IsFloatImageFormat in core/outputs.h: PNG,
+// JPEG, ...) are refused with rouen::Error.
 void WriteImage(const std::string& path, const Image& image, StoredType type);
 
 }  // namespace rouen

@@ -1,5 +1,7 @@
 #include "core/list_file.h"
 
+#include "core/text.h"
+
 namespace rouen {
 namespace {
 
@@ -10,6 +12,7 @@ bool IsSpace(char c) {
 }  // namespace
 
 std::vector<ListLine> ParseListText(std::string_view text, const std::string& name) {
+  text = WithoutUtf8Bom(text);
   std::vector<ListLine> out;
   int line_no = 0;
   size_t pos = 0;

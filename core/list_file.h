@@ -15,7 +15,8 @@ struct ListLine {
 };
 
 // Splits the text of a list file; `name` (the file) goes into each line's `where`. Words are
-// separated by spaces, tabs, carriage returns, vertical tabs and form feeds.
+// separated by spaces, tabs, carriage returns, vertical tabs and form feeds; a leading UTF-8
+// byte-order mark is not part of the first word.
 std::vector<ListLine> ParseListText(std::string_view text, const std::string& name);
 
 }  // namespace rouen

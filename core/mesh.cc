@@ -11,6 +11,7 @@
 
 #include "core/error.h"
 #include "core/files.h"
+#include "core/text.h"
 
 namespace rouen {
 namespace {
@@ -87,6 +88,7 @@ void Mesh::AddPolygon(const std::vector<Eigen::Vector3d>& points, int block) {
 Mesh ReadObj(const std::string& path) { return ParseObj(ReadFileToString(path), path); }
 
 Mesh ParseObj(std::string_view text, const std::string& path) {
+  text = WithoutUtf8Bom(text);
   Mesh mesh;
   std::map<std::string, int> block_index;
   std::string current = "default";
@@ -173,6 +175,10 @@ Mesh ParseObj(std::string_view text, const std::string& path) {
       }
     }
     // vt, vn, usemtl, mtllib, s, l, p and unknown statements are ignored.
+  }
+  if (mesh.triangles.empty()) {
+    throw Error(path + ": no faces (" + std::to_string(mesh.vertices.size()) +
+                " vertices, no 'f' lines): the file is empty, only comments, or not a model");
   }
   return mesh;
 }

@@ -24,7 +24,8 @@ struct Mesh {
 };
 
 // Throws rouen::Error with file and line for malformed input (bad indices, bad numbers,
-// faces with fewer than 3 vertices, degenerate triangles).
+// faces with fewer than 3 vertices, degenerate triangles), and naming the file for a model
+// with no faces at all (empty, or comments only).
 Mesh ReadObj(const std::string& path);
 // The same from the text of an OBJ file; `name` (the file) is used in messages.
 Mesh ParseObj(std::string_view text, const std::string& name);

@@ -104,6 +104,26 @@ TEST_F(MeshTest, ErrorsNameFileAndLine) {
   EXPECT_THROW(ReadObj((dir_ / "missing.obj").string()), Error);
 }
 
+TEST_F(MeshTest, AModelWithoutFacesIsRefusedNamingTheFile) {
+  // Empty, comments only, or vertices without faces: nothing to render, refused when read
+  // rather than minutes later in the solve.
+  for (const char* text : {"", "# just a comment\n\n   # another\n", "v 0 0 0\nv 1 0 0\n"}) {
+    const std::string p = Write("empty.obj", text);
+    try {
+      ReadObj(p);
+      ADD_FAILURE() << "accepted: " << text;
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(p + ": no faces"), std::string::npos) << e.what();
+    }
+  }
+}
+
+TEST_F(MeshTest, AByteOrderMarkDoesNotHideTheFirstVertex) {
+  const Mesh m = ReadObj(Write("bom.obj", "\xEF\xBB\xBFv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"));
+  EXPECT_EQ(m.vertices.size(), 3u);
+  EXPECT_EQ(m.triangles.size(), 1u);
+}
+
 TEST_F(MeshTest, WriteReadRoundTrip) {
   Mesh m;
   const int ground = m.AddBlock("ground");

@@ -83,6 +83,13 @@ SunPosition ComputeSunPosition(UtcTime t, const Site& site, const Weather& weath
                                                             weather.temperature_c);
   s.distance_au = astrom.em;
   s.angular_radius_deg = std::asin(kSunRadiusKm / (astrom.em * kAuKm)) * kRadToDeg;
+  // ERFA gives NaN for sites far from the Earth's surface (a height of 1e15 m): never return it.
+  if (!std::isfinite(s.azimuth_deg) || !std::isfinite(s.elevation_deg) ||
+      !std::isfinite(s.angular_radius_deg)) {
+    throw Error("solar position: no finite position for the site (lat " +
+                std::to_string(site.lat_deg) + ", lon " + std::to_string(site.lon_deg) +
+                ", height " + std::to_string(site.height_m) + " m)");
+  }
   return s;
 }
 

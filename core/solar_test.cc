@@ -102,6 +102,8 @@ TEST(SolarTest, AzElEnuRoundTrip) {
 TEST(SolarTest, RefusesBadSite) {
   EXPECT_THROW(ComputeSunPosition(UtcTime{}, Site{95.0, 0.0, 0.0}), Error);
   EXPECT_THROW(ComputeSunPosition(UtcTime{}, Site{NAN, 0.0, 0.0}), Error);
+  EXPECT_THROW(ComputeSunPosition(ParseIso8601("2026-08-25T20:30:00Z"), Site{37.0, -122.0, 1e15}),
+               Error);  // ERFA gives NaN there
   EXPECT_THROW(ComputeSunPosition(UtcTime{}, Site{}, Weather{-5.0, 10.0}), Error);
 }
 

@@ -1,0 +1,104 @@
+#include "core/outputs.h"
+
+#include <OpenImageIO/imageio.h>
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+
+#include "core/error.h"
+#include "core/files.h"
+#include "core/temporaries.h"
+
+namespace fs = std::filesystem;
+
+namespace rouen {
+namespace {
+
+std::string LowerExtension(const std::string& path) {
+  std::string e = fs::path(path).extension().string();
+  std::transform(e.begin(), e.end(), e.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return e;
+}
+
+void RemoveQuietly(const std::string& path) {
+  std::error_code ec;
+  fs::remove(path, ec);
+}
+
+}  // namespace
+
+bool IsFloatImageFormat(const std::string& path) {
+  const std::string e = LowerExtension(path);
+  return e == ".exr" || e == ".hdr" || e == ".pfm" || e == ".tif" || e == ".tiff";
+}
+
+void CheckWritableFolder(const std::string& what, const std::string& dir) {
+  const std::string where = what + " " + dir;
+  std::error_code ec;
+  fs::path p = dir.empty() ? fs::path(".") : fs::path(dir);
+  if (fs::exists(p, ec) && !fs::is_directory(p, ec)) throw Error(where + ": is not a folder");
+  while (!fs::exists(p, ec)) {
+    p = p.has_parent_path() && p.parent_path() != p ? p.parent_path() : fs::path(".");
+  }
+  if (!fs::is_directory(p, ec)) throw Error(where + ": " + p.string() + " is not a folder");
+  if (::access(p.c_str(), W_OK) != 0)
+    throw Error(where + ": cannot write in " + p.string() + ": " + std::strerror(errno));
+}
+
+OutputSet::~OutputSet() {
+  if (committed_) return;
+  for (const Entry& e : entries_) RemoveQuietly(e.temp);
+}
+
+std::string OutputSet::Add(const std::string& what, const std::string& path, OutputKind kind) {
+  if (path.empty()) throw Error(what + ": no file name given");
+  const std::string where = what + " " + path;
+  const fs::path p(path);
+  std::error_code ec;
+  if (fs::is_directory(p, ec) || !p.has_filename())
+    throw Error(where + ": is a folder; give a file name (e.g. " +
+                (p / (kind == OutputKind::kFile ? "out.json" : "out.exr")).string() + ")");
+  const fs::path dir = p.has_parent_path() ? p.parent_path() : fs::path(".");
+  if (!fs::exists(dir, ec)) throw Error(where + ": no such folder " + dir.string());
+  if (!fs::is_directory(dir, ec)) throw Error(where + ": " + dir.string() + " is not a folder");
+  const std::string ext = LowerExtension(path);
+  if (kind == OutputKind::kRadiance && !IsFloatImageFormat(path))
+    throw Error(where + ": radiance needs a floating-point image format (.exr, .hdr, .pfm or " +
+                ".tif), not '" + (ext.empty() ? std::string("no extension") : ext) + "'");
+  if (kind == OutputKind::kImage && !OIIO::ImageOutput::create(path))
+    throw Error(where + ": no image format to write for '" +
+                (ext.empty() ? std::string("no extension") : ext) + "' (use .png)");
+  const fs::path canonical = fs::weakly_canonical(p, ec);
+  for (const Entry& e : entries_) {
+    std::error_code ec2;
+    if (fs::weakly_canonical(e.path, ec2) == canonical)
+      throw Error(where + ": the same file as " + e.what + " " + e.path);
+  }
+  WatchForTemporaries(dir);
+  const std::string temp = TempPathFor(p, fs::path(path).extension().string()).string();
+  const int fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  if (fd < 0)
+    throw Error(where + ": cannot write in " + dir.string() + ": " + std::strerror(errno));
+  ::close(fd);
+  entries_.push_back({what, path, temp});
+  return temp;
+}
+
+void OutputSet::Commit() {
+  for (const Entry& e : entries_) {
+    std::error_code ec;
+    if (fs::file_size(e.temp, ec) == 0 || ec)
+      throw Error(e.what + " " + e.path + ": nothing was written (" +
+                  (ec ? ec.message() : std::string("empty")) + ")");
+  }
+  for (const Entry& e : entries_) CommitFile(e.temp, e.path);
+  committed_ = true;
+}
+
+}  // namespace rouen

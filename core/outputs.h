@@ -1,0 +1,53 @@
+// The files one command writes, all or nothing. Each output is declared before the work
+// starts (Add checks that it can be written and reserves a temporary beside it), written to
+// its temporary, and renamed into place with the others by Commit once all are written. An
+// OutputSet destroyed before Commit -- an error -- removes its temporaries; signals are
+// covered by core/temporaries.h (Add records each output's folder there).
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace rouen {
+
+enum class OutputKind {
+  kFile,      // any content (JSON, text)
+  kRadiance,  // a floating-point image (IsFloatImageFormat)
+  kImage,     // an 8-bit image in a format OpenImageIO writes (.png, .jpg, .tif, ...)
+};
+
+// True for the formats that store floating-point radiance: OpenEXR (.exr), Radiance RGBE
+// (.hdr), PFM (.pfm) and TIFF (.tif, .tiff). Others (PNG, JPEG) would clip it to 8 or 16 bits.
+bool IsFloatImageFormat(const std::string& path);
+
+// Checks that `dir` is a folder this process can write in, or one it can create: throws
+// rouen::Error naming `what` (an option) when `dir` or the nearest existing folder above it
+// is a file, or when that folder is not writable (permissions, a read-only disk).
+void CheckWritableFolder(const std::string& what, const std::string& dir);
+
+class OutputSet {
+ public:
+  OutputSet() = default;
+  ~OutputSet();
+  OutputSet(const OutputSet&) = delete;
+  OutputSet& operator=(const OutputSet&) = delete;
+
+  // Declares an output; `what` names it in messages (an option: "--out"). Throws
+  // rouen::Error when `path` is empty or a folder, when its folder is missing or not
+  // writable, when the format does not suit `kind`, or when another output has the same path.
+  // Returns the temporary to write it to: "<path>.tmp-<pid>-<n><extension>", so writers that
+  // choose a format by extension choose the right one.
+  std::string Add(const std::string& what, const std::string& path, OutputKind kind);
+  // Renames every temporary to its path (each rename atomic); after this the destructor
+  // removes nothing.
+  void Commit();
+
+ private:
+  struct Entry {
+    std::string what, path, temp;
+  };
+  std::vector<Entry> entries_;
+  bool committed_ = false;
+};
+
+}  // namespace rouen

@@ -1,0 +1,133 @@
+#include "core/outputs.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <iterator>
+#include <string>
+
+#include "core/error.h"
+#include "core/files.h"
+#include "core/image.h"
+
+namespace fs = std::filesystem;
+
+namespace rouen {
+namespace {
+
+class OutputsTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("rouen_outputs_" + std::to_string(::getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  int Entries() const {
+    return static_cast<int>(std::distance(fs::directory_iterator(dir_), fs::directory_iterator()));
+  }
+  // The message of the rouen::Error `f` throws ("" when it throws none).
+  template <typename F>
+  static std::string ErrorOf(F f) {
+    try {
+      f();
+    } catch (const Error& e) {
+      return e.what();
+    }
+    return "";
+  }
+  fs::path dir_;
+};
+
+TEST_F(OutputsTest, AllOrNothing) {
+  const std::string a = (dir_ / "a.exr").string(), b = (dir_ / "b.json").string();
+  {
+    OutputSet out;
+    const std::string ta = out.Add("--out", a, OutputKind::kRadiance);
+    const std::string tb = out.Add("--summary", b, OutputKind::kFile);
+    EXPECT_NE(ta.find(".tmp-"), std::string::npos);
+    EXPECT_EQ(fs::path(ta).extension(), ".exr");  // writers choose the format by extension
+    WriteImage(ta, Image(2, 1, 3, PixelUnits::kRadiance, 1.5f), StoredType::kFloat);
+    // The second output is never written: an error before Commit.
+  }
+  EXPECT_EQ(Entries(), 0) << "a failed command leaves neither outputs nor temporaries";
+  OutputSet out;
+  WriteImage(out.Add("--out", a, OutputKind::kRadiance),
+             Image(2, 1, 3, PixelUnits::kRadiance, 1.5f), StoredType::kFloat);
+  WriteFileAtomic(out.Add("--summary", b, OutputKind::kFile), "{}\n");
+  EXPECT_FALSE(fs::exists(a));
+  out.Commit();
+  EXPECT_EQ(ReadImage(a).data[0], 1.5f);
+  EXPECT_EQ(ReadFileToString(b), "{}\n");
+  EXPECT_EQ(Entries(), 2);
+}
+
+TEST_F(OutputsTest, RefusesBeforeAnyWorkNamingTheOption) {
+  OutputSet out;
+  EXPECT_EQ(ErrorOf([&] { out.Add("--out", dir_.string(), OutputKind::kRadiance); }),
+            "--out " + dir_.string() + ": is a folder; give a file name (e.g. " +
+                (dir_ / "out.exr").string() + ")");
+  EXPECT_EQ(ErrorOf([&] { out.Add("--out", (dir_ / "x.png").string(), OutputKind::kRadiance); }),
+            "--out " + (dir_ / "x.png").string() +
+                ": radiance needs a floating-point image format (.exr, .hdr, .pfm or .tif), not "
+                "'.png'");
+  EXPECT_NE(ErrorOf([&] {
+              out.Add("--out", (dir_ / "no/x.exr").string(), OutputKind::kRadiance);
+            }).find("no such folder " + (dir_ / "no").string()),
+            std::string::npos);
+  WriteFileAtomic(dir_ / "file", "x");
+  EXPECT_NE(ErrorOf([&] {
+              out.Add("--out", (dir_ / "file/x.exr").string(), OutputKind::kFile);
+            }).find("is not a folder"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] {
+              out.Add("--png", (dir_ / "x.nosuchformat").string(), OutputKind::kImage);
+            }).find("no image format"),
+            std::string::npos);
+  EXPECT_EQ(ErrorOf([&] { out.Add("--out", "", OutputKind::kFile); }), "--out: no file name given");
+  out.Add("--out", (dir_ / "same.exr").string(), OutputKind::kRadiance);
+  EXPECT_NE(ErrorOf([&] {
+              out.Add("--coverage", (dir_ / "." / "same.exr").string(), OutputKind::kRadiance);
+            }).find("the same file as --out"),
+            std::string::npos);
+  EXPECT_EQ(Entries(), 2);  // "file" and the reserved temporary of same.exr
+}
+
+TEST_F(OutputsTest, CommitRefusesAnOutputNeverWritten) {
+  OutputSet out;
+  out.Add("--out", (dir_ / "a.json").string(), OutputKind::kFile);
+  EXPECT_NE(ErrorOf([&] {
+              out.Commit();
+            }).find("--out " + (dir_ / "a.json").string() + ": nothing was written"),
+            std::string::npos);
+}
+
+TEST_F(OutputsTest, WorkingFoldersMustBeFoldersWeCanWriteIn) {
+  EXPECT_EQ(ErrorOf([&] { CheckWritableFolder("--work", dir_.string()); }), "");
+  EXPECT_EQ(ErrorOf([&] { CheckWritableFolder("--work", (dir_ / "new" / "deeper").string()); }),
+            "");
+  EXPECT_FALSE(fs::exists(dir_ / "new")) << "checking creates nothing";
+  WriteFileAtomic(dir_ / "file", "x");
+  EXPECT_EQ(ErrorOf([&] { CheckWritableFolder("--work", (dir_ / "file").string()); }),
+            "--work " + (dir_ / "file").string() + ": is not a folder");
+  EXPECT_EQ(ErrorOf([&] { CheckWritableFolder("--work", (dir_ / "file" / "sub").string()); }),
+            "--work " + (dir_ / "file" / "sub").string() + ": " + (dir_ / "file").string() +
+                " is not a folder");
+}
+
+TEST(FloatFormatsTest, WriteImageRefusesToClipRadianceIntoPng) {
+  EXPECT_TRUE(IsFloatImageFormat("a.EXR"));
+  EXPECT_TRUE(IsFloatImageFormat("dir.png/a.hdr"));
+  EXPECT_FALSE(IsFloatImageFormat("a.png"));
+  EXPECT_FALSE(IsFloatImageFormat("a"));
+  const fs::path p =
+      fs::temp_directory_path() / ("rouen_float_" + std::to_string(::getpid()) + ".png");
+  EXPECT_THROW(
+      WriteImage(p.string(), Image(2, 1, 3, PixelUnits::kRadiance, 1000.f), StoredType::kFloat),
+      Error);
+  EXPECT_FALSE(fs::exists(p));
+}
+
+}  // namespace
+}  // namespace rouen

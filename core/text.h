@@ -1,0 +1,19 @@
+// Text files as users save them: a UTF-8 byte-order mark (Windows editors write one) is not
+// part of the first line, and CRLF line ends are not part of the lines.
+#pragma once
+
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace rouen {
+
+// `text` without a leading UTF-8 byte-order mark (EF BB BF).
+std::string_view WithoutUtf8Bom(std::string_view text);
+
+// The lines of a text file, without the byte-order mark and without '\n' or "\r\n" ends.
+// Throws rouen::Error "<path>: cannot open <what>" when the file cannot be read (or "is a
+// folder, not <what>").
+std::vector<std::string> ReadTextLines(const std::string& path, const std::string& what);
+
+}  // namespace rouen

@@ -1,0 +1,40 @@
+#include "core/text.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "core/error.h"
+
+namespace rouen {
+namespace {
+
+TEST(TextTest, ByteOrderMarkAndCrlfAreNotPartOfTheLines) {
+  EXPECT_EQ(WithoutUtf8Bom("\xEF\xBB\xBFutc,lat"), "utc,lat");
+  EXPECT_EQ(WithoutUtf8Bom("utc,lat"), "utc,lat");
+  EXPECT_EQ(WithoutUtf8Bom("\xEF\xBB"), "\xEF\xBB");
+  const std::filesystem::path p = std::filesystem::temp_directory_path() /
+                                  ("rouen_text_" + std::to_string(::getpid()) + ".csv");
+  std::ofstream(p, std::ios::binary) << "\xEF\xBB\xBFutc,lat\r\n\r\nlast";
+  EXPECT_EQ(ReadTextLines(p.string(), "CSV file"),
+            (std::vector<std::string>{"utc,lat", "", "last"}));
+  std::filesystem::remove(p);
+  try {
+    ReadTextLines(p.string(), "CSV file");
+    FAIL() << "read a missing file";
+  } catch (const Error& e) {
+    EXPECT_EQ(std::string(e.what()), p.string() + ": cannot open CSV file");
+  }
+  const std::string dir = std::filesystem::temp_directory_path().string();
+  try {
+    ReadTextLines(dir, "a list file");
+    FAIL() << "read a folder";
+  } catch (const Error& e) {
+    EXPECT_EQ(std::string(e.what()), dir + ": is a folder, not a list file");
+  }
+}
+
+}  // namespace
+}  // namespace rouen
