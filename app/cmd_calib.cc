@@ -2,9 +2,8 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <sstream>
-
 #include <nlohmann/json.hpp>
+#include <sstream>
 
 #include "app/commands.h"
 #include "app/options.h"
@@ -27,7 +26,8 @@ void ForEachListLine(const std::string& list,
                                               const std::string& where)>& line) {
   std::error_code ec;
   if (std::filesystem::is_directory(list, ec)) throw Error(list + ": is a folder, not a list file");
-  if (!std::filesystem::is_regular_file(list, ec)) throw Error(list + ": cannot open the list file");
+  if (!std::filesystem::is_regular_file(list, ec))
+    throw Error(list + ": cannot open the list file");
   const std::vector<ListLine> lines = ParseListText(ReadFileToString(list), list);
   if (lines.empty()) throw Error(list + ": no images listed");
   for (const ListLine& l : lines) line(l.words, l.where);
@@ -35,7 +35,8 @@ void ForEachListLine(const std::string& list,
 
 nlohmann::json ReadJsonFile(const std::string& path, const char* what) {
   std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) throw Error(path + ": no such " + what + " file");
+  if (!std::filesystem::is_regular_file(path, ec))
+    throw Error(path + ": no such " + what + " file");
   try {
     return nlohmann::json::parse(ReadFileToString(path));
   } catch (const nlohmann::json::exception& e) {
@@ -162,8 +163,8 @@ void RegisterCalib(CLI::App& app) {
       "calib", "Calibration: response curve, HDR merge, ND filters, vignetting, lenses, poses");
   calib->require_subcommand(1);
   auto r = std::make_shared<ResponseArgs>();
-  CLI::App* c = calib->add_subcommand(
-      "response", "Recover the camera response curve from one bracket");
+  CLI::App* c =
+      calib->add_subcommand("response", "Recover the camera response curve from one bracket");
   c->footer(
       "FILE lists one image per line: 'image seconds' (paths relative to FILE).\n"
       "Example: rouen calib response --list memorial/exposures.txt --out response.json");
@@ -178,9 +179,9 @@ void RegisterCalib(CLI::App& app) {
       ->capture_default_str();
   c->callback([r] { RunResponse(*r); });
   AddHdrCommand(*calib, "rouen calib");
-  RegisterCalibGeometry(calib);  // rouen calib intrinsics|pose
+  RegisterCalibGeometry(calib);     // rouen calib intrinsics|pose
   RegisterCalibPhotometric(calib);  // rouen calib nd|vignetting
-  RegisterCalibEnvmap(calib);  // rouen calib envmap|orient
+  RegisterCalibEnvmap(calib);       // rouen calib envmap|orient
 }
 
 void RegisterHdr(CLI::App& app) { AddHdrCommand(app, "rouen"); }

@@ -4,11 +4,10 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "app/commands.h"
 #include "app/options.h"
@@ -100,7 +99,8 @@ void RunEnvmap(const EnvmapArgs& a) {
     l.pose = ReadPose(resolve(words[2]));
     l.image = ReadImage(l.name);
     if (l.image.units != PixelUnits::kRadiance) {
-      throw Error(l.name + ": not an HDR radiance image (float EXR expected; merge brackets "
+      throw Error(l.name +
+                  ": not an HDR radiance image (float EXR expected; merge brackets "
                   "with `rouen hdr` first)");
     }
     if (l.image.channels > 3) {  // drop alpha
@@ -139,11 +139,12 @@ void RunEnvmap(const EnvmapArgs& a) {
   j["mask"] = mask_path;
   WriteFileAtomic(sum_tmp, j.dump(2) + "\n");
   outputs.Commit();
-  std::printf("%s: %dx%d lat-long radiance from %zu photos; %.1f%% of the sphere seen "
-              "(%.1f%% of the sky), %.2f s (%.1f output Mpx/s)\n",
-              a.out.c_str(), r.radiance.width, r.radiance.height, photos.size(),
-              100 * r.coverage_fraction, 100 * r.sky_coverage_fraction, r.seconds,
-              r.radiance.width * 1e-6 * r.radiance.height / std::max(r.seconds, 1e-9));
+  std::printf(
+      "%s: %dx%d lat-long radiance from %zu photos; %.1f%% of the sphere seen "
+      "(%.1f%% of the sky), %.2f s (%.1f output Mpx/s)\n",
+      a.out.c_str(), r.radiance.width, r.radiance.height, photos.size(), 100 * r.coverage_fraction,
+      100 * r.sky_coverage_fraction, r.seconds,
+      r.radiance.width * 1e-6 * r.radiance.height / std::max(r.seconds, 1e-9));
   std::printf("  coverage %s, mask %s, summary %s\n", cov_path.c_str(), mask_path.c_str(),
               sum_path.c_str());
 }
@@ -157,8 +158,9 @@ struct OrientArgs {
 
 void RunOrient(const OrientArgs& a) {
   if (a.landmarks.empty() && a.horizon.empty() && !a.level) {
-    throw Error("calib orient: give --landmark, --horizon or --level (the sun alone leaves the "
-                "roll about the sun axis free)");
+    throw Error(
+        "calib orient: give --landmark, --horizon or --level (the sun alone leaves the "
+        "roll about the sun axis free)");
   }
   const std::vector<double> s = ParseNumbers(a.site, 3, "--site");
   const Site site{s[0], s[1], s[2]};
@@ -199,31 +201,31 @@ void RunOrient(const OrientArgs& a) {
     o.pose.position = Eigen::Vector3d(p[0], p[1], p[2]);
   }
   nlohmann::json j = o.pose;
-  j["orientation"] = {
-      {"method", "sun"},
-      {"time", t.Iso8601()},
-      {"site", {site.lat_deg, site.lon_deg, site.height_m}},
-      {"sun_azimuth_deg", sun.azimuth_deg},
-      {"sun_elevation_deg", sun.elevation_deg},
-      {"sun_pixel", {d.pixel.x(), d.pixel.y()}},
-      {"sun_radius_px", d.radius_px},
-      {"sun_expected_radius_px", d.expected_radius_px},
-      {"sun_sigma_deg", d.sigma_deg},
-      {"sun_residual_deg", o.sun_residual_deg},
-      {"landmark_residual_deg", o.landmark_residual_deg},
-      {"horizon_residual_deg", o.horizon_residual_deg},
-      {"level", a.level},
-      {"level_residual_deg", o.level_residual_deg},
-      {"rotation_sigma_deg", o.rotation_sigma_deg},
-      {"mirror_solution", o.had_mirror_solution}};
+  j["orientation"] = {{"method", "sun"},
+                      {"time", t.Iso8601()},
+                      {"site", {site.lat_deg, site.lon_deg, site.height_m}},
+                      {"sun_azimuth_deg", sun.azimuth_deg},
+                      {"sun_elevation_deg", sun.elevation_deg},
+                      {"sun_pixel", {d.pixel.x(), d.pixel.y()}},
+                      {"sun_radius_px", d.radius_px},
+                      {"sun_expected_radius_px", d.expected_radius_px},
+                      {"sun_sigma_deg", d.sigma_deg},
+                      {"sun_residual_deg", o.sun_residual_deg},
+                      {"landmark_residual_deg", o.landmark_residual_deg},
+                      {"horizon_residual_deg", o.horizon_residual_deg},
+                      {"level", a.level},
+                      {"level_residual_deg", o.level_residual_deg},
+                      {"rotation_sigma_deg", o.rotation_sigma_deg},
+                      {"mirror_solution", o.had_mirror_solution}};
   WriteFileAtomic(out, j.dump(2) + "\n");
   outputs.Commit();
   double az, el;
   AzElFromEnu(o.pose.rotation.col(2), &az, &el);
-  std::printf("%s: sun at pixel (%.2f, %.2f) (radius %.2f px, expected %.2f); camera looks at "
-              "azimuth %.3f deg, elevation %.3f deg; rotation sigma %.4f deg\n",
-              a.out.c_str(), d.pixel.x(), d.pixel.y(), d.radius_px, d.expected_radius_px, az,
-              el, o.rotation_sigma_deg);
+  std::printf(
+      "%s: sun at pixel (%.2f, %.2f) (radius %.2f px, expected %.2f); camera looks at "
+      "azimuth %.3f deg, elevation %.3f deg; rotation sigma %.4f deg\n",
+      a.out.c_str(), d.pixel.x(), d.pixel.y(), d.radius_px, d.expected_radius_px, az, el,
+      o.rotation_sigma_deg);
   for (size_t i = 0; i < o.landmark_residual_deg.size(); ++i) {
     std::printf("  landmark %zu residual %.4f deg\n", i + 1, o.landmark_residual_deg[i]);
   }

@@ -4,10 +4,9 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "app/commands.h"
 #include "app/options.h"
@@ -35,8 +34,8 @@ struct PoseArgs {
 bool IsImageName(const fs::path& p) {
   std::string e = p.extension().string();
   std::transform(e.begin(), e.end(), e.begin(), ::tolower);
-  for (const char* x : {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".pgm", ".ppm",
-                        ".dng", ".cr2", ".nef", ".arw"}) {
+  for (const char* x : {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".pgm", ".ppm", ".dng",
+                        ".cr2", ".nef", ".arw"}) {
     if (e == x) return true;
   }
   return false;
@@ -82,17 +81,18 @@ void RunIntrinsics(const IntrinsicsArgs& a) {
   outputs.Commit();
   const Intrinsics& k = s.intrinsics;
   std::printf("%s: %s %dx%d, fx %.2f fy %.2f cx %.2f cy %.2f, k1 %.5f k2 %.5f k3 %.5f",
-              a.out.c_str(), a.model.c_str(), k.width, k.height, k.fx, k.fy, k.cx, k.cy, k.k1,
-              k.k2, k.k3);
+              a.out.c_str(), a.model.c_str(), k.width, k.height, k.fx, k.fy, k.cx, k.cy, k.k1, k.k2,
+              k.k3);
   if (k.projection == Projection::kFisheye) {
     std::printf(" k4 %.5f\n", k.k4);
   } else {
     std::printf(" p1 %.5f p2 %.5f\n", k.p1, k.p2);
   }
-  std::printf("reprojection RMS %.3f px (max %.3f px) over %d corners in %d of %zu images, "
-              "%.2f s\n",
-              s.rms_px, s.max_px, s.corners_used, s.views_used,
-              s.used.size() + s.not_found.size(), s.seconds);
+  std::printf(
+      "reprojection RMS %.3f px (max %.3f px) over %d corners in %d of %zu images, "
+      "%.2f s\n",
+      s.rms_px, s.max_px, s.corners_used, s.views_used, s.used.size() + s.not_found.size(),
+      s.seconds);
   for (const std::string& n : s.not_found) std::printf("  board not found: %s\n", n.c_str());
 }
 
@@ -112,10 +112,11 @@ void RunPose(const PoseArgs& a) {
   WriteFileAtomic(out, PoseJson(s).dump(2) + "\n");
   outputs.Commit();
   const Eigen::Vector3d& c = s.pose.position;
-  std::printf("%s: camera at (%.3f, %.3f, %.3f) m; reprojection RMS %.3f px, max %.3f px, "
-              "%d of %zu landmarks inliers, %.1f ms\n",
-              a.out.c_str(), c.x(), c.y(), c.z(), s.rms_px, s.max_px, s.inliers, s.points.size(),
-              1e3 * s.seconds);
+  std::printf(
+      "%s: camera at (%.3f, %.3f, %.3f) m; reprojection RMS %.3f px, max %.3f px, "
+      "%d of %zu landmarks inliers, %.1f ms\n",
+      a.out.c_str(), c.x(), c.y(), c.z(), s.rms_px, s.max_px, s.inliers, s.points.size(),
+      1e3 * s.seconds);
   for (const PointReport& p : s.points) {
     if (p.behind) {
       std::printf("  %-20s behind the camera (outlier)\n", p.name.c_str());
@@ -140,10 +141,10 @@ void RegisterCalibGeometry(CLI::App* calib) {
       "Writes a rig lens file (rigs/lenses/*.json) with the reprojection RMS.\n"
       "Example: rouen calib intrinsics --images shots/ --board chessboard:9x7:0.025 \\\n"
       "           --model pinhole --out rigs/lenses/mycam.json");
-  c->add_option("--images", ia->images, "Folder of board photographs, or a list file")
-      ->required();
-  c->add_option("--board", ia->board, "Board: chessboard:COLSxROWS:SQUARE_M or "
-                                      "charuco:COLSxROWS:SQUARE_M:MARKER_M:DICT")
+  c->add_option("--images", ia->images, "Folder of board photographs, or a list file")->required();
+  c->add_option("--board", ia->board,
+                "Board: chessboard:COLSxROWS:SQUARE_M or "
+                "charuco:COLSxROWS:SQUARE_M:MARKER_M:DICT")
       ->required();
   c->add_option("--model", ia->model, "pinhole or fisheye")->capture_default_str();
   c->add_option("--min-views", ia->min_views, "Images in which the board must be found (>= 2)")

@@ -4,11 +4,10 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "app/commands.h"
 #include "app/options.h"
@@ -90,8 +89,7 @@ void UpdateSessionExtra(const std::string& dir, const std::string& key, const st
   SessionWriter w = SessionWriter::Resume(dir);
   SessionInfo info = w.info();
   if (info.extra.contains(key) && !info.extra[key].is_object())
-    throw Error((fs::path(dir) / "session.json").string() + ": extra." + key +
-                " is not an object");
+    throw Error((fs::path(dir) / "session.json").string() + ": extra." + key + " is not an object");
   info.extra[key][name] = value;
   w.UpdateInfo(info);
 }
@@ -111,7 +109,8 @@ void RunNd(const NdArgs& a) {
       throw Error(a.with + " and " + a.without +
                   ": one lists LDR images, the other float images; use one kind for both");
     if (a.response.empty())
-      throw Error(a.with + ": 8-bit images need --response R.json (rouen calib response) to be "
+      throw Error(a.with +
+                  ": 8-bit images need --response R.json (rouen calib response) to be "
                   "linearised");
     const ResponseCurve curve = ReadResponseCurve(a.response);
     Bracket bw, bo;
@@ -140,9 +139,9 @@ void RunNd(const NdArgs& a) {
   j["without"] = a.without;
   if (!a.out.empty()) WriteFileAtomic(out, j.dump(2) + "\n");
   if (!a.session.empty())
-    UpdateSessionExtra(a.session, "nd_filters", a.filter,
-                       json::array({cal.channel[0].density, cal.channel[1].density,
-                                    cal.channel[2].density}));
+    UpdateSessionExtra(
+        a.session, "nd_filters", a.filter,
+        json::array({cal.channel[0].density, cal.channel[1].density, cal.channel[2].density}));
   outputs.Commit();
   std::printf(
       "%s: ND density R %.4f G %.4f B %.4f (95%% +-%.4f %.4f %.4f; transmission %.3g %.3g "
@@ -187,8 +186,9 @@ void RunVignetting(const VignettingArgs& a) {
   o.fit_gradient = !a.no_gradient;
   o.fit_centre = a.fit_centre;
   if (o.fit_centre && o.fit_gradient)
-    throw Error("--fit-centre needs --no-gradient (a centre offset and an illumination "
-                "gradient look the same to first order)");
+    throw Error(
+        "--fit-centre needs --no-gradient (a centre offset and an illumination "
+        "gradient look the same to first order)");
   std::vector<const Image*> ptrs;
   for (const Image& f : flats) ptrs.push_back(&f);
   VignettingSummary s;
@@ -206,10 +206,11 @@ void RunVignetting(const VignettingArgs& a) {
     } catch (const Error& e) {
       throw Error(a.lens + ": " + e.what());
     }
-    if (std::abs(double(k.width) / k.height - double(m.width) / m.height) > 0.01 * k.width / k.height)
+    if (std::abs(double(k.width) / k.height - double(m.width) / m.height) >
+        0.01 * k.width / k.height)
       throw Error(a.lens + ": the lens is " + std::to_string(k.width) + "x" +
-                  std::to_string(k.height) + ", the flat fields " + std::to_string(m.width) +
-                  "x" + std::to_string(m.height) + " (another aspect ratio)");
+                  std::to_string(k.height) + ", the flat fields " + std::to_string(m.width) + "x" +
+                  std::to_string(m.height) + " (another aspect ratio)");
     lens["vignetting"] = m;
     WriteFileAtomic(a.lens, lens.dump(2) + "\n");
   }
@@ -254,8 +255,8 @@ void RegisterCalibPhotometric(CLI::App* calib) {
   c->callback([n] { RunNd(*n); });
 
   auto v = std::make_shared<VignettingArgs>();
-  CLI::App* d = calib->add_subcommand(
-      "vignetting", "Lens vignetting (radial fall-off) from flat-field frames");
+  CLI::App* d = calib->add_subcommand("vignetting",
+                                      "Lens vignetting (radial fall-off) from flat-field frames");
   d->footer(
       "Flat fields: frames of a uniform field filling the view (an overcast sky through a\n"
       "diffuser, a light panel), each exposed without clipping; several frames average the\n"

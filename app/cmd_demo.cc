@@ -7,9 +7,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <map>
-#include <numeric>
-
 #include <nlohmann/json.hpp>
+#include <numeric>
 
 #include "app/commands.h"
 #include "app/pipeline.h"
@@ -83,9 +82,8 @@ void Run(const DemoArgs& a) {
   RigConfig rig = ParseRig(kSimRig, "rigs/sim.toml (built in)");
   rig.quick = a.quick;
   rig.seed = a.seed;
-  say(std::string("capturing a simulated field session (") + (a.quick ? "quick" : "full") +
-      ", " + std::to_string(rig.plan.slots.size()) + " times of day) into " +
-      (out / "session").string());
+  say(std::string("capturing a simulated field session (") + (a.quick ? "quick" : "full") + ", " +
+      std::to_string(rig.plan.slots.size()) + " times of day) into " + (out / "session").string());
   RigDevices dev = OpenRig(rig);
   auto* sim_cam = dynamic_cast<SimCamera*>(dev.camera.get());
   auto world = std::static_pointer_cast<SimWorld>(dev.keep_alive);
@@ -118,8 +116,9 @@ void Run(const DemoArgs& a) {
       diffs.push_back(sensor.TrueLogExposure(c, z) - calib.response.g[c][z]);
     double offset = Percentile(diffs, 0.5);
     for (int z = 10; z <= 245; ++z)
-      resp_err = std::max(resp_err, std::abs(std::exp(calib.response.g[c][z] + offset -
-                                                      sensor.TrueLogExposure(c, z)) - 1));
+      resp_err = std::max(
+          resp_err,
+          std::abs(std::exp(calib.response.g[c][z] + offset - sensor.TrueLogExposure(c, z)) - 1));
     to_truth[c] = std::exp(offset);  // TrueLogExposure is ln(true radiance x exposure factor)
   }
   m["response_max_rel_error"] = resp_err;
@@ -139,7 +138,8 @@ void Run(const DemoArgs& a) {
     for (const Eigen::Vector3d& d : HemisphereDirections(2000, 3.0)) {
       if (d.dot(truth_dir) > std::cos(3.0 * M_PI / 180)) continue;  // the sun's own disc
       Eigen::Vector3d fit = ss.lighting.sky.Radiance(d), tru = world->TrueSkyRadiance(d);
-      for (int c = 0; c < 3; ++c) sky_err.push_back(std::abs(to_truth[c] * fit[c] - tru[c]) / tru[c]);
+      for (int c = 0; c < 3; ++c)
+        sky_err.push_back(std::abs(to_truth[c] * fit[c] - tru[c]) / tru[c]);
     }
   }
   m["sun_direction_error_deg"] = Mean(sun_dir_err);
@@ -187,12 +187,10 @@ void Run(const DemoArgs& a) {
     return v.empty() ? 0.0 : s / v.size();
   };
   for (const auto& [block, b] : by_block)
-    m["albedo_by_block"][block] = {{"sun_rel_error_mean", mean_abs(b.sun)},
-                                   {"skyenv_rel_error_mean", mean_abs(b.se)},
-                                   {"sun_rel_bias", Mean(b.sun)},
-                                   {"skyenv_rel_bias", Mean(b.se)},
-                                   {"points_sun", b.sun.size() / 3},
-                                   {"points_skyenv", b.se.size() / 3}};
+    m["albedo_by_block"][block] = {
+        {"sun_rel_error_mean", mean_abs(b.sun)}, {"skyenv_rel_error_mean", mean_abs(b.se)},
+        {"sun_rel_bias", Mean(b.sun)},           {"skyenv_rel_bias", Mean(b.se)},
+        {"points_sun", b.sun.size() / 3},        {"points_skyenv", b.se.size() / 3}};
 
   // 4. Held-out time: render every architecture view and compare with the truth, first under
   // the lighting measured at that time, then under lighting predicted from the other times
@@ -211,8 +209,8 @@ void Run(const DemoArgs& a) {
                                   std::to_string(v));
       if (it == calib.groups.end()) break;
       const HdrGroup& g = it->second;
-      Image rendered = RenderView(solved.mesh, solved.grid, *solved.caster, solved.albedo,
-                                  lighting, irr, g.intrinsics, g.pose, RenderOptions{});
+      Image rendered = RenderView(solved.mesh, solved.grid, *solved.caster, solved.albedo, lighting,
+                                  irr, g.intrinsics, g.pose, RenderOptions{});
       Image truth = world->RenderRadiance(g.intrinsics, g.pose);
       Image ids = world->RenderBlockIds(g.intrinsics, g.pose);
       // Truth in the recovered units, for tone mapping both the same way.
@@ -261,7 +259,8 @@ void Run(const DemoArgs& a) {
   };
   if (heldout < 0) throw Error("demo: the rig names no held-out time");
   const SlotSolve& hs = solved.slots.at(heldout);
-  const HeldoutScore measured = score_heldout(hs.lighting, solved.irradiance.at(heldout), "heldout");
+  const HeldoutScore measured =
+      score_heldout(hs.lighting, solved.irradiance.at(heldout), "heldout");
   m["heldout_render_rel_rmse"] = measured.rel_rmse;
   m["heldout_render_psnr_db"] = measured.psnr_db;
   const int64_t npx = measured.pixels;
@@ -275,8 +274,8 @@ void Run(const DemoArgs& a) {
   RelightSummary rsum;
   const Lighting predicted = predictor.At(hs.lighting.utc, SessionSite(session), &rsum);
   say("predicted " + rsum.Describe());
-  const HeldoutScore pred = score_heldout(predicted, IrradianceFor(solved, predicted),
-                                          "heldout_predicted");
+  const HeldoutScore pred =
+      score_heldout(predicted, IrradianceFor(solved, predicted), "heldout_predicted");
   m["heldout_predicted_render_rel_rmse"] = pred.rel_rmse;
   m["heldout_predicted_render_psnr_db"] = pred.psnr_db;
   {
@@ -298,8 +297,7 @@ void Run(const DemoArgs& a) {
   }
   m["heldout_building_pixels"] = npx;
   m["frames_captured"] = static_cast<int>(session.frames().size());
-  m["wall_seconds"] =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  m["wall_seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   m["quick"] = a.quick;
   for (auto& [k, v] : m.items())
     if (v.is_number_float() && !std::isfinite(v.get<double>()))
@@ -313,16 +311,18 @@ void Run(const DemoArgs& a) {
   std::printf("  sun radiance        relative error      %.4f\n", Mean(sun_rad_err));
   std::printf("  sky                 relative error      median %.4f  p90 %.4f\n",
               m["sky_rel_error_median"].get<double>(), m["sky_rel_error_p90"].get<double>());
-  std::printf("  pseudo-albedo       relative error      sun %.4f  sky+env %.4f\n",
-              Mean(e_sun), Mean(e_se));
+  std::printf("  pseudo-albedo       relative error      sun %.4f  sky+env %.4f\n", Mean(e_sun),
+              Mean(e_se));
   std::printf("  held-out render     relative RMSE       %.4f  PSNR %.2f dB\n",
-              m["heldout_render_rel_rmse"].get<double>(), m["heldout_render_psnr_db"].get<double>());
-  std::printf("  held-out, predicted  relative RMSE       %.4f  PSNR %.2f dB  (sky median %.4f, "
-              "sun %.4f)\n",
-              pred.rel_rmse, pred.psnr_db, m["heldout_predicted_sky_rel_error_median"].get<double>(),
-              m["heldout_predicted_sun_radiance_rel_error"].get<double>());
-  std::printf("  wrote %s, %s, %s\n", (out / "metrics.json").c_str(),
-              (out / "heldout.png").c_str(), (out / "heldout_truth.png").c_str());
+              m["heldout_render_rel_rmse"].get<double>(),
+              m["heldout_render_psnr_db"].get<double>());
+  std::printf(
+      "  held-out, predicted  relative RMSE       %.4f  PSNR %.2f dB  (sky median %.4f, "
+      "sun %.4f)\n",
+      pred.rel_rmse, pred.psnr_db, m["heldout_predicted_sky_rel_error_median"].get<double>(),
+      m["heldout_predicted_sun_radiance_rel_error"].get<double>());
+  std::printf("  wrote %s, %s, %s\n", (out / "metrics.json").c_str(), (out / "heldout.png").c_str(),
+              (out / "heldout_truth.png").c_str());
 }
 
 }  // namespace
@@ -330,8 +330,9 @@ void Run(const DemoArgs& a) {
 void RegisterDemo(CLI::App& app) {
   auto a = std::make_shared<DemoArgs>();
   CLI::App* c = app.add_subcommand(
-      "demo", "The whole pipeline on a built-in simulated world: capture, calibrate, solve, "
-              "render a held-out time, score against ground truth");
+      "demo",
+      "The whole pipeline on a built-in simulated world: capture, calibrate, solve, "
+      "render a held-out time, score against ground truth");
   c->footer(
       "No camera and no download needed. A campanile on a plaza in Berkeley is captured at five\n"
       "times of day by simulated devices through the real capture controller; the architecture\n"

@@ -466,8 +466,8 @@ void RunImport(const ImportArgs& a) {
   // An import of the same folder killed earlier left its temporary session: no process holds
   // it any more, so it goes (one still being written is another import's, and stays).
   const std::string prefix = out.filename().string() + ".tmp-";
-  for (const auto& e : fs::directory_iterator(
-           out.parent_path().empty() ? fs::path(".") : out.parent_path(), ec)) {
+  for (const auto& e :
+       fs::directory_iterator(out.parent_path().empty() ? fs::path(".") : out.parent_path(), ec)) {
     if (e.is_directory(ec) && e.path().filename().string().rfind(prefix, 0) == 0 &&
         !SessionInUse(e.path())) {
       std::fprintf(stderr, "rouen import: removing %s, left by an import that was interrupted\n",

@@ -4,9 +4,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
-#include <string>
-
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "app/commands.h"
 #include "app/options.h"
@@ -114,16 +113,16 @@ void Run(const RenderArgs& a) {
   SlotIrradiance irr;
   if (a.have_slot) {
     if (a.slot >= static_cast<int>(solved.slots.size()))
-      throw Error(a.session + ": slot " + std::to_string(a.slot) + " does not exist (the session has " +
-                  std::to_string(solved.slots.size()) + ")");
+      throw Error(a.session + ": slot " + std::to_string(a.slot) +
+                  " does not exist (the session has " + std::to_string(solved.slots.size()) + ")");
     lighting = solved.slots[a.slot].lighting;
     irr = solved.irradiance.at(a.slot);
   } else {
     RelightOptions ro;
     ro.pbs = a.pbs;
     if (!a.overcast_colour.empty())
-      ro.overcast_colour = Eigen::Vector3d(a.overcast_colour[0], a.overcast_colour[1],
-                                           a.overcast_colour[2]);
+      ro.overcast_colour =
+          Eigen::Vector3d(a.overcast_colour[0], a.overcast_colour[1], a.overcast_colour[2]);
     ro.overcast_brightness = a.overcast_brightness;
     std::vector<Lighting> measured;
     for (const SlotSolve& ss : solved.slots) measured.push_back(ss.lighting);
@@ -174,8 +173,10 @@ void RegisterRender(CLI::App& app) {
   CLI::Option* slot = c->add_option("--slot", a->slot,
                                     "Render under the lighting of this captured slot (0, 1, ...)")
                           ->check(Within(0, INFINITY));
-  c->add_option("--time", a->time, "Render at this time (ISO 8601 with offset, e.g. 2026-08-25T19:40:00-07:00)");
-  c->add_option("--view", a->view, "Camera of this bracket (e.g. slot0/architecture/view1; default: the first)");
+  c->add_option("--time", a->time,
+                "Render at this time (ISO 8601 with offset, e.g. 2026-08-25T19:40:00-07:00)");
+  c->add_option("--view", a->view,
+                "Camera of this bracket (e.g. slot0/architecture/view1; default: the first)");
   c->add_option("--lens", a->lens, "Camera intrinsics JSON (with --pose)");
   c->add_option("--pose", a->pose, "Camera pose JSON (with --lens)");
   // The predicted sky's options have no meaning for a captured slot's lighting.

@@ -5,10 +5,9 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "app/commands.h"
 #include "app/options.h"
@@ -195,18 +194,18 @@ void RunFit(const SkyFitArgs& a) {
   WriteFileAtomic(out, j.dump(2) + "\n");
   outputs.Commit();
   std::printf("sky fit (%s): %d samples, %zu fitted pixels (mask: %s)\n",
-              SkyModelKindName(summary.model), summary.samples, rel[0].size(),
-              mask_source.c_str());
+              SkyModelKindName(summary.model), summary.samples, rel[0].size(), mask_source.c_str());
   if (summary.model == SkyModelKind::kCie)
     std::printf("  best CIE standard sky: type %d (%s)\n", summary.cie_type,
                 CieStandardSky(summary.cie_type).name);
   const char* names[3] = {"R", "G", "B"};
   for (int c = 0; c < 3; ++c) {
     const SkyParams& p = fit.channel[c];
-    std::printf("  %s  Lz %.5g a %.4f b %.4f c %.4f d %.4f e %.4f h %.4f   rel error median "
-                "%.4f p90 %.4f\n",
-                names[c], p.Lz, p.a, p.b, p.c, p.d, p.e, p.h, Percentile(rel[c], 0.5),
-                Percentile(rel[c], 0.9));
+    std::printf(
+        "  %s  Lz %.5g a %.4f b %.4f c %.4f d %.4f e %.4f h %.4f   rel error median "
+        "%.4f p90 %.4f\n",
+        names[c], p.Lz, p.a, p.b, p.c, p.d, p.e, p.h, Percentile(rel[c], 0.5),
+        Percentile(rel[c], 0.9));
   }
   std::printf("wrote %s\n", a.out.c_str());
 }
@@ -270,14 +269,11 @@ void RegisterSky(CLI::App& app) {
       "rel_error_median and rel_error_p90 over the fitted pixels; the model kind.\n"
       "Example: rouen sky fit --image sky.exr --projection equirect --sun-azimuth 190\n"
       "           --sun-elevation 62 --out fit.json");
-  c->add_option("--image", f->image, "Sky panorama, floating-point radiance (EXR/HDR)")
-      ->required();
-  c->add_option("--projection", f->projection, "Image projection (only 'equirect')")
-      ->required();
+  c->add_option("--image", f->image, "Sky panorama, floating-point radiance (EXR/HDR)")->required();
+  c->add_option("--projection", f->projection, "Image projection (only 'equirect')")->required();
   c->add_option("--sun-azimuth", f->sun_azimuth, "Sun azimuth, degrees from north eastward")
       ->required();
-  c->add_option("--sun-elevation", f->sun_elevation, "Sun elevation, degrees (>= -5)")
-      ->required();
+  c->add_option("--sun-elevation", f->sun_elevation, "Sun elevation, degrees (>= -5)")->required();
   c->add_option("--azimuth-offset", f->azimuth_offset,
                 "Azimuth of the image's left edge, degrees (rotates the panorama)")
       ->check(Within(-360, 360, "deg"));
@@ -299,8 +295,9 @@ void RegisterSky(CLI::App& app) {
 
   auto r = std::make_shared<SkyRenderArgs>();
   CLI::App* rc = sky->add_subcommand("render", "Draw a fitted sky as an equirect panorama");
-  rc->footer("Example: rouen sky render fit.json --out sky.exr --width 1024\n"
-             "Below the horizon each column shows its horizon value.");
+  rc->footer(
+      "Example: rouen sky render fit.json --out sky.exr --width 1024\n"
+      "Below the horizon each column shows its horizon value.");
   rc->add_option("fit", r->fit, "FIT.json from `rouen sky fit`")->required();
   rc->add_option("--out", r->out, "Radiance to write (.exr, or .hdr, .pfm, .tif)")->required();
   rc->add_option("--width", r->width,

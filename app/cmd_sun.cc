@@ -1,8 +1,7 @@
 // rouen sun: solar position for a place and time, or for a CSV batch.
 #include <cstdio>
-#include <sstream>
-
 #include <nlohmann/json.hpp>
+#include <sstream>
 
 #include "app/commands.h"
 #include "app/options.h"

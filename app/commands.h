@@ -7,10 +7,10 @@ namespace rouen {
 
 void RegisterSun(CLI::App& app);
 void RegisterCapture(CLI::App& app);
-void RegisterCalib(CLI::App& app);  // rouen calib response
-void RegisterCalibGeometry(CLI::App* calib);  // rouen calib intrinsics|pose
+void RegisterCalib(CLI::App& app);               // rouen calib response
+void RegisterCalibGeometry(CLI::App* calib);     // rouen calib intrinsics|pose
 void RegisterCalibPhotometric(CLI::App* calib);  // rouen calib nd|vignetting
-void RegisterCalibEnvmap(CLI::App* calib);  // rouen calib envmap|orient
+void RegisterCalibEnvmap(CLI::App* calib);       // rouen calib envmap|orient
 void RegisterHdr(CLI::App& app);
 void RegisterDemo(CLI::App& app);
 void RegisterDevices(CLI::App& app);

@@ -73,8 +73,8 @@ std::map<std::string, VignettingModel> ReadSessionVignetting(const Session& sess
     try {
       out[key] = model.get<VignettingModel>();
     } catch (const Error& e) {
-      throw Error((session.dir() / "session.json").string() + ": extra.vignetting." + key +
-                  ": " + e.what());
+      throw Error((session.dir() / "session.json").string() + ": extra.vignetting." + key + ": " +
+                  e.what());
     }
   }
   return out;
@@ -174,8 +174,10 @@ std::vector<uint8_t> SkyMaskFor(const Session& session, const HdrGroup& group,
   if (extra.contains("sky_masks")) {
     const nlohmann::json& m = extra["sky_masks"];
     if (!m.is_object()) throw Error(json + ": extra.sky_masks must map group names to masks");
-    if (m.contains(group.name)) key = group.name;
-    else if (m.contains("*")) key = "*";
+    if (m.contains(group.name))
+      key = group.name;
+    else if (m.contains("*"))
+      key = "*";
   }
   std::vector<uint8_t> mask;
   if (key.empty()) {
@@ -187,8 +189,8 @@ std::vector<uint8_t> SkyMaskFor(const Session& session, const HdrGroup& group,
       throw Error(json + ": extra.sky_masks." + key + " must be an image file name or \"auto\"");
     if (entry == "auto") {
       try {
-        mask = SegmentSky(group.radiance, group.intrinsics, group.pose, sun_dir,
-                          SkySegmentOptions{});
+        mask =
+            SegmentSky(group.radiance, group.intrinsics, group.pose, sun_dir, SkySegmentOptions{});
       } catch (const Error& e) {
         throw Error(group.name + ": " + e.what() + " (give a mask file in " + json +
                     " extra.sky_masks." + key + ")");
@@ -196,8 +198,8 @@ std::vector<uint8_t> SkyMaskFor(const Session& session, const HdrGroup& group,
       if (source) *source = "automatic";
     } else {
       const std::string path = ResolveInside(session.dir(), entry.get<std::string>()).string();
-      mask = ReadMask(path, group.radiance.width, group.radiance.height,
-                      "the merged " + group.name);
+      mask =
+          ReadMask(path, group.radiance.width, group.radiance.height, "the merged " + group.name);
       if (source) *source = path;
     }
   }
@@ -210,8 +212,8 @@ std::vector<SkySample> SlotSkySamples(const Session& session, const CalibResult&
   std::vector<SkySample> samples;
   if (sources) sources->clear();
   for (int v = 0;; ++v) {
-    const auto it = calib.groups.find("slot" + std::to_string(slot) + "/sky/view" +
-                                      std::to_string(v));
+    const auto it =
+        calib.groups.find("slot" + std::to_string(slot) + "/sky/view" + std::to_string(v));
     if (it == calib.groups.end()) break;
     const HdrGroup& g = it->second;
     std::string source;
@@ -422,9 +424,9 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
     const Eigen::Vector3d sun_dir = ss.sun.DirectionEnu();
     // §3.1: sun radiance from the ND frames and the sun's solid angle for the date.
     SunPosition at_sun_frame = ComputeSunPosition(sun_g->utc, site);
-    ss.sun_measured = MeasureSun(sun_g->radiance, sun_g->intrinsics, sun_g->pose,
-                                 at_sun_frame.DirectionEnu(), at_sun_frame.SolidAngleSr(),
-                                 SunOptions{});
+    ss.sun_measured =
+        MeasureSun(sun_g->radiance, sun_g->intrinsics, sun_g->pose, at_sun_frame.DirectionEnu(),
+                   at_sun_frame.SolidAngleSr(), SunOptions{});
     // §3.2: the seven-parameter sky per channel, from every sky photo of the slot.
     std::string mask_source;
     const std::vector<SkySample> samples = SlotSkySamples(session, calib, s, sun_dir, &mask_source);
@@ -486,8 +488,7 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   // Sun directions per slot let footprints that straddle a shadow edge be dropped.
   std::vector<Eigen::Vector3d> sun_dirs;
   for (const SlotSolve& ss : r.slots) sun_dirs.push_back(ss.lighting.sun_dir);
-  std::vector<Observation> obs =
-      CollectObservations(r.grid, *r.caster, photos, {}, &os, &sun_dirs);
+  std::vector<Observation> obs = CollectObservations(r.grid, *r.caster, photos, {}, &os, &sun_dirs);
   Log(options, std::to_string(obs.size()) + " observations of " +
                    std::to_string(os.points_observed) + " grid points in " +
                    std::to_string(photos.size()) + " photos");
@@ -503,7 +504,8 @@ SlotIrradiance IrradianceFor(const SolveResult& solved, const Lighting& lighting
   const AlbedoOptions ao;
   IrradianceOptions io = ao.irradiance;
   io.mesh = &solved.mesh;
-  SlotIrradiance irr = ComputeIrradiance(solved.grid, solved.hemisphere, *solved.caster, lighting, io);
+  SlotIrradiance irr =
+      ComputeIrradiance(solved.grid, solved.hemisphere, *solved.caster, lighting, io);
   AddInterreflection(solved.grid, solved.hemisphere, solved.albedo.rho_sun, solved.albedo.rho_se,
                      &irr, ao.bounces);
   return irr;

@@ -25,7 +25,7 @@
 namespace rouen {
 
 struct PipelineOptions {
-  std::filesystem::path work_dir;        // calib/ and scene/ are written here
+  std::filesystem::path work_dir;         // calib/ and scene/ are written here
   std::vector<int> exclude_albedo_slots;  // held-out slots: their architecture photos unused
   bool quick = false;
   // A response curve known from an earlier calibration: used instead of recovering one.
@@ -38,11 +38,11 @@ struct HdrGroup {
   std::string name;
   int slot = 0;
   Target target = Target::kArchitecture;
-  Image radiance;                // kRadiance
-  std::vector<uint8_t> valid;    // 1 where some frame was well exposed
+  Image radiance;              // kRadiance
+  std::vector<uint8_t> valid;  // 1 where some frame was well exposed
   Intrinsics intrinsics;
   Pose pose;
-  UtcTime utc;                   // median frame time
+  UtcTime utc;  // median frame time
   double nd_density = 0;
 };
 
@@ -71,7 +71,7 @@ Mesh ReadSessionModel(const Session& session);
 struct SlotSolve {
   int slot = 0;
   UtcTime utc;
-  SunPosition sun;            // from GPS site + UTC (ERFA)
+  SunPosition sun;  // from GPS site + UTC (ERFA)
   SunMeasurement sun_measured;
   SkyFitSummary sky_summary;
   Lighting lighting;

@@ -1,11 +1,11 @@
 // A one-line progress display on stderr (only when stderr is a terminal or forced).
 #pragma once
 
+#include <unistd.h>
+
 #include <chrono>
 #include <cstdio>
 #include <string>
-
-#include <unistd.h>
 
 namespace rouen {
 

@@ -196,8 +196,7 @@ void PrintTable(std::vector<DataSet>& sets) {
         c2 = RecoverResponse(d.brackets, Samples(400, m), nullptr);
         const std::string name = std::string("rouen ") + ResponseMethodName(m);
         std::printf("%-28s %10.1f %10.2f %12.3f %9s %10.3f", name.c_str(), t * 1e3, t_cv_dm / t,
-                    MaxDelta(c1, c2), Monotone(c1) && Monotone(c2) ? "yes" : "NO",
-                    s1.residual_rms);
+                    MaxDelta(c1, c2), Monotone(c1) && Monotone(c2) ? "yes" : "NO", s1.residual_rms);
         if (m == ResponseMethod::kDebevecMalik) {
           dm = c1;
           std::printf("   (scan stride %d)\n", s1.scan_stride);
@@ -226,13 +225,13 @@ void PrintTable(std::vector<DataSet>& sets) {
     const double t_new =
         Time(5, [&] { hdr = MergeHdr(ptrs, d.brackets[0].exposures, dm, MergeOptions{}); });
     Image reused;
-    const double t_r = Time(
-        5, [&] { MergeHdrInto(ptrs, d.brackets[0].exposures, dm, MergeOptions{}, &reused); });
+    const double t_r =
+        Time(5, [&] { MergeHdrInto(ptrs, d.brackets[0].exposures, dm, MergeOptions{}, &reused); });
     MergeOptions ghost;
     ghost.ghost_removal = true;
     MergeSummary gs;
-    const double t_g = Time(
-        3, [&] { MergeHdrInto(ptrs, d.brackets[0].exposures, dm, ghost, &reused, &gs); });
+    const double t_g =
+        Time(3, [&] { MergeHdrInto(ptrs, d.brackets[0].exposures, dm, ghost, &reused, &gs); });
     int64_t used = 0;
     const double corr = LogLumCorrelation(hdr, cv_hdr, &used);
     std::printf("%-28s %10s %12s %10s\n", "HDR merge (same curve)", "time ms", "input MP/s",

@@ -1,9 +1,9 @@
 // Speed of the pipeline's building blocks (Google Benchmark). Peer comparisons (OpenCV HDR,
 // Monte Carlo irradiance) arrive with the issues that ask for them.
+#include <benchmark/benchmark.h>
+
 #include <cmath>
 #include <random>
-
-#include <benchmark/benchmark.h>
 
 #include "calib/hdr.h"
 #include "core/solar.h"
@@ -47,9 +47,9 @@ void BM_MergeHdr(benchmark::State& state) {
   std::vector<const Image*> ptrs;
   for (const Image& f : frames) ptrs.push_back(&f);
   for (auto _ : state) benchmark::DoNotOptimize(MergeHdr(ptrs, exposures, curve, MergeOptions{}));
-  state.counters["input_MP/s"] = benchmark::Counter(
-      static_cast<double>(w) * h * frames.size() * 1e-6 * state.iterations(),
-      benchmark::Counter::kIsRate);
+  state.counters["input_MP/s"] =
+      benchmark::Counter(static_cast<double>(w) * h * frames.size() * 1e-6 * state.iterations(),
+                         benchmark::Counter::kIsRate);
 }
 BENCHMARK(BM_MergeHdr)->Unit(benchmark::kMillisecond);
 

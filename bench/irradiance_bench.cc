@@ -20,7 +20,6 @@
 // The Monte Carlo sample count reaching the vector flux's error comes from a log-log fit of
 // Monte Carlo's measured error against the reference over K = 64 .. 65536.
 #include <benchmark/benchmark.h>
-
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -28,9 +27,9 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <string>
 #include <ctime>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "capture/sim/sim_scene.h"
@@ -213,8 +212,8 @@ void Study(bool use_env) {
   const Lighting l = DemoLighting(use_env);
   const int n = static_cast<int>(w.sample.size());
   std::printf("\n== %s: %d grid points of the demo model (%zu triangles, %d grid points) ==\n",
-              use_env ? "ENVIRONMENT MAP (the demo's path)" : "SKY MODEL (eq. 9), adaptive",
-              n, w.mesh.triangles.size(), w.grid.size());
+              use_env ? "ENVIRONMENT MAP (the demo's path)" : "SKY MODEL (eq. 9), adaptive", n,
+              w.mesh.triangles.size(), w.grid.size());
 
   // --- Reference: fine vector flux, validated against 1M-direction Monte Carlo.
   VfSetup fine(l, 8, 0.005, 64, true);
@@ -237,11 +236,12 @@ void Study(bool use_env) {
   std::vector<Eigen::Vector3d> mc_mean(nval);
   for (int k = 0; k < nval; ++k) mc_mean[k] = 0.5 * (mc_a[k] + mc_b[k]);
   const double diff = MeanRelError(mc_mean, ref_sub, &diff_worst);
-  std::printf("reference: fine vector flux (all faces, 8-level tree, tol 0.005, 64 arcs; sky "
-              "tree %.2f s). Validation on %d points vs 2 x 1048576-direction Monte Carlo: "
-              "mean rel diff %.2e (max %.2e); that Monte Carlo's own noise ~%.2e (1 run), "
-              "%.2e (mean of 2)\n",
-              fine_tree_s, nval, diff, diff_worst, noise, noise / std::sqrt(2.0));
+  std::printf(
+      "reference: fine vector flux (all faces, 8-level tree, tol 0.005, 64 arcs; sky "
+      "tree %.2f s). Validation on %d points vs 2 x 1048576-direction Monte Carlo: "
+      "mean rel diff %.2e (max %.2e); that Monte Carlo's own noise ~%.2e (1 run), "
+      "%.2e (mean of 2)\n",
+      fine_tree_s, nval, diff, diff_worst, noise, noise / std::sqrt(2.0));
 
   // --- Default vector flux (every face in front, exact culling), and the Embree id-buffer
   // occluder selection against it (same discretisation).
@@ -290,8 +290,8 @@ void Study(bool use_env) {
       const std::vector<int> cand =
           SelectOccluders(w.mesh, *w.rc, *w.adj, o, p.normal, p.triangle, def_sel.select);
       std::printf("point %d tri %d pos %s n %s rel %.2e sel %zu\n", i, p.triangle,
-                  std::to_string(p.position.x()).c_str(), std::to_string(p.normal.z()).c_str(),
-                  r, cand.size());
+                  std::to_string(p.position.x()).c_str(), std::to_string(p.normal.z()).c_str(), r,
+                  cand.size());
       for (int t = 0; t < static_cast<int>(w.mesh.triangles.size()); ++t) {
         if (std::binary_search(cand.begin(), cand.end(), t) || t == p.triangle) continue;
         const PointVisibility one(w.mesh, o, p.normal, p.triangle, std::vector<int>{t});
@@ -309,25 +309,27 @@ void Study(bool use_env) {
       }
     }
   }
-  std::printf("occluder selection (Embree id buffer %dx%d rays, silhouette pixels, +%d ring): "
-              "%.1f occluders/point vs %.1f with every face in front (after exact culling); "
-              "irradiance vs all faces: mean rel diff %.2e, max %.2e; geometry %.3f ms vs %.3f "
-              "ms CPU/point (default: all faces)\n",
-              def_sel.select.resolution, def_sel.select.resolution, def_sel.select.grow_rings,
-              static_cast<double>(occ_sel) / n, static_cast<double>(occ_all) / n, sel_err,
-              sel_worst, geom_sel_s * 1e3, geom_s * 1e3);
+  std::printf(
+      "occluder selection (Embree id buffer %dx%d rays, silhouette pixels, +%d ring): "
+      "%.1f occluders/point vs %.1f with every face in front (after exact culling); "
+      "irradiance vs all faces: mean rel diff %.2e, max %.2e; geometry %.3f ms vs %.3f "
+      "ms CPU/point (default: all faces)\n",
+      def_sel.select.resolution, def_sel.select.resolution, def_sel.select.grow_rings,
+      static_cast<double>(occ_sel) / n, static_cast<double>(occ_all) / n, sel_err, sel_worst,
+      geom_sel_s * 1e3, geom_s * 1e3);
   double vf_worst;
   const double vf_err = MeanRelError(vf, ref, &vf_worst);
   const double tree_per_point = use_env ? 0 : tree_s / w.grid.size();
   std::printf("vector flux (default: %s): vs reference mean rel error %.2e, max %.2e (%s)\n",
               use_env ? "4 arcs per parallel" : "6-level tree, tol 0.1", vf_err, vf_worst,
               vf_err <= 0.005 ? "<= 0.5%" : "ABOVE 0.5%");
-  std::printf("  geometry (projection + culling + clipping) %.3f ms/point; evaluation %.2f "
-              "us/point (%.0f cached entries, %.0f partly visible deepest nodes); per lighting "
-              "%s%.2f ms for the whole grid = %.2f us/point amortised over %d points\n",
-              geom_s * 1e3, eval_s * 1e6, static_cast<double>(entries) / n,
-              static_cast<double>(partial) / n, use_env ? "(nothing) " : "sky tree ",
-              use_env ? 0.0 : tree_s * 1e3, tree_per_point * 1e6, w.grid.size());
+  std::printf(
+      "  geometry (projection + culling + clipping) %.3f ms/point; evaluation %.2f "
+      "us/point (%.0f cached entries, %.0f partly visible deepest nodes); per lighting "
+      "%s%.2f ms for the whole grid = %.2f us/point amortised over %d points\n",
+      geom_s * 1e3, eval_s * 1e6, static_cast<double>(entries) / n,
+      static_cast<double>(partial) / n, use_env ? "(nothing) " : "sky tree ",
+      use_env ? 0.0 : tree_s * 1e3, tree_per_point * 1e6, w.grid.size());
 
   // --- Monte Carlo convergence (vs the reference), from scratch and with visibility cached.
   std::vector<double> ks, errs, t_scratch, t_cached;
@@ -348,9 +350,10 @@ void Study(bool use_env) {
     errs.push_back(err);
     t_scratch.push_back(build_s + cached_s);
     t_cached.push_back(cached_s);
-    std::printf("monte carlo K=%6d: mean rel error %.2e, max %.2e; from scratch %.3f ms/point, "
-                "cached %.3f ms/point\n",
-                strata * strata, err, worst, (build_s + cached_s) * 1e3, cached_s * 1e3);
+    std::printf(
+        "monte carlo K=%6d: mean rel error %.2e, max %.2e; from scratch %.3f ms/point, "
+        "cached %.3f ms/point\n",
+        strata * strata, err, worst, (build_s + cached_s) * 1e3, cached_s * 1e3);
   }
   // log-log least-squares fit err = a K^slope over the runs.
   double sx = 0, sy = 0, sxx = 0, sxy = 0;
@@ -373,23 +376,26 @@ void Study(bool use_env) {
   const double big_k = 1024.0 * 1024.0;
   std::printf("monte carlo K=%.0f (the %d validation points): mean rel error %.2e, max %.2e\n",
               big_k, nval, big_err, big_worst);
-  std::printf("monte carlo error ~ K^%.2f (fit over K = 64..65536): reaching %.2e needs ~%.3g "
-              "directions/point: %.1f ms from scratch, %.2f ms cached\n",
-              slope, vf_err, k_needed, mc_scratch * 1e3, mc_cached * 1e3);
+  std::printf(
+      "monte carlo error ~ K^%.2f (fit over K = 64..65536): reaching %.2e needs ~%.3g "
+      "directions/point: %.1f ms from scratch, %.2f ms cached\n",
+      slope, vf_err, k_needed, mc_scratch * 1e3, mc_cached * 1e3);
   const char* path = use_env ? "env" : "sky";
-  std::printf("RATIO (i)  from scratch, %s: monte carlo %.2f ms / vector flux %.3f ms = %.0fx "
-              "at error %.2e (%s)\n",
-              path, mc_scratch * 1e3, vf_scratch * 1e3, mc_scratch / vf_scratch, vf_err,
-              vf_err <= 0.005 ? "<= 0.5%" : "ABOVE 0.5%");
-  std::printf("RATIO (ii) visibility cached (per lighting), %s: monte carlo %.2f ms / vector "
-              "flux %.2f us = %.0fx at error %.2e\n",
-              path, mc_cached * 1e3, vf_cached * 1e6, mc_cached / vf_cached, vf_err);
+  std::printf(
+      "RATIO (i)  from scratch, %s: monte carlo %.2f ms / vector flux %.3f ms = %.0fx "
+      "at error %.2e (%s)\n",
+      path, mc_scratch * 1e3, vf_scratch * 1e3, mc_scratch / vf_scratch, vf_err,
+      vf_err <= 0.005 ? "<= 0.5%" : "ABOVE 0.5%");
+  std::printf(
+      "RATIO (ii) visibility cached (per lighting), %s: monte carlo %.2f ms / vector "
+      "flux %.2f us = %.0fx at error %.2e\n",
+      path, mc_cached * 1e3, vf_cached * 1e6, mc_cached / vf_cached, vf_err);
   if (vf_err <= big_err) {
     // No extrapolation: Monte Carlo at 1048576 directions is measured to be still worse.
-    std::printf("RATIO lower bounds without extrapolation (monte carlo at K=1048576 still has "
-                "%.2e > %.2e): (i) %.0fx, (ii) %.0fx\n",
-                big_err, vf_err, big_k * per_dir_scratch / vf_scratch,
-                big_k * per_dir_cached / vf_cached);
+    std::printf(
+        "RATIO lower bounds without extrapolation (monte carlo at K=1048576 still has "
+        "%.2e > %.2e): (i) %.0fx, (ii) %.0fx\n",
+        big_err, vf_err, big_k * per_dir_scratch / vf_scratch, big_k * per_dir_cached / vf_cached);
   }
 }
 
@@ -433,14 +439,16 @@ void DemoGridTiming() {
   t0 = std::chrono::steady_clock::now();
   ComputeIrradiance(w.grid, cache, *w.rc, l, vf_ns);
   const double vf_ns_s = secs(t0);
-  std::printf("\n== ComputeIrradiance on the whole demo grid (%d points, environment map, ground "
-              "shadow), wall time with TBB ==\nhemisphere cache (256 directions, once per model) "
-              "%.2f s; per slot: monte carlo %.2f s, vector flux %.2f s (ratio vf/mc %.2f); "
-              "mean rel difference of direct E_se %.2e (the 256-direction noise)\n",
-              w.grid.size(), cache_s, mc_s, vf_s, vf_s / mc_s, count ? diff / count : 0.0);
-  std::printf("without the ground-shadow correction: monte carlo %.2f s, vector flux %.2f s "
-              "(ratio vf/mc %.2f)\n",
-              mc_ns_s, vf_ns_s, vf_ns_s / mc_ns_s);
+  std::printf(
+      "\n== ComputeIrradiance on the whole demo grid (%d points, environment map, ground "
+      "shadow), wall time with TBB ==\nhemisphere cache (256 directions, once per model) "
+      "%.2f s; per slot: monte carlo %.2f s, vector flux %.2f s (ratio vf/mc %.2f); "
+      "mean rel difference of direct E_se %.2e (the 256-direction noise)\n",
+      w.grid.size(), cache_s, mc_s, vf_s, vf_s / mc_s, count ? diff / count : 0.0);
+  std::printf(
+      "without the ground-shadow correction: monte carlo %.2f s, vector flux %.2f s "
+      "(ratio vf/mc %.2f)\n",
+      mc_ns_s, vf_ns_s, vf_ns_s / mc_ns_s);
 }
 
 void BM_VectorFluxGeometryEnv(benchmark::State& state) {

@@ -16,9 +16,9 @@
 #include <cstdio>
 #include <cstdlib>
 #include <functional>
-#include <utility>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "capture/sim/almanac.h"
@@ -73,8 +73,7 @@ std::vector<TruthSky> DemoSkies() {
   for (const char* hm : {"07:45", "10:30", "13:30", "16:00", "18:15"}) {
     const UtcTime t = ParseIso8601(std::string("2026-08-25T") + hm + ":00-07:00");
     const AlmanacSun s = AlmanacSunPosition(t, site);
-    const Eigen::Vector3d toa =
-        atmosphere.params().solar_toa / (s.distance_au * s.distance_au);
+    const Eigen::Vector3d toa = atmosphere.params().solar_toa / (s.distance_au * s.distance_au);
     TruthSky ts;
     ts.label = hm;
     ts.sun = s.DirectionEnu();
@@ -193,8 +192,8 @@ void PrintDiagnostics() {
                   wt == SkyWeighting::kPaper ? "eq.10" : "relative");
       for (int c = 0; c < 3; ++c) {
         const SkyParams& p = fit.channel[c];
-        std::printf("  ch%d Lz %.4g a %.3f b %.3f c %.3f d %.3f e %.3f h %.3f\n", c, p.Lz, p.a,
-                    p.b, p.c, p.d, p.e, p.h);
+        std::printf("  ch%d Lz %.4g a %.3f b %.3f c %.3f d %.3f e %.3f h %.3f\n", c, p.Lz, p.a, p.b,
+                    p.c, p.d, p.e, p.h);
       }
       std::vector<std::vector<double>> by_el(9), by_sun(12);
       std::vector<double> sgn_el(9, 0.0);
@@ -216,7 +215,6 @@ void PrintDiagnostics() {
     }
   }
 }
-
 
 // ---------------------------------------------------------------------------------------------
 // Error study (ROUEN_SKY_BENCH_STUDY=1): where the demo's sky p90 comes from.
@@ -255,8 +253,9 @@ double P(const std::vector<ScoredError>& v, double q) {
 void PrintBreakdown(const std::vector<ScoredError>& all, const std::vector<TruthSky>& skies) {
   const double t90 = P(all, 0.9);
   const double n_tail = 0.1 * all.size();
-  auto row = [&](const char* name, const std::vector<std::pair<std::string,
-                                                               std::function<bool(const ScoredError&)>>>& cats) {
+  auto row = [&](const char* name,
+                 const std::vector<std::pair<std::string, std::function<bool(const ScoredError&)>>>&
+                     cats) {
     std::printf("  %-16s", name);
     for (const auto& [label, in] : cats) {
       std::vector<ScoredError> sub;
@@ -280,20 +279,18 @@ void PrintBreakdown(const std::vector<ScoredError>& all, const std::vector<Truth
   const double el_edges[] = {3, 10, 20, 45, 90.1};
   for (int i = 0; i < 4; ++i) {
     const double lo = el_edges[i], hi = el_edges[i + 1];
-    el.push_back({"el " + std::to_string(static_cast<int>(lo)) + "-" +
-                      std::to_string(static_cast<int>(hi)),
-                  [lo, hi](const ScoredError& e) {
-                    return e.elevation_deg >= lo && e.elevation_deg < hi;
-                  }});
+    el.push_back(
+        {"el " + std::to_string(static_cast<int>(lo)) + "-" + std::to_string(static_cast<int>(hi)),
+         [lo, hi](const ScoredError& e) { return e.elevation_deg >= lo && e.elevation_deg < hi; }});
   }
   const double sd_edges[] = {3, 15, 40, 90, 180.1};
   for (int i = 0; i < 4; ++i) {
     const double lo = sd_edges[i], hi = sd_edges[i + 1];
-    sd.push_back({"sun " + std::to_string(static_cast<int>(lo)) + "-" +
-                      std::to_string(static_cast<int>(hi)),
-                  [lo, hi](const ScoredError& e) {
-                    return e.sun_distance_deg >= lo && e.sun_distance_deg < hi;
-                  }});
+    sd.push_back(
+        {"sun " + std::to_string(static_cast<int>(lo)) + "-" + std::to_string(static_cast<int>(hi)),
+         [lo, hi](const ScoredError& e) {
+           return e.sun_distance_deg >= lo && e.sun_distance_deg < hi;
+         }});
   }
   for (int c = 0; c < 3; ++c) {
     ch.push_back({std::string(1, "RGB"[c]), [c](const ScoredError& e) { return e.channel == c; }});
@@ -339,9 +336,9 @@ void PrintFitStudy() {
     const char* name;
     double visibility_km;
   };
-  for (const Atmo& a : {Atmo{"demo atmosphere (visibility 35 km)", 35.0},
-                        Atmo{"hazy (visibility 15 km)", 15.0},
-                        Atmo{"clear (visibility 80 km)", 80.0}}) {
+  for (const Atmo& a :
+       {Atmo{"demo atmosphere (visibility 35 km)", 35.0}, Atmo{"hazy (visibility 15 km)", 15.0},
+        Atmo{"clear (visibility 80 km)", 80.0}}) {
     AtmosphereParams ap;
     ap.visibility_km = a.visibility_km;
     const std::vector<TruthSky> skies = Skies(ap);
@@ -356,8 +353,8 @@ void PrintFitStudy() {
       std::string ratios;
       for (size_t k = 0; k < skies.size(); ++k) {
         SkyModel fit;
-        const SkyFitSummary sum = FitSky(Samples(skies[k], 20000, 7), skies[k].sun, v.options,
-                                         &fit);
+        const SkyFitSummary sum =
+            FitSky(Samples(skies[k], 20000, 7), skies[k].sun, v.options, &fit);
         const std::vector<ScoredError> e = Score(fit, skies[k], static_cast<int>(k));
         all.insert(all.end(), e.begin(), e.end());
         std::printf("  %.4f/%.4f", P(e, 0.5), P(e, 0.9));
@@ -451,8 +448,7 @@ void BM_FitSky20k(benchmark::State& state, SkyModelKind kind, SkyWeighting weigh
   state.counters["p90_g"] = last.channel[1].rel_error_p90;
   state.counters["iterations_g"] = last.channel[1].iterations;
 }
-BENCHMARK_CAPTURE(BM_FitSky20k, seven_param, SkyModelKind::kSevenParam, SkyWeighting::kPaper,
-                  2.0)
+BENCHMARK_CAPTURE(BM_FitSky20k, seven_param, SkyModelKind::kSevenParam, SkyWeighting::kPaper, 2.0)
     ->Unit(benchmark::kMillisecond);
 // The pipeline's fit (app/pipeline.cc): relative residuals, L1.
 BENCHMARK_CAPTURE(BM_FitSky20k, seven_param_relative_l1, SkyModelKind::kSevenParam,

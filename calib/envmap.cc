@@ -6,9 +6,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <string>
-
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "core/error.h"
 
@@ -86,8 +85,7 @@ void EnvmapOptions::Validate() const {
 Eigen::Vector3d EnvmapDirection(int width, int height, double x, double y) {
   const double az = x / width * 2 * kPi;
   const double el = 0.5 * kPi - y / height * kPi;
-  return Eigen::Vector3d(std::cos(el) * std::sin(az), std::cos(el) * std::cos(az),
-                         std::sin(el));
+  return Eigen::Vector3d(std::cos(el) * std::sin(az), std::cos(el) * std::cos(az), std::sin(el));
 }
 
 Eigen::Vector2d EnvmapPixel(int width, int height, const Eigen::Vector3d& d) {
@@ -125,8 +123,7 @@ EnvmapResult AssembleEnvmap(const std::vector<EnvmapPhoto>& photos, const Envmap
     if (im.width != ph.intrinsics.width || im.height != ph.intrinsics.height) {
       throw Error(name + ": image is " + std::to_string(im.width) + "x" +
                   std::to_string(im.height) + " but its lens is " +
-                  std::to_string(ph.intrinsics.width) + "x" +
-                  std::to_string(ph.intrinsics.height));
+                  std::to_string(ph.intrinsics.width) + "x" + std::to_string(ph.intrinsics.height));
     }
     if (i == 0) channels = im.channels;
     if (im.channels != channels) {
@@ -141,8 +138,8 @@ EnvmapResult AssembleEnvmap(const std::vector<EnvmapPhoto>& photos, const Envmap
     if (!(ph.max_field_deg >= 0 && ph.max_field_deg <= 180)) {
       throw Error(name + ": max_field_deg must be in [0, 180]");
     }
-    Prepared p{&im, ph.intrinsics, r.transpose(), -2.0, 0.0,
-               ph.intrinsics.projection == Projection::kEquirect};
+    Prepared p{&im,  ph.intrinsics, r.transpose(),
+               -2.0, 0.0,           ph.intrinsics.projection == Projection::kEquirect};
     const Intrinsics& k = ph.intrinsics;
     if (k.projection == Projection::kFisheye) {
       p.circle_px = std::min({k.cx, k.cy, k.width - k.cx, k.height - k.cy});
@@ -182,15 +179,14 @@ EnvmapResult AssembleEnvmap(const std::vector<EnvmapPhoto>& photos, const Envmap
         double wsum = 0;
         for (int sy = 0; sy < S; ++sy) {
           for (int sx = 0; sx < S; ++sx) {
-            const Eigen::Vector3d d =
-                EnvmapDirection(W, H, x + (sx + 0.5) / S, y + (sy + 0.5) / S);
+            const Eigen::Vector3d d = EnvmapDirection(W, H, x + (sx + 0.5) / S, y + (sy + 0.5) / S);
             for (int i = 0; i < np; ++i) {
               const Prepared& p = prep[i];
               const Eigen::Vector3d dc = p.world_to_cam * d;
               if (dc.z() < p.cos_max_field) continue;
               const auto px = Project(p.k, dc);
-              if (!px || !(px->x() >= 0 && px->x() < p.k.width && px->y() >= 0 &&
-                           px->y() < p.k.height)) {
+              if (!px ||
+                  !(px->x() >= 0 && px->x() < p.k.width && px->y() >= 0 && px->y() < p.k.height)) {
                 continue;
               }
               if (!SampleAll(p, px->x(), px->y(), val.data())) continue;
@@ -220,7 +216,8 @@ EnvmapResult AssembleEnvmap(const std::vector<EnvmapPhoto>& photos, const Envmap
   res.pixels_per_photo.assign(np, 0);
   double covered_sr = 0, sky_sr = 0;
   for (int y = 0; y < H; ++y) {
-    for (int i = 0; i < np; ++i) res.pixels_per_photo[i] += row_counts[static_cast<size_t>(y) * np + i];
+    for (int i = 0; i < np; ++i)
+      res.pixels_per_photo[i] += row_counts[static_cast<size_t>(y) * np + i];
     const double el_top = 0.5 * kPi - y * kPi / H, el_bot = 0.5 * kPi - (y + 1) * kPi / H;
     const double pixel_sr = 2 * kPi / W * (std::sin(el_top) - std::sin(el_bot));
     int covered = 0;
@@ -231,8 +228,7 @@ EnvmapResult AssembleEnvmap(const std::vector<EnvmapPhoto>& photos, const Envmap
   }
   res.coverage_fraction = covered_sr / (4 * kPi);
   res.sky_coverage_fraction = sky_sr / (2 * kPi);
-  res.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  res.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return res;
 }
 

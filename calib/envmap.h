@@ -10,12 +10,11 @@
 // positions are ignored (the environment is taken to be at infinity).
 #pragma once
 
+#include <Eigen/Core>
 #include <cstdint>
+#include <nlohmann/json_fwd.hpp>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
-#include <nlohmann/json_fwd.hpp>
 
 #include "core/camera.h"
 #include "core/image.h"

@@ -1,13 +1,13 @@
 #include "calib/envmap.h"
 
-#include <cmath>
-#include <cstdio>
-#include <string>
-
-#include <Eigen/Geometry>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <cstdio>
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "core/camera.h"
 #include "core/error.h"
@@ -191,8 +191,10 @@ TEST(Envmap, FourCamerasMatchTheEnvironmentWhereCovered) {
   EXPECT_GT(r.coverage_fraction, 0.5);
   EXPECT_LT(r.coverage_fraction, 1.0);
   for (int64_t n : r.pixels_per_photo) EXPECT_GT(n, 0);
-  std::printf("envmap 512x256 from 4 photos: max error %.2e (tolerance %.2e), coverage %.3f, "
-              "%.3f s\n", max_err, tol, r.coverage_fraction, r.seconds);
+  std::printf(
+      "envmap 512x256 from 4 photos: max error %.2e (tolerance %.2e), coverage %.3f, "
+      "%.3f s\n",
+      max_err, tol, r.coverage_fraction, r.seconds);
   const nlohmann::json j = EnvmapSummaryJson(r, photos);
   EXPECT_EQ(j["photos"].size(), 4u);
   EXPECT_DOUBLE_EQ(j["coverage_fraction"].get<double>(), r.coverage_fraction);
@@ -314,8 +316,10 @@ TEST(Envmap, Throughput) {
   opt.width = 1024;
   const EnvmapResult r = AssembleEnvmap(rig.Photos(), opt);
   const double mp = 1024.0 * 512 / 1e6;
-  std::printf("envmap 1024x512 from 4 photos: %.3f s, %.1f output Mpx/s (%.1f photo lookups "
-              "M/s)\n", r.seconds, mp / r.seconds, 4 * mp / r.seconds);
+  std::printf(
+      "envmap 1024x512 from 4 photos: %.3f s, %.1f output Mpx/s (%.1f photo lookups "
+      "M/s)\n",
+      r.seconds, mp / r.seconds, 4 * mp / r.seconds);
   EXPECT_GT(r.seconds, 0);
 }
 

@@ -128,8 +128,8 @@ int AccumulateRows(const float* const* s, const float* log_x, int nf, const Leve
 // as Levels::HatWeight does, only g is gathered.
 template <int NC, int F>
 __attribute__((target("avx2"))) int AccumulatePassAvx2(const float* const* s, const float* log_x,
-                                                        const Levels& lv, size_t row_len,
-                                                        float* num, float* den) {
+                                                       const Levels& lv, size_t row_len, float* num,
+                                                       float* den) {
   const __m256 steps = _mm256_set1_ps(kSteps), half = _mm256_set1_ps(0.5f);
   const __m256 inv_steps = _mm256_set1_ps(1.f / kSteps);
   const __m256 dark = _mm256_set1_ps(lv.dark), sat = _mm256_set1_ps(lv.sat);
@@ -194,8 +194,8 @@ __attribute__((target("avx2"))) int AccumulatePassAvx2(const float* const* s, co
 constexpr int kAvx2Frames = 4;
 template <int NC>
 __attribute__((target("avx2"))) int AccumulateRowsAvx2(const float* const* s, const float* log_x,
-                                                        int nf, const Levels& lv, size_t row_len,
-                                                        float* num, float* den) {
+                                                       int nf, const Levels& lv, size_t row_len,
+                                                       float* num, float* den) {
   int bad = -1;
   int j = 0;
   for (; j + kAvx2Frames <= nf; j += kAvx2Frames) {
@@ -365,8 +365,8 @@ void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<dou
     const double t = z - z0;
     for (int c = 0; c < nc; ++c) {
       const auto& g = curve.g[nc == 1 ? 1 : c];
-      lv.e[static_cast<size_t>(k) * nc + c] = {
-          lv.HatWeight(k), static_cast<float>((1 - t) * g[z0] + t * g[z0 + 1])};
+      lv.e[static_cast<size_t>(k) * nc + c] = {lv.HatWeight(k),
+                                               static_cast<float>((1 - t) * g[z0] + t * g[z0 + 1])};
     }
   }
   std::vector<float> log_x(nf);
@@ -427,14 +427,12 @@ void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<dou
       float* dst = out.data.data() + static_cast<size_t>(y) * w * nc;
       std::fill(num.begin(), num.end(), 0.f);
       std::fill(den.begin(), den.end(), 0.f);
-      const int bad = accumulate(src.data(), log_x.data(), nf, lv, row_len, num.data(),
-                                 den.data());
+      const int bad = accumulate(src.data(), log_x.data(), nf, lv, row_len, num.data(), den.data());
       if (bad >= 0) bad_frame.store(bad);
       if (options.ghost_removal) {
-        local_ghosts += RemoveGhosts(src, by_median, lv, log_x, slope, w, options, num.data(),
-                                     den.data(),
-                                     ghost_mask ? ghost_mask->data() + static_cast<size_t>(y) * w
-                                                : nullptr);
+        local_ghosts +=
+            RemoveGhosts(src, by_median, lv, log_x, slope, w, options, num.data(), den.data(),
+                         ghost_mask ? ghost_mask->data() + static_cast<size_t>(y) * w : nullptr);
       }
       for (int x = 0; x < w; ++x) {
         bool pixel_sat = false, pixel_dark = false, pixel_invalid = false;
@@ -600,9 +598,9 @@ Image MergeRadiance(const std::vector<const Image*>& frames, const std::vector<d
         }
         const double top = clip[k][c];
         const double w =
-            weight[k] *
-            (std::isfinite(top) ? std::clamp((top - v) / (options.clip_ramp * top), 0.0, 1.0)
-                                : 1.0);
+            weight[k] * (std::isfinite(top)
+                             ? std::clamp((top - v) / (options.clip_ramp * top), 0.0, 1.0)
+                             : 1.0);
         sw += w;
         swv += w * l;
       }

@@ -169,8 +169,7 @@ TEST(MergeHdr, GhostRemovalFollowsTheReferenceFrame) {
   MergeSummary s_plain, s_ghost;
   std::vector<uint8_t> ghost_mask;
   MergeHdrInto(ptrs, exposures, TrueCurve(), plain, &merged_plain, &s_plain);
-  MergeHdrInto(ptrs, exposures, TrueCurve(), ghost, &merged_ghost, &s_ghost, nullptr,
-               &ghost_mask);
+  MergeHdrInto(ptrs, exposures, TrueCurve(), ghost, &merged_ghost, &s_ghost, nullptr, &ghost_mask);
   EXPECT_EQ(s_plain.ghost_pixels, 0);
   // Worst error inside the square's paths (rows 30..49, x 10..109) and elsewhere.
   double worst_plain = 0, worst_ghost = 0, worst_static = 0;
@@ -256,8 +255,7 @@ TEST(MergeHdr, IntoReusesTheOutputAndMatchesTheReturningForm) {
   MergeOptions bad;
   bad.ghost_threshold = -1;
   EXPECT_THROW(bad.Validate(), Error);
-  EXPECT_THROW(MergeHdrInto(Pointers(b), exposures, TrueCurve(), MergeOptions{}, nullptr),
-               Error);
+  EXPECT_THROW(MergeHdrInto(Pointers(b), exposures, TrueCurve(), MergeOptions{}, nullptr), Error);
 }
 
 // The AVX2 kernel (used where the CPU has it) must give the same floats as the portable one
@@ -327,8 +325,7 @@ TEST(MergeHdr, BothKernelsRejectOutOfRangeValuesNamingTheFrame) {
             MergeHdr(ptrs, exposures, curve, o, nullptr);
             ADD_FAILURE() << "accepted " << bad << " at x " << x << " simd " << simd;
           } catch (const Error& e) {
-            EXPECT_NE(std::string(e.what()).find("frame " + std::to_string(j)),
-                      std::string::npos)
+            EXPECT_NE(std::string(e.what()).find("frame " + std::to_string(j)), std::string::npos)
                 << e.what();
           }
         }

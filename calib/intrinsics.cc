@@ -1,17 +1,16 @@
 #include "calib/intrinsics.h"
 
+#include <Eigen/Cholesky>
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <map>
-#include <sstream>
-
-#include <Eigen/Cholesky>
-#include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
+#include <sstream>
 #ifdef ROUEN_HAVE_ARUCO
 #include <opencv2/aruco.hpp>
 #include <opencv2/aruco/charuco.hpp>
@@ -28,13 +27,13 @@ constexpr int kMinCharucoCorners = 6;
 const std::map<std::string, int>& DictionaryIds() {
   // Values of cv::aruco::PREDEFINED_DICTIONARY_NAME (stable since OpenCV 3.x).
   static const std::map<std::string, int> ids = {
-      {"DICT_4X4_50", 0},          {"DICT_4X4_100", 1},        {"DICT_4X4_250", 2},
-      {"DICT_4X4_1000", 3},        {"DICT_5X5_50", 4},         {"DICT_5X5_100", 5},
-      {"DICT_5X5_250", 6},         {"DICT_5X5_1000", 7},       {"DICT_6X6_50", 8},
-      {"DICT_6X6_100", 9},         {"DICT_6X6_250", 10},       {"DICT_6X6_1000", 11},
-      {"DICT_7X7_50", 12},         {"DICT_7X7_100", 13},       {"DICT_7X7_250", 14},
-      {"DICT_7X7_1000", 15},       {"DICT_ARUCO_ORIGINAL", 16}, {"DICT_APRILTAG_16h5", 17},
-      {"DICT_APRILTAG_25h9", 18},  {"DICT_APRILTAG_36h10", 19}, {"DICT_APRILTAG_36h11", 20}};
+      {"DICT_4X4_50", 0},         {"DICT_4X4_100", 1},         {"DICT_4X4_250", 2},
+      {"DICT_4X4_1000", 3},       {"DICT_5X5_50", 4},          {"DICT_5X5_100", 5},
+      {"DICT_5X5_250", 6},        {"DICT_5X5_1000", 7},        {"DICT_6X6_50", 8},
+      {"DICT_6X6_100", 9},        {"DICT_6X6_250", 10},        {"DICT_6X6_1000", 11},
+      {"DICT_7X7_50", 12},        {"DICT_7X7_100", 13},        {"DICT_7X7_250", 14},
+      {"DICT_7X7_1000", 15},      {"DICT_ARUCO_ORIGINAL", 16}, {"DICT_APRILTAG_16h5", 17},
+      {"DICT_APRILTAG_25h9", 18}, {"DICT_APRILTAG_36h10", 19}, {"DICT_APRILTAG_36h11", 20}};
   return ids;
 }
 
@@ -160,8 +159,8 @@ Intrinsics UnpackIntrinsics(const Intrinsics& base, const Eigen::VectorXd& v) {
 }
 
 struct View {
-  std::vector<Eigen::Vector3d> board;  // board-frame points
-  std::vector<Eigen::Vector2d> pixels;  // rouen pixel convention
+  std::vector<Eigen::Vector3d> board;              // board-frame points
+  std::vector<Eigen::Vector2d> pixels;             // rouen pixel convention
   Eigen::Vector3d rvec = Eigen::Vector3d::Zero();  // camera-from-board: x_cam = R(rvec) x + tvec
   Eigen::Vector3d tvec = Eigen::Vector3d::Zero();
 };
@@ -313,8 +312,8 @@ void BoardSpec::Validate() const {
   }
   const int markers = cols * rows / 2;
   if (markers > DictionarySize(dictionary)) {
-    throw Error(what + "needs " + std::to_string(markers) + " markers but " + dictionary +
-                " has " + std::to_string(DictionarySize(dictionary)));
+    throw Error(what + "needs " + std::to_string(markers) + " markers but " + dictionary + " has " +
+                std::to_string(DictionarySize(dictionary)));
   }
   if (!HaveCharucoSupport()) {
     throw Error(what + "ChArUco boards need OpenCV's aruco module, absent from this build");
@@ -451,14 +450,14 @@ IntrinsicsSummary CalibrateIntrinsics(const std::vector<Image>& images,
   if (views.empty()) {
     std::string list;
     for (const std::string& n : sum.not_found) list += "\n  " + n;
-    throw Error("board " + sum.board + " not found in any of the " +
-                std::to_string(images.size()) + " images:" + list);
+    throw Error("board " + sum.board + " not found in any of the " + std::to_string(images.size()) +
+                " images:" + list);
   }
   if (static_cast<int>(views.size()) < options.min_views) {
     std::string list;
     for (const std::string& n : sum.not_found) list += "\n  not found: " + n;
-    throw Error("board " + sum.board + " found in only " + std::to_string(views.size()) +
-                " of " + std::to_string(images.size()) + " images; at least " +
+    throw Error("board " + sum.board + " found in only " + std::to_string(views.size()) + " of " +
+                std::to_string(images.size()) + " images; at least " +
                 std::to_string(options.min_views) + " views are needed" + list);
   }
 
@@ -484,9 +483,9 @@ IntrinsicsSummary CalibrateIntrinsics(const std::vector<Image>& images,
       if (!options.estimate_k3) flags |= cv::CALIB_FIX_K3;
       if (!options.estimate_tangential) flags |= cv::CALIB_ZERO_TANGENT_DIST;
       cv::Mat cam, dist;
-      cv::calibrateCamera(obj, img, cv::Size(w, h), cam, dist, rvecs, tvecs, flags,
-                          cv::TermCriteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 100,
-                                           1e-12));
+      cv::calibrateCamera(
+          obj, img, cv::Size(w, h), cam, dist, rvecs, tvecs, flags,
+          cv::TermCriteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 100, 1e-12));
       cam.convertTo(cam, CV_64F);
       dist.convertTo(dist, CV_64F);
       const double* d = dist.ptr<double>();
@@ -584,16 +583,14 @@ nlohmann::json LensJson(const IntrinsicsSummary& s) {
   }
   nlohmann::json images = nlohmann::json::array();
   for (const std::string& n : s.used) images.push_back(n);
-  std::vector<std::string> names = s.intrinsics.projection == Projection::kFisheye
-                                       ? std::vector<std::string>{"fx", "fy", "cx", "cy", "k1",
-                                                                  "k2", "k3", "k4"}
-                                       : std::vector<std::string>{"fx", "fy", "cx", "cy", "k1",
-                                                                  "k2", "k3", "p1", "p2"};
+  std::vector<std::string> names =
+      s.intrinsics.projection == Projection::kFisheye
+          ? std::vector<std::string>{"fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"}
+          : std::vector<std::string>{"fx", "fy", "cx", "cy", "k1", "k2", "k3", "p1", "p2"};
   nlohmann::json sd = nlohmann::json::object();
   for (size_t i = 0; i < names.size() && i < s.stddev.size(); ++i) sd[names[i]] = s.stddev[i];
-  j["calibration"] = {{"board", s.board},          {"rms_px", s.rms_px},
-                      {"max_px", s.max_px},        {"views", s.views_used},
-                      {"corners", s.corners_used}, {"stddev", sd},
+  j["calibration"] = {{"board", s.board},      {"rms_px", s.rms_px},        {"max_px", s.max_px},
+                      {"views", s.views_used}, {"corners", s.corners_used}, {"stddev", sd},
                       {"images", images}};
   return j;
 }
@@ -663,9 +660,8 @@ Image BoardRenderer::Render(const Eigen::Matrix3d& rotation, const Eigen::Vector
   return im;
 }
 
-std::optional<Eigen::Vector2d> BoardRenderer::CornerPixel(int id,
-                                                          const Eigen::Matrix3d& rotation,
-                                                          const Eigen::Vector3d& translation) const {
+std::optional<Eigen::Vector2d> BoardRenderer::CornerPixel(
+    int id, const Eigen::Matrix3d& rotation, const Eigen::Vector3d& translation) const {
   const std::vector<Eigen::Vector3d> pts = board_.CornerPoints();
   if (id < 0 || id >= static_cast<int>(pts.size())) return std::nullopt;
   return Project(camera_, rotation * pts[id] + translation);

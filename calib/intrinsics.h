@@ -7,12 +7,11 @@
 // corners are shifted by +0.5 before calibration, so cx, cy come out in rouen's convention.
 #pragma once
 
+#include <Eigen/Core>
+#include <nlohmann/json_fwd.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
-#include <nlohmann/json_fwd.hpp>
 
 #include "core/camera.h"
 #include "core/image.h"
@@ -28,9 +27,9 @@ struct BoardSpec {
   enum class Type { kChessboard, kCharuco };
   Type type = Type::kChessboard;
   int cols = 0, rows = 0;
-  double square_m = 0;         // side of one square
-  double marker_m = 0;         // ChArUco: side of one marker (< square_m)
-  std::string dictionary;      // ChArUco: OpenCV dictionary, e.g. "DICT_5X5_100"
+  double square_m = 0;     // side of one square
+  double marker_m = 0;     // ChArUco: side of one marker (< square_m)
+  std::string dictionary;  // ChArUco: OpenCV dictionary, e.g. "DICT_5X5_100"
 
   // "chessboard:COLSxROWS:SQUARE_M" or "charuco:COLSxROWS:SQUARE_M:MARKER_M:DICT".
   static BoardSpec Parse(const std::string& text);
@@ -92,7 +91,7 @@ bool DetectBoard(const Image& image, const BoardSpec& board, BoardDetection* out
 struct IntrinsicsOptions {
   Projection model = Projection::kPinhole;  // kPinhole or kFisheye
   BoardSpec board;
-  int min_views = 3;  // images in which the board must be found
+  int min_views = 3;                // images in which the board must be found
   bool estimate_k3 = true;          // pinhole k3 (turn off for narrow lenses and few views)
   bool estimate_tangential = true;  // pinhole p1, p2
   bool sector_fallback = true;      // see DetectBoard
@@ -101,13 +100,13 @@ struct IntrinsicsOptions {
 
 struct IntrinsicsSummary {
   Intrinsics intrinsics;
-  double rms_px = 0;   // reprojection RMS over all corners, pixels (through core Project)
-  double max_px = 0;   // largest corner reprojection error, pixels
+  double rms_px = 0;  // reprojection RMS over all corners, pixels (through core Project)
+  double max_px = 0;  // largest corner reprojection error, pixels
   int views_used = 0;
   int corners_used = 0;
-  std::vector<std::string> used;        // names of images in which the board was found
-  std::vector<std::string> not_found;   // names of images without a detectable board
-  std::vector<double> view_rms_px;      // per used view
+  std::vector<std::string> used;       // names of images in which the board was found
+  std::vector<std::string> not_found;  // names of images without a detectable board
+  std::vector<double> view_rms_px;     // per used view
   // One-sigma standard deviations from the Gauss-Newton covariance sigma^2 (J^T J)^-1 with
   // sigma^2 = residual sum of squares / degrees of freedom; order fx, fy, cx, cy, then the
   // model's distortion terms (pinhole k1, k2, k3, p1, p2; fisheye k1, k2, k3, k4).

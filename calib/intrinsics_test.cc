@@ -9,10 +9,9 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <random>
-
 #include <nlohmann/json.hpp>
 #include <opencv2/calib3d.hpp>
+#include <random>
 
 #include "core/error.h"
 #include "core/files.h"
@@ -42,12 +41,12 @@ std::vector<ViewPose> SpreadViews(const BoardSpec& b, const Intrinsics& k, doubl
                                   double reach) {
   const Eigen::Vector3d centre(0.5 * b.cols * b.square_m, 0.5 * b.rows * b.square_m, 0);
   std::vector<ViewPose> out;
-  const double tilts[][3] = {{0, 0, 0},    {30, 0, 5},   {-30, 0, -5}, {0, 30, 10},
-                             {0, -30, -10}, {20, 25, 0}, {-25, 20, 15}, {25, -20, -15},
-                             {-20, -25, 0}, {10, 10, 90}, {35, 0, 0},   {0, 35, 0}};
-  const double offs[][2] = {{0, 0},     {0.5, 0.5},  {-0.5, -0.5}, {0.5, -0.5},
-                            {-0.5, 0.5}, {0.8, 0},   {-0.8, 0},    {0, 0.8},
-                            {0, -0.8},  {0.3, -0.3}, {0.6, 0.6},   {-0.6, -0.6}};
+  const double tilts[][3] = {{0, 0, 0},     {30, 0, 5},   {-30, 0, -5},  {0, 30, 10},
+                             {0, -30, -10}, {20, 25, 0},  {-25, 20, 15}, {25, -20, -15},
+                             {-20, -25, 0}, {10, 10, 90}, {35, 0, 0},    {0, 35, 0}};
+  const double offs[][2] = {{0, 0},      {0.5, 0.5},  {-0.5, -0.5}, {0.5, -0.5},
+                            {-0.5, 0.5}, {0.8, 0},    {-0.8, 0},    {0, 0.8},
+                            {0, -0.8},   {0.3, -0.3}, {0.6, 0.6},   {-0.6, -0.6}};
   for (int i = 0; i < 12; ++i) {
     const Eigen::Vector2d px(k.cx + reach * offs[i][0] * 0.5 * k.width,
                              k.cy + reach * offs[i][1] * 0.5 * k.height);
@@ -117,10 +116,10 @@ void ExpectRecovered(const IntrinsicsSummary& s, const Intrinsics& truth) {
       fish ? std::vector<double>{k.fx, k.fy, k.cx, k.cy, k.k1, k.k2, k.k3, k.k4}
            : std::vector<double>{k.fx, k.fy, k.cx, k.cy, k.k1, k.k2, k.k3, k.p1, k.p2};
   const std::vector<double> tru =
-      fish ? std::vector<double>{truth.fx, truth.fy, truth.cx, truth.cy, truth.k1, truth.k2,
-                                 truth.k3, truth.k4}
-           : std::vector<double>{truth.fx, truth.fy, truth.cx, truth.cy, truth.k1, truth.k2,
-                                 truth.k3, truth.p1, truth.p2};
+      fish ? std::vector<double>{truth.fx, truth.fy, truth.cx, truth.cy,
+                                 truth.k1, truth.k2, truth.k3, truth.k4}
+           : std::vector<double>{truth.fx, truth.fy, truth.cx, truth.cy, truth.k1,
+                                 truth.k2, truth.k3, truth.p1, truth.p2};
   const char* names[] = {"fx", "fy", "cx", "cy", "k1", "k2", "k3", fish ? "k4" : "p1", "p2"};
   ASSERT_EQ(s.stddev.size(), est.size());
   for (size_t i = 0; i < est.size(); ++i) {
@@ -142,10 +141,10 @@ TEST(BoardSpec, ParsesAndRejects) {
   EXPECT_DOUBLE_EQ(c.square_m, 0.03);
   EXPECT_EQ(c.CornerPoints().size(), 8u * 6u);
   EXPECT_EQ(BoardSpec::Parse(c.ToString()).ToString(), c.ToString());
-  for (const char* bad : {"chessboard:9x7", "chessboard:9:0.03", "chessboard:2x7:0.03",
-                          "chessboard:9x7:-1", "chessboard:9x7:abc", "square:9x7:0.03",
-                          "charuco:9x7:0.03:0.04:DICT_5X5_100", "charuco:9x7:0.03:0.02:NOPE",
-                          "charuco:20x20:0.03:0.02:DICT_4X4_50"}) {
+  for (const char* bad :
+       {"chessboard:9x7", "chessboard:9:0.03", "chessboard:2x7:0.03", "chessboard:9x7:-1",
+        "chessboard:9x7:abc", "square:9x7:0.03", "charuco:9x7:0.03:0.04:DICT_5X5_100",
+        "charuco:9x7:0.03:0.02:NOPE", "charuco:20x20:0.03:0.02:DICT_4X4_50"}) {
     EXPECT_THROW(BoardSpec::Parse(bad), Error) << bad;
   }
   if (HaveCharucoSupport()) {
@@ -192,7 +191,8 @@ TEST(CameraModels, MatchOpenCv) {
 TEST(DrawBoard, CornersWhereDocumented) {
   // Detecting the flat drawing recovers corner (x, y) at ((x/s + 1) pps, (y/s + 1) pps).
   std::vector<BoardSpec> boards{BoardSpec::Parse("chessboard:9x7:0.03")};
-  if (HaveCharucoSupport()) boards.push_back(BoardSpec::Parse("charuco:7x5:0.04:0.03:DICT_5X5_100"));
+  if (HaveCharucoSupport())
+    boards.push_back(BoardSpec::Parse("charuco:7x5:0.04:0.03:DICT_5X5_100"));
   for (const BoardSpec& b : boards) {
     const int pps = 40;
     const Image im = DrawBoard(b, pps);
@@ -263,13 +263,14 @@ TEST_P(CalibrateModel, RecoversKnownCamera) {
   EXPECT_LT(sum.rms_px, 1.5 * noise);
   EXPECT_GT(sum.rms_px, 0.5 * noise);
   ExpectRecovered(sum, truth);
-  std::printf("[ measured ] %s %s: %d views, corner noise %.4f px, fit RMS %.4f px, max %.4f px, "
-              "fx err %.3f px (sd %.3f), cx err %.3f px (sd %.3f), k1 err %.5f (sd %.5f); "
-              "render %.2f s, calibrate %.2f s\n",
-              model == Projection::kPinhole ? "pinhole" : "fisheye", board_text.c_str(),
-              sum.views_used, noise, sum.rms_px, sum.max_px, sum.intrinsics.fx - truth.fx,
-              sum.stddev[0], sum.intrinsics.cx - truth.cx, sum.stddev[2],
-              sum.intrinsics.k1 - truth.k1, sum.stddev[4], render_s, sum.seconds);
+  std::printf(
+      "[ measured ] %s %s: %d views, corner noise %.4f px, fit RMS %.4f px, max %.4f px, "
+      "fx err %.3f px (sd %.3f), cx err %.3f px (sd %.3f), k1 err %.5f (sd %.5f); "
+      "render %.2f s, calibrate %.2f s\n",
+      model == Projection::kPinhole ? "pinhole" : "fisheye", board_text.c_str(), sum.views_used,
+      noise, sum.rms_px, sum.max_px, sum.intrinsics.fx - truth.fx, sum.stddev[0],
+      sum.intrinsics.cx - truth.cx, sum.stddev[2], sum.intrinsics.k1 - truth.k1, sum.stddev[4],
+      render_s, sum.seconds);
 }
 
 INSTANTIATE_TEST_SUITE_P(

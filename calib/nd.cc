@@ -2,9 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <string>
-
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "calib/hdr.h"
 #include "core/error.h"
@@ -51,8 +50,8 @@ void to_json(nlohmann::json& j, const NdCalibration& c) {
     sp.push_back(ch.density_spread);
     n.push_back(ch.pixels);
   }
-  j = {{"density_rgb", d},      {"transmission_rgb", t}, {"density_ci95_rgb", ci},
-       {"density_spread_rgb", sp}, {"pixels_rgb", n},    {"density_mean", c.MeanDensity()}};
+  j = {{"density_rgb", d},         {"transmission_rgb", t}, {"density_ci95_rgb", ci},
+       {"density_spread_rgb", sp}, {"pixels_rgb", n},       {"density_mean", c.MeanDensity()}};
 }
 
 void from_json(const nlohmann::json& j, NdCalibration& c) {
@@ -80,9 +79,8 @@ NdCalibration EstimateNdTransmission(const Image& with, const std::vector<uint8_
   CheckRadiance(without, "without");
   if (with.width != without.width || with.height != without.height)
     throw Error("nd calibration: image sizes differ (" + std::to_string(with.width) + "x" +
-                std::to_string(with.height) + " with the filter, " +
-                std::to_string(without.width) + "x" + std::to_string(without.height) +
-                " without)");
+                std::to_string(with.height) + " with the filter, " + std::to_string(without.width) +
+                "x" + std::to_string(without.height) + " without)");
   const size_t npix = static_cast<size_t>(with.width) * with.height;
   for (const auto* m : {with_valid, without_valid})
     if (m && m->size() != npix) throw Error("nd calibration: a valid mask has the wrong size");

@@ -1,10 +1,10 @@
 #include "calib/nd.h"
 
-#include <cmath>
-#include <random>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 #include <nlohmann/json.hpp>
+#include <random>
 
 #include "calib/test_util.h"
 #include "core/error.h"
@@ -58,8 +58,7 @@ TEST(NdTest, RobustToMovingContentAndHonoursMasks) {
   for (int y = 0; y < 80; ++y)
     for (int x = 0; x < 15; ++x)
       for (int c = 0; c < 3; ++c) with.at(x, y, c) *= 3;
-  const NdCalibration robust =
-      EstimateNdTransmission(with, nullptr, without, nullptr, NdOptions{});
+  const NdCalibration robust = EstimateNdTransmission(with, nullptr, without, nullptr, NdOptions{});
   for (int c = 0; c < 3; ++c) {
     // 15% one-sided outliers move the median to the clean 0.5 / 0.85 = 0.59 quantile:
     // 0.22 sd of the per-pixel spread (0.0123) = 0.0027 at most.

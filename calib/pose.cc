@@ -1,15 +1,15 @@
 #include "calib/pose.h"
 
+#include <ceres/ceres.h>
+#include <ceres/rotation.h>
+
+#include <Eigen/Geometry>
+#include <Eigen/SVD>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <memory>
-
-#include <ceres/ceres.h>
-#include <ceres/rotation.h>
-#include <Eigen/Geometry>
-#include <Eigen/SVD>
 #include <nlohmann/json.hpp>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
@@ -146,7 +146,8 @@ LandmarkFile ReadLandmarks(const std::string& path) {
     if (!p.contains("pixel")) throw Error(what + ": missing \"pixel\"");
     l.pixel = ReadVec(p["pixel"], 2, what + ": \"pixel\"").head<2>();
     const bool has_world = p.contains("world"), has_vertex = p.contains("vertex");
-    if (has_world == has_vertex) throw Error(what + ": needs exactly one of \"world\" or \"vertex\"");
+    if (has_world == has_vertex)
+      throw Error(what + ": needs exactly one of \"world\" or \"vertex\"");
     if (has_world) {
       l.world = ReadVec(p["world"], 3, what + ": \"world\"");
     } else {
@@ -204,8 +205,9 @@ PoseSummary EstimatePose(const Intrinsics& k, const std::vector<Landmark>& pts,
     const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::MatrixXd>(w).singularValues();
     if (!(sv[0] > 1e-9)) throw Error("camera pose: all landmarks are at the same world point");
     if (sv[1] < 1e-4 * sv[0]) {
-      throw Error("camera pose: the landmarks' world points are collinear; the pose is not "
-                  "determined (add points off that line)");
+      throw Error(
+          "camera pose: the landmarks' world points are collinear; the pose is not "
+          "determined (add points off that line)");
     }
   }
   // Normalised image points for PnP (works for fisheye too).
@@ -234,8 +236,9 @@ PoseSummary EstimatePose(const Intrinsics& k, const std::vector<Landmark>& pts,
     const double px = 0.5 * (k.fx + k.fy) / std::sqrt(static_cast<double>(m));
     const double along_px = sv[0] * px, across_px = sv[1] * px;  // RMS spreads, ~pixels
     if (across_px < std::max(2.0, 0.02 * along_px)) {
-      throw Error("camera pose: the landmark pixels are (nearly) collinear; the camera sees "
-                  "the points edge-on and the pose is not determined");
+      throw Error(
+          "camera pose: the landmark pixels are (nearly) collinear; the camera sees "
+          "the points edge-on and the pose is not determined");
     }
   }
 
@@ -317,8 +320,7 @@ PoseSummary EstimatePose(const Intrinsics& k, const std::vector<Landmark>& pts,
     std::string detail;
     for (const PointReport& r : s.points) {
       detail += "\n  " + r.name + ": " +
-                (r.behind ? std::string("behind the camera")
-                          : std::to_string(r.error_px) + " px");
+                (r.behind ? std::string("behind the camera") : std::to_string(r.error_px) + " px");
     }
     throw Error("camera pose: only " + std::to_string(s.inliers) + " of " + std::to_string(n) +
                 " landmarks reproject within " + std::to_string(options.inlier_threshold_px) +
@@ -349,10 +351,8 @@ nlohmann::json PoseJson(const PoseSummary& s) {
     }
     pts.push_back(e);
   }
-  j["reprojection"] = {{"rms_px", s.rms_px},
-                       {"max_px", s.max_px},
-                       {"inliers", s.inliers},
-                       {"points", pts}};
+  j["reprojection"] = {
+      {"rms_px", s.rms_px}, {"max_px", s.max_px}, {"inliers", s.inliers}, {"points", pts}};
   return j;
 }
 

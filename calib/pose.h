@@ -17,11 +17,10 @@
 // 0-based index into the model's OBJ vertices. Each point has exactly one of world/vertex.
 #pragma once
 
-#include <string>
-#include <vector>
-
 #include <Eigen/Core>
 #include <nlohmann/json_fwd.hpp>
+#include <string>
+#include <vector>
 
 #include "core/camera.h"
 

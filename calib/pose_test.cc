@@ -9,9 +9,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <random>
-
 #include <nlohmann/json.hpp>
+#include <random>
 
 #include "core/error.h"
 
@@ -35,7 +34,8 @@ void PoseSigma(const Intrinsics& k, const Pose& pose, const std::vector<Eigen::V
     if (a > 0) p.rotation = Eigen::AngleAxisd(a, d.head<3>() / a).toRotationMatrix() * p.rotation;
     p.position += d.tail<3>();
     Eigen::VectorXd r(2 * world.size());
-    for (size_t i = 0; i < world.size(); ++i) r.segment<2>(2 * i) = *Project(k, p.WorldToCamera(world[i]));
+    for (size_t i = 0; i < world.size(); ++i)
+      r.segment<2>(2 * i) = *Project(k, p.WorldToCamera(world[i]));
     return r;
   };
   Eigen::MatrixXd jac(2 * world.size(), 6);
@@ -126,11 +126,12 @@ void CheckRecovery(const Scene& s, double noise_px, const char* label) {
   // Inlier RMS of a 6-parameter fit to 2n noisy coordinates: sigma sqrt(2 (1 - 6/2n)).
   const double expect_rms = noise_px * std::sqrt(2.0 * (1 - 3.0 / r.inliers));
   EXPECT_NEAR(r.rms_px, expect_rms, 0.35 * expect_rms) << label;
-  std::printf("[ measured ] %s: %zu points (%d inliers), noise %.2f px -> position error %.4f m "
-              "(sd %.4f), rotation error %.4f deg (sd %.4f), RMS %.3f px, max %.3f px, "
-              "%d Ceres iterations, %.1f ms\n",
-              label, s.points.size(), r.inliers, noise_px, pos_err, pos_sd, rot_err, rot_sd,
-              r.rms_px, r.max_px, r.ceres_iterations, 1e3 * r.seconds);
+  std::printf(
+      "[ measured ] %s: %zu points (%d inliers), noise %.2f px -> position error %.4f m "
+      "(sd %.4f), rotation error %.4f deg (sd %.4f), RMS %.3f px, max %.3f px, "
+      "%d Ceres iterations, %.1f ms\n",
+      label, s.points.size(), r.inliers, noise_px, pos_err, pos_sd, rot_err, rot_sd, r.rms_px,
+      r.max_px, r.ceres_iterations, 1e3 * r.seconds);
 }
 
 TEST(EstimatePose, PinholeWithNoiseAndOutliers) {

@@ -10,8 +10,8 @@
 #include <array>
 #include <atomic>
 #include <chrono>
-#include <limits>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <random>
 #include <string>
@@ -172,19 +172,18 @@ std::vector<size_t> SelectSamples(const Bracket& b, size_t index, const Response
   // Gradient between grid neighbours and brightness stratum, for interior grid points.
   std::vector<float> grad(ng, 0.f);
   std::vector<int8_t> bin_of(ng, -1);
-  tbb::parallel_for(tbb::blocked_range<int>(1, std::max(1, gh - 1)),
-                    [&](const tbb::blocked_range<int>& rows) {
-                      for (int k = rows.begin(); k != rows.end(); ++k) {
-                        for (int i = 1; i + 1 < gw; ++i) {
-                          const size_t g = static_cast<size_t>(k) * gw + i;
-                          if (!ok[g]) continue;
-                          grad[g] = std::abs(key[g + 1] - key[g - 1]) +
-                                    std::abs(key[g + gw] - key[g - gw]);
-                          bin_of[g] = static_cast<int8_t>(
-                              std::min(kBins - 1, static_cast<int>(key[g] * kBins / 256.f)));
-                        }
-                      }
-                    });
+  tbb::parallel_for(
+      tbb::blocked_range<int>(1, std::max(1, gh - 1)), [&](const tbb::blocked_range<int>& rows) {
+        for (int k = rows.begin(); k != rows.end(); ++k) {
+          for (int i = 1; i + 1 < gw; ++i) {
+            const size_t g = static_cast<size_t>(k) * gw + i;
+            if (!ok[g]) continue;
+            grad[g] = std::abs(key[g + 1] - key[g - 1]) + std::abs(key[g + gw] - key[g - gw]);
+            bin_of[g] =
+                static_cast<int8_t>(std::min(kBins - 1, static_cast<int>(key[g] * kBins / 256.f)));
+          }
+        }
+      });
   std::vector<std::vector<size_t>> bins(kBins);
   for (size_t g = 0; g < ng; ++g) {
     if (bin_of[g] >= 0) bins[bin_of[g]].push_back(g);
@@ -515,8 +514,8 @@ double EvalPoly(const Eigen::VectorXd& c, double m) {
 // Mitsunaga & Nayar 1999, eq. 6-8 (see ResponseMethod::kMitsunagaNayar).
 // Returns false when no order gives an increasing f over the fitted range.
 bool FitMitsunagaNayar(const std::vector<Observation>& obs, double fit_high,
-                       std::vector<double>* support, const ResponseOptions& o,
-                       ChannelResult* info, std::vector<double>* g_out) {
+                       std::vector<double>* support, const ResponseOptions& o, ChannelResult* info,
+                       std::vector<double>* g_out) {
   struct Pair {
     double m0, m1;
     int key;  // which pair of frames (for the ratio)
@@ -536,8 +535,7 @@ bool FitMitsunagaNayar(const std::vector<Observation>& obs, double fit_high,
     for (size_t k = 0; k + 1 < group.size(); ++k) {
       const Observation &a = group[k], &b = group[k + 1];
       if (!(b.log_exposure > a.log_exposure)) continue;
-      if (a.z < o.mn_fit_low || a.z > o.mn_fit_high || b.z < o.mn_fit_low ||
-          b.z > fit_high) {
+      if (a.z < o.mn_fit_low || a.z > o.mn_fit_high || b.z < o.mn_fit_low || b.z > fit_high) {
         continue;
       }
       const std::pair<int, int> id(a.frame, b.frame);
@@ -752,8 +750,10 @@ void ResponseOptions::Validate() const {
   }
   if (!std::isfinite(mn_fit_low) || !std::isfinite(mn_fit_high) || mn_fit_low < 1 ||
       mn_fit_high > 254 || mn_fit_high - mn_fit_low < 64) {
-    throw Error("ResponseOptions: need 1 <= mn_fit_low, mn_fit_low + 64 <= mn_fit_high <= 254, "
-                "got " + std::to_string(mn_fit_low) + " and " + std::to_string(mn_fit_high));
+    throw Error(
+        "ResponseOptions: need 1 <= mn_fit_low, mn_fit_low + 64 <= mn_fit_high <= 254, "
+        "got " +
+        std::to_string(mn_fit_low) + " and " + std::to_string(mn_fit_high));
   }
   if (samples_per_bracket < kMinSamples || samples_per_bracket > 1000000) {
     throw Error("ResponseOptions: samples_per_bracket must be in [8, 1e6], got " +
@@ -880,7 +880,8 @@ ResponseCurve RecoverResponse(const std::vector<Bracket>& brackets, const Respon
     summary->exposure_ratios = res[0].ratios;
     summary->mn_fit_high = 255;
     for (int c = 0; c < channels; ++c) {
-      if (res[c].fit_high > 0) summary->mn_fit_high = std::min(summary->mn_fit_high, res[c].fit_high);
+      if (res[c].fit_high > 0)
+        summary->mn_fit_high = std::min(summary->mn_fit_high, res[c].fit_high);
     }
     if (options.method != ResponseMethod::kMitsunagaNayar) summary->mn_fit_high = 0;
     summary->scan_stride = stride;

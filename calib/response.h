@@ -112,13 +112,13 @@ struct ResponseSummary {
   // weighted data rows (ln units); Robertson, (I(z) - t x) / I(z) over weighted readings;
   // Mitsunaga-Nayar, (f(M_q) - R_q f(M_q+1)) / f(M_q) over the pairs.
   double method_residual = 0;
-  int monotone_violations = 0;  // adjacent pairs the isotonic step had to repair
-  int iterations = 0;           // Robertson: iterations run (max over channels)
-  bool converged = true;        // Robertson: every channel met convergence_tolerance
-  int polynomial_order = 0;     // Mitsunaga-Nayar: chosen order (max over channels)
+  int monotone_violations = 0;          // adjacent pairs the isotonic step had to repair
+  int iterations = 0;                   // Robertson: iterations run (max over channels)
+  bool converged = true;                // Robertson: every channel met convergence_tolerance
+  int polynomial_order = 0;             // Mitsunaga-Nayar: chosen order (max over channels)
   std::vector<double> exposure_ratios;  // Mitsunaga-Nayar with mn_estimate_ratios: R_q used
   double mn_fit_high = 0;  // Mitsunaga-Nayar: top of the fit range used (lowest over channels)
-  int scan_stride = 1;          // grid stride of the sample scan (largest over brackets)
+  int scan_stride = 1;     // grid stride of the sample scan (largest over brackets)
   double seconds = 0;
 };
 

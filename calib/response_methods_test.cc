@@ -64,8 +64,8 @@ class MethodCurveTest : public ::testing::TestWithParam<Case> {};
 TEST_P(MethodCurveTest, RecoversKnownCurve) {
   const Case& k = GetParam();
   const Image radiance = RadianceField(240, 160, -5.0, 4.0, 7);
-  const std::vector<Bracket> brackets = {MakeBracket(radiance, kExposures, k.noise_dn, 11,
-                                                     k.shape)};
+  const std::vector<Bracket> brackets = {
+      MakeBracket(radiance, kExposures, k.noise_dn, 11, k.shape)};
   ResponseOptions opt;
   opt.method = k.method;
   opt.mn_fit_high = k.mn_fit_high;
@@ -102,10 +102,11 @@ TEST_P(MethodCurveTest, RecoversKnownCurve) {
   RecordProperty("worst_error_over_tolerance", std::to_string(worst));
   RecordProperty("residual_rms", std::to_string(s.residual_rms));
   RecordProperty("method_residual", std::to_string(s.method_residual));
-  std::printf("%s: worst |error| / tolerance %.2f, residual %.4f ln, method residual %.4g, "
-              "iterations %d, order %d, %.3f s\n",
-              CaseName({k, 0}).c_str(), worst, s.residual_rms, s.method_residual, s.iterations,
-              s.polynomial_order, s.seconds);
+  std::printf(
+      "%s: worst |error| / tolerance %.2f, residual %.4f ln, method residual %.4g, "
+      "iterations %d, order %d, %.3f s\n",
+      CaseName({k, 0}).c_str(), worst, s.residual_rms, s.method_residual, s.iterations,
+      s.polynomial_order, s.seconds);
 }
 
 constexpr auto kDM = ResponseMethod::kDebevecMalik;
@@ -262,10 +263,10 @@ TEST(RecoverResponse, MemorialMethodsAreMonotoneAndAgreementIsReported) {
     const std::string name = ResponseMethodName(methods[m]);
     RecordProperty("max_abs_delta_vs_debevec_malik_20_235_" + name, std::to_string(diff20));
     RecordProperty("max_abs_delta_vs_debevec_malik_40_235_" + name, std::to_string(diff40));
-    std::printf("Memorial: %s vs Debevec-Malik, max |delta g| over z 20..235 = %.3f ln, over "
-                "40..235 = %.3f ln; residual %.4f vs %.4f ln; %.3f s\n",
-                name.c_str(), diff20, diff40, sums[m].residual_rms, sums[0].residual_rms,
-                sums[m].seconds);
+    std::printf(
+        "Memorial: %s vs Debevec-Malik, max |delta g| over z 20..235 = %.3f ln, over "
+        "40..235 = %.3f ln; residual %.4f vs %.4f ln; %.3f s\n",
+        name.c_str(), diff20, diff40, sums[m].residual_rms, sums[0].residual_rms, sums[m].seconds);
   }
 }
 

@@ -1,14 +1,13 @@
 #include "calib/sky_orientation.h"
 
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <string>
-
-#include <Eigen/Eigenvalues>
-#include <Eigen/Geometry>
-#include <Eigen/LU>
 
 #include "core/error.h"
 
@@ -196,8 +195,8 @@ SunDisc DetectSunDisc(const Image& image, const Intrinsics& k, const SunDiscOpti
   if (image.empty() || image.channels < 1) throw Error(what + ": empty image");
   if (image.width != k.width || image.height != k.height) {
     throw Error(what + ": image is " + std::to_string(image.width) + "x" +
-                std::to_string(image.height) + " but the lens is " + std::to_string(k.width) +
-                "x" + std::to_string(k.height));
+                std::to_string(image.height) + " but the lens is " + std::to_string(k.width) + "x" +
+                std::to_string(k.height));
   }
   const int w = image.width, h = image.height, nc = image.channels;
   const size_t n = static_cast<size_t>(w) * h;
@@ -214,10 +213,9 @@ SunDisc DetectSunDisc(const Image& image, const Intrinsics& k, const SunDiscOpti
     chmax[i] = std::isfinite(m) ? m : 0;
   }
   const double saturation =
-      o.saturation > 0 ? o.saturation
-                       : (image.units == PixelUnits::kDigital
-                              ? 254.5
-                              : std::numeric_limits<double>::infinity());
+      o.saturation > 0
+          ? o.saturation
+          : (image.units == PixelUnits::kDigital ? 254.5 : std::numeric_limits<double>::infinity());
   // Global median from a subsample (at most ~1M values).
   std::vector<float> sub;
   const size_t stride = std::max<size_t>(1, n / 1000000);

@@ -7,10 +7,9 @@
 // Pose::rotation maps camera rays to world directions.
 #pragma once
 
+#include <Eigen/Core>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "core/camera.h"
 #include "core/image.h"
@@ -41,12 +40,12 @@ struct SunDiscOptions {
 };
 
 struct SunDisc {
-  Eigen::Vector2d pixel = Eigen::Vector2d::Zero();  // sub-pixel centroid (pixel centres +0.5)
+  Eigen::Vector2d pixel = Eigen::Vector2d::Zero();     // sub-pixel centroid (pixel centres +0.5)
   Eigen::Vector3d ray_cam = Eigen::Vector3d::UnitZ();  // unit camera-frame ray through it
-  double peak = 0;                // peak luminance (image units)
-  double background = 0;          // local background luminance around the disc
-  int core_pixels = 0;            // pixels in the blob's core
-  double radius_px = 0;           // equivalent radius of the core, pixels
+  double peak = 0;                                     // peak luminance (image units)
+  double background = 0;                               // local background luminance around the disc
+  int core_pixels = 0;                                 // pixels in the blob's core
+  double radius_px = 0;                                // equivalent radius of the core, pixels
   double expected_radius_px = 0;  // the sun's radius projected at this place in the image
   // 1-sigma centroid uncertainty from the image noise around the disc, pixels (plus a 0.02 px
   // floor for pixelisation), and the same as an angle, degrees.

@@ -1,12 +1,12 @@
 #include "calib/sky_orientation.h"
 
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
 #include <cmath>
 #include <random>
 #include <string>
-
-#include <Eigen/Geometry>
-#include <gmock/gmock.h>
-#include <gtest/gtest.h>
 
 #include "core/camera.h"
 #include "core/error.h"
@@ -206,16 +206,16 @@ struct OrientCase {
 };
 
 TEST(OrientFromSun, FisheyeWithOneLandmark) {
-  OrientCase c{Intrinsics::FisheyeFov(800, 800, 185), Camera(75, 88, 0),
-               EnuFromAzEl(230, 28), 0.02};
+  OrientCase c{Intrinsics::FisheyeFov(800, 800, 185), Camera(75, 88, 0), EnuFromAzEl(230, 28),
+               0.02};
   const Image img = RenderSky(c.k, c.truth, {{c.sun}}, c.noise, 3);
   const SunDisc d = DetectSunDisc(img, c.k);
   // A landmark: a church spire at azimuth 40 deg, elevation 3 deg, clicked exactly.
   const Eigen::Vector3d spire = EnuFromAzEl(40, 3);
   const SkyLandmark lm{*Project(c.k, c.truth.rotation.transpose() * spire), spire, 0.05};
   const SkyOrientation o = OrientFromSun(c.k, d.ray_cam, d.sigma_deg, c.sun, {lm}, {});
-  const double sun_err = std::acos(std::min(1.0, d.ray_cam.dot(
-                                                     c.truth.rotation.transpose() * c.sun)));
+  const double sun_err =
+      std::acos(std::min(1.0, d.ray_cam.dot(c.truth.rotation.transpose() * c.sun)));
   const double sep = std::acos(spire.dot(c.sun)) / kDeg;
   const double err = RotationAngleDeg(o.pose.rotation, c.truth.rotation);
   EXPECT_LT(err, RotationToleranceDeg(sun_err + CentroidTolerancePx(d) / c.k.fx, sep));

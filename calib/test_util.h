@@ -6,9 +6,9 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <sstream>
 #include <string>
-#include <random>
 #include <vector>
 
 #include "calib/response.h"
@@ -117,8 +117,7 @@ inline Bracket MakeBracket(const Image& radiance, const std::vector<double>& exp
 // ---- Real data under ROUEN_SHARED_DIR (tests and bench only): Debevec's Memorial Church. ----
 
 // Two stops apart; radiance e^-5..e^4 is well exposed somewhere for both curve shapes.
-inline const std::vector<double> kTwoStopExposures = {1.0 / 64, 1.0 / 16, 1.0 / 4, 1.0, 4.0,
-                                                      16.0};
+inline const std::vector<double> kTwoStopExposures = {1.0 / 64, 1.0 / 16, 1.0 / 4, 1.0, 4.0, 16.0};
 
 inline bool StrictlyIncreasing(const std::vector<double>& g) {
   for (size_t z = 1; z < g.size(); ++z) {

@@ -1,17 +1,15 @@
 #include "calib/vignetting.h"
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
-#include <string>
-
-#include <Eigen/Dense>
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "core/error.h"
 
 namespace rouen {
 namespace {
-
 
 // One bin of one flat frame: centre (pixels) and mean linear level.
 struct Bin {
@@ -52,7 +50,8 @@ VignettingModel FitVignetting(const std::vector<const Image*>& flats,
         throw Error("vignetting: flat frame " + std::to_string(k) +
                     " holds digital numbers; a response curve is needed to linearise it");
     } else if (f->units != PixelUnits::kRadiance) {
-      throw Error("vignetting: flat frame " + std::to_string(k) + " is neither radiance nor digital");
+      throw Error("vignetting: flat frame " + std::to_string(k) +
+                  " is neither radiance nor digital");
     }
   }
   const int bin = options.bin;
@@ -116,9 +115,8 @@ VignettingModel FitVignetting(const std::vector<const Image*>& flats,
   const int np = ic + (centre ? 2 : 0);
   const int min_bins = np + 10;
   if (static_cast<int>(bins.size()) < min_bins)
-    throw Error("vignetting: only " + std::to_string(bins.size()) +
-                " usable bins (need " + std::to_string(min_bins) +
-                "); the flat frames are too dark, saturated or small");
+    throw Error("vignetting: only " + std::to_string(bins.size()) + " usable bins (need " +
+                std::to_string(min_bins) + "); the flat frames are too dark, saturated or small");
 
   Eigen::VectorXd p = Eigen::VectorXd::Zero(np);
   std::vector<double> scale(nf, 0);  // initial level: residuals are relative to it

@@ -34,8 +34,8 @@ struct VignettingSummary {
   int frames = 0;
   int bins_used = 0;
   int iterations = 0;
-  double residual_rms = 0;       // relative (fraction of the frame's level), per bin
-  double corner_falloff = 1;     // V at the farthest corner
+  double residual_rms = 0;    // relative (fraction of the frame's level), per bin
+  double corner_falloff = 1;  // V at the farthest corner
   std::array<double, 3> gradient_max = {0, 0, 0};  // largest |gradient| fitted (per image width)
 };
 

@@ -1,9 +1,9 @@
 #include "calib/vignetting.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <random>
-
-#include <gtest/gtest.h>
 
 #include "calib/test_util.h"
 #include "core/error.h"
@@ -35,8 +35,7 @@ Image Flat(const VignettingModel& m, double level, double gx, double gy, double 
     for (int x = 0; x < kW; ++x) {
       const double g = 1 + gx * (x + 0.5 - kW / 2.0) / hd + gy * (y + 0.5 - kH / 2.0) / hd;
       for (int c = 0; c < 3; ++c)
-        im.at(x, y, c) =
-            static_cast<float>(level * g * m.Falloff(x + 0.5, y + 0.5) * (1 + n(rng)));
+        im.at(x, y, c) = static_cast<float>(level * g * m.Falloff(x + 0.5, y + 0.5) * (1 + n(rng)));
     }
   return im;
 }

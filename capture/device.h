@@ -27,12 +27,12 @@ struct ControlInfo {
 };
 
 struct CapturedFrame {
-  Image image;           // kDigital (8-bit LDR) or kRadiance (HDR camera)
+  Image image;  // kDigital (8-bit LDR) or kRadiance (HDR camera)
   bool hdr = false;
   double exposure_s = 0;  // as applied by the device
   double gain = 1;
   double nd_density = 0;
-  UtcTime utc;            // mid-exposure
+  UtcTime utc;  // mid-exposure
   std::optional<Intrinsics> intrinsics;
   std::optional<Pose> pose;  // when the device knows it (sim, replay, calibrated mount)
 };

@@ -3,9 +3,8 @@
 #include <algorithm>
 #include <climits>
 #include <cmath>
-#include <string>
-
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "core/error.h"
 #include "core/solar.h"
@@ -44,9 +43,12 @@ double FisheyeR(const Intrinsics& k, double t, double* dr) {
 
 const char* ProjectionName(Projection p) {
   switch (p) {
-    case Projection::kPinhole: return "pinhole";
-    case Projection::kFisheye: return "fisheye";
-    case Projection::kEquirect: return "equirect";
+    case Projection::kPinhole:
+      return "pinhole";
+    case Projection::kFisheye:
+      return "fisheye";
+    case Projection::kEquirect:
+      return "equirect";
   }
   return "pinhole";
 }
@@ -140,8 +142,7 @@ std::optional<Eigen::Vector2d> Project(const Intrinsics& k, const Eigen::Vector3
   switch (k.projection) {
     case Projection::kPinhole: {
       if (d.z() <= 1e-12 * n) return std::nullopt;
-      const Eigen::Vector2d pd = Distort(k, Eigen::Vector2d(d.x() / d.z(), d.y() / d.z()),
-                                         nullptr);
+      const Eigen::Vector2d pd = Distort(k, Eigen::Vector2d(d.x() / d.z(), d.y() / d.z()), nullptr);
       return Eigen::Vector2d(k.fx * pd.x() + k.cx, k.fy * pd.y() + k.cy);
     }
     case Projection::kFisheye: {

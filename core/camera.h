@@ -2,13 +2,12 @@
 // east-north-up frame (x east, y north, z up), metres.
 #pragma once
 
-#include <optional>
-#include <string>
-#include <string_view>
-
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <nlohmann/json_fwd.hpp>
+#include <optional>
+#include <string>
+#include <string_view>
 
 namespace rouen {
 

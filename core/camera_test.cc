@@ -1,8 +1,8 @@
 #include "core/camera.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
@@ -124,8 +124,8 @@ TEST(CameraTest, LookAtIsAProperRotation) {
   EXPECT_TRUE(north.rotation.col(0).isApprox(Eigen::Vector3d(1, 0, 0)));   // right = east
   EXPECT_TRUE(north.rotation.col(1).isApprox(Eigen::Vector3d(0, 0, -1)));  // down
   EXPECT_TRUE(north.rotation.col(2).isApprox(Eigen::Vector3d(0, 1, 0)));   // forward
-  const Eigen::Vector3d targets[] = {{3, -4, 1}, {-1, 0.5, -2}, {0, 0, 10}, {0, 0, -10},
-                                     {1e-12, 0, 5}};
+  const Eigen::Vector3d targets[] = {
+      {3, -4, 1}, {-1, 0.5, -2}, {0, 0, 10}, {0, 0, -10}, {1e-12, 0, 5}};
   for (const Eigen::Vector3d& t : targets) {
     const Pose p = Pose::LookAt(eye, eye + t);
     EXPECT_NEAR(p.rotation.determinant(), 1.0, 1e-12);
@@ -166,16 +166,23 @@ TEST(CameraTest, ValidateExplainsItself) {
 }
 
 TEST(CameraTest, JsonRoundTrip) {
-  for (const Intrinsics& k : {DistortedPinhole(), DistortedFisheye(),
-                              Intrinsics::Equirect(2048, 1024)}) {
+  for (const Intrinsics& k :
+       {DistortedPinhole(), DistortedFisheye(), Intrinsics::Equirect(2048, 1024)}) {
     const nlohmann::json j = k;
     const Intrinsics back = nlohmann::json::parse(j.dump()).get<Intrinsics>();
     EXPECT_EQ(back.projection, k.projection);
     EXPECT_EQ(back.width, k.width);
     EXPECT_EQ(back.height, k.height);
-    for (auto [a, b] : {std::pair{back.fx, k.fx}, {back.fy, k.fy}, {back.cx, k.cx},
-                        {back.cy, k.cy}, {back.k1, k.k1}, {back.k2, k.k2}, {back.k3, k.k3},
-                        {back.k4, k.k4}, {back.p1, k.p1}, {back.p2, k.p2}}) {
+    for (auto [a, b] : {std::pair{back.fx, k.fx},
+                        {back.fy, k.fy},
+                        {back.cx, k.cx},
+                        {back.cy, k.cy},
+                        {back.k1, k.k1},
+                        {back.k2, k.k2},
+                        {back.k3, k.k3},
+                        {back.k4, k.k4},
+                        {back.p1, k.p1},
+                        {back.p2, k.p2}}) {
       EXPECT_EQ(a, b);
     }
   }

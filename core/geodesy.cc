@@ -1,10 +1,9 @@
 #include "core/geodesy.h"
 
-#include <cmath>
-#include <string>
-
 #include <GeographicLib/Geocentric.hpp>
 #include <GeographicLib/LocalCartesian.hpp>
+#include <cmath>
+#include <string>
 
 #include "core/error.h"
 
@@ -17,9 +16,9 @@ struct LocalFrame::Impl {
 LocalFrame::LocalFrame(const Site& origin) : origin_(origin) {
   if (!std::isfinite(origin.lat_deg) || !std::isfinite(origin.lon_deg) ||
       !std::isfinite(origin.height_m) || std::abs(origin.lat_deg) > 90.0) {
-    throw Error("local frame: invalid origin (lat " + std::to_string(origin.lat_deg) +
-                ", lon " + std::to_string(origin.lon_deg) + ", height " +
-                std::to_string(origin.height_m) + ")");
+    throw Error("local frame: invalid origin (lat " + std::to_string(origin.lat_deg) + ", lon " +
+                std::to_string(origin.lon_deg) + ", height " + std::to_string(origin.height_m) +
+                ")");
   }
   impl_ = std::make_unique<Impl>(Impl{GeographicLib::LocalCartesian(
       origin.lat_deg, origin.lon_deg, origin.height_m, GeographicLib::Geocentric::WGS84())});

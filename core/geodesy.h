@@ -1,9 +1,8 @@
 // Geodetic <-> local east-north-up frame of a site (GeographicLib, WGS84).
 #pragma once
 
-#include <memory>
-
 #include <Eigen/Core>
+#include <memory>
 
 #include "core/solar.h"
 

@@ -1,8 +1,8 @@
 #include "core/geodesy.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "core/error.h"
 
@@ -10,9 +10,9 @@ namespace rouen {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-constexpr double kA = 6378137.0;                  // WGS84 semi-major axis, m
-constexpr double kF = 1.0 / 298.257223563;        // WGS84 flattening
-constexpr double kE2 = kF * (2 - kF);             // first eccentricity squared
+constexpr double kA = 6378137.0;            // WGS84 semi-major axis, m
+constexpr double kF = 1.0 / 298.257223563;  // WGS84 flattening
+constexpr double kE2 = kF * (2 - kF);       // first eccentricity squared
 
 TEST(GeodesyTest, RoundTrip) {
   const LocalFrame frame(Site{37.8722, -122.2578, 60.0});
@@ -33,7 +33,7 @@ TEST(GeodesyTest, KnownOffsetsFromTheEllipsoid) {
   const double s = std::sin(lat * kPi / 180);
   const double w = 1 - kE2 * s * s;
   const double meridian = kA * (1 - kE2) / std::pow(w, 1.5);  // M
-  const double normal = kA / std::sqrt(w);                      // N
+  const double normal = kA / std::sqrt(w);                    // N
   const double dphi = 0.001 * kPi / 180;
   const Eigen::Vector3d north = frame.ToEnu(Site{lat + 0.001, -122.0, h});
   EXPECT_NEAR(north.y(), meridian * dphi, 0.05);

@@ -5,9 +5,8 @@
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
-#include <string>
-
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "core/error.h"
 #include "core/files.h"

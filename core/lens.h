@@ -4,11 +4,10 @@
 #pragma once
 
 #include <array>
+#include <nlohmann/json_fwd.hpp>
 #include <optional>
 #include <string>
 #include <string_view>
-
-#include <nlohmann/json_fwd.hpp>
 
 #include "core/camera.h"
 #include "core/image.h"
@@ -44,8 +43,9 @@ void from_json(const nlohmann::json& j, VignettingModel& v);  // validates; thro
 void RemoveVignetting(const VignettingModel& model, Image* radiance);
 
 // A rig lens file: the Intrinsics keys, plus optional "max_field_deg" (the largest angle
-// from the optical axis the lens images, degrees, 0..180; 0 = automatic) and "vignetting" (a VignettingModel).
-// Other keys (e.g. the "calibration" record `rouen calib intrinsics` writes) are ignored.
+// from the optical axis the lens images, degrees, 0..180; 0 = automatic) and "vignetting" (a
+// VignettingModel). Other keys (e.g. the "calibration" record `rouen calib intrinsics` writes) are
+// ignored.
 struct LensFile {
   Intrinsics intrinsics;
   double max_field_deg = 0;

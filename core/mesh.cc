@@ -1,13 +1,12 @@
 #include "core/mesh.h"
 
+#include <Eigen/Geometry>
 #include <cassert>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <map>
 #include <sstream>
-
-#include <Eigen/Geometry>
 
 #include "core/error.h"
 #include "core/files.h"
@@ -21,8 +20,8 @@ constexpr double kDegenerateRatio = 1e-12;
 
 bool IsDegenerate(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
   const double cross = (b - a).cross(c - a).norm();
-  const double longest = std::max({(b - a).squaredNorm(), (c - b).squaredNorm(),
-                                   (a - c).squaredNorm()});
+  const double longest =
+      std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()});
   return !(cross > kDegenerateRatio * longest) || !(longest > 0);
 }
 
@@ -169,8 +168,8 @@ Mesh ParseObj(std::string_view text, const std::string& path) {
         current = "default";
       } else {
         const size_t start = static_cast<size_t>(tok[1].data() - line.data());
-        const size_t stop = static_cast<size_t>(tok.back().data() + tok.back().size() -
-                                                line.data());
+        const size_t stop =
+            static_cast<size_t>(tok.back().data() + tok.back().size() - line.data());
         current = std::string(line.substr(start, stop - start));
       }
     }

@@ -1,18 +1,17 @@
 // Triangle meshes from Wavefront OBJ; OBJ groups ("g name") become blocks.
 #pragma once
 
+#include <Eigen/Core>
 #include <string>
 #include <string_view>
 #include <vector>
 
-#include <Eigen/Core>
-
 namespace rouen {
 
 struct Mesh {
-  std::vector<Eigen::Vector3d> vertices;        // world frame (ENU metres)
-  std::vector<Eigen::Vector3i> triangles;       // counter-clockwise seen from outside
-  std::vector<int> triangle_block;              // block index per triangle
+  std::vector<Eigen::Vector3d> vertices;   // world frame (ENU metres)
+  std::vector<Eigen::Vector3i> triangles;  // counter-clockwise seen from outside
+  std::vector<int> triangle_block;         // block index per triangle
   std::vector<std::string> block_names;
 
   Eigen::Vector3d Normal(int t) const;  // unit outward normal

@@ -1,11 +1,10 @@
 #include "core/mesh.h"
 
+#include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <filesystem>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "core/error.h"
 #include "core/files.h"

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
@@ -61,13 +60,13 @@ void from_json(const nlohmann::json& j, ResponseCurve& r) {
     out.g[c].resize(256);
     for (int z = 0; z < 256; ++z) {
       if (!ch[z].is_number()) {
-        throw Error("response curve: channel " + std::to_string(c) + " entry " +
-                    std::to_string(z) + " is not a number");
+        throw Error("response curve: channel " + std::to_string(c) + " entry " + std::to_string(z) +
+                    " is not a number");
       }
       out.g[c][z] = ch[z].get<double>();
       if (!std::isfinite(out.g[c][z])) {
-        throw Error("response curve: channel " + std::to_string(c) + " entry " +
-                    std::to_string(z) + " is not finite");
+        throw Error("response curve: channel " + std::to_string(c) + " entry " + std::to_string(z) +
+                    " is not finite");
       }
       if (z > 0 && out.g[c][z] < out.g[c][z - 1]) {
         throw Error("response curve: channel " + std::to_string(c) + " decreases at entry " +

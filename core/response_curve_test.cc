@@ -1,11 +1,10 @@
 #include "core/response_curve.h"
 
+#include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <cmath>
 #include <filesystem>
-
-#include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
@@ -69,8 +68,8 @@ TEST(ResponseCurveTest, JsonAndFiles) {
   EXPECT_EQ(j["g"][0].size(), 256u);
   EXPECT_EQ(j.get<ResponseCurve>().g, r.g);
 
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("rouen_core_curve_" + std::to_string(::getpid()));
+  const auto dir =
+      std::filesystem::temp_directory_path() / ("rouen_core_curve_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
   const std::string path = (dir / "response.json").string();
   WriteResponseCurve(path, r);

@@ -234,9 +234,8 @@ void from_json(const json& j, FrameRecord& f) {
   r.id = NeedInt(j, "id", what);
   r.device = NeedString(j, "device", what);
   r.target = ParseTarget(NeedString(j, "target", what));
-  r.group = Optional<std::string>(j, "group", "", [&](const json& x, const char* k) {
-    return NeedString(x, k, what);
-  });
+  r.group = Optional<std::string>(
+      j, "group", "", [&](const json& x, const char* k) { return NeedString(x, k, what); });
   r.slot = Optional<int>(j, "slot", 0,
                          [&](const json& x, const char* k) { return NeedInt32(x, k, what); });
   r.utc = NeedTime(j, "utc", what);

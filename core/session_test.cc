@@ -469,7 +469,6 @@ TEST_F(SessionTest, OneWriterPerSession) {
   ExpectWholeFrames(Session::Load(dir_), 6, 4);
 }
 
-
 TEST_F(SessionTest, IntegersOutOfRangeAreRefusedNotTruncated) {
   FrameRecord f = Meta(Target::kSky, false, 0.01);
   f.gps = GpsFix{};

@@ -1,9 +1,9 @@
 #include "core/solar.h"
 
+#include <erfa.h>
+
 #include <cmath>
 #include <string>
-
-#include <erfa.h>
 
 #include "core/error.h"
 
@@ -13,10 +13,10 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kDegToRad = kPi / 180.0;
 constexpr double kRadToDeg = 180.0 / kPi;
-constexpr double kSunRadiusKm = 695700.0;       // IAU 2015 nominal solar radius
-constexpr double kAuKm = 149597870.700;         // IAU 2012 astronomical unit
-constexpr double kSpaSunRadiusDeg = 0.26667;    // NREL SPA's sun radius for its condition
-constexpr double kSpaRefractionDeg = 0.5667;    // NREL SPA's refraction at the horizon
+constexpr double kSunRadiusKm = 695700.0;     // IAU 2015 nominal solar radius
+constexpr double kAuKm = 149597870.700;       // IAU 2012 astronomical unit
+constexpr double kSpaSunRadiusDeg = 0.26667;  // NREL SPA's sun radius for its condition
+constexpr double kSpaRefractionDeg = 0.5667;  // NREL SPA's refraction at the horizon
 
 // NREL SPA (Reda & Andreas 2008, eq. 42): refraction correction in degrees for a true
 // elevation e0 (degrees) at pressure P (mbar) and temperature T (deg C).
@@ -56,16 +56,16 @@ SunPosition ComputeSunPosition(UtcTime t, const Site& site, const Weather& weath
   eraASTROM astrom;
   double eo = 0;
   // Pressure 0: ERFA's refraction is off; SPA's formula is applied below.
-  const int status = eraApco13(utc1, utc2, /*dut1=*/0.0, site.lon_deg * kDegToRad,
-                               site.lat_deg * kDegToRad, site.height_m, /*xp=*/0.0, /*yp=*/0.0,
-                               /*phpa=*/0.0, weather.temperature_c, /*rh=*/0.0, /*wl=*/0.55,
-                               &astrom, &eo);
+  const int status =
+      eraApco13(utc1, utc2, /*dut1=*/0.0, site.lon_deg * kDegToRad, site.lat_deg * kDegToRad,
+                site.height_m, /*xp=*/0.0, /*yp=*/0.0,
+                /*phpa=*/0.0, weather.temperature_c, /*rh=*/0.0, /*wl=*/0.55, &astrom, &eo);
   if (status < 0) throw Error("solar position: ERFA refused the date " + t.Iso8601());
   // Observer-to-Sun natural direction (astrom.eh is the Sun-to-observer unit vector).
   double pnat[3] = {-astrom.eh[0], -astrom.eh[1], -astrom.eh[2]};
   double ppr[3], pi[3];
   eraAb(pnat, astrom.v, astrom.em, astrom.bm1, ppr);  // annual aberration
-  eraRxp(astrom.bpn, ppr, pi);                          // GCRS -> CIRS
+  eraRxp(astrom.bpn, ppr, pi);                        // GCRS -> CIRS
   double ri = 0, di = 0;
   eraC2s(pi, &ri, &di);
   double aob = 0, zob = 0, hob = 0, dob = 0, rob = 0;
@@ -78,9 +78,9 @@ SunPosition ComputeSunPosition(UtcTime t, const Site& site, const Weather& weath
   if (az >= 360.0) az -= 360.0;
   s.azimuth_deg = az;
   s.elevation_true_deg = 90.0 - zob * kRadToDeg;
-  s.elevation_deg = s.elevation_true_deg + SpaRefractionDeg(s.elevation_true_deg,
-                                                            weather.pressure_mbar,
-                                                            weather.temperature_c);
+  s.elevation_deg =
+      s.elevation_true_deg +
+      SpaRefractionDeg(s.elevation_true_deg, weather.pressure_mbar, weather.temperature_c);
   s.distance_au = astrom.em;
   s.angular_radius_deg = std::asin(kSunRadiusKm / (astrom.em * kAuKm)) * kRadToDeg;
   // ERFA gives NaN for sites far from the Earth's surface (a height of 1e15 m): never return it.
@@ -95,8 +95,7 @@ SunPosition ComputeSunPosition(UtcTime t, const Site& site, const Weather& weath
 
 Eigen::Vector3d EnuFromAzEl(double azimuth_deg, double elevation_deg) {
   const double az = azimuth_deg * kDegToRad, el = elevation_deg * kDegToRad;
-  return Eigen::Vector3d(std::sin(az) * std::cos(el), std::cos(az) * std::cos(el),
-                         std::sin(el));
+  return Eigen::Vector3d(std::sin(az) * std::cos(el), std::cos(az) * std::cos(el), std::sin(el));
 }
 
 void AzElFromEnu(const Eigen::Vector3d& d, double* azimuth_deg, double* elevation_deg) {

@@ -1,9 +1,9 @@
 #include "core/solar.h"
 
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cmath>
-
-#include <gtest/gtest.h>
 
 #include "core/error.h"
 

@@ -17,7 +17,7 @@ constexpr int kMinYear = 1678, kMaxYear = 2261;  // ParseIso8601
 int64_t DaysFromCivil(int64_t y, int m, int d) {
   y -= m <= 2;
   const int64_t era = (y >= 0 ? y : y - 399) / 400;
-  const int64_t yoe = y - era * 400;                                    // [0, 399]
+  const int64_t yoe = y - era * 400;                                   // [0, 399]
   const int64_t doy = (153 * (m + (m > 2 ? -3 : 9)) + 2) / 5 + d - 1;  // [0, 365]
   const int64_t doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;           // [0, 146096]
   return era * 146097 + doe - 719468;
@@ -207,8 +207,8 @@ UtcTime FromCivil(const CivilTime& c) {
   int64_t y = c.year + FloorDiv(c.month - 1, 12);
   const int m = static_cast<int>(c.month - 1 - FloorDiv(c.month - 1, 12) * 12) + 1;
   const int64_t days = DaysFromCivil(y, m, 1) + (c.day - 1);
-  const int64_t whole = (days * 86400 + int64_t{c.hour} * 3600 + int64_t{c.minute} * 60) *
-                        kNsPerSecond;
+  const int64_t whole =
+      (days * 86400 + int64_t{c.hour} * 3600 + int64_t{c.minute} * 60) * kNsPerSecond;
   return UtcTime{whole + static_cast<int64_t>(std::llround(c.second * 1e9))};
 }
 

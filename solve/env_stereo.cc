@@ -339,8 +339,9 @@ Eigen::Vector3d PredictWithQuad(const EnvRegionFit& fit, const EnvStereoOptions&
 
 void EnvStereoOptions::Validate() const {
   if (!(alpha >= 10) || !std::isfinite(alpha)) {
-    throw Error("EnvStereoOptions: alpha must be a large positive constant (>= 10; the paper "
-                "uses 1000)");
+    throw Error(
+        "EnvStereoOptions: alpha must be a large positive constant (>= 10; the paper "
+        "uses 1000)");
   }
   if (fixed_channel < 0 || fixed_channel > 2) {
     throw Error("EnvStereoOptions: fixed_channel must be 0, 1 or 2");
@@ -588,8 +589,8 @@ EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
     // Sky-only fallback (§5.2): a bad fit with a normal pointing away from the viewer, or a
     // normal no training sun lit (its solar term and direction are then unconstrained).
     const bool away = fit.normal.dot(view) > 0;
-    const bool implausible = std::max(fit.rho_sun.maxCoeff(), fit.rho_sky.maxCoeff()) >
-                             options.max_albedo;
+    const bool implausible =
+        std::max(fit.rho_sun.maxCoeff(), fit.rho_sky.maxCoeff()) > options.max_albedo;
     if ((fit.rel_rms > options.fallback_rel_error && away) || implausible ||
         fit.sunlit_times == 0) {
       fallback_reason[gi] = fit.sunlit_times == 0 ? 2 : 1;
@@ -721,8 +722,8 @@ EnvironmentMap PredictEnvironment(const EnvStereoResult& result, const EnvLighti
   m.source = result.source;
   for (size_t gi = 0; gi < result.regions.size(); ++gi) {
     const int r = static_cast<int>(gi % nreg);
-    m.radiance[gi] = PredictWithQuad(result.regions[gi], result.options, lighting, q,
-                                     sky.radiance[r]);
+    m.radiance[gi] =
+        PredictWithQuad(result.regions[gi], result.options, lighting, q, sky.radiance[r]);
   }
   m.Validate();
   return m;

@@ -107,20 +107,20 @@ const char* EnvRegionKindName(EnvRegionKind kind);
 
 struct EnvRegionFit {
   EnvRegionKind kind = EnvRegionKind::kUnobserved;
-  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();       // unit ENU (the fallback's: fixed)
-  Eigen::Vector3d rho_sky = Eigen::Vector3d::Zero();       // albedo for the sky's light
-  Eigen::Vector3d rho_sun = Eigen::Vector3d::Zero();       // albedo for the sun's light
-  double sky_fraction = 0;                                 // f, above-horizon regions only
-  double rel_rms = 0;        // RMS of (model - I) / sigma over times and channels
-  int sunlit_times = 0;      // training times with normal . sun > 0
-  int iterations = 0;        // of the winning start (plus smoothing refinement)
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  // unit ENU (the fallback's: fixed)
+  Eigen::Vector3d rho_sky = Eigen::Vector3d::Zero();  // albedo for the sky's light
+  Eigen::Vector3d rho_sun = Eigen::Vector3d::Zero();  // albedo for the sun's light
+  double sky_fraction = 0;                            // f, above-horizon regions only
+  double rel_rms = 0;    // RMS of (model - I) / sigma over times and channels
+  int sunlit_times = 0;  // training times with normal . sun > 0
+  int iterations = 0;    // of the winning start (plus smoothing refinement)
 };
 
 struct EnvStereoSummary {
   int times = 0;
   int regions_sky = 0, regions_landscape = 0, regions_sky_only = 0, regions_unobserved = 0;
-  int fallback_bad_fit = 0;     // sky-only because of the fit error + normal away from viewer
-  int fallback_never_lit = 0;   // sky-only because no training sun lit the normal
+  int fallback_bad_fit = 0;      // sky-only because of the fit error + normal away from viewer
+  int fallback_never_lit = 0;    // sky-only because no training sun lit the normal
   bool underdetermined = false;  // fewer than min_times: all landscape regions are sky-only
   double rel_rms_median = 0;     // over landscape regions
   double rel_rms_p90 = 0;
@@ -153,8 +153,7 @@ EnvironmentMap PredictEnvironment(const EnvStereoResult& result, const EnvLighti
 // The radiance PredictEnvironment gives one fitted region under `lighting`; `sky_mean` is the
 // sky model's mean over the region (used by sky regions and the sky fraction f).
 Eigen::Vector3d PredictRegionRadiance(const EnvRegionFit& fit, const EnvStereoOptions& options,
-                                      const EnvLighting& lighting,
-                                      const Eigen::Vector3d& sky_mean);
+                                      const EnvLighting& lighting, const Eigen::Vector3d& sky_mean);
 
 // E_sky for a unit normal under `lighting` as the solver computes it (ambient or plane).
 Eigen::Vector3d EnvSkyIrradianceAt(const EnvLighting& lighting, const EnvStereoOptions& options,

@@ -285,8 +285,7 @@ TEST(EnvStereoTest, OneTimeIsUnderdeterminedAndReproducesItsMap) {
   const EnvironmentMap same = PredictEnvironment(res, obs[0].lighting);
   for (int r = 0; r < grid.num_regions(); ++r) {
     for (int c = 0; c < 3; ++c) {
-      EXPECT_NEAR(same.radiance[r][c], obs[0].env.radiance[r][c],
-                  1e-9 * obs[0].env.radiance[r][c])
+      EXPECT_NEAR(same.radiance[r][c], obs[0].env.radiance[r][c], 1e-9 * obs[0].env.radiance[r][c])
           << r;
     }
   }

@@ -145,8 +145,8 @@ TEST(BuildEnvironmentMapTest, OneLayerPerPanoramaHeight) {
   for (auto& ch : sky.channel) ch.Lz = 2;
   // Given in any order: sorted by height.
   EnvSummary s;
-  const EnvironmentMap env = BuildEnvironmentMap(
-      {{&pano_high, k, high}, {&pano_low, k, low}}, rc, Dir(90, 45), 0.0047, sky, EnvOptions(), &s);
+  const EnvironmentMap env = BuildEnvironmentMap({{&pano_high, k, high}, {&pano_low, k, low}}, rc,
+                                                 Dir(90, 45), 0.0047, sky, EnvOptions(), &s);
   ASSERT_EQ(env.num_layers(), 2);
   EXPECT_NEAR(env.layer_z[0], 1.6, 1e-12);
   EXPECT_NEAR(env.layer_z[1], 50, 1e-12);
@@ -174,8 +174,8 @@ TEST(BuildEnvironmentMapTest, OneLayerPerPanoramaHeight) {
   // Two panoramas 0.5 m apart in height (less than layer_merge_m): one layer at their mean
   // height, pooling their pixels; a third one high up makes a second layer.
   const EnvironmentMap merged =
-      BuildEnvironmentMap({{&pano_low, k, low}, {&pano_high, k, high}, {&pano_low2, k, low2}},
-                          rc, Dir(90, 45), 0.0047, sky, EnvOptions());
+      BuildEnvironmentMap({{&pano_low, k, low}, {&pano_high, k, high}, {&pano_low2, k, low2}}, rc,
+                          Dir(90, 45), 0.0047, sky, EnvOptions());
   ASSERT_EQ(merged.num_layers(), 2);
   EXPECT_NEAR(merged.layer_z[0], 0.5 * (1.6 + 2.1), 1e-12);
   EXPECT_NEAR(merged.layer_z[1], 50, 1e-12);

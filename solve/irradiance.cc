@@ -151,8 +151,8 @@ SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache&
   const bool vector_flux = options.method == IrradianceMethod::kVectorFlux;
   if (vector_flux && static_cast<int>(options.mesh->triangles.size()) != model.num_triangles()) {
     throw Error("irradiance: the mesh has " + std::to_string(options.mesh->triangles.size()) +
-                " triangles but the ray-casting model " +
-                std::to_string(model.num_triangles()) + " (not the same model)");
+                " triangles but the ray-casting model " + std::to_string(model.num_triangles()) +
+                " (not the same model)");
   }
   std::vector<SphericalPolygon> regions;
   std::unique_ptr<FaceAdjacency> adjacency;
@@ -224,8 +224,8 @@ SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache&
         const auto visibility = [&]() {
           if (!adjacency) return PointVisibility(*options.mesh, origin, p.normal, p.triangle);
           return PointVisibility(*options.mesh, origin, p.normal, p.triangle,
-                                 SelectOccluders(*options.mesh, model, *adjacency, origin,
-                                                 p.normal, p.triangle, options.vector_flux.select));
+                                 SelectOccluders(*options.mesh, model, *adjacency, origin, p.normal,
+                                                 p.triangle, options.vector_flux.select));
         };
         const PointVisibility vis = visibility();
         if (lighting.use_env) {
@@ -233,9 +233,9 @@ SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache&
           if (ground_shadow && origin.z() > ground_z) {
             shadow = GroundShadowPolygons(*options.mesh, s, ground_z, origin);
           }
-          irr.direct_se[i] = EnvironmentIrradianceVectorFlux(
-              vis, lighting.env, p.position.z(), regions, ground_shadow ? &shadow : nullptr,
-              shadow_ratio);
+          irr.direct_se[i] =
+              EnvironmentIrradianceVectorFlux(vis, lighting.env, p.position.z(), regions,
+                                              ground_shadow ? &shadow : nullptr, shadow_ratio);
         } else {
           // The sky tree clipped for this point, against the sky integrated once per lighting.
           PointFluxCache c;

@@ -265,7 +265,6 @@ TEST(IrradianceTest, BadInputThrows) {
   EXPECT_THROW(AddInterreflection(g, cache, short_rho, rho, &irr), Error);
 }
 
-
 // A 10 m cube on a 60 m plaza: points on the plaza and the walls see the cube, the plaza and
 // (beyond it) the environment's ground.
 struct BoxScene {

@@ -19,13 +19,13 @@ void RelightOptions::Validate() const {
 
 std::string RelightSummary::Describe() const {
   char buf[256];
-  std::snprintf(buf, sizeof buf,
-                "sun elevation %.2f deg, air mass %.2f (measured times: %.2f), sun radiance %s, "
-                "sky refit p90 error %.4f%s",
-                sun_elevation_deg, air_mass, reference_air_mass,
-                sun_from_extinction ? "from extinction" : "interpolated", sky_refit_rel_error_p90,
-                extinction_from_air_mass > 0 ? ", sky dimmed for a sun below the measured ones"
-                                             : "");
+  std::snprintf(
+      buf, sizeof buf,
+      "sun elevation %.2f deg, air mass %.2f (measured times: %.2f), sun radiance %s, "
+      "sky refit p90 error %.4f%s",
+      sun_elevation_deg, air_mass, reference_air_mass,
+      sun_from_extinction ? "from extinction" : "interpolated", sky_refit_rel_error_p90,
+      extinction_from_air_mass > 0 ? ", sky dimmed for a sun below the measured ones" : "");
   std::string s = buf;
   s += ", weights";
   for (double w : sky_weights) {
@@ -47,7 +47,8 @@ LightingPredictor::LightingPredictor(std::vector<Lighting> measured, const Relig
     ts.sky.sun_dir = l.sun_dir;
     ts.sun_radiance = l.sun_radiance;
     skies_.push_back(ts);
-    if (l.sun_dir.z() > 0 && l.sun_radiance.minCoeff() > 0) suns.push_back({l.sun_dir, l.sun_radiance});
+    if (l.sun_dir.z() > 0 && l.sun_radiance.minCoeff() > 0)
+      suns.push_back({l.sun_dir, l.sun_radiance});
     EnvObservation eo;
     eo.env = l.env;
     eo.lighting.sun_dir = l.sun_dir;
@@ -109,7 +110,8 @@ Lighting LightingPredictor::At(UtcTime utc, const Site& site, RelightSummary* su
     const Eigen::Vector3d colour = options_.overcast_colour / options_.overcast_colour.mean();
     OvercastSky overcast;
     // CIE overcast: E_horizontal = 7 pi Lz / 9.
-    overcast.zenith_radiance = colour * (options_.overcast_brightness * clear_e.mean() * 9 / (7 * M_PI));
+    overcast.zenith_radiance =
+        colour * (options_.overcast_brightness * clear_e.mean() * 9 / (7 * M_PI));
     IntermediateSky blend = MakeIntermediateSky(out.sky, overcast, options_.pbs);
     IntermediateFitSummary fs;
     // Its sun_dir is the zenith when pbs = 1 (the overcast form of eq. 9 is fitted that way).

@@ -1,9 +1,9 @@
 // Lighting at a time of day that was not captured (Yu & Malik 1998 §5 and §6.3): the sun's
 // position from the site and time; its radiance from the measured sun radiances against air
 // mass; the sky interpolated between the measured skies by sun position (§5.1) and, for a sun
-// lower than every measured one, dimmed and reddened through the extra air mass; the environment from its recovered
-// per-region normals and albedos (§5.2); optionally part of the sunlight blocked by a cloud
-// layer, blending towards an overcast sky (§6.3).
+// lower than every measured one, dimmed and reddened through the extra air mass; the environment
+// from its recovered per-region normals and albedos (§5.2); optionally part of the sunlight blocked
+// by a cloud layer, blending towards an overcast sky (§6.3).
 #pragma once
 
 #include <Eigen/Core>
@@ -35,8 +35,8 @@ struct RelightOptions {
 
 struct RelightSummary {
   double sun_elevation_deg = 0;
-  double air_mass = 0;             // Kasten-Young, of the new sun
-  double reference_air_mass = 0;   // inverse-distance weighted over the measured times
+  double air_mass = 0;              // Kasten-Young, of the new sun
+  double reference_air_mass = 0;    // inverse-distance weighted over the measured times
   std::vector<double> sky_weights;  // per measured time (§5.1)
   double sky_refit_rel_error_p90 = 0;
   bool sun_from_extinction = false;  // false: interpolated sun radiance (too few air masses)

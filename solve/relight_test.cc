@@ -80,7 +80,8 @@ TEST(RelightTest, SunRadianceFollowsTheExtinctionOfTheMeasuredTimes) {
   const Lighting noon = predictor.At(ParseIso8601("2026-08-25T13:00:00-07:00"), kSite);
   const Lighting late = predictor.At(ParseIso8601("2026-08-25T19:30:00-07:00"), kSite);
   EXPECT_LT(late.sun_radiance[1], noon.sun_radiance[1]);
-  EXPECT_GT(late.sun_radiance[0] / late.sun_radiance[2], noon.sun_radiance[0] / noon.sun_radiance[2]);
+  EXPECT_GT(late.sun_radiance[0] / late.sun_radiance[2],
+            noon.sun_radiance[0] / noon.sun_radiance[2]);
 }
 
 TEST(RelightTest, AMeasuredTimeGivesBackItsSky) {
@@ -111,8 +112,8 @@ TEST(RelightTest, BlockedSunlightBlendsTowardsOvercast) {
   // and the colour is the same in every channel (up to the 7-parameter approximation's error,
   // 2.2% at most per sky_time's fit).
   const Eigen::Vector3d zen = lo.sky.Radiance(Eigen::Vector3d::UnitZ());
-  const Eigen::Vector3d low = lo.sky.Radiance(Eigen::Vector3d(0, std::sin(85 * M_PI / 180),
-                                                              std::cos(85 * M_PI / 180)));
+  const Eigen::Vector3d low =
+      lo.sky.Radiance(Eigen::Vector3d(0, std::sin(85 * M_PI / 180), std::cos(85 * M_PI / 180)));
   for (int c = 0; c < 3; ++c) {
     EXPECT_NEAR(zen[c] / zen.mean(), 1, 0.03);
     EXPECT_NEAR(low[c] / low.mean(), 1, 0.03);

@@ -17,9 +17,9 @@ struct Indicatrix {
   double c, d, e;
 };
 // ISO 15469 groups I..VI and 1..6.
-constexpr Gradation kGradation[6] = {{4.0, -0.70}, {1.1, -0.80}, {0.0, -1.0},
+constexpr Gradation kGradation[6] = {{4.0, -0.70},  {1.1, -0.80},  {0.0, -1.0},
                                      {-1.0, -0.55}, {-1.0, -0.32}, {-1.0, -0.15}};
-constexpr Indicatrix kIndicatrix[6] = {{0, -1, 0},       {2, -1.5, 0.15}, {5, -2.5, 0.30},
+constexpr Indicatrix kIndicatrix[6] = {{0, -1, 0},       {2, -1.5, 0.15},  {5, -2.5, 0.30},
                                        {10, -3.0, 0.45}, {16, -3.0, 0.30}, {24, -2.8, 0.15}};
 
 CieSkyType Make(int type, const char* name, int g, int i) {
@@ -29,11 +29,10 @@ CieSkyType Make(int type, const char* name, int g, int i) {
 }
 
 const CieSkyType kTypes[kNumCieSkyTypes] = {
-    Make(1, "I.1", 1, 1),    Make(2, "I.2", 1, 2),    Make(3, "II.1", 2, 1),
-    Make(4, "II.2", 2, 2),   Make(5, "III.1", 3, 1),  Make(6, "III.2", 3, 2),
-    Make(7, "III.3", 3, 3),  Make(8, "III.4", 3, 4),  Make(9, "IV.2", 4, 2),
-    Make(10, "IV.3", 4, 3),  Make(11, "IV.4", 4, 4),  Make(12, "V.4", 5, 4),
-    Make(13, "V.5", 5, 5),   Make(14, "VI.5", 6, 5),  Make(15, "VI.6", 6, 6)};
+    Make(1, "I.1", 1, 1),   Make(2, "I.2", 1, 2),   Make(3, "II.1", 2, 1),  Make(4, "II.2", 2, 2),
+    Make(5, "III.1", 3, 1), Make(6, "III.2", 3, 2), Make(7, "III.3", 3, 3), Make(8, "III.4", 3, 4),
+    Make(9, "IV.2", 4, 2),  Make(10, "IV.3", 4, 3), Make(11, "IV.4", 4, 4), Make(12, "V.4", 5, 4),
+    Make(13, "V.5", 5, 5),  Make(14, "VI.5", 6, 5), Make(15, "VI.6", 6, 6)};
 
 double Phi(const CieSkyType& t, double z) {
   const double cz = std::cos(z);

@@ -13,9 +13,9 @@
 namespace rouen {
 
 struct CieSkyType {
-  int type = 0;            // 1..15
-  const char* name = "";   // e.g. "V.4"
-  double a = 0, b = 0;     // gradation group
+  int type = 0;                // 1..15
+  const char* name = "";       // e.g. "V.4"
+  double a = 0, b = 0;         // gradation group
   double c = 0, d = 0, e = 0;  // indicatrix group
 };
 

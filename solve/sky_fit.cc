@@ -210,9 +210,12 @@ double FitLzOnly(const std::vector<SkyPoint>& points, double* p) {
 
 const char* SkyModelKindName(SkyModelKind kind) {
   switch (kind) {
-    case SkyModelKind::kSevenParam: return "7";
-    case SkyModelKind::kPerez5: return "perez5";
-    case SkyModelKind::kCie: return "cie";
+    case SkyModelKind::kSevenParam:
+      return "7";
+    case SkyModelKind::kPerez5:
+      return "perez5";
+    case SkyModelKind::kCie:
+      return "cie";
   }
   return "7";
 }
@@ -494,10 +497,9 @@ SkyFitSummary FitSky(const std::vector<SkySample>& samples, const Eigen::Vector3
         screened.push_back(stride > 1 ? RunStart(subset, p0, kScreenIterations, options)
                                       : RunStart(pts, p0, options.max_iterations, options));
       }
-      std::sort(screened.begin(), screened.end(),
-                [](const StartResult& a, const StartResult& b) {
-                  return a.final_cost < b.final_cost;
-                });
+      std::sort(screened.begin(), screened.end(), [](const StartResult& a, const StartResult& b) {
+        return a.final_cost < b.final_cost;
+      });
       StartResult b;
       if (stride == 1) {
         b = screened.front();
@@ -519,8 +521,8 @@ SkyFitSummary FitSky(const std::vector<SkySample>& samples, const Eigen::Vector3
           StartResult r =
               options.norm_p < 2
                   ? IrlsSolve(on, from, options, screen ? kIrlsScreenOuter : kIrlsOuter)
-                  : RunStart(on, from, screen ? kScreenIterations : options.max_iterations,
-                             options, options.norm_p);
+                  : RunStart(on, from, screen ? kScreenIterations : options.max_iterations, options,
+                             options.norm_p);
           if (std::isfinite(r.final_cost)) {
             r.final_cost = NormObjective(on, r.params, options.norm_p, options.norm_eps);
           }

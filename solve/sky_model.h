@@ -4,9 +4,8 @@
 // xi: zenith angle of the sky element, gamma: its angle to the sun, both radians.
 #pragma once
 
-#include <array>
-
 #include <Eigen/Core>
+#include <array>
 #include <nlohmann/json_fwd.hpp>
 
 namespace rouen {

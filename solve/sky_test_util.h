@@ -15,8 +15,8 @@ namespace rouen::testing {
 // Compares the cost's analytic Jacobian at p0 (eq. 9's 7 parameters) with central differences
 // of step h_rel x max(1, |p0_k|), within tol x max(1, |numeric|) per entry.
 inline void ExpectJacobianMatchesCentralDifferences(const internal::SkyCost& cost, int n,
-                                                    const double (&p0)[7], double h_rel,
-                                                    double tol, const std::string& label) {
+                                                    const double (&p0)[7], double h_rel, double tol,
+                                                    const std::string& label) {
   std::vector<double> r(n), jac(n * 7), rp(n), rm(n);
   double* jacs[1] = {jac.data()};
   const double* params[1] = {p0};

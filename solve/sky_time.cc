@@ -166,7 +166,6 @@ Eigen::Vector3d HorizontalIrradiance(const SkyModel& sky) {
   return e * (2 * kPi / (kRings * kColumns));  // d omega = d(cos xi) d(azimuth)
 }
 
-
 // ---------------------------------------------------------------------------------------------
 
 double SkyBackground(const SkyParams& p, double xi) {

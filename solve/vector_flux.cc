@@ -155,8 +155,7 @@ struct Cap {
   }
 };
 
-bool Disjoint(const SphericalPolygon& p, const Cap& pcap, const ConvexSpherical& q,
-              bool p_convex) {
+bool Disjoint(const SphericalPolygon& p, const Cap& pcap, const ConvexSpherical& q, bool p_convex) {
   // Bounding caps apart (valid for caps smaller than a hemisphere): the angle between the
   // centres exceeds the sum of the radii.
   if (pcap.valid && q.cap_radius < kPi / 2 &&
@@ -327,8 +326,8 @@ std::vector<int> SelectOccluders(const Mesh& mesh, const RayCaster& model,
                 " faces but the mesh " + std::to_string(nt));
   }
   // Tangent frame about the normal.
-  Eigen::Vector3d t = std::abs(normal.x()) < 0.9 ? Eigen::Vector3d::UnitX()
-                                                 : Eigen::Vector3d::UnitY();
+  Eigen::Vector3d t =
+      std::abs(normal.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
   t = (t - t.dot(normal) * normal).normalized();
   const Eigen::Vector3d b = normal.cross(t);
   // Polar angle and azimuth about the normal in equal steps: n_theta x n_phi = resolution^2
@@ -409,8 +408,7 @@ std::vector<int> SelectOccluders(const Mesh& mesh, const RayCaster& model,
     std::sort(next.begin(), next.end());
     next.erase(std::unique(next.begin(), next.end()), next.end());
     ring.clear();
-    std::set_difference(next.begin(), next.end(), hit.begin(), hit.end(),
-                        std::back_inserter(ring));
+    std::set_difference(next.begin(), next.end(), hit.begin(), hit.end(), std::back_inserter(ring));
     std::vector<int> merged;
     std::merge(hit.begin(), hit.end(), ring.begin(), ring.end(), std::back_inserter(merged));
     hit.swap(merged);
@@ -684,8 +682,8 @@ Eigen::Vector3d SkyIrradianceVectorFlux(const PointVisibility& vis, const SkyMod
   std::vector<SphericalPolygon> patches, visible;
   // Counter-clockwise seen from outside: horizon point, the next one anticlockwise (seen from
   // above), zenith.
-  for (int q = 0; q < 4; ++q) SplitTriangle({h[q], h[(q + 1) % 4], z}, options.sky_initial_split,
-                                            &patches);
+  for (int q = 0; q < 4; ++q)
+    SplitTriangle({h[q], h[(q + 1) % 4], z}, options.sky_initial_split, &patches);
   for (const auto& p : patches) vis.Clip(p, &visible);
   const SkyAdaptive adapt{sky, vis.normal(), options, stats};
   Eigen::Vector3d e = Eigen::Vector3d::Zero();
@@ -713,14 +711,16 @@ std::vector<SphericalPolygon> EnvironmentRegionPolygons(const EnvironmentMap& en
   return regions;
 }
 
-Eigen::Vector3d EnvironmentIrradianceVectorFlux(
-    const PointVisibility& vis, const EnvironmentMap& env, double z,
-    const std::vector<SphericalPolygon>& regions, const std::vector<ConvexSpherical>* ground_shadow,
-    const Eigen::Vector3d& shadow_ratio, FluxStats* stats) {
+Eigen::Vector3d EnvironmentIrradianceVectorFlux(const PointVisibility& vis,
+                                                const EnvironmentMap& env, double z,
+                                                const std::vector<SphericalPolygon>& regions,
+                                                const std::vector<ConvexSpherical>* ground_shadow,
+                                                const Eigen::Vector3d& shadow_ratio,
+                                                FluxStats* stats) {
   if (static_cast<int>(regions.size()) != env.num_regions()) {
     throw Error("vector flux: " + std::to_string(regions.size()) +
-                " region polygons for an environment map of " +
-                std::to_string(env.num_regions()) + " regions");
+                " region polygons for an environment map of " + std::to_string(env.num_regions()) +
+                " regions");
   }
   if (stats) stats->occluders = vis.num_occluders();
   const Eigen::Vector3d& n = vis.normal();

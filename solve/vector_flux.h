@@ -48,8 +48,8 @@ struct ConvexSpherical {
   SphericalPolygon vertices;
   std::vector<Eigen::Vector3d> edge_normal;
   Eigen::Vector3d cap_centre = Eigen::Vector3d::UnitZ();  // bounding cap of the vertices
-  double cap_radius = 0;                                   // radians
-  double cap_cos = 1, cap_sin = 0;                         // of cap_radius
+  double cap_radius = 0;                                  // radians
+  double cap_cos = 1, cap_sin = 0;                        // of cap_radius
   // From counter-clockwise vertices; false (and nothing set) when degenerate.
   bool Set(const SphericalPolygon& ccw);
 };
@@ -168,8 +168,8 @@ struct VectorFluxOptions {
   // rule: on a clear sky 0.1 gives ~3e-4 relative error with ~3000 patches per point, 0.05
   // ~8e-5 with ~15000 (VectorFluxTest.AdaptiveSkyMatchesFineQuadrature).
   double sky_tolerance = 0.1;
-  int sky_max_depth = 14;      // subdivisions below a visible patch
-  double sky_min_sr = 1e-7;    // patches smaller than this are not split further
+  int sky_max_depth = 14;    // subdivisions below a visible patch
+  double sky_min_sr = 1e-7;  // patches smaller than this are not split further
   // Environment regions' edges along parallels (small circles) are followed by this many
   // great arcs per region (at least one per 60 deg of azimuth).
   int env_parallel_segments = 4;
@@ -205,10 +205,12 @@ std::vector<SphericalPolygon> EnvironmentRegionPolygons(const EnvironmentMap& en
 // `z`) clipped for visibility, no subdivision. When `ground_shadow` is given (convex spherical
 // polygons, seen from the point, of the ground in the model's cast shadow), visible parts
 // below the horizon inside them are scaled per channel by `shadow_ratio`.
-Eigen::Vector3d EnvironmentIrradianceVectorFlux(
-    const PointVisibility& vis, const EnvironmentMap& env, double z,
-    const std::vector<SphericalPolygon>& regions, const std::vector<ConvexSpherical>* ground_shadow,
-    const Eigen::Vector3d& shadow_ratio, FluxStats* stats = nullptr);
+Eigen::Vector3d EnvironmentIrradianceVectorFlux(const PointVisibility& vis,
+                                                const EnvironmentMap& env, double z,
+                                                const std::vector<SphericalPolygon>& regions,
+                                                const std::vector<ConvexSpherical>* ground_shadow,
+                                                const Eigen::Vector3d& shadow_ratio,
+                                                FluxStats* stats = nullptr);
 
 // The model's shadow on the ground plane z = ground_z (every face above it projected along
 // the sun direction `sun`, z > 0), seen from `origin` (above the plane): convex polygons,

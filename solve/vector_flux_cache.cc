@@ -17,10 +17,14 @@ Tri Child(const Tri& t, int j) {
   const Eigen::Vector3d ab = (t[0] + t[1]).normalized(), bc = (t[1] + t[2]).normalized(),
                         ca = (t[2] + t[0]).normalized();
   switch (j) {
-    case 0: return {t[0], ab, ca};
-    case 1: return {ab, t[1], bc};
-    case 2: return {ca, bc, t[2]};
-    default: return {ab, bc, ca};
+    case 0:
+      return {t[0], ab, ca};
+    case 1:
+      return {ab, t[1], bc};
+    case 2:
+      return {ca, bc, t[2]};
+    default:
+      return {ab, bc, ca};
   }
 }
 

@@ -69,8 +69,7 @@ TEST(VectorFluxCacheTest, UniformSkyIsExactWithOccluders) {
     const PointVisibility tv(empty, Eigen::Vector3d::Zero(), n.normalized());
     CacheSky(tv, tree, &c);
     const double cos_tilt = n.normalized().z();
-    EXPECT_NEAR(EvaluateSky(c, sky).x(), 2 * kPi * (1 + cos_tilt) / 2, 2 * kPi * 1e-6)
-        << tilt_deg;
+    EXPECT_NEAR(EvaluateSky(c, sky).x(), 2 * kPi * (1 + cos_tilt) / 2, 2 * kPi * 1e-6) << tilt_deg;
   }
 }
 
@@ -115,8 +114,8 @@ TEST(VectorFluxCacheTest, CachedEnvironmentEqualsUncached) {
                              {Eigen::Vector3d(3, -0.01, 6), Eigen::Vector3d(0, -1, 0)},
                              {Eigen::Vector3d(-6, 7.99, 2), Eigen::Vector3d(0, -1, 0)}}) {
     const PointVisibility vis(m, o, n);
-    const Eigen::Vector3d ref = EnvironmentIrradianceVectorFlux(vis, env, 0, regions, nullptr,
-                                                                Eigen::Vector3d::Ones());
+    const Eigen::Vector3d ref =
+        EnvironmentIrradianceVectorFlux(vis, env, 0, regions, nullptr, Eigen::Vector3d::Ones());
     CacheEnvironment(vis, regions, &c);
     EXPECT_NEAR((EvaluateEnvironment(c, env, 0) - ref).norm(), 0, 1e-6 * ref.norm());
   }
@@ -139,12 +138,11 @@ TEST(VectorFluxCacheTest, OccluderSelectionAgreesWithAllFaces) {
   // about a pixel of unoccluded view: pi / 32^2 sr of projected solid angle each; allow 4.
   const double bound = 4 * kPi / (so.resolution * so.resolution);
   int selected_total = 0, all_total = 0;
-  for (const auto& [o, n] :
-       {std::pair{Eigen::Vector3d(3, -3, 0.01), Eigen::Vector3d(0, 0, 1)},
-        {Eigen::Vector3d(2.5, 4.01, 0.5), Eigen::Vector3d(0, 1, 0)},
-        {Eigen::Vector3d(-6, 7.99, 2), Eigen::Vector3d(0, -1, 0)},
-        {Eigen::Vector3d(6.01, 2, 3), Eigen::Vector3d(1, 0, 0)},
-        {Eigen::Vector3d(-4, 3, 0.01), Eigen::Vector3d(0, 0, 1)}}) {
+  for (const auto& [o, n] : {std::pair{Eigen::Vector3d(3, -3, 0.01), Eigen::Vector3d(0, 0, 1)},
+                             {Eigen::Vector3d(2.5, 4.01, 0.5), Eigen::Vector3d(0, 1, 0)},
+                             {Eigen::Vector3d(-6, 7.99, 2), Eigen::Vector3d(0, -1, 0)},
+                             {Eigen::Vector3d(6.01, 2, 3), Eigen::Vector3d(1, 0, 0)},
+                             {Eigen::Vector3d(-4, 3, 0.01), Eigen::Vector3d(0, 0, 1)}}) {
     int rays = 0;
     const std::vector<int> cand = SelectOccluders(m, rc, adj, o, n, -1, so, &rays);
     EXPECT_EQ(rays, so.resolution * so.resolution);

@@ -66,7 +66,8 @@ TEST(VectorFluxTest, TiltedPlaneUnderUniformUpperHemisphere) {
     EXPECT_NEAR(n.dot(phi), expected, 1e-12) << tilt_deg;
     // Through the sky path with a uniform sky model (radiance 2).
     const PointVisibility pv(empty, Eigen::Vector3d::Zero(), n);
-    const Eigen::Vector3d e = SkyIrradianceVectorFlux(pv, testing::UniformSkyModel(2), VectorFluxOptions());
+    const Eigen::Vector3d e =
+        SkyIrradianceVectorFlux(pv, testing::UniformSkyModel(2), VectorFluxOptions());
     EXPECT_NEAR(e.x(), 2 * expected, 1e-12) << tilt_deg;
   }
 }
@@ -157,8 +158,8 @@ TEST(VectorFluxTest, EnvironmentRegionsTileTheSphere) {
     double el0, el1, az0, az1;
     env.RegionBounds(r, &el0, &el1, &az0, &az1);
     // Exact lat-long region: Phi_z = dAz (sin^2 el1 - sin^2 el0) / 2.
-    const double exact = (az1 - az0) * (std::sin(el1) * std::sin(el1) -
-                                        std::sin(el0) * std::sin(el0)) / 2;
+    const double exact =
+        (az1 - az0) * (std::sin(el1) * std::sin(el1) - std::sin(el0) * std::sin(el0)) / 2;
     const double exact_omega = (az1 - az0) * (std::sin(el1) - std::sin(el0));
     worst = std::max(worst, std::abs(SolidAngle(regions[r]) - exact_omega) / exact_omega);
     EXPECT_NEAR(VectorFlux(regions[r]).z(), exact, 0.01 * std::abs(exact) + 1e-12) << r;
@@ -177,13 +178,13 @@ TEST(VectorFluxTest, EnvironmentUniformHorizontalPlaneIsPiL) {
   const auto regions = EnvironmentRegionPolygons(env, VectorFluxOptions());
   const Mesh empty;
   const PointVisibility pv(empty, Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ());
-  const Eigen::Vector3d e = EnvironmentIrradianceVectorFlux(pv, env, 0, regions, nullptr,
-                                                            Eigen::Vector3d::Ones());
+  const Eigen::Vector3d e =
+      EnvironmentIrradianceVectorFlux(pv, env, 0, regions, nullptr, Eigen::Vector3d::Ones());
   EXPECT_NEAR((e - kPi * Eigen::Vector3d(1, 2, 3)).norm(), 0, 1e-12);
   // Vertical wall: half the sky, half the ground, each pi L / 2.
   const PointVisibility wall(empty, Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitX());
-  const Eigen::Vector3d ew = EnvironmentIrradianceVectorFlux(wall, env, 0, regions, nullptr,
-                                                             Eigen::Vector3d::Ones());
+  const Eigen::Vector3d ew =
+      EnvironmentIrradianceVectorFlux(wall, env, 0, regions, nullptr, Eigen::Vector3d::Ones());
   EXPECT_NEAR((ew - kPi / 2 * Eigen::Vector3d(6, 7, 8)).norm(), 0, 1e-12);
   // A region list that does not fit the map is refused.
   EXPECT_THROW(EnvironmentIrradianceVectorFlux(pv, env, 0, {}, nullptr, Eigen::Vector3d::Ones()),

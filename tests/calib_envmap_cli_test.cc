@@ -4,14 +4,13 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <string>
-
-#include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "core/camera.h"
 #include "core/files.h"
@@ -24,16 +23,12 @@ namespace rouen {
 namespace {
 
 namespace fs = std::filesystem;
+using rouen::cli_test::Q;
 using rouen::cli_test::Result;
 using rouen::cli_test::RunRouen;
-using rouen::cli_test::Q;
 using rouen::cli_test::TempDir;
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kDeg = kPi / 180.0;
-
-
-
-
 
 Eigen::Vector3d Env(const Eigen::Vector3d& d) {
   return Eigen::Vector3d(1.5 + 0.5 * d.z() + 0.3 * d.x(), 1.2 + 0.4 * d.y(), 1.0 + 0.3 * d.z());
@@ -74,8 +69,8 @@ TEST(CalibEnvmapCli, AssemblesAMapWithMaskAndSummary) {
   list += WritePhoto(dir, "up", Intrinsics::FisheyeFov(200, 200, 185), Camera(0, 90, 0));
   list += WritePhoto(dir, "east", Intrinsics::PinholeFov(160, 120, 70), Camera(90, -5, 0));
   WriteFileAtomic(dir / "photos.txt", list);
-  const Result r = RunRouen("calib envmap --list " + Q(dir / "photos.txt") +
-                            " --width 128 --out " + Q(dir / "env.exr"));
+  const Result r = RunRouen("calib envmap --list " + Q(dir / "photos.txt") + " --width 128 --out " +
+                            Q(dir / "env.exr"));
   ASSERT_EQ(r.code, 0) << r.out;
   const Image env = ReadImage((dir / "env.exr").string());
   ASSERT_EQ(env.width, 128);
@@ -119,8 +114,8 @@ TEST(CalibEnvmapCli, BadInputFailsClearly) {
   const std::string line =
       WritePhoto(dir, "a", Intrinsics::PinholeFov(80, 60, 60), Camera(0, 0, 0));
   WriteFileAtomic(dir / "two_words.txt", "a.exr a.lens.json\n");
-  Result r = RunRouen("calib envmap --list " + Q(dir / "two_words.txt") + " --out " +
-                      Q(dir / "o.exr"));
+  Result r =
+      RunRouen("calib envmap --list " + Q(dir / "two_words.txt") + " --out " + Q(dir / "o.exr"));
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.out.find("two_words.txt:1: expected 'image.exr lens.json pose.json'"),
             std::string::npos)
@@ -204,8 +199,7 @@ TEST(CalibOrientCli, OrientsASkyPhotoFromTheSunAndALandmark) {
   const nlohmann::json j = nlohmann::json::parse(ReadFileToString(dir / "pose.json"));
   const Pose got = j.get<Pose>();
   const double err =
-      Eigen::AngleAxisd(Eigen::Matrix3d(got.rotation.transpose() * truth.rotation)).angle() /
-      kDeg;
+      Eigen::AngleAxisd(Eigen::Matrix3d(got.rotation.transpose() * truth.rotation)).angle() / kDeg;
   // The centroid is good to ~1/16 px (16x16 render) at >= 335 px/rad: 0.011 deg; the landmark
   // (over 30 deg from the sun) multiplies that by at most 1 + 1/sin(30 deg) = 3: 0.033 deg.
   EXPECT_LT(err, 0.05) << r.out;
@@ -217,9 +211,9 @@ TEST(CalibOrientCli, OrientsASkyPhotoFromTheSunAndALandmark) {
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.out.find("--landmark, --horizon or --level"), std::string::npos) << r.out;
   WriteSkyPhoto(dir / "nosun.exr", k, truth, nullptr);
-  r = RunRouen("calib orient --image " + Q(dir / "nosun.exr") + " --lens " +
-               Q(dir / "lens.json") + " --time " + time + " --site 37.8722,-122.2578,60 --level" +
-               " --out " + Q(dir / "p2.json"));
+  r = RunRouen("calib orient --image " + Q(dir / "nosun.exr") + " --lens " + Q(dir / "lens.json") +
+               " --time " + time + " --site 37.8722,-122.2578,60 --level" + " --out " +
+               Q(dir / "p2.json"));
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.out.find("no sun disc"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("nosun.exr"), std::string::npos) << r.out;

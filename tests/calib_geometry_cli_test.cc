@@ -8,9 +8,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <string>
-
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "calib/intrinsics.h"
 #include "core/camera.h"
@@ -22,14 +21,10 @@ namespace rouen {
 namespace {
 
 namespace fs = std::filesystem;
+using rouen::cli_test::Q;
 using rouen::cli_test::Result;
 using rouen::cli_test::RunRouen;
-using rouen::cli_test::Q;
 using rouen::cli_test::TempDir;
-
-
-
-
 
 TEST(CalibGeometryCli, HelpExplains) {
   const Result i = RunRouen("calib intrinsics --help");
@@ -49,18 +44,17 @@ TEST(CalibGeometryCli, IntrinsicsThenPose) {
   truth.k2 = 0.05;
   BoardRenderer renderer(board, truth, 2);
   const Eigen::Vector3d centre(0.135, 0.105, 0);
-  const double tilts[][3] = {{0, 0, 0},   {30, 0, 5},  {-30, 0, -5}, {0, 30, 10},
+  const double tilts[][3] = {{0, 0, 0},     {30, 0, 5},  {-30, 0, -5},  {0, 30, 10},
                              {0, -30, -10}, {20, 25, 0}, {-25, 20, 15}, {25, -20, -15}};
   const double offs[][2] = {{0, 0},      {0.3, 0.3}, {-0.3, -0.3}, {0.3, -0.3},
                             {-0.3, 0.3}, {0.45, 0},  {-0.45, 0},   {0, 0.45}};
   fs::create_directories(dir / "shots");
   for (int i = 0; i < 8; ++i) {
     const double d = 3.14159265358979323846 / 180;
-    const Eigen::Matrix3d r =
-        (Eigen::AngleAxisd(tilts[i][2] * d, Eigen::Vector3d::UnitZ()) *
-         Eigen::AngleAxisd(tilts[i][1] * d, Eigen::Vector3d::UnitY()) *
-         Eigen::AngleAxisd(tilts[i][0] * d, Eigen::Vector3d::UnitX()))
-            .toRotationMatrix();
+    const Eigen::Matrix3d r = (Eigen::AngleAxisd(tilts[i][2] * d, Eigen::Vector3d::UnitZ()) *
+                               Eigen::AngleAxisd(tilts[i][1] * d, Eigen::Vector3d::UnitY()) *
+                               Eigen::AngleAxisd(tilts[i][0] * d, Eigen::Vector3d::UnitX()))
+                                  .toRotationMatrix();
     const Eigen::Vector3d at =
         Unproject(truth, {truth.cx + offs[i][0] * 240, truth.cy + offs[i][1] * 180}) * 0.6;
     const Image im = renderer.Render(r, at - r * centre, 30.f, 220.f, 120.f);
@@ -69,7 +63,7 @@ TEST(CalibGeometryCli, IntrinsicsThenPose) {
   }
   const fs::path lens = dir / "lens.json";
   const Result a = RunRouen("calib intrinsics --images " + Q(dir / "shots") +
-                       " --board chessboard:9x7:0.03 --model pinhole --out " + Q(lens));
+                            " --board chessboard:9x7:0.03 --model pinhole --out " + Q(lens));
   ASSERT_EQ(a.code, 0) << a.out;
   EXPECT_NE(a.out.find("reprojection RMS"), std::string::npos) << a.out;
   const nlohmann::json j = nlohmann::json::parse(ReadFileToString(lens));
@@ -90,15 +84,15 @@ TEST(CalibGeometryCli, IntrinsicsThenPose) {
                             24.0 * ((i * 5) % 13) / 12);
     const auto px = Project(truth, pose.WorldToCamera(w));
     if (!px || px->x() < 0 || px->y() < 0 || px->x() >= 480 || px->y() >= 360) continue;
-    pts["points"].push_back(
-        {{"name", "p" + std::to_string(made++)}, {"pixel", {px->x(), px->y()}},
-         {"world", {w.x(), w.y(), w.z()}}});
+    pts["points"].push_back({{"name", "p" + std::to_string(made++)},
+                             {"pixel", {px->x(), px->y()}},
+                             {"world", {w.x(), w.y(), w.z()}}});
   }
   ASSERT_EQ(made, 10);
   WriteFileAtomic(dir / "pts.json", pts.dump());
   const fs::path out = dir / "pose.json";
   const Result b = RunRouen("calib pose --points " + Q(dir / "pts.json") + " --lens " + Q(lens) +
-                       " --out " + Q(out));
+                            " --out " + Q(out));
   ASSERT_EQ(b.code, 0) << b.out;
   const nlohmann::json pj = nlohmann::json::parse(ReadFileToString(out));
   const Pose got = pj.get<Pose>();
@@ -109,11 +103,11 @@ TEST(CalibGeometryCli, IntrinsicsThenPose) {
 
   // Bad input: three landmarks only.
   nlohmann::json three = pts;
-  three["points"] = nlohmann::json(std::vector<nlohmann::json>(pts["points"].begin(),
-                                                               pts["points"].begin() + 3));
+  three["points"] =
+      nlohmann::json(std::vector<nlohmann::json>(pts["points"].begin(), pts["points"].begin() + 3));
   WriteFileAtomic(dir / "three.json", three.dump());
   const Result c = RunRouen("calib pose --points " + Q(dir / "three.json") + " --lens " + Q(lens) +
-                       " --out " + Q(dir / "bad.json"));
+                            " --out " + Q(dir / "bad.json"));
   EXPECT_NE(c.code, 0);
   EXPECT_NE(c.out.find("rouen: error:"), std::string::npos) << c.out;
   EXPECT_NE(c.out.find("three.json"), std::string::npos) << c.out;
@@ -131,7 +125,7 @@ TEST(CalibGeometryCli, IntrinsicsBadInput) {
                StoredType::kUint8);
   }
   Result r = RunRouen("calib intrinsics --images " + Q(dir / "blank") +
-                 " --board chessboard:9x7:0.03 --out " + Q(dir / "lens.json"));
+                      " --board chessboard:9x7:0.03 --out " + Q(dir / "lens.json"));
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.out.find("not found in any"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("a.png"), std::string::npos) << r.out;
@@ -141,25 +135,25 @@ TEST(CalibGeometryCli, IntrinsicsBadInput) {
   WriteImage((dir / "blank" / "c.png").string(), Image(200, 120, 1, PixelUnits::kDigital, 100.f),
              StoredType::kUint8);
   r = RunRouen("calib intrinsics --images " + Q(dir / "blank") +
-          " --board chessboard:9x7:0.03 --out " + Q(dir / "lens.json"));
+               " --board chessboard:9x7:0.03 --out " + Q(dir / "lens.json"));
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.out.find("c.png: size 200x120"), std::string::npos) << r.out;
   // Unreadable image through a list file, bad board text, bad model, missing folder.
   std::ofstream(dir / "list.txt") << "# shots\nmissing.png\n";
   r = RunRouen("calib intrinsics --images " + Q(dir / "list.txt") +
-          " --board chessboard:9x7:0.03 --out " + Q(dir / "lens.json"));
+               " --board chessboard:9x7:0.03 --out " + Q(dir / "lens.json"));
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.out.find("missing.png"), std::string::npos) << r.out;
   r = RunRouen("calib intrinsics --images " + Q(dir / "blank") + " --board chess:9x7 --out " +
-          Q(dir / "lens.json"));
+               Q(dir / "lens.json"));
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.out.find("chess:9x7"), std::string::npos) << r.out;
   r = RunRouen("calib intrinsics --images " + Q(dir / "blank") +
-          " --board chessboard:9x7:0.03 --model fish --out " + Q(dir / "lens.json"));
+               " --board chessboard:9x7:0.03 --model fish --out " + Q(dir / "lens.json"));
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.out.find("pinhole or fisheye"), std::string::npos) << r.out;
   r = RunRouen("calib intrinsics --images " + Q(dir / "nowhere") +
-          " --board chessboard:9x7:0.03 --out " + Q(dir / "lens.json"));
+               " --board chessboard:9x7:0.03 --out " + Q(dir / "lens.json"));
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.out.find("nowhere"), std::string::npos) << r.out;
   fs::remove_all(dir);

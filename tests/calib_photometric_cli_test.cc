@@ -8,11 +8,10 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <random>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "app/pipeline.h"
 #include "calib/nd.h"
@@ -30,17 +29,13 @@ namespace rouen {
 namespace {
 
 namespace fs = std::filesystem;
+using nlohmann::json;
+using rouen::cli_test::Q;
 using rouen::cli_test::Result;
 using rouen::cli_test::RunRouen;
-using rouen::cli_test::Q;
 using rouen::cli_test::TempDir;
-using nlohmann::json;
-
-
-
 
 void WriteText(const fs::path& p, const std::string& s) { std::ofstream(p) << s; }
-
 
 const std::array<double, 3> kTrueDensity = {1.02, 0.95, 1.10};
 
@@ -71,9 +66,9 @@ TEST(CalibNdCliTest, RecoversDensityFromLdrPairsAndStoresIt) {
   WriteText(dir / "open.txt", "open0.png 0.25\nopen1.png 1\n");
   WriteText(dir / "nd.txt", "nd0.png 2.5\nnd1.png 10\n");
   WriteResponseCurve((dir / "response.json").string(), testing::TrueCurve());
-  const Result r = RunRouen("calib nd --with " + Q(dir / "nd.txt") + " --without " +
-                            Q(dir / "open.txt") + " --response " + Q(dir / "response.json") +
-                            " --out " + Q(dir / "nd.json"));
+  const Result r =
+      RunRouen("calib nd --with " + Q(dir / "nd.txt") + " --without " + Q(dir / "open.txt") +
+               " --response " + Q(dir / "response.json") + " --out " + Q(dir / "nd.json"));
   ASSERT_EQ(r.code, 0) << r.out;
   EXPECT_NE(r.out.find("sun_density = ["), std::string::npos) << r.out;
   const json j = json::parse(ReadFileToString(dir / "nd.json"));
@@ -83,13 +78,13 @@ TEST(CalibNdCliTest, RecoversDensityFromLdrPairsAndStoresIt) {
     // round trip is lossless.
     EXPECT_NEAR(cal.channel[c].density, kTrueDensity[c], 2e-3) << c;
     std::printf("nd channel %d: density %.5f true %.5f (error %.1e, 95%% +-%.1e)\n", c,
-                cal.channel[c].density, kTrueDensity[c],
-                cal.channel[c].density - kTrueDensity[c], j["density_ci95_rgb"][c].get<double>());
+                cal.channel[c].density, kTrueDensity[c], cal.channel[c].density - kTrueDensity[c],
+                j["density_ci95_rgb"][c].get<double>());
   }
   // Swapped lists: brighter through the "filter" is refused.
-  const Result sw = RunRouen("calib nd --with " + Q(dir / "open.txt") + " --without " +
-                             Q(dir / "nd.txt") + " --response " + Q(dir / "response.json") +
-                             " --out " + Q(dir / "bad.json"));
+  const Result sw =
+      RunRouen("calib nd --with " + Q(dir / "open.txt") + " --without " + Q(dir / "nd.txt") +
+               " --response " + Q(dir / "response.json") + " --out " + Q(dir / "bad.json"));
   EXPECT_EQ(sw.code, 1);
   EXPECT_NE(sw.out.find("swapped"), std::string::npos) << sw.out;
   EXPECT_FALSE(fs::exists(dir / "bad.json"));
@@ -112,9 +107,9 @@ TEST(CalibNdCliTest, FloatImagesAndSessionUpdate) {
   info.created_utc = "2024-06-21T07:00:00Z";
   info.extra["nd_filters"] = {{"sun", {4.5, 4.5, 4.5}}};
   SessionWriter::Create(dir / "session", info);
-  const Result r = RunRouen("calib nd --with " + Q(dir / "nd.txt") + " --without " +
-                            Q(dir / "open.txt") + " --session " + Q(dir / "session") +
-                            " --filter sun");
+  const Result r =
+      RunRouen("calib nd --with " + Q(dir / "nd.txt") + " --without " + Q(dir / "open.txt") +
+               " --session " + Q(dir / "session") + " --filter sun");
   ASSERT_EQ(r.code, 0) << r.out;
   const Session s = Session::Load(dir / "session");
   const json& d = s.info().extra.at("nd_filters").at("sun");
@@ -129,8 +124,7 @@ TEST(CalibNdCliTest, BadInputsFailClearly) {
   WriteImage((dir / "a.exr").string(), scene, StoredType::kFloat);
   WriteImage((dir / "b.exr").string(), testing::RadianceField(30, 24, -1, 1, 5),
              StoredType::kFloat);
-  WriteImage((dir / "c.png").string(), testing::Expose(scene, 1, 0, nullptr),
-             StoredType::kUint8);
+  WriteImage((dir / "c.png").string(), testing::Expose(scene, 1, 0, nullptr), StoredType::kUint8);
   WriteText(dir / "junk.png", "not an image");
   WriteText(dir / "a.txt", "a.exr 1\n");
   WriteText(dir / "b.txt", "b.exr 1\n");
@@ -155,8 +149,8 @@ TEST(CalibNdCliTest, BadInputsFailClearly) {
     EXPECT_NE(r.out.find(c.expect), std::string::npos) << c.expect << " not in: " << r.out;
     EXPECT_FALSE(fs::exists(dir / "o.json"));
   }
-  const Result none = RunRouen("calib nd --with " + Q(dir / "a.txt") + " --without " +
-                               Q(dir / "a.txt"));
+  const Result none =
+      RunRouen("calib nd --with " + Q(dir / "a.txt") + " --without " + Q(dir / "a.txt"));
   EXPECT_EQ(none.code, 1);
   EXPECT_NE(none.out.find("--out"), std::string::npos) << none.out;
   const Result help = RunRouen("calib nd --help");
@@ -198,9 +192,9 @@ TEST(CalibVignettingCliTest, FitsFlatsAndUpdatesTheLens) {
   WriteText(dir / "flats.txt", "flat0.exr 1\nflat1.exr 1\n");
   json lens = Intrinsics::PinholeFov(1600, 1200, 60);
   WriteText(dir / "lens.json", lens.dump(2));
-  const Result r = RunRouen("calib vignetting --flat " + Q(dir / "flats.txt") + " " +
-                            Q(dir / "flat2.exr") + " --out " + Q(dir / "v.json") + " --lens " +
-                            Q(dir / "lens.json"));
+  const Result r =
+      RunRouen("calib vignetting --flat " + Q(dir / "flats.txt") + " " + Q(dir / "flat2.exr") +
+               " --out " + Q(dir / "v.json") + " --lens " + Q(dir / "lens.json"));
   ASSERT_EQ(r.code, 0) << r.out;
   EXPECT_NE(r.out.find("3 flat frames"), std::string::npos) << r.out;
   const VignettingModel fit = json::parse(ReadFileToString(dir / "v.json")).get<VignettingModel>();
@@ -233,12 +227,9 @@ TEST(CalibVignettingCliTest, BadInputsFailClearly) {
   struct Case {
     std::string args, expect;
   } cases[] = {
-      {Q(dir / "junk.exr"), "junk.exr"},
-      {Q(dir / "f.exr") + " " + Q(dir / "g.exr"), "differs"},
-      {Q(dir / "d.png"), "--response"},
-      {Q(dir / "f.exr") + " --fit-centre", "--no-gradient"},
-      {"", "no flat-field images"},
-      {Q(dir / "f.exr") + " --bin 40", "too small"},
+      {Q(dir / "junk.exr"), "junk.exr"}, {Q(dir / "f.exr") + " " + Q(dir / "g.exr"), "differs"},
+      {Q(dir / "d.png"), "--response"},  {Q(dir / "f.exr") + " --fit-centre", "--no-gradient"},
+      {"", "no flat-field images"},      {Q(dir / "f.exr") + " --bin 40", "too small"},
   };
   for (const Case& c : cases) {
     const Result r = RunRouen("calib vignetting " + c.args + " --out " + Q(dir / "o.json"));
@@ -248,8 +239,8 @@ TEST(CalibVignettingCliTest, BadInputsFailClearly) {
   }
   // A lens of another aspect ratio is refused and left as it was.
   const std::string before = ReadFileToString(dir / "lens.json");
-  const Result r = RunRouen("calib vignetting " + Q(dir / "f.exr") + " --lens " +
-                            Q(dir / "lens.json"));
+  const Result r =
+      RunRouen("calib vignetting " + Q(dir / "f.exr") + " --lens " + Q(dir / "lens.json"));
   EXPECT_EQ(r.code, 1) << r.out;
   EXPECT_NE(r.out.find("aspect"), std::string::npos) << r.out;
   EXPECT_EQ(ReadFileToString(dir / "lens.json"), before);
@@ -356,9 +347,9 @@ TEST(CalibrateSessionTest, MixedLdrAndHdrBracketsAndPerChannelNdAndVignetting) {
     // per-channel filter, an HDR landscape frame.
     std::mt19937_64 rng(5);
     for (double t : {0.25, 1.0, 4.0})
-      wr.Append(Frame("slot0/architecture/view0", Target::kArchitecture, t, 0, k,
-                      "2024-06-21T07:00:00Z"),
-                testing::Expose(vignetted, t, 0.5, &rng));
+      wr.Append(
+          Frame("slot0/architecture/view0", Target::kArchitecture, t, 0, k, "2024-06-21T07:00:00Z"),
+          testing::Expose(vignetted, t, 0.5, &rng));
     const double mean_d = (kTrueDensity[0] + kTrueDensity[1] + kTrueDensity[2]) / 3;
     const Image behind = Scaled(vignetted, Transmission(kTrueDensity));
     for (double t : {4.0, 16.0})
@@ -378,8 +369,7 @@ TEST(CalibrateSessionTest, MixedLdrAndHdrBracketsAndPerChannelNdAndVignetting) {
   ASSERT_EQ(cal.groups.size(), 3u);
   // HDR landscape: the vignetting divided out, exact up to half-float storage.
   const HdrGroup& land = cal.groups.at("slot0/landscape/view0");
-  for (int c = 0; c < 3; ++c)
-    EXPECT_LT(MaxRelError(land.radiance, scene, {}, c), 2e-3) << c;
+  for (int c = 0; c < 3; ++c) EXPECT_LT(MaxRelError(land.radiance, scene, {}, c), 2e-3) << c;
   // LDR brackets are in the recovered curve's scale (pinned at g(128) = 0): compare the sun
   // bracket with the architecture bracket of the same scene, channel by channel. With the
   // per-channel filter applied they agree; a scalar filter would leave 10^(d_c - mean) =

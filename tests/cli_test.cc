@@ -1,17 +1,17 @@
 // End-to-end tests of the rouen CLI: run the binary as a user would and check its output,
 // its files and its errors.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 
-#include <gtest/gtest.h>
-#include <nlohmann/json.hpp>
-
 #include "core/image.h"
 #include "tests/cli_util.h"
-#include <sys/wait.h>
 
 namespace {
 
@@ -19,9 +19,6 @@ namespace fs = std::filesystem;
 using rouen::cli_test::Result;
 using rouen::cli_test::RunRouen;
 using rouen::cli_test::TempDir;
-
-
-
 
 void WriteText(const fs::path& p, const std::string& s) { std::ofstream(p) << s; }
 
@@ -45,8 +42,9 @@ TEST(CliTest, HelpExplainsEveryCommand) {
 
 TEST(CliTest, SunSingleAndJson) {
   // SPA's worked example (NREL): zenith 50.111622 deg, azimuth 194.340241 deg.
-  Result r = RunRouen("sun --lat 39.742476 --lon -105.1786 --height 1830.14 "
-                      "--time 2003-10-17T12:30:30-07:00 --pressure 820 --temperature 11 --json");
+  Result r = RunRouen(
+      "sun --lat 39.742476 --lon -105.1786 --height 1830.14 "
+      "--time 2003-10-17T12:30:30-07:00 --pressure 820 --temperature 11 --json");
   ASSERT_EQ(r.code, 0) << r.out;
   nlohmann::json j = nlohmann::json::parse(r.out);
   EXPECT_NEAR(j["azimuth_deg"].get<double>(), 194.340241, 3e-4);
@@ -77,8 +75,9 @@ TEST(CliTest, SunBatchCsv) {
 
 TEST(CliTest, SunBadInputNamesTheProblem) {
   fs::path dir = TempDir("sunbad");
-  WriteText(dir / "bad.csv", "utc,lat,lon,elev_m\n2026-08-25T20:30:00Z,37.8,-122.2,60\n"
-                             "2026-13-25T20:30:00Z,37.8,-122.2,60\n");
+  WriteText(dir / "bad.csv",
+            "utc,lat,lon,elev_m\n2026-08-25T20:30:00Z,37.8,-122.2,60\n"
+            "2026-13-25T20:30:00Z,37.8,-122.2,60\n");
   Result r = RunRouen("sun --batch " + (dir / "bad.csv").string());
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.out.find("bad.csv:3"), std::string::npos) << r.out;
@@ -191,8 +190,8 @@ TEST(CliTest, FieldCaptureWithoutItsCameraFailsClearlyAndWritesNothing) {
   EXPECT_FALSE(fs::exists(dir / "s"));
   // A misspelt key is refused with its line.
   WriteText(dir / "typo.toml", "[rig]\nname = \"w\"\nkind = \"sim\"\n[camera]\nlatency = 3\n");
-  Result t = RunRouen("capture --rig " + (dir / "typo.toml").string() + " --out " +
-                      (dir / "t").string());
+  Result t =
+      RunRouen("capture --rig " + (dir / "typo.toml").string() + " --out " + (dir / "t").string());
   EXPECT_NE(t.code, 0);
   EXPECT_NE(t.out.find("typo.toml:5: unknown key 'latency' in [camera]"), std::string::npos)
       << t.out;

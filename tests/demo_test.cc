@@ -1,15 +1,15 @@
 // The whole pipeline end to end: `rouen demo --quick` captures a simulated session through
 // the capture controller, solves it and scores it; then the session is replayed through the
 // replay devices on the same code path and must come out identical.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <map>
-
-#include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
-#include <sys/wait.h>
 
 #include "core/files.h"
 #include "core/image.h"
@@ -40,8 +40,7 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
         "sky_rel_error_median", "sky_rel_error_p90", "albedo_sun_rel_error_mean",
         "albedo_skyenv_rel_error_mean", "heldout_render_rel_rmse", "heldout_render_psnr_db",
         "heldout_predicted_render_rel_rmse", "heldout_predicted_sky_rel_error_median",
-        "heldout_predicted_sun_radiance_rel_error",
-        "frames_captured", "wall_seconds"}) {
+        "heldout_predicted_sun_radiance_rel_error", "frames_captured", "wall_seconds"}) {
     ASSERT_TRUE(m.contains(k)) << k;
     ASSERT_TRUE(m[k].is_number()) << k;
   }
@@ -65,10 +64,11 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
   // Replay through the replay devices: the same frames, times and metadata.
   fs::path replayed = dir / "replayed";
   out.clear();
-  ASSERT_EQ(RunRouen("capture --rig " + std::string(ROUEN_SOURCE_DIR) + "/rigs/replay.toml --from " +
-                         (dir / "session").string() + " --out " + replayed.string(),
-                     &out),
-            0)
+  ASSERT_EQ(
+      RunRouen("capture --rig " + std::string(ROUEN_SOURCE_DIR) + "/rigs/replay.toml --from " +
+                   (dir / "session").string() + " --out " + replayed.string(),
+               &out),
+      0)
       << out;
   rouen::Session a = rouen::Session::Load(dir / "session");
   rouen::Session b = rouen::Session::Load(replayed);
@@ -85,20 +85,21 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
 
   // rouen render on the same session: under a captured slot's lighting, and at another time
   // under predicted lighting with part of the sun blocked (§5, §6.3).
-  const std::string session = " --session " + (dir / "session").string() + " --work " +
-                              (dir / "render-work").string();
+  const std::string session =
+      " --session " + (dir / "session").string() + " --work " + (dir / "render-work").string();
   out.clear();
-  ASSERT_EQ(RunRouen("render" + session + " --quick --slot 1 --view slot1/architecture/view0 --out " +
-                         (dir / "slot1.exr").string(),
-                     &out),
-            0)
+  ASSERT_EQ(
+      RunRouen("render" + session + " --quick --slot 1 --view slot1/architecture/view0 --out " +
+                   (dir / "slot1.exr").string(),
+               &out),
+      0)
       << out;
   out.clear();
-  ASSERT_EQ(RunRouen("render" + session +
-                         " --quick --time 2026-08-25T17:00:00-07:00 --pbs 0.5 --out " +
-                         (dir / "p.exr").string() + " --png " + (dir / "p.png").string(),
-                     &out),
-            0)
+  ASSERT_EQ(
+      RunRouen("render" + session + " --quick --time 2026-08-25T17:00:00-07:00 --pbs 0.5 --out " +
+                   (dir / "p.exr").string() + " --png " + (dir / "p.png").string(),
+               &out),
+      0)
       << out;
   EXPECT_NE(out.find("air mass"), std::string::npos) << out;
   for (const char* f : {"slot1.exr", "p.exr"}) {
@@ -125,9 +126,9 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
     rouen::WriteFileAtomic(dir / "pose.json", nlohmann::json(*view->pose).dump());
   }
   out.clear();
-  ASSERT_EQ(RunRouen("render" + session + " --quick --slot 1 --lens " + (dir / "lens.json").string() +
-                         " --pose " + (dir / "pose.json").string() + " --out " +
-                         (dir / "files.exr").string(),
+  ASSERT_EQ(RunRouen("render" + session + " --quick --slot 1 --lens " +
+                         (dir / "lens.json").string() + " --pose " + (dir / "pose.json").string() +
+                         " --out " + (dir / "files.exr").string(),
                      &out),
             0)
       << out;
@@ -141,11 +142,11 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
   // A bad lens file fails before the solve, naming the file.
   rouen::WriteFileAtomic(dir / "bad-lens.json", "{\"projection\": \"pinhole\"");
   out.clear();
-  EXPECT_NE(RunRouen("render" + session + " --slot 1 --lens " + (dir / "bad-lens.json").string() +
-                         " --pose " + (dir / "pose.json").string() + " --out " +
-                         (dir / "n.exr").string(),
-                     &out),
-            0);
+  EXPECT_NE(
+      RunRouen("render" + session + " --slot 1 --lens " + (dir / "bad-lens.json").string() +
+                   " --pose " + (dir / "pose.json").string() + " --out " + (dir / "n.exr").string(),
+               &out),
+      0);
   EXPECT_NE(out.find("bad-lens.json: not a valid lens file"), std::string::npos) << out;
   // Night, and contradictory options, fail at once with the reason.
   out.clear();

@@ -3,6 +3,8 @@
 // them: fitted sky, sun from the simulator's truth), region normals and albedos recovered
 // from the training times and compared with the world's geometry, and the environment
 // predicted at the held-out time compared with the map built from that time's panoramas.
+#include "solve/env_stereo.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -15,7 +17,6 @@
 #include "capture/sim/sim_scene.h"
 #include "capture/sim/sim_world.h"
 #include "core/time.h"
-#include "solve/env_stereo.h"
 #include "solve/environment.h"
 #include "solve/raycast.h"
 #include "solve/sky_fit.h"
@@ -68,8 +69,7 @@ bool TraceWorld(const sim::SceneGeometry& g, const Eigen::Vector3d& o, const Eig
       auto cross = [](const Eigen::Vector2d& x, const Eigen::Vector2d& y) {
         return x.x() * y.y() - x.y() * y.x();
       };
-      inside = cross(b - a, st - a) >= 0 && cross(c - b, st - b) >= 0 &&
-               cross(a - c, st - c) >= 0;
+      inside = cross(b - a, st - a) >= 0 && cross(c - b, st - b) >= 0 && cross(a - c, st - c) >= 0;
     }
     if (!inside) continue;
     best = t;
@@ -125,14 +125,13 @@ class EnvStereoSimTest : public ::testing::Test {
       std::vector<SimView> views = world_->LandscapeViews();
       for (const SimView& v : views) panos.push_back(world_->RenderRadiance(v.intrinsics, v.pose));
       std::vector<EnvPanorama> ep;
-      for (size_t i = 0; i < views.size(); ++i) ep.push_back({&panos[i], views[i].intrinsics,
-                                                             views[i].pose});
+      for (size_t i = 0; i < views.size(); ++i)
+        ep.push_back({&panos[i], views[i].intrinsics, views[i].pose});
       s.obs.env = BuildEnvironmentMap(ep, *caster_, l.sun_dir,
                                       std::sqrt(l.sun_solid_angle_sr / kPi), l.sky, EnvOptions());
       slots_->push_back(std::move(s));
     }
-    setup_seconds_ =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    setup_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
   static void TearDownTestSuite() {
     delete caster_;
@@ -147,13 +146,13 @@ class EnvStereoSimTest : public ::testing::Test {
     std::vector<RegionTruth> out(m.radiance.size());
     const int nreg = m.num_regions();
     for (size_t v = 0; v < views.size(); ++v) {
-      const int layer = static_cast<int>(
-          std::min_element(m.layer_z.begin(), m.layer_z.end(),
-                           [&](double a, double b) {
-                             return std::abs(a - views[v].pose.position.z()) <
-                                    std::abs(b - views[v].pose.position.z());
-                           }) -
-          m.layer_z.begin());
+      const int layer =
+          static_cast<int>(std::min_element(m.layer_z.begin(), m.layer_z.end(),
+                                            [&](double a, double b) {
+                                              return std::abs(a - views[v].pose.position.z()) <
+                                                     std::abs(b - views[v].pose.position.z());
+                                            }) -
+                           m.layer_z.begin());
       const Intrinsics& k = views[v].intrinsics;
       for (int y = 0; y < k.height; y += 2) {
         for (int x = 0; x < k.width; x += 2) {
@@ -255,14 +254,16 @@ TEST_F(EnvStereoSimTest, RecoversRegionsAndPredictsTheHeldOutTime) {
       rho_sky.push_back(std::abs(f.rho_sky[c] / t.albedo()[c] - 1));
     }
   }
-  std::printf("landscape regions %d (pure %d): normal error median %.1f p90 %.1f deg "
-              "(all landscape: median %.1f p90 %.1f)\n",
-              res.summary.regions_landscape, pure, Percentile(ang, 0.5), Percentile(ang, 0.9),
-              Percentile(ang_all, 0.5), Percentile(ang_all, 0.9));
-  std::printf("albedo relative error: rho_sun median %.3f p90 %.3f; rho_sky median %.3f p90 "
-              "%.3f\n",
-              Percentile(rho_sun, 0.5), Percentile(rho_sun, 0.9), Percentile(rho_sky, 0.5),
-              Percentile(rho_sky, 0.9));
+  std::printf(
+      "landscape regions %d (pure %d): normal error median %.1f p90 %.1f deg "
+      "(all landscape: median %.1f p90 %.1f)\n",
+      res.summary.regions_landscape, pure, Percentile(ang, 0.5), Percentile(ang, 0.9),
+      Percentile(ang_all, 0.5), Percentile(ang_all, 0.9));
+  std::printf(
+      "albedo relative error: rho_sun median %.3f p90 %.3f; rho_sky median %.3f p90 "
+      "%.3f\n",
+      Percentile(rho_sun, 0.5), Percentile(rho_sun, 0.9), Percentile(rho_sky, 0.5),
+      Percentile(rho_sky, 0.9));
   ASSERT_GE(pure, 30);
   // Stated figures. Most pure regions are recovered to about a degree and a few percent; the
   // tail is ground in moving cast shadows (blocks, and the tower's own shadow on the ground
@@ -297,9 +298,10 @@ TEST_F(EnvStereoSimTest, RecoversRegionsAndPredictsTheHeldOutTime) {
   const MapError e_before = CompareMaps(before, held.env, land);
   const MapError e_after = CompareMaps(after, held.env, land);
   const MapError e_lerp = CompareMaps(lerp, held.env, land);
-  std::printf("held-out 16:00, landscape regions (%d): relative error median %.3f p90 %.3f "
-              "aggregate %.3f\n",
-              e_land.regions, e_land.median, e_land.p90, e_land.aggregate);
+  std::printf(
+      "held-out 16:00, landscape regions (%d): relative error median %.3f p90 %.3f "
+      "aggregate %.3f\n",
+      e_land.regions, e_land.median, e_land.p90, e_land.aggregate);
   std::printf("  sky regions (%d): median %.3f p90 %.3f aggregate %.3f\n", e_sky.regions,
               e_sky.median, e_sky.p90, e_sky.aggregate);
   std::printf("  baselines (aggregate): 13:30 map %.3f, 18:15 map %.3f, linear in time %.3f\n",

@@ -114,7 +114,8 @@ TEST(FieldTest, GigeFakeCameraListedThenBracketJournalledWithGpsAndSun) {
     char t[16];
     std::snprintf(t, sizeof t, "1200%02d.00", s);
     log += NmeaSentence(std::string("GPRMC,") + t + ",A,4926.586,N,00105.958,E,0.0,0.0,210626,,");
-    log += NmeaSentence(std::string("GPGGA,") + t + ",4926.586,N,00105.958,E,1,09,0.9,20.0,M,47.0,M,,");
+    log += NmeaSentence(std::string("GPGGA,") + t +
+                        ",4926.586,N,00105.958,E,1,09,0.9,20.0,M,47.0,M,,");
     log += NmeaSentence(std::string("GPGSA,A,3,01,02,03,04,05,06,07,08,09,,,,1.5,0.9,1.2"));
   }
   WriteFileAtomic(dir / "gps.nmea", log);

@@ -28,16 +28,12 @@ namespace rouen {
 namespace {
 
 namespace fs = std::filesystem;
+using rouen::cli_test::Q;
 using rouen::cli_test::Result;
 using rouen::cli_test::RunRouen;
-using rouen::cli_test::Q;
 using rouen::cli_test::TempDir;
 
-
-
-
 void WriteText(const fs::path& p, const std::string& s) { std::ofstream(p) << s; }
-
 
 // Names in `dir` that start with `prefix` (the session folder or its temporary twin).
 std::vector<std::string> Leftovers(const fs::path& dir, const std::string& prefix) {

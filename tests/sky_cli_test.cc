@@ -21,14 +21,10 @@ namespace rouen {
 namespace {
 
 namespace fs = std::filesystem;
+using rouen::cli_test::Q;
 using rouen::cli_test::Result;
 using rouen::cli_test::RunRouen;
-using rouen::cli_test::Q;
 using rouen::cli_test::TempDir;
-
-
-
-
 
 // A clear sky of eq. 9 (sun at azimuth 200, elevation 40), as `sky fit` would write it.
 nlohmann::json KnownFit() {
@@ -72,8 +68,8 @@ TEST(SkyCli, RenderThenFitRecoversTheSky) {
     const nlohmann::json j = nlohmann::json::parse(in);
     EXPECT_EQ(j.at("model"), model);
     ASSERT_EQ(j.at("channels").size(), 3u);
-    for (const char* key : {"Lz", "a", "b", "c", "d", "e", "h", "rel_error_median",
-                            "rel_error_p90"}) {
+    for (const char* key :
+         {"Lz", "a", "b", "c", "d", "e", "h", "rel_error_median", "rel_error_p90"}) {
       EXPECT_TRUE(j["channels"][1].contains(key)) << key;
     }
     const double med = j.at("rel_error_median"), p90 = j.at("rel_error_p90");
@@ -119,7 +115,8 @@ TEST(SkyCli, MaskOverridesAndAzimuthOffsetRotates) {
   WriteImage((dir / "mask.png").string(), m, StoredType::kUint8);
   r = RunRouen("sky fit --image " + Q(dir / "sky.exr") +
                " --projection equirect --sun-azimuth 200 --sun-elevation 40 --azimuth-offset 90"
-               " --mask " + Q(dir / "mask.png") + " --out " + Q(dir / "fit.json"));
+               " --mask " +
+               Q(dir / "mask.png") + " --out " + Q(dir / "fit.json"));
   ASSERT_EQ(r.code, 0) << r.out;
   std::ifstream in(dir / "fit.json");
   const nlohmann::json j = nlohmann::json::parse(in);
@@ -131,7 +128,8 @@ TEST(SkyCli, MaskOverridesAndAzimuthOffsetRotates) {
   // Without the offset the sun would be in the wrong place: a clearly worse fit.
   r = RunRouen("sky fit --image " + Q(dir / "sky.exr") +
                " --projection equirect --sun-azimuth 200 --sun-elevation 40 --no-segment"
-               " --out " + Q(dir / "wrong.json"));
+               " --out " +
+               Q(dir / "wrong.json"));
   ASSERT_EQ(r.code, 0) << r.out;
   std::ifstream in2(dir / "wrong.json");
   const nlohmann::json w = nlohmann::json::parse(in2);
@@ -146,8 +144,8 @@ TEST(SkyCli, BadInputGivesClearErrors) {
                      " --width 64")
                 .code,
             0);
-  const std::string base = "sky fit --image " + Q(dir / "sky.exr") +
-                           " --sun-azimuth 200 --out " + Q(dir / "f.json");
+  const std::string base =
+      "sky fit --image " + Q(dir / "sky.exr") + " --sun-azimuth 200 --out " + Q(dir / "f.json");
   auto expect_error = [](const Result& r, const std::string& what) {
     EXPECT_EQ(r.code, 1) << r.out;
     EXPECT_NE(r.out.find("rouen: error:"), std::string::npos) << r.out;
@@ -161,11 +159,10 @@ TEST(SkyCli, BadInputGivesClearErrors) {
   expect_error(RunRouen(base + " --projection equirect --sun-elevation -10"), "-5");
   Image m(10, 10, 1, PixelUnits::kDigital, 255.f);
   WriteImage((dir / "small.png").string(), m, StoredType::kUint8);
-  expect_error(RunRouen(base + " --projection equirect --sun-elevation 40 --mask " +
-                        Q(dir / "small.png")),
-               "small.png");
-  expect_error(RunRouen(base + " --projection equirect --sun-elevation 40 --model cie9"),
-               "cie9");
+  expect_error(
+      RunRouen(base + " --projection equirect --sun-elevation 40 --mask " + Q(dir / "small.png")),
+      "small.png");
+  expect_error(RunRouen(base + " --projection equirect --sun-elevation 40 --model cie9"), "cie9");
   WriteFileAtomic(dir / "broken.json", "{\"channels\": [1, 2");
   expect_error(RunRouen("sky render " + Q(dir / "broken.json") + " --out " + Q(dir / "x.exr")),
                "broken.json");

@@ -1,12 +1,12 @@
 // The sky pixels SolveSession fits (§3.2): every pixel of the sky photo, automatic
 // segmentation, or the session's own mask (session.json extra.sky_masks), always within the
 // valid pixels.
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <filesystem>
-#include <string>
-
-#include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "app/pipeline.h"
 #include "core/error.h"
@@ -111,8 +111,7 @@ TEST(SkyMaskTest, AutomaticSegmentationKeepsTheSkyAndDropsTheBuilding) {
         // Clear of the building's edge by a pixel (~2 deg) and of the sun's exclusion.
         bool near_edge = false;
         for (int dy = -2; dy <= 2; ++dy)
-          for (int dx = -2; dx <= 2; ++dx)
-            near_edge |= Building(DirectionOf(g, x + dx, y + dy));
+          for (int dx = -2; dx <= 2; ++dx) near_edge |= Building(DirectionOf(g, x + dx, y + dy));
         if (near_edge) continue;
         ++open_sky;
         open_sky_kept += m[p];
@@ -169,8 +168,7 @@ TEST(SkyMaskTest, TheSlotsSkyPhotosAreFittedTogether) {
   const Eigen::Vector3d sun = Eigen::Vector3d(0, -1, 1).normalized();
   std::string sources;
   const std::vector<SkySample> both = SlotSkySamples(s, calib, 0, sun, &sources);
-  EXPECT_EQ(sources, "slot0/sky/view0: " + (sdir / "left.png").string() +
-                         ", slot0/sky/view1: all");
+  EXPECT_EQ(sources, "slot0/sky/view0: " + (sdir / "left.png").string() + ", slot0/sky/view1: all");
   const std::vector<uint8_t> left = SkyMaskFor(s, up, sun);
   const size_t n0 =
       ExtractSkySamples(up.radiance, &left, up.intrinsics, up.pose, sun, SkySampleOptions{}).size();

@@ -1,6 +1,5 @@
 // GpsdGps against a real gpsd fed by gpsfake on loopback.
 #include "capture/gpsd/gpsd.h"
-#include "capture/nmea/nmea_test_util.h"
 
 #include <arpa/inet.h>
 #include <fcntl.h>
@@ -26,6 +25,7 @@
 #include <string>
 #include <vector>
 
+#include "capture/nmea/nmea_test_util.h"
 #include "core/solar.h"
 
 extern char** environ;

@@ -1,5 +1,4 @@
 #include "capture/nmea/nmea.h"
-#include "capture/nmea/nmea_test_util.h"
 
 #include <gtest/gtest.h>
 
@@ -7,6 +6,8 @@
 #include <cstdio>
 #include <random>
 #include <string>
+
+#include "capture/nmea/nmea_test_util.h"
 
 namespace rouen {
 namespace {

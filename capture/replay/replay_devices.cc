@@ -29,7 +29,8 @@ ReplaySource::ReplaySource(const std::filesystem::path& session_dir)
   }
   const nlohmann::json& extra = session_.info().extra;
   if (extra.contains("plan") && extra["plan"].contains("slots")) {
-    for (const auto& s : extra["plan"]["slots"]) slot_times_.push_back(ParseIso8601(s.get<std::string>()));
+    for (const auto& s : extra["plan"]["slots"])
+      slot_times_.push_back(ParseIso8601(s.get<std::string>()));
   } else {
     for (const auto& [slot, t] : first) {
       if (slot != static_cast<int>(slot_times_.size()))
