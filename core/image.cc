@@ -5,11 +5,13 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <string_view>
 
 #include "core/error.h"
 #include "core/files.h"
@@ -58,23 +60,18 @@ void CheckImageSize(const std::string& path, int width, int height, int channels
 
 namespace internal {
 
-void CheckImageFileHeader(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return;  // OpenImageIO says why
+namespace {
+
+// OpenEXR headers (several when multi-part, then an empty one): attributes "name\0type\0" +
+// int32 size + value, ended by an empty name. Only what is parsed is checked; OpenEXR reports
+// other damage itself.
+void CheckExrHeader(std::ifstream& in, int64_t size, int32_t version, const std::string& path) {
   auto read_int = [&](int32_t* v) {
     char b[4];
     if (!in.read(b, 4)) return false;
     *v = Le32(b);
     return true;
   };
-  int32_t magic = 0, version = 0;
-  if (!read_int(&magic) || magic != 20000630 || !read_int(&version)) return;  // not OpenEXR
-  in.seekg(0, std::ios::end);
-  const int64_t size = in.tellg();
-  in.seekg(8);
-  // Headers (several when multi-part, then an empty one): attributes "name\0type\0" + int32
-  // size + value, ended by an empty name. Only what is parsed is checked; OpenEXR reports
-  // other damage itself.
   const bool multipart = version & 0x1000;
   auto read_name = [&](std::string* s) {
     s->clear();
@@ -119,6 +116,45 @@ void CheckImageFileHeader(const std::string& path) {
       ++attributes;
     }
     if (!in || !multipart || attributes == 0) return;
+  }
+}
+
+// PNG chunks after the signature: big-endian uint32 length, 4-byte type, data, CRC, up to
+// IEND. libpng allocates a chunk's claimed length before reading it.
+void CheckPngChunks(std::ifstream& in, int64_t size, const std::string& path) {
+  in.seekg(8);
+  unsigned char head[8];
+  while (in.read(reinterpret_cast<char*>(head), 8)) {
+    const uint32_t length =
+        uint32_t{head[0]} << 24 | uint32_t{head[1]} << 16 | uint32_t{head[2]} << 8 | head[3];
+    const std::string type(reinterpret_cast<const char*>(head + 4), 4);
+    const int64_t left = size - in.tellg();
+    if (int64_t{length} + 4 > left) {
+      std::string shown;
+      for (char c : type) shown += std::isalpha(static_cast<unsigned char>(c)) ? c : '?';
+      throw Error(path + ": PNG chunk \"" + shown + "\" claims " + std::to_string(length) +
+                  " bytes; the file has " + std::to_string(std::max<int64_t>(0, left - 4)) +
+                  " left (a truncated or corrupt file)");
+    }
+    if (type == "IEND") return;
+    in.seekg(int64_t{length} + 4, std::ios::cur);
+  }
+}
+
+}  // namespace
+
+void CheckImageFileHeader(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return;  // OpenImageIO says why
+  char magic[8];
+  if (!in.read(magic, 8)) return;
+  in.seekg(0, std::ios::end);
+  const int64_t size = in.tellg();
+  if (Le32(magic) == 20000630) {
+    in.seekg(8);
+    CheckExrHeader(in, size, Le32(magic + 4), path);
+  } else if (std::string_view(magic, 8) == std::string_view("\x89PNG\r\n\x1a\n", 8)) {
+    CheckPngChunks(in, size, path);
   }
 }
 

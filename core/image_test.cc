@@ -1,5 +1,7 @@
 #include "core/image.h"
 
+#include <OpenImageIO/imageio.h>
+#include <gtest/gtest.h>
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -7,9 +9,6 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
-
-#include <OpenImageIO/imageio.h>
-#include <gtest/gtest.h>
 
 #include "core/error.h"
 #include "core/exif.h"
@@ -252,6 +251,34 @@ TEST_F(ImageTest, ExrChannelOfUnknownPixelTypeIsRefused) {
   EXPECT_THROW(ReadPhotoMetadata(P("bad.exr")), Error);
 }
 
+TEST_F(ImageTest, PngChunkClaimingMoreThanTheFileIsRefused) {
+  // Found by tests/fuzz/image_fuzz: libpng allocates a chunk's claimed length before reading
+  // it (a 558-byte file whose tEXt chunk claimed 1711276190 bytes asked for 1.7 GB).
+  WriteImage(P("ok.png"), Ramp(4, 2, 3, PixelUnits::kDigital, 100.f), StoredType::kUint8);
+  const std::string good = ReadFileToString(P("ok.png"));
+  // After the 8-byte signature and the 25-byte IHDR chunk: a tEXt chunk claiming 0x66000000.
+  std::string bad =
+      good.substr(0, 33) + std::string("\x66\x00\x00\x00tEXtkey\0value", 18) + good.substr(33);
+  WriteFileAtomic(P("claims.png"), bad);
+  WriteFileAtomic(P("cut.png"), good.substr(0, good.size() - 20));  // into the last chunks
+  rusage before{}, after{};
+  ::getrusage(RUSAGE_SELF, &before);
+  for (const auto& [name, chunk] : {std::pair{"claims.png", "tEXt"}, std::pair{"cut.png", ""}}) {
+    try {
+      ReadImage(P(name));
+      ADD_FAILURE() << name;
+    } catch (const Error& e) {
+      const std::string msg = e.what();
+      EXPECT_EQ(msg.rfind(P(name) + ": PNG chunk \"" + chunk, 0), 0u) << msg;
+      EXPECT_NE(msg.find("(a truncated or corrupt file)"), std::string::npos) << msg;
+    }
+    EXPECT_THROW(ReadPhotoMetadata(P(name)), Error);
+  }
+  ::getrusage(RUSAGE_SELF, &after);
+  EXPECT_LT(after.ru_maxrss - before.ru_maxrss, 256 * 1024) << "KiB of peak memory";
+  EXPECT_EQ(ReadImage(P("ok.png")).width, 4);  // a whole PNG passes
+}
+
 TEST_F(ImageTest, ReadsTiledAndScanlineFilesInBands) {
   // More samples than one band (internal::kBandSamples): the bands join seamlessly.
   const Image img = Ramp(1500, 1000, 3, PixelUnits::kRadiance, 4.f);
@@ -275,15 +302,15 @@ TEST_F(ImageTest, ReadsTiledAndScanlineFilesInBands) {
 }
 
 TEST_F(ImageTest, WritingToAMissingFolderFails) {
-  EXPECT_THROW(WriteImage(P("nope/a.png"), Ramp(2, 2, 3, PixelUnits::kDigital, 1.f),
-                          StoredType::kUint8),
-               Error);
+  EXPECT_THROW(
+      WriteImage(P("nope/a.png"), Ramp(2, 2, 3, PixelUnits::kDigital, 1.f), StoredType::kUint8),
+      Error);
 }
 
 TEST(ImageSampleTest, Bilinear) {
   Image img(2, 2, 1);
   img.data = {0.f, 10.f, 20.f, 30.f};
-  EXPECT_FLOAT_EQ(img.Sample(0.5, 0.5, 0), 0.f);   // pixel centre
+  EXPECT_FLOAT_EQ(img.Sample(0.5, 0.5, 0), 0.f);  // pixel centre
   EXPECT_FLOAT_EQ(img.Sample(1.5, 1.5, 0), 30.f);
   EXPECT_FLOAT_EQ(img.Sample(1.0, 0.5, 0), 5.f);   // between two centres
   EXPECT_FLOAT_EQ(img.Sample(1.0, 1.0, 0), 15.f);  // middle of four

@@ -326,8 +326,12 @@ TEST_F(CliSessionInputs, JournalValuesOutOfRangeNameTheFrame) {
 
 TEST_F(CliSessionInputs, AFrameOfTheWrongSizeNamesItsFileAndBracket) {
   const fs::path s = Copy("tiny");
+  // A frame journalled with its hash (as an import of a 1x1 photo would), so that the size
+  // check, not the sha256 check, is what refuses it.
+  const std::string before = Sha256File(s / "frames" / "000008.png");
   Image one(1, 1, 3, PixelUnits::kDigital, 100.f);
   WriteImage((s / "frames" / "000008.png").string(), one, StoredType::kUint8);
+  Edit(s / "frames.jsonl", before, Sha256File(s / "frames" / "000008.png"));
   const Session session = Session::Load(s);
   const FrameRecord& f = session.frames()[7];
   ASSERT_EQ(f.id, 8);

@@ -15,8 +15,9 @@ namespace rouen::internal {
 // Checks what OpenImageIO's readers would trust blindly, before the file is opened with
 // OpenImageIO, in an OpenEXR header: attribute sizes (OpenEXR 3.1 allocates and clears a
 // claimed size of up to 2 GB before reading it; a 700-byte file took 1.9 GB and 10 s) and
-// channel pixel types (OpenImageIO 2.4 aborts the process on an unknown one). Other files
-// pass. Throws rouen::Error naming the file.
+// channel pixel types (OpenImageIO 2.4 aborts the process on an unknown one); in a PNG, chunk
+// lengths (libpng allocates a chunk's claimed length first: a 558-byte file asked for 1.7 GB).
+// Other files pass. Throws rouen::Error naming the file.
 void CheckImageFileHeader(const std::string& path);
 
 // Samples (pixels x channels) per band; a band is at least one row (or one row of tiles).
