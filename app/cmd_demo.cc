@@ -11,7 +11,7 @@
 #include <numeric>
 
 #include "app/commands.h"
-#include "app/pipeline.h"
+#include "pipeline/session_solve.h"
 #include "capture/sim/sim_devices.h"
 #include "core/error.h"
 #include "core/files.h"

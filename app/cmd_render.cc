@@ -1,31 +1,25 @@
-// rouen render: the building of a session under the lighting of one of its times of day, or
+// rouen render: a solved scene's building under the lighting of one of its times of day, or
 // under lighting predicted for another time (§5-6): interpolated sky, sunset, overcast.
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
 #include <memory>
-#include <nlohmann/json.hpp>
 #include <string>
 
 #include "app/commands.h"
 #include "app/options.h"
-#include "app/pipeline.h"
 #include "core/error.h"
-#include "core/files.h"
 #include "core/image.h"
 #include "core/lens.h"
 #include "core/outputs.h"
-#include "core/solar.h"
 #include "core/time.h"
-#include "render/render.h"
+#include "pipeline/scene.h"
 #include "render/tonemap.h"
-#include "solve/relight.h"
 
 namespace rouen {
 namespace {
 
 struct RenderArgs {
-  std::string session, work, out, png;
+  std::string scene, out, png;
   int slot = 0;
   bool have_slot = false;
   std::string time;
@@ -35,113 +29,59 @@ struct RenderArgs {
   std::vector<double> overcast_colour;
   double overcast_brightness = 1;
   double exposure = 0;
-  bool quick = false;
 };
 
 void Run(const RenderArgs& a) {
-  namespace fs = std::filesystem;
   // Arguments first (CLI11 has checked each option's range and the options that exclude
-  // each other), then the outputs and the working folder, then the inputs: every mistake is
-  // told before minutes of solving.
+  // each other), then the outputs, then the camera files and the scene: every mistake is told
+  // before any work.
   if (a.have_slot == !a.time.empty())
     throw Error("give exactly one of --slot (a captured time of day) or --time (any other)");
   if (!a.lens.empty() != !a.pose.empty()) throw Error("--lens and --pose go together");
   if (!a.view.empty() && !a.lens.empty()) throw Error("give --view or --lens/--pose, not both");
   if (!a.overcast_colour.empty() && a.overcast_colour.size() != 3)
     throw Error("--overcast-colour takes three numbers R,G,B");
-  UtcTime when;
+  RenderRequest request;
+  if (a.have_slot) request.slot = a.slot;
   if (!a.time.empty()) {
     try {
-      when = ParseIso8601(a.time);
+      request.time = ParseIso8601(a.time);
     } catch (const Error& e) {
       throw Error(std::string("--time: ") + e.what());
     }
   }
+  request.relight.pbs = a.pbs;
+  if (!a.overcast_colour.empty())
+    request.relight.overcast_colour =
+        Eigen::Vector3d(a.overcast_colour[0], a.overcast_colour[1], a.overcast_colour[2]);
+  request.relight.overcast_brightness = a.overcast_brightness;
   OutputSet outputs;
   const std::string out = outputs.Add("--out", a.out, OutputKind::kRadiance);
   const std::string png = a.png.empty() ? "" : outputs.Add("--png", a.png, OutputKind::kImage);
-  fs::path session_dir = fs::path(a.session).lexically_normal();
-  if (!session_dir.has_filename()) session_dir = session_dir.parent_path();  // "s/" -> "s"
-  const fs::path work =
-      a.work.empty() ? fs::path(session_dir.string() + ".work") : fs::path(a.work);
-  CheckWritableFolder(a.work.empty() ? "the working folder" : "--work", work.string());
+  if (!a.lens.empty()) {
+    request.intrinsics = ReadLensFile(a.lens).intrinsics;
+    request.pose = ReadPose(a.pose);
+  }
   auto say = [](const std::string& s) { std::fprintf(stderr, "render: %s\n", s.c_str()); };
 
-  Session session = Session::Load(a.session);
-  const Site site = SessionSite(session);
-  if (!a.time.empty()) {
-    const SunPosition sun = ComputeSunPosition(when, site);
-    if (!(sun.elevation_deg > 0))
-      throw Error("--time " + a.time + ": the sun is below the horizon there (elevation " +
-                  std::to_string(sun.elevation_deg) + " deg); rouen renders daylight only");
-  }
-  // The model and a camera from files are read before the long solve, so a bad file fails at
-  // once (SolveSession reads the model again).
-  ReadSessionModel(session);
-  Intrinsics intrinsics;
-  Pose pose;
-  if (!a.lens.empty()) {
-    intrinsics = ReadLensFile(a.lens).intrinsics;
-    pose = ReadPose(a.pose);
-  }
-  PipelineOptions po;
-  po.work_dir = work;
-  po.quick = a.quick;
-  po.log = say;
-  CalibResult calib = CalibrateSession(session, po);
-  SolveResult solved = SolveSession(session, calib, po);
-
-  // Otherwise the camera of a view of the session.
+  const LoadedScene scene = LoadScene(a.scene, say);
   if (a.lens.empty()) {
-    std::string name = a.view;
-    if (name.empty()) {
-      for (const auto& [n, g] : calib.groups)
-        if (g.target == Target::kArchitecture) {
-          name = n;
-          break;
-        }
-    }
-    auto it = calib.groups.find(name);
-    if (it == calib.groups.end())
-      throw Error(a.session + ": no bracket named '" + name +
-                  "' (views are named like slot0/architecture/view0)");
-    intrinsics = it->second.intrinsics;
-    pose = it->second.pose;
+    const SceneView& view = FindView(scene, a.view);
+    request.intrinsics = view.intrinsics;
+    request.pose = view.pose;
   }
-
-  Lighting lighting;
-  SlotIrradiance irr;
-  if (a.have_slot) {
-    if (a.slot >= static_cast<int>(solved.slots.size()))
-      throw Error(a.session + ": slot " + std::to_string(a.slot) +
-                  " does not exist (the session has " + std::to_string(solved.slots.size()) + ")");
-    lighting = solved.slots[a.slot].lighting;
-    irr = solved.irradiance.at(a.slot);
-  } else {
-    RelightOptions ro;
-    ro.pbs = a.pbs;
-    if (!a.overcast_colour.empty())
-      ro.overcast_colour =
-          Eigen::Vector3d(a.overcast_colour[0], a.overcast_colour[1], a.overcast_colour[2]);
-    ro.overcast_brightness = a.overcast_brightness;
-    std::vector<Lighting> measured;
-    for (const SlotSolve& ss : solved.slots) measured.push_back(ss.lighting);
-    say("fitting the sun's extinction, the sky interpolation and the environment's normals");
-    LightingPredictor predictor(std::move(measured), ro);
-    say(predictor.environment().summary.BriefReport());
-    RelightSummary rs;
-    lighting = predictor.At(when, site, &rs);
-    say(rs.Describe());
-    irr = IrradianceFor(solved, lighting);
-  }
-  say("rendering " + std::to_string(intrinsics.width) + "x" + std::to_string(intrinsics.height));
-  Image image = RenderView(solved.mesh, solved.grid, *solved.caster, solved.albedo, lighting, irr,
-                           intrinsics, pose, RenderOptions{});
+  CheckRenderRequest(scene, request);
+  const ResponseCurve& response = scene.scene.response;
+  if (!a.png.empty() && !response.valid())
+    throw Error(a.scene +
+                ": the scene has no response curve (its photos were HDR), which --png "
+                "needs; write the radiance only");
+  const Image image = RenderScene(scene, request, say);
   WriteImage(out, image, StoredType::kFloat);
   double exposure = 0;
   if (!a.png.empty()) {
-    exposure = a.exposure > 0 ? a.exposure : AutoExposure(image, calib.response);
-    WriteImage(png, ToDigital(image, calib.response, exposure), StoredType::kUint8);
+    exposure = a.exposure > 0 ? a.exposure : AutoExposure(image, response);
+    WriteImage(png, ToDigital(image, response, exposure), StoredType::kUint8);
   }
   outputs.Commit();
   std::printf("%s: radiance %dx%d\n", a.out.c_str(), image.width, image.height);
@@ -155,10 +95,10 @@ void Run(const RenderArgs& a) {
 void RegisterRender(CLI::App& app) {
   auto a = std::make_shared<RenderArgs>();
   CLI::App* c = app.add_subcommand(
-      "render", "Render a session's building at a captured time of day or at any other time");
+      "render", "Render a solved scene's building at a captured time of day or at any other time");
   c->footer(
-      "Calibrates and solves the session (files in --work), then renders the building's radiance\n"
-      "from the recovered pseudo-albedos under the chosen lighting:\n"
+      "Renders the building's radiance from a scene (written once by `rouen solve`; render never\n"
+      "solves) with the recovered pseudo-albedos under the chosen lighting:\n"
       "  --slot N     the lighting measured at the session's N-th time of day;\n"
       "  --time ISO   lighting predicted for another time (paper §5): the sun's position from the\n"
       "               site and time, its radiance from the session's sun measurements against air\n"
@@ -166,10 +106,11 @@ void RegisterRender(CLI::App& app) {
       "               skies by sun position, the environment from its recovered normals and\n"
       "               albedos; --pbs blocks that fraction of the sunlight and blends towards an\n"
       "               overcast sky (paper §6.3).\n"
-      "Example: rouen render --session s --time 2026-08-25T19:40:00-07:00 --out sunset.exr "
+      "The camera is one of the scene's views (--view, the names `rouen solve` lists), or a lens\n"
+      "file and a pose file (as `rouen calib intrinsics` and `rouen calib pose` write them).\n"
+      "Example: rouen render s.scene --time 2026-08-25T19:40:00-07:00 --out sunset.exr "
       "--png sunset.png");
-  c->add_option("--session", a->session, "Session folder")->required();
-  c->add_option("--work", a->work, "Working folder (default: SESSION.work)");
+  c->add_option("scene", a->scene, "Scene folder (from rouen solve)")->required();
   CLI::Option* slot = c->add_option("--slot", a->slot,
                                     "Render under the lighting of this captured slot (0, 1, ...)")
                           ->check(Within(0, INFINITY));
@@ -199,7 +140,6 @@ void RegisterRender(CLI::App& app) {
   c->add_option("--exposure", a->exposure, "Exposure factor for --png (default: automatic)")
       ->check(Positive())
       ->needs(png);
-  c->add_flag("--quick", a->quick, "Fewer samples (faster, rougher)");
   c->callback([a, slot] {
     a->have_slot = slot->count() > 0;
     Run(*a);

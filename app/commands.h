@@ -15,7 +15,8 @@ void RegisterHdr(CLI::App& app);
 void RegisterDemo(CLI::App& app);
 void RegisterDevices(CLI::App& app);
 void RegisterImport(CLI::App& app);  // rouen import: a session from existing photos
-void RegisterRender(CLI::App& app);  // rouen render: a session at any time of day
+void RegisterSolve(CLI::App& app);   // rouen solve: a session solved into a scene folder
+void RegisterRender(CLI::App& app);  // rouen render: a scene at any time of day
 void RegisterSky(CLI::App& app);     // rouen sky fit / rouen sky render
 
 }  // namespace rouen

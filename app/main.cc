@@ -22,6 +22,7 @@ int main(int argc, char** argv) {
   rouen::RegisterSun(app);
   rouen::RegisterImport(app);
   rouen::RegisterSky(app);
+  rouen::RegisterSolve(app);
   rouen::RegisterRender(app);
   // Ctrl-C or SIGTERM removes the temporaries of the files being written.
   rouen::RemoveTemporariesOnSignal();

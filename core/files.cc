@@ -239,6 +239,8 @@ void CommitFile(const fs::path& tmp, const fs::path& path) {
   FsyncPath(ParentOrDot(path), true);
 }
 
+void FsyncDirectory(const fs::path& dir) { FsyncPath(dir, true); }
+
 std::string ReadFileToString(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw Error(path.string() + ": cannot open: " + Errno());

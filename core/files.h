@@ -49,6 +49,9 @@ void WriteFileAtomic(const std::filesystem::path& path, std::string_view bytes);
 // Renames a finished temporary file into place and fsyncs it and its directory.
 void CommitFile(const std::filesystem::path& tmp, const std::filesystem::path& path);
 std::string ReadFileToString(const std::filesystem::path& path);
+// Makes a folder's entries (files created, renamed or removed in it) durable: fsync of the
+// folder. Throws rouen::Error naming it.
+void FsyncDirectory(const std::filesystem::path& dir);
 // A fresh temporary name beside `path`: "<path>.tmp-<pid>-<n><suffix>" (unique within the
 // process). Names containing ".tmp-" are leftovers that session resume deletes.
 std::filesystem::path TempPathFor(const std::filesystem::path& path, std::string_view suffix = {});

@@ -136,7 +136,9 @@ void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const
     j["response"] = nullptr;
   }
   j["grid"] = scene.grid_options;
+  j["hemisphere"] = {{"directions", scene.hemisphere.directions}, {"seed", scene.hemisphere.seed}};
   j["model_file"] = scene.model_file;
+  j["model_sha256"] = Sha256File(model_path);
   j["points"] = n;
   nlohmann::json slots = nlohmann::json::array();
   for (const SlotModel& s : scene.slots) {
@@ -148,6 +150,16 @@ void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const
                      {"env", s.env}});
   }
   j["slots"] = slots;
+  nlohmann::json views = nlohmann::json::object();
+  for (const auto& [name, v] : scene.views) {
+    views[name] = {{"slot", v.slot},
+                   {"target", v.target},
+                   {"utc", v.utc.Iso8601(9)},
+                   {"intrinsics", v.intrinsics},
+                   {"pose", v.pose}};
+  }
+  j["views"] = views;
+  j["holdout_slots"] = scene.holdout_slots;
   j["albedo"] = {{"sun", "albedo_sun.exr"},
                  {"se", "albedo_se.exr"},
                  {"info", "albedo_info.exr"},
@@ -171,7 +183,7 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
     throw Error(json_path.string() + ": not valid JSON: " + e.what());
   }
   size_t points = 0;
-  std::string files[3];
+  std::string files[3], model_sha256;
   try {
     scene.format_version = j.at("format_version").get<int>();
     if (scene.format_version != 1) {
@@ -183,7 +195,11 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
     scene.site.height_m = site.at("height_m").get<double>();
     if (!j.at("response").is_null()) scene.response = j.at("response").get<ResponseCurve>();
     scene.grid_options = j.at("grid").get<GridOptions>();
+    scene.hemisphere.directions = j.at("hemisphere").at("directions").get<int>();
+    scene.hemisphere.seed = j.at("hemisphere").at("seed").get<uint64_t>();
+    scene.hemisphere.Validate();
     scene.model_file = j.at("model_file").get<std::string>();
+    model_sha256 = j.at("model_sha256").get<std::string>();
     points = j.at("points").get<size_t>();
     for (const auto& s : j.at("slots")) {
       SlotModel m;
@@ -199,6 +215,24 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
       }
       scene.slots.push_back(std::move(m));
     }
+    for (const auto& [name, v] : j.at("views").items()) {
+      SceneView view;
+      view.slot = v.at("slot").get<int>();
+      if (view.slot < 0 || view.slot >= static_cast<int>(scene.slots.size())) {
+        throw Error("view " + name + ": slot " + std::to_string(view.slot) +
+                    " is not in the scene");
+      }
+      view.target = v.at("target").get<std::string>();
+      view.utc = ParseIso8601(v.at("utc").get<std::string>());
+      view.intrinsics = v.at("intrinsics").get<Intrinsics>();
+      view.pose = v.at("pose").get<Pose>();
+      scene.views.emplace(name, std::move(view));
+    }
+    for (const auto& h : j.at("holdout_slots")) {
+      const int slot = h.get<int>();
+      if (slot < 0) throw Error("holdout slot " + std::to_string(slot) + " is negative");
+      scene.holdout_slots.push_back(slot);
+    }
     const auto& a = j.at("albedo");
     files[0] = a.at("sun").get<std::string>();
     files[1] = a.at("se").get<std::string>();
@@ -210,6 +244,11 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
     throw Error(json_path.string() + ": " + e.what());
   }
   const std::filesystem::path model_path = ResolveInside(dir, scene.model_file);
+  // The grid's points are numbered by triangle: the albedos belong to this very file.
+  if (Sha256File(model_path) != model_sha256) {
+    throw Error(json_path.string() + ": " + model_path.string() +
+                " is not the model the scene was solved with (its sha256 differs)");
+  }
   Mesh mesh = ReadObj(model_path.string());
   SurfaceGrid grid = BuildSurfaceGrid(mesh, scene.grid_options);
   if (static_cast<size_t>(grid.size()) != points) {

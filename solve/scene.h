@@ -6,9 +6,11 @@
 
 #include <Eigen/Core>
 #include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
+#include "core/camera.h"
 #include "core/mesh.h"
 #include "core/response_curve.h"
 #include "core/solar.h"
@@ -34,14 +36,27 @@ struct SlotModel {
   static SlotModel FromLighting(const Lighting& l);
 };
 
+// The camera of one photographed bracket of the session (named slot<k>/<target>/view<v>), so a
+// scene renders its views without the session.
+struct SceneView {
+  int slot = 0;
+  std::string target;  // "architecture", "sky", "landscape", "sun"
+  UtcTime utc;         // the bracket's median frame time
+  Intrinsics intrinsics;
+  Pose pose;
+};
+
 struct SceneModel {
   int format_version = 1;
   Site site;
   ResponseCurve response;  // may be empty (not valid()) when photos came in as HDR
   GridOptions grid_options;
+  HemisphereOptions hemisphere;  // the irradiance's gathering pattern over that grid
   std::vector<SlotModel> slots;
   AlbedoResult albedo;
   std::string model_file;  // OBJ, relative to the scene folder
+  std::map<std::string, SceneView> views;
+  std::vector<int> holdout_slots;  // slots whose architecture photos the albedos did not use
 };
 
 constexpr int kAlbedoImageWidth = 1024;
@@ -50,8 +65,10 @@ constexpr int kAlbedoImageWidth = 1024;
 // already be at dir/model_file (or be given as `mesh`, which is then written there).
 void WriteScene(const std::filesystem::path& dir, const SceneModel& scene,
                 const Mesh* mesh = nullptr);
-// Reads and validates a scene folder; rebuilds the grid from the OBJ and checks that the
-// albedo images hold exactly one value per grid point. Throws rouen::Error naming the file.
+// Reads and validates a scene folder; checks that the OBJ is the file the scene was written
+// with (scene.json keeps its sha256: grid points are numbered by triangle), rebuilds the grid
+// from it and checks that the albedo images hold exactly one value per grid point. Throws
+// rouen::Error naming the file.
 SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh = nullptr,
                      SurfaceGrid* grid = nullptr);
 

@@ -42,6 +42,16 @@ SceneModel MakeScene(const Mesh& mesh, SurfaceGrid* grid_out) {
     s.albedo.observations.push_back(i % 7);
     s.albedo.flags.push_back(static_cast<uint8_t>(i % 5));
   }
+  SceneView view;
+  view.slot = 1;
+  view.target = "architecture";
+  view.utc = ParseIso8601("2024-08-28T20:16:01.5Z");
+  view.intrinsics = Intrinsics::PinholeFov(64, 48, 50.3);
+  view.pose = Pose::LookAt({10.25, -30.5, 1.7}, {0, 0, 12});
+  s.views["slot1/architecture/view0"] = view;
+  s.holdout_slots = {1};
+  s.hemisphere.directions = 64;
+  s.hemisphere.seed = 7;
   s.albedo.summary.points = grid.size();
   s.albedo.summary.residual_rms_rel = 0.0123;
   if (grid_out) *grid_out = grid;
@@ -86,6 +96,20 @@ TEST(SceneTest, RoundTrip) {
     EXPECT_EQ(r.albedo.flags[i], s.albedo.flags[i]);
   }
   EXPECT_EQ(r.albedo.summary.residual_rms_rel, 0.0123);
+  // Views keep their cameras exactly (JSON doubles round-trip).
+  ASSERT_EQ(r.views.size(), 1u);
+  const SceneView& v = r.views.at("slot1/architecture/view0");
+  const SceneView& w = s.views.at("slot1/architecture/view0");
+  EXPECT_EQ(v.slot, 1);
+  EXPECT_EQ(v.target, "architecture");
+  EXPECT_EQ(v.utc, w.utc);
+  EXPECT_EQ(v.intrinsics.fx, w.intrinsics.fx);
+  EXPECT_EQ(v.intrinsics.width, 64);
+  EXPECT_EQ(v.pose.rotation, w.pose.rotation);
+  EXPECT_EQ(v.pose.position, w.pose.position);
+  EXPECT_EQ(r.holdout_slots, std::vector<int>{1});
+  EXPECT_EQ(r.hemisphere.directions, 64);
+  EXPECT_EQ(r.hemisphere.seed, 7u);
   std::filesystem::remove_all(dir);
 }
 
@@ -121,6 +145,19 @@ TEST(SceneTest, MismatchedModelOrImagesAreRefused) {
   s = MakeScene(mesh, nullptr);
   s.model_file = "../outside.obj";
   EXPECT_THROW(WriteScene(dir, s), Error);
+  // A view of a slot the scene does not have.
+  s = MakeScene(mesh, nullptr);
+  s.views.begin()->second.slot = 2;
+  WriteScene(dir, s);
+  try {
+    ReadScene(dir);
+    FAIL() << "expected rouen::Error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("scene.json: view slot1/architecture/view0: slot 2 is "
+                                         "not in the scene"),
+              std::string::npos)
+        << e.what();
+  }
   std::filesystem::remove_all(dir);
   EXPECT_THROW(ReadScene(dir), Error);
 }

@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "app/pipeline.h"
+#include "pipeline/session_solve.h"
 #include "calib/nd.h"
 #include "calib/test_util.h"
 #include "calib/vignetting.h"

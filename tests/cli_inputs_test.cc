@@ -98,9 +98,8 @@ TEST(CliInputs, RadianceIsWrittenOnlyToFloatFormats) {
   ExpectError(RunRouen("calib envmap --list " + Q(b.list) + " --out " + Q(dir / "env.exr") +
                        " --coverage " + Q(dir / "cov.png")),
               {"--coverage", "cov.png", "floating-point"});
-  ExpectError(
-      RunRouen("render --session " + Q(dir / "nosession") + " --slot 0 --out " + Q(dir / "r.png")),
-      {"--out", "r.png", "floating-point"});
+  ExpectError(RunRouen("render " + Q(dir / "noscene") + " --slot 0 --out " + Q(dir / "r.png")),
+              {"--out", "r.png", "floating-point"});
   EXPECT_EQ(Extra(dir, inputs), std::vector<std::string>{});
   // The same folder is fine as EXR.
   const Result ok = RunRouen("hdr --list " + Q(b.list) + " --response " + Q(b.response) +
@@ -155,7 +154,7 @@ TEST(CliInputs, NumericOptionsRefuseNonsenseBeforeAnyWork) {
   const std::string sky_fit =
       "sky fit --image none.exr --projection equirect --sun-azimuth 10 --sun-elevation 30 "
       "--out none.json ";
-  const std::string render = "render --session none --out none.exr ";
+  const std::string render = "render none --out none.exr ";
   const std::vector<Case> cases = {
       {"sun --lat 1 --lon 1 --time 2026-08-25T20:30:00Z --pressure nan", "--pressure"},
       {"sun --lat 1 --lon 1 --time 2026-08-25T20:30:00Z --pressure -5", "--pressure"},
@@ -196,7 +195,7 @@ TEST(CliInputs, NumericOptionsRefuseNonsenseBeforeAnyWork) {
 
 TEST(CliInputs, RenderArgumentErrorsComeFirstAndNameTheOption) {
   const fs::path dir = TempDir("render_args");
-  const std::string base = "render --session " + Q(dir / "none") + " --out " + Q(dir / "r.exr");
+  const std::string base = "render " + Q(dir / "none") + " --out " + Q(dir / "r.exr");
   ExpectError(RunRouen(base + " --slot 0 --overcast-brightness 1"),
               {"--overcast-brightness", "--slot"});
   ExpectError(RunRouen(base + " --slot 0 --pbs 0"), {"--pbs", "--slot"});
@@ -206,8 +205,16 @@ TEST(CliInputs, RenderArgumentErrorsComeFirstAndNameTheOption) {
               {"--png", "no such folder"});
   fs::path work_file = dir / "work";
   WriteFileAtomic(work_file, "a file, not a folder\n");
-  ExpectError(RunRouen(base + " --slot 0 --work " + Q(work_file)),
+  ExpectError(RunRouen("solve " + Q(dir / "none") + " --out " + Q(dir / "s.scene") + " --work " +
+                       Q(work_file)),
               {"--work " + work_file.string(), "not a folder"});
+  // A scene's name is checked before the session is read.
+  ExpectError(RunRouen("solve " + Q(dir / "none") + " --out " + Q(work_file)),
+              {work_file.string(), "not a folder"});
+  ExpectError(RunRouen("solve " + Q(dir / "none") + " --out " + Q(dir / "missing" / "s.scene")),
+              {"missing", "does not exist"});
+  ExpectError(RunRouen("solve " + Q(dir / "none") + " --out " + Q(dir / "s.scene")),
+              {(dir / "none").string()});
   EXPECT_EQ(Extra(dir, {"work"}), std::vector<std::string>{});
   fs::remove_all(dir);
 }
@@ -297,15 +304,15 @@ class CliSessionInputs : public ::testing::Test {
     ASSERT_NE(edited, text) << pattern;
     WriteFileAtomic(file, edited);
   }
-  // `render --slot 0` of the session: must fail naming every one of `phrases` before any
-  // HDR merge has been written to the working folder.
-  static void ExpectRenderError(const fs::path& s, const std::vector<std::string>& phrases,
-                                bool before_any_work = true) {
-    ExpectError(RunRouen("render --session " + Q(s) + " --slot 0 --out " + Q(s / "r.exr")),
-                phrases);
-    EXPECT_FALSE(fs::exists(s / "r.exr"));
+  // `rouen solve` of the session: must fail naming every one of `phrases`, write no scene,
+  // and (`before_any_work`) no HDR merge into the working folder.
+  static void ExpectSolveError(const fs::path& s, const std::vector<std::string>& phrases,
+                               bool before_any_work = true) {
+    const fs::path scene = s.string() + ".scene";
+    ExpectError(RunRouen("solve " + Q(s) + " --out " + Q(scene)), phrases);
+    EXPECT_FALSE(fs::exists(scene));
     if (before_any_work) {
-      EXPECT_FALSE(fs::exists(s.string() + ".work/calib")) << s;
+      EXPECT_FALSE(fs::exists(scene.string() + ".work/calib")) << s;
     }
   }
   static fs::path* root_;
@@ -315,13 +322,13 @@ fs::path* CliSessionInputs::root_ = nullptr;
 TEST_F(CliSessionInputs, JournalValuesOutOfRangeNameTheFrame) {
   const fs::path nd = Copy("nd");
   Edit(nd / "frames.jsonl", "\"nd_density\":4.5", "\"nd_density\":-1");  // frame 1, the sun
-  ExpectRenderError(nd, {(nd / "frames.jsonl").string(), "frame 1", "slot0/sun/view0",
-                         "ND density -1 is outside 0..10"});
+  ExpectSolveError(nd, {(nd / "frames.jsonl").string(), "frame 1", "slot0/sun/view0",
+                        "ND density -1 is outside 0..10"});
   const fs::path ex = Copy("exposure");
   // The first frame exposed 1/256 s: frame 2, the sun's second.
   Edit(ex / "frames.jsonl", "\"exposure_s\":0.00390625", "\"exposure_s\":1e308");
-  ExpectRenderError(ex, {(ex / "frames.jsonl").string(), "frame 2", "slot0/sun/view0",
-                         "exposure 1e+308 s is outside 1e-09..86400 s"});
+  ExpectSolveError(ex, {(ex / "frames.jsonl").string(), "frame 2", "slot0/sun/view0",
+                        "exposure 1e+308 s is outside 1e-09..86400 s"});
 }
 
 TEST_F(CliSessionInputs, AFrameOfTheWrongSizeNamesItsFileAndBracket) {
@@ -335,7 +342,7 @@ TEST_F(CliSessionInputs, AFrameOfTheWrongSizeNamesItsFileAndBracket) {
   const Session session = Session::Load(s);
   const FrameRecord& f = session.frames()[7];
   ASSERT_EQ(f.id, 8);
-  ExpectRenderError(
+  ExpectSolveError(
       s,
       {"frame 8", "frames/000008.png", f.group, "1x1",
        std::to_string(f.intrinsics->width) + "x" + std::to_string(f.intrinsics->height)},
@@ -345,21 +352,21 @@ TEST_F(CliSessionInputs, AFrameOfTheWrongSizeNamesItsFileAndBracket) {
 TEST_F(CliSessionInputs, AModelWithoutFacesIsRefusedBeforeAnyWork) {
   const fs::path s = Copy("empty_model");
   WriteFileAtomic(s / "model.obj", "# exported from nowhere\n\n");
-  ExpectRenderError(s, {(s / "model.obj").string(), "no faces"});
+  ExpectSolveError(s, {(s / "model.obj").string(), "no faces"});
 }
 
 TEST_F(CliSessionInputs, TheSessionSiteObeysTheHeightRule) {
   const fs::path gps = Copy("gps_height");
   Edit(gps / "frames.jsonl", "\"height_m\":[0-9.e+-]+", "\"height_m\":1e15");
-  ExpectRenderError(gps, {"frames.jsonl", "GPS", "height", "is outside -500..9000 m"});
+  ExpectSolveError(gps, {"frames.jsonl", "GPS", "height", "is outside -500..9000 m"});
   const fs::path site = Copy("site_height");
   const std::string journal = ReadFileToString(site / "frames.jsonl");
   WriteFileAtomic(site / "frames.jsonl",
                   std::regex_replace(journal, std::regex("\"gps\":\\{[^}]*\\}"),
                                      "\"gps\":null"));  // no fix: session.json's site counts
   Edit(site / "session.json", "\"height_m\": [0-9.e+-]+", "\"height_m\": 1e15");
-  ExpectRenderError(site, {(site / "session.json").string(),
-                           "height 1e+15 m is outside -500..9000 m above the WGS84 ellipsoid"});
+  ExpectSolveError(site, {(site / "session.json").string(),
+                          "height 1e+15 m is outside -500..9000 m above the WGS84 ellipsoid"});
 }
 
 // Ctrl-C or SIGTERM while a radiance file is being made: the process ends as the signal says

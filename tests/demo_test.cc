@@ -83,23 +83,31 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
   }
   EXPECT_EQ(a.info().site_source, b.info().site_source);
 
-  // rouen render on the same session: under a captured slot's lighting, and at another time
-  // under predicted lighting with part of the sun blocked (§5, §6.3).
-  const std::string session =
-      " --session " + (dir / "session").string() + " --work " + (dir / "render-work").string();
+  // rouen solve, once, into a scene; rouen render reads the scene under a captured slot's
+  // lighting, and at another time under predicted lighting with part of the sun blocked
+  // (§5, §6.3). Render never solves: the session is moved away first.
   out.clear();
-  ASSERT_EQ(
-      RunRouen("render" + session + " --quick --slot 1 --view slot1/architecture/view0 --out " +
-                   (dir / "slot1.exr").string(),
-               &out),
-      0)
+  ASSERT_EQ(RunRouen("solve " + (dir / "session").string() + " --quick --holdout-slot 3 --out " +
+                         (dir / "s.scene").string(),
+                     &out),
+            0)
+      << out;
+  EXPECT_NE(out.find("grid points"), std::string::npos) << out;
+  for (const char* f : {"scene.json", "model.obj", "albedo_sun.exr", "albedo_se.exr"})
+    EXPECT_TRUE(fs::is_regular_file(dir / "s.scene" / f)) << f;
+  fs::rename(dir / "session", dir / "session-away");
+  const std::string scene = " " + (dir / "s.scene").string();
+  out.clear();
+  ASSERT_EQ(RunRouen("render" + scene + " --slot 1 --view slot1/architecture/view0 --out " +
+                         (dir / "slot1.exr").string(),
+                     &out),
+            0)
       << out;
   out.clear();
-  ASSERT_EQ(
-      RunRouen("render" + session + " --quick --time 2026-08-25T17:00:00-07:00 --pbs 0.5 --out " +
-                   (dir / "p.exr").string() + " --png " + (dir / "p.png").string(),
-               &out),
-      0)
+  ASSERT_EQ(RunRouen("render" + scene + " --time 2026-08-25T17:00:00-07:00 --pbs 0.5 --out " +
+                         (dir / "p.exr").string() + " --png " + (dir / "p.png").string(),
+                     &out),
+            0)
       << out;
   EXPECT_NE(out.find("air mass"), std::string::npos) << out;
   for (const char* f : {"slot1.exr", "p.exr"}) {
@@ -114,10 +122,9 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
   }
   EXPECT_TRUE(fs::exists(dir / "p.png"));
   // The same view from a lens file and a pose file (as `rouen calib intrinsics` and `rouen
-  // calib pose` write them) renders the same image: JSON keeps every double exactly and the
-  // solve is deterministic.
+  // calib pose` write them) renders the same image: JSON keeps every double exactly.
   {
-    const rouen::Session s = rouen::Session::Load(dir / "session");
+    const rouen::Session s = rouen::Session::Load(dir / "session-away");
     const rouen::FrameRecord* view = nullptr;
     for (const rouen::FrameRecord& f : s.frames())
       if (f.group == "slot1/architecture/view0") view = &f;
@@ -126,11 +133,11 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
     rouen::WriteFileAtomic(dir / "pose.json", nlohmann::json(*view->pose).dump());
   }
   out.clear();
-  ASSERT_EQ(RunRouen("render" + session + " --quick --slot 1 --lens " +
-                         (dir / "lens.json").string() + " --pose " + (dir / "pose.json").string() +
-                         " --out " + (dir / "files.exr").string(),
-                     &out),
-            0)
+  ASSERT_EQ(
+      RunRouen("render" + scene + " --slot 1 --lens " + (dir / "lens.json").string() + " --pose " +
+                   (dir / "pose.json").string() + " --out " + (dir / "files.exr").string(),
+               &out),
+      0)
       << out;
   {
     const rouen::Image a = rouen::ReadImage((dir / "slot1.exr").string());
@@ -139,29 +146,66 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
     ASSERT_EQ(a.height, b.height);
     EXPECT_EQ(a.data, b.data);
   }
-  // A bad lens file fails before the solve, naming the file.
+  // A bad lens file fails before the scene is read, naming the file.
   rouen::WriteFileAtomic(dir / "bad-lens.json", "{\"projection\": \"pinhole\"");
   out.clear();
   EXPECT_NE(
-      RunRouen("render" + session + " --slot 1 --lens " + (dir / "bad-lens.json").string() +
+      RunRouen("render" + scene + " --slot 1 --lens " + (dir / "bad-lens.json").string() +
                    " --pose " + (dir / "pose.json").string() + " --out " + (dir / "n.exr").string(),
                &out),
       0);
   EXPECT_NE(out.find("bad-lens.json: not a valid lens file"), std::string::npos) << out;
   // Night, and contradictory options, fail at once with the reason.
   out.clear();
-  EXPECT_NE(RunRouen("render" + session + " --time 2026-08-25T23:30:00-07:00 --out " +
+  EXPECT_NE(RunRouen("render" + scene + " --time 2026-08-25T23:30:00-07:00 --out " +
                          (dir / "n.exr").string(),
                      &out),
             0);
   EXPECT_NE(out.find("below the horizon"), std::string::npos) << out;
   out.clear();
-  EXPECT_NE(RunRouen("render" + session + " --slot 0 --time 2026-08-25T12:00:00-07:00 --out " +
+  EXPECT_NE(RunRouen("render" + scene + " --slot 0 --time 2026-08-25T12:00:00-07:00 --out " +
                          (dir / "n.exr").string(),
                      &out),
             0);
   EXPECT_NE(out.find("exactly one"), std::string::npos) << out;
+  // A slot or a view the scene does not have is named with what it has.
+  out.clear();
+  EXPECT_NE(RunRouen("render" + scene + " --slot 7 --out " + (dir / "n.exr").string(), &out), 0);
+  EXPECT_NE(out.find("slot 7 is not in the scene (it has slots 0..4)"), std::string::npos) << out;
+  out.clear();
+  EXPECT_NE(RunRouen("render" + scene + " --slot 1 --view slot1/architecture/view9 --out " +
+                         (dir / "n.exr").string(),
+                     &out),
+            0);
+  EXPECT_NE(out.find("no view named 'slot1/architecture/view9' (architecture views: "
+                     "slot0/architecture/view0"),
+            std::string::npos)
+      << out;
   EXPECT_FALSE(fs::exists(dir / "n.exr"));
+  {
+    const nlohmann::json j = nlohmann::json::parse(std::ifstream(dir / "s.scene" / "scene.json"));
+    EXPECT_EQ(j["holdout_slots"], nlohmann::json::array({3}));
+    EXPECT_EQ(j["slots"].size(), 5u);
+  }
+  // A solve that fails half-way (a frame changed behind the journal) leaves the earlier scene
+  // as it was and no temporary folder.
+  const std::string scene_json = rouen::ReadFileToString(dir / "s.scene" / "scene.json");
+  {
+    const rouen::Session s = rouen::Session::Load(dir / "session-away");
+    const fs::path last = dir / "session-away" / s.frames().back().file;
+    std::string bytes = rouen::ReadFileToString(last);
+    bytes.back() ^= 1;
+    rouen::WriteFileAtomic(last, bytes);
+  }
+  out.clear();
+  EXPECT_NE(RunRouen("solve " + (dir / "session-away").string() + " --quick --out " +
+                         (dir / "s.scene").string(),
+                     &out),
+            0);
+  EXPECT_NE(out.find("does not match its journal"), std::string::npos) << out;
+  EXPECT_EQ(rouen::ReadFileToString(dir / "s.scene" / "scene.json"), scene_json);
+  for (const auto& e : fs::directory_iterator(dir))
+    EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
   fs::remove_all(dir);
 }
 

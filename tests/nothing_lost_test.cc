@@ -181,7 +181,7 @@ TEST_F(NothingLostTest, ASecondWriterOfASessionIsRefusedNamingTheHolder) {
   ExpectWhole(t);
 }
 
-TEST_F(NothingLostTest, RenderRefusesFramesChangedBehindTheJournal) {
+TEST_F(NothingLostTest, SolveRefusesFramesChangedBehindTheJournal) {
   ASSERT_NE(reference_, nullptr);
   const fs::path s = *root_ / "tampered";
   fs::copy(reference_->dir(), s, fs::copy_options::recursive);
@@ -192,8 +192,8 @@ TEST_F(NothingLostTest, RenderRefusesFramesChangedBehindTheJournal) {
     im.data[0] = im.data[0] > 100 ? 0.f : 200.f;
     WriteImage((s / f.file).string(), im, f.hdr ? StoredType::kHalf : StoredType::kUint8);
   }
-  const fs::path out = *root_ / "tampered.exr";
-  const Result r = RunRouen("render --session " + Q(s) + " --slot 0 --out " + Q(out) + " --quick");
+  const fs::path out = *root_ / "tampered.scene";
+  const Result r = RunRouen("solve " + Q(s) + " --out " + Q(out) + " --quick");
   EXPECT_NE(r.code, 0) << r.out;
   EXPECT_NE(r.out.find("does not match its journal"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("frames/"), std::string::npos) << r.out;

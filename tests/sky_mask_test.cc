@@ -8,7 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "app/pipeline.h"
+#include "pipeline/session_solve.h"
 #include "core/error.h"
 #include "core/image.h"
 #include "core/session.h"

@@ -1,4 +1,4 @@
-#include "app/pipeline.h"
+#include "pipeline/session_solve.h"
 
 #include <algorithm>
 #include <array>
@@ -266,6 +266,13 @@ Mesh ReadSessionModel(const Session& session) {
   return ReadObj(ResolveInside(session.dir(), session.info().model).string());
 }
 
+GridOptions DefaultGridOptions() {
+  GridOptions go;
+  go.spacing_m = 0.6;
+  go.block_spacing_m["plaza"] = 1.5;
+  return go;
+}
+
 CalibResult CalibrateSession(const Session& session, const PipelineOptions& options) {
   CheckSessionFrames(session);
   CalibResult out;
@@ -459,13 +466,8 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   }
 
   // Surface grid and geometry-only visibility, computed once.
-  GridOptions go;
-  go.spacing_m = 0.6;
-  go.block_spacing_m["plaza"] = 1.5;
-  r.grid = BuildSurfaceGrid(r.mesh, go);
-  HemisphereOptions ho;
-  ho.directions = 256;
-  r.hemisphere = BuildHemisphereCache(r.grid, *r.caster, ho);
+  r.grid = BuildSurfaceGrid(r.mesh, options.grid);
+  r.hemisphere = BuildHemisphereCache(r.grid, *r.caster, options.hemisphere);
   Log(options, "surface grid: " + std::to_string(r.grid.size()) + " points");
 
   // Observations from the architecture photos of the training slots.

@@ -24,10 +24,17 @@
 
 namespace rouen {
 
+// 0.6 m between grid points, 1.5 m on a block named "plaza" (the ground around the building).
+GridOptions DefaultGridOptions();
+
 struct PipelineOptions {
-  std::filesystem::path work_dir;         // calib/ and scene/ are written here
+  std::filesystem::path work_dir;         // calib/ is written here
   std::vector<int> exclude_albedo_slots;  // held-out slots: their architecture photos unused
   bool quick = false;
+  // The surface grid the albedos are solved on, and the gathering pattern of its irradiance
+  // (both recorded in the scene, which rebuilds them from the model).
+  GridOptions grid = DefaultGridOptions();
+  HemisphereOptions hemisphere;
   // A response curve known from an earlier calibration: used instead of recovering one.
   std::optional<ResponseCurve> response;
   std::function<void(const std::string&)> log;  // progress lines

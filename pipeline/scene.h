@@ -1,0 +1,69 @@
+// The solved scene as a stage: `rouen solve` calibrates and solves a session once and writes
+// its scene folder (solve/scene.h); render and every later command read that folder and never
+// solve again.
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+
+#include "core/camera.h"
+#include "core/image.h"
+#include "core/session.h"
+#include "core/time.h"
+#include "pipeline/session_solve.h"
+#include "solve/relight.h"
+#include "solve/scene.h"
+
+namespace rouen {
+
+// Checks, before any work, that `out` can become a scene folder: it does not exist, or is an
+// earlier scene (it holds scene.json) that a complete new one will replace. Throws rouen::Error
+// naming `out`.
+void CheckSceneOutput(const std::filesystem::path& out);
+
+// Calibrates and solves `session` (CalibrateSession, then SolveSession with
+// options.exclude_albedo_slots held out) and writes the scene folder `out`: the folder is built
+// as "<out>.tmp-<pid>" and renamed into place only when whole, so an error or a crash leaves
+// the earlier scene (or none), never half of one. Returns the solve, for its summaries.
+SolveResult SolveToScene(const Session& session, const PipelineOptions& options,
+                         const std::filesystem::path& out);
+
+// A scene folder read back, ready to render: the model, its grid and visibility pattern
+// rebuilt from the recorded options, each slot's lighting, the albedos, the views' cameras.
+struct LoadedScene {
+  std::filesystem::path dir;
+  SceneModel scene;    // site, response, views, held-out slots (its albedo moved to `solved`)
+  SolveResult solved;  // mesh, grid, caster, hemisphere, slots' lighting and times, albedo
+};
+// Throws rouen::Error naming the file when the folder is not a whole, consistent scene.
+LoadedScene LoadScene(const std::filesystem::path& dir,
+                      const std::function<void(const std::string&)>& log = {});
+
+// What to render: the lighting measured at a captured slot, or predicted for another time
+// (§5: sun from the site and time, sky interpolated, environment from its normals; §6.3
+// overcast through `relight`), seen through a camera.
+struct RenderRequest {
+  std::optional<int> slot;
+  std::optional<UtcTime> time;
+  RelightOptions relight;  // used with `time`
+  Intrinsics intrinsics;
+  Pose pose;
+};
+
+// The camera of the scene's view `name` (e.g. "slot0/architecture/view0"; empty: the first
+// architecture view). Throws rouen::Error listing the scene's views when there is no such one.
+const SceneView& FindView(const LoadedScene& scene, const std::string& name);
+
+// Checks a request against the scene before any work: exactly one of slot and time, the slot
+// is in the scene, the sun is above the horizon at the time, the camera is valid. Throws
+// rouen::Error saying what is wrong.
+void CheckRenderRequest(const LoadedScene& scene, const RenderRequest& request);
+
+// The building's radiance through the request's camera (§6), with irradiance (sun, sky,
+// environment, one bounce) computed for the requested lighting.
+Image RenderScene(const LoadedScene& scene, const RenderRequest& request,
+                  const std::function<void(const std::string&)>& log = {});
+
+}  // namespace rouen

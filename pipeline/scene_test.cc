@@ -1,0 +1,70 @@
+#include "pipeline/scene.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <string>
+
+#include "core/error.h"
+#include "core/files.h"
+
+namespace rouen {
+namespace {
+
+namespace fs = std::filesystem;
+
+class SceneStageTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("rouen_scene_stage_" + std::to_string(::getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  // The message of the rouen::Error `f` throws ("" when it throws none).
+  template <typename F>
+  static std::string ErrorOf(F&& f) {
+    try {
+      f();
+    } catch (const Error& e) {
+      return e.what();
+    }
+    return "";
+  }
+  fs::path dir_;
+};
+
+TEST_F(SceneStageTest, ASceneIsWrittenOnlyWhereNothingElseIsLost) {
+  // A new folder, or an earlier scene, may become the scene.
+  EXPECT_EQ(ErrorOf([&] { CheckSceneOutput(dir_ / "new.scene"); }), "");
+  fs::create_directories(dir_ / "old.scene");
+  WriteFileAtomic(dir_ / "old.scene" / "scene.json", "{}");
+  EXPECT_EQ(ErrorOf([&] { CheckSceneOutput(dir_ / "old.scene"); }), "");
+  fs::create_directories(dir_ / "empty");
+  EXPECT_EQ(ErrorOf([&] { CheckSceneOutput(dir_ / "empty"); }), "");
+  // A folder holding something else, a file, or a folder that does not exist is refused,
+  // naming it.
+  fs::create_directories(dir_ / "photos");
+  WriteFileAtomic(dir_ / "photos" / "a.jpg", "jpeg");
+  EXPECT_EQ(ErrorOf([&] { CheckSceneOutput(dir_ / "photos"); }),
+            (dir_ / "photos").string() +
+                ": exists and is not a scene folder (no scene.json); give a new folder");
+  WriteFileAtomic(dir_ / "file", "x");
+  EXPECT_EQ(ErrorOf([&] { CheckSceneOutput(dir_ / "file"); }),
+            (dir_ / "file").string() + ": exists and is not a folder");
+  EXPECT_EQ(ErrorOf([&] { CheckSceneOutput(dir_ / "missing" / "s.scene"); }),
+            (dir_ / "missing" / "s.scene").string() + ": the folder " +
+                (dir_ / "missing").string() + " does not exist");
+}
+
+TEST_F(SceneStageTest, LoadingSomethingThatIsNotASceneSaysSo) {
+  EXPECT_EQ(ErrorOf([&] { LoadScene(dir_ / "none"); }),
+            (dir_ / "none").string() + ": no such scene folder (rouen solve writes one)");
+  WriteFileAtomic(dir_ / "scene.json", "{\"format_version\": 1");
+  const std::string m = ErrorOf([&] { LoadScene(dir_); });
+  EXPECT_EQ(m.rfind((dir_ / "scene.json").string() + ": not valid JSON", 0), 0u) << m;
+}
+
+}  // namespace
+}  // namespace rouen
