@@ -20,6 +20,7 @@
 #include "capture/clock.h"
 #include "capture/controller.h"
 #include "core/session.h"
+#include "tests/sanitizers.h"
 
 extern char** environ;
 
@@ -192,6 +193,9 @@ TEST(GvLoopbackTest, BracketOfSevenExposures) {
 
 // Frame rate and per-frame overhead, software-triggered and free-running, over loopback.
 TEST(GvLoopbackTest, FrameRateAndOverhead) {
+  if (testing_build::kSanitized)
+    GTEST_SKIP() << "a throughput measurement: under ASan the instrumented receive path cannot "
+                    "follow 100 fps over loopback (packets missing after 2 retries)";
   START_FAKE_GV(fake, id, );
   for (AravisTrigger mode : {AravisTrigger::kSoftware, AravisTrigger::kFreeRun}) {
     AravisOptions o;
