@@ -11,11 +11,11 @@
 #include <numeric>
 
 #include "app/commands.h"
-#include "pipeline/session_solve.h"
 #include "capture/sim/sim_devices.h"
 #include "core/error.h"
 #include "core/files.h"
 #include "core/temporaries.h"
+#include "pipeline/session_solve.h"
 #include "render/metrics.h"
 #include "render/render.h"
 #include "render/tonemap.h"

@@ -13,7 +13,6 @@
 #include <string>
 #include <vector>
 
-#include "pipeline/session_solve.h"
 #include "calib/nd.h"
 #include "calib/test_util.h"
 #include "calib/vignetting.h"
@@ -23,6 +22,7 @@
 #include "core/image.h"
 #include "core/session.h"
 #include "core/time.h"
+#include "pipeline/session_solve.h"
 #include "tests/cli_util.h"
 
 namespace rouen {

@@ -8,10 +8,10 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "pipeline/session_solve.h"
 #include "core/error.h"
 #include "core/image.h"
 #include "core/session.h"
+#include "pipeline/session_solve.h"
 #include "tests/cli_util.h"
 
 namespace rouen {
