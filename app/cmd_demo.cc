@@ -8,18 +8,19 @@
 #include <filesystem>
 #include <map>
 #include <nlohmann/json.hpp>
-#include <numeric>
 
 #include "app/commands.h"
 #include "capture/sim/sim_devices.h"
 #include "core/error.h"
 #include "core/files.h"
+#include "core/stats.h"
 #include "core/temporaries.h"
+#include "pipeline/scene.h"
 #include "pipeline/session_solve.h"
+#include "pipeline/validate.h"
 #include "render/metrics.h"
 #include "render/render.h"
 #include "render/tonemap.h"
-#include "solve/relight.h"
 
 namespace rouen {
 namespace {
@@ -34,17 +35,6 @@ struct DemoArgs {
   bool true_response = false;
   uint64_t seed = 1;
 };
-
-double Percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  size_t k = static_cast<size_t>(std::clamp(p, 0.0, 1.0) * (v.size() - 1));
-  std::nth_element(v.begin(), v.begin() + k, v.end());
-  return v[k];
-}
-
-double Mean(const std::vector<double>& v) {
-  return v.empty() ? 0 : std::accumulate(v.begin(), v.end(), 0.0) / v.size();
-}
 
 // Evenly spread unit directions over the upper hemisphere (Fibonacci lattice).
 std::vector<Eigen::Vector3d> HemisphereDirections(int n, double min_elevation_deg) {
@@ -64,7 +54,7 @@ void PrepareOut(const std::filesystem::path& out) {
   if (fs::exists(out) && !fs::is_empty(out)) {
     if (!fs::exists(out / ".rouen-demo"))
       throw Error(out.string() + " exists and is not a rouen demo folder; choose another --out");
-    for (const char* sub : {"session", "work"}) fs::remove_all(out / sub);
+    for (const char* sub : {"session", "work", "scene"}) fs::remove_all(out / sub);
   }
   fs::create_directories(out);
   WatchForTemporaries(out);  // its images and reports: removed on Ctrl-C
@@ -100,8 +90,12 @@ void Run(const DemoArgs& a) {
   const int heldout = rig.heldout_slot;
   if (heldout >= 0) po.exclude_albedo_slots = {heldout};
   if (a.true_response) po.response = sim_cam->sensor().TrueResponse();
-  CalibResult calib = CalibrateSession(session, po);
-  SolveResult solved = SolveSession(session, calib, po);
+  const fs::path scene_dir = out / "scene";
+  SolveToScene(session, po, scene_dir);
+  // Everything below reads the scene back, as `rouen render` and `rouen validate` do.
+  const LoadedScene scene = LoadScene(scene_dir, say);
+  const SolveResult& solved = scene.solved;
+  const ResponseCurve& response = scene.scene.response;
 
   // 3. Score against the simulator's ground truth (never seen by the solver).
   nlohmann::json m;
@@ -113,12 +107,12 @@ void Run(const DemoArgs& a) {
   for (int c = 0; c < 3; ++c) {
     std::vector<double> diffs;
     for (int z = 10; z <= 245; ++z)
-      diffs.push_back(sensor.TrueLogExposure(c, z) - calib.response.g[c][z]);
-    double offset = Percentile(diffs, 0.5);
+      diffs.push_back(sensor.TrueLogExposure(c, z) - response.g[c][z]);
+    double offset = Quantile(diffs, 0.5);
     for (int z = 10; z <= 245; ++z)
       resp_err = std::max(
           resp_err,
-          std::abs(std::exp(calib.response.g[c][z] + offset - sensor.TrueLogExposure(c, z)) - 1));
+          std::abs(std::exp(response.g[c][z] + offset - sensor.TrueLogExposure(c, z)) - 1));
     to_truth[c] = std::exp(offset);  // TrueLogExposure is ln(true radiance x exposure factor)
   }
   m["response_max_rel_error"] = resp_err;
@@ -133,7 +127,7 @@ void Run(const DemoArgs& a) {
                           180 / M_PI);
     Eigen::Vector3d true_sun = world->TrueSunRadiance();
     for (int c = 0; c < 3; ++c)
-      sun_rad_err.push_back(std::abs(to_truth[c] * ss.sun_measured.radiance[c] - true_sun[c]) /
+      sun_rad_err.push_back(std::abs(to_truth[c] * ss.lighting.sun_radiance[c] - true_sun[c]) /
                             true_sun[c]);
     for (const Eigen::Vector3d& d : HemisphereDirections(2000, 3.0)) {
       if (d.dot(truth_dir) > std::cos(3.0 * M_PI / 180)) continue;  // the sun's own disc
@@ -144,8 +138,8 @@ void Run(const DemoArgs& a) {
   }
   m["sun_direction_error_deg"] = Mean(sun_dir_err);
   m["sun_radiance_rel_error"] = Mean(sun_rad_err);
-  m["sky_rel_error_median"] = Percentile(sky_err, 0.5);
-  m["sky_rel_error_p90"] = Percentile(sky_err, 0.9);
+  m["sky_rel_error_median"] = Quantile(sky_err, 0.5);
+  m["sky_rel_error_p90"] = Quantile(sky_err, 0.9);
 
   // Pseudo-albedos against the true per-channel albedo at each grid point (Lambertian RGB
   // world: the pseudo-albedos of eqs. 11-12 equal it there). The headline figures are over
@@ -195,89 +189,66 @@ void Run(const DemoArgs& a) {
   // 4. Held-out time: render every architecture view and compare with the truth, first under
   // the lighting measured at that time, then under lighting predicted from the other times
   // only (§5: sun by extinction, sky interpolated, environment by photometric stereo).
-  struct HeldoutScore {
-    double rel_rmse = 0, psnr_db = 0;
-    int64_t pixels = 0;
-  };
-  auto score_heldout = [&](const Lighting& lighting, const SlotIrradiance& irr,
-                           const std::string& prefix) {
-    double sq = 0, tsq = 0, dn_sq = 0;
-    int64_t npx = 0;
+  // Figures from render/metrics (as `rouen validate` computes them) against the simulator's
+  // truth, in the recovered units (the truth divided by to_truth), over the building's pixels.
+  if (heldout < 0) throw Error("demo: the rig names no held-out time");
+  std::vector<std::string> heldout_views;
+  for (const auto& [name, v] : scene.scene.views)
+    if (v.slot == heldout && v.target == "architecture") heldout_views.push_back(name);
+  if (heldout_views.empty()) throw Error("demo: the held-out time has no architecture photo");
+  MetricsOptions mo;
+  mo.response = &response;
+  auto score_heldout = [&](const Lighting& lighting, const std::string& prefix) {
+    const SlotIrradiance irr = IrradianceFor(solved, lighting);
+    MetricsAccumulator acc(mo);
     world->SetTime(rig.plan.slots.at(heldout));
-    for (int v = 0;; ++v) {
-      auto it = calib.groups.find("slot" + std::to_string(heldout) + "/architecture/view" +
-                                  std::to_string(v));
-      if (it == calib.groups.end()) break;
-      const HdrGroup& g = it->second;
-      Image rendered = RenderView(solved.mesh, solved.grid, *solved.caster, solved.albedo, lighting,
-                                  irr, g.intrinsics, g.pose, RenderOptions{});
-      Image truth = world->RenderRadiance(g.intrinsics, g.pose);
-      Image ids = world->RenderBlockIds(g.intrinsics, g.pose);
-      // Truth in the recovered units, for tone mapping both the same way.
-      Image truth_rel = truth;
-      for (size_t k = 0; k < truth_rel.data.size(); ++k) truth_rel.data[k] /= to_truth[k % 3];
-      std::vector<double> building;
-      for (int y = 0; y < rendered.height; ++y)
-        for (int x = 0; x < rendered.width; ++x) {
-          int id = static_cast<int>(ids.at(x, y, 0));
+    for (size_t v = 0; v < heldout_views.size(); ++v) {
+      const SceneView& view = scene.scene.views.at(heldout_views[v]);
+      const Image rendered = RenderView(solved.mesh, solved.grid, *solved.caster, solved.albedo,
+                                        lighting, irr, view.intrinsics, view.pose, RenderOptions{});
+      Image truth = world->RenderRadiance(view.intrinsics, view.pose);
+      for (size_t k = 0; k < truth.data.size(); ++k) truth.data[k] /= to_truth[k % 3];
+      const Image ids = world->RenderBlockIds(view.intrinsics, view.pose);
+      std::vector<uint8_t> building(static_cast<size_t>(ids.width) * ids.height, 0);
+      std::vector<double> green;
+      for (int y = 0; y < ids.height; ++y)
+        for (int x = 0; x < ids.width; ++x) {
+          const int id = static_cast<int>(ids.at(x, y, 0));
           if (id < 0 || solved.mesh.block_names[id] == "plaza") continue;
-          for (int c = 0; c < 3; ++c) {
-            double r = to_truth[c] * rendered.at(x, y, c), t = truth.at(x, y, c);
-            sq += (r - t) * (r - t);
-            tsq += t * t;
-          }
-          building.push_back(truth_rel.at(x, y, 1));
-          ++npx;
+          building[static_cast<size_t>(y) * ids.width + x] = 1;
+          green.push_back(truth.at(x, y, 1));
         }
-      // LDR images through the recovered response, exposed for the building.
-      double l99 = std::max(1e-12, Percentile(building, 0.99));
-      double exposure = std::exp(calib.response.g[1][230]) / l99;
-      Image ldr_r = ToDigital(rendered, calib.response, exposure);
-      Image ldr_t = ToDigital(truth_rel, calib.response, exposure);
-      for (int y = 0; y < rendered.height; ++y)
-        for (int x = 0; x < rendered.width; ++x) {
-          int id = static_cast<int>(ids.at(x, y, 0));
-          if (id < 0 || solved.mesh.block_names[id] == "plaza") continue;
-          for (int c = 0; c < 3; ++c) {
-            double d = ldr_r.at(x, y, c) - ldr_t.at(x, y, c);
-            dn_sq += d * d;
-          }
-        }
+      acc.Add(rendered, truth, building);
       if (v == 0) {
-        WriteImage((out / (prefix + ".png")).string(), ldr_r, StoredType::kUint8);
+        // 8-bit images through the recovered response, exposed as the metrics expose them.
+        const double exposure =
+            std::exp(response.LogExposure(1, mo.target_dn)) / Quantile(green, mo.percentile);
+        WriteImage((out / (prefix + ".png")).string(), ToDigital(rendered, response, exposure),
+                   StoredType::kUint8);
         WriteImage((out / (prefix + ".exr")).string(), rendered, StoredType::kFloat);
         if (prefix == "heldout")
-          WriteImage((out / "heldout_truth.png").string(), ldr_t, StoredType::kUint8);
+          WriteImage((out / "heldout_truth.png").string(), ToDigital(truth, response, exposure),
+                     StoredType::kUint8);
       }
     }
-    if (npx == 0 || tsq <= 0) throw Error("demo: no building pixels in the held-out views");
-    HeldoutScore hs;
-    hs.rel_rmse = std::sqrt(sq / tsq);
-    hs.psnr_db = 10 * std::log10(255.0 * 255.0 / (dn_sq / (3.0 * npx)));
-    hs.pixels = npx;
-    return hs;
+    return acc.Result();
   };
-  if (heldout < 0) throw Error("demo: the rig names no held-out time");
-  const SlotSolve& hs = solved.slots.at(heldout);
-  const HeldoutScore measured =
-      score_heldout(hs.lighting, solved.irradiance.at(heldout), "heldout");
+  const RenderMetrics measured = score_heldout(solved.slots.at(heldout).lighting, "heldout");
   m["heldout_render_rel_rmse"] = measured.rel_rmse;
   m["heldout_render_psnr_db"] = measured.psnr_db;
+  m["heldout_render_median_rel_error"] = measured.median_rel_error;
   const int64_t npx = measured.pixels;
 
   say("predicting the held-out time's lighting from the other times");
-  std::vector<Lighting> training;
-  for (const SlotSolve& ss : solved.slots)
-    if (ss.slot != heldout) training.push_back(ss.lighting);
-  LightingPredictor predictor(std::move(training), RelightOptions{});
-  say("environment photometric stereo: " + predictor.environment().summary.BriefReport());
-  RelightSummary rsum;
-  const Lighting predicted = predictor.At(hs.lighting.utc, SessionSite(session), &rsum);
-  say("predicted " + rsum.Describe());
-  const HeldoutScore pred =
-      score_heldout(predicted, IrradianceFor(solved, predicted), "heldout_predicted");
+  RenderRequest request;
+  request.time = solved.slots.at(heldout).utc;
+  request.predict_without_slots = {heldout};
+  request.intrinsics = scene.scene.views.at(heldout_views.front()).intrinsics;
+  const Lighting predicted = RequestedLighting(scene, request, say);
+  const RenderMetrics pred = score_heldout(predicted, "heldout_predicted");
   m["heldout_predicted_render_rel_rmse"] = pred.rel_rmse;
   m["heldout_predicted_render_psnr_db"] = pred.psnr_db;
+  m["heldout_predicted_render_median_rel_error"] = pred.median_rel_error;
   {
     world->SetTime(rig.plan.slots.at(heldout));
     const Eigen::Vector3d true_sun = world->TrueSunRadiance();
@@ -292,9 +263,20 @@ void Run(const DemoArgs& a) {
       Eigen::Vector3d fit = predicted.sky.Radiance(d), tru = world->TrueSkyRadiance(d);
       for (int c = 0; c < 3; ++c) err.push_back(std::abs(to_truth[c] * fit[c] - tru[c]) / tru[c]);
     }
-    m["heldout_predicted_sky_rel_error_median"] = Percentile(err, 0.5);
-    m["heldout_predicted_sky_rel_error_p90"] = Percentile(err, 0.9);
+    m["heldout_predicted_sky_rel_error_median"] = Quantile(err, 0.5);
+    m["heldout_predicted_sky_rel_error_p90"] = Quantile(err, 0.9);
   }
+
+  // 5. The held-out photographs themselves, as `rouen validate` compares them (no truth).
+  ValidateOptions vo;
+  vo.exclude_blocks = {"plaza"};
+  const Validation validation = ValidateSlot(scene, session, heldout, vo, say);
+  m["validate_measured_rel_rmse"] = validation.measured.rel_rmse;
+  m["validate_measured_psnr_db"] = validation.measured.psnr_db;
+  m["validate_measured_median_rel_error"] = validation.measured.median_rel_error;
+  m["validate_predicted_rel_rmse"] = validation.predicted->rel_rmse;
+  m["validate_predicted_psnr_db"] = validation.predicted->psnr_db;
+  m["validate_predicted_median_rel_error"] = validation.predicted->median_rel_error;
   m["heldout_building_pixels"] = npx;
   m["frames_captured"] = static_cast<int>(session.frames().size());
   m["wall_seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -321,6 +303,14 @@ void Run(const DemoArgs& a) {
       "sun %.4f)\n",
       pred.rel_rmse, pred.psnr_db, m["heldout_predicted_sky_rel_error_median"].get<double>(),
       m["heldout_predicted_sun_radiance_rel_error"].get<double>());
+  std::printf(
+      "  held-out photographs relative RMSE       %.4f  PSNR %.2f dB  (predicted: %.4f, "
+      "%.2f dB)\n",
+      validation.measured.rel_rmse, validation.measured.psnr_db, validation.predicted->rel_rmse,
+      validation.predicted->psnr_db);
+  std::printf(
+      "  the same figures:    rouen validate %s --session %s --slot %d --exclude-block plaza\n",
+      scene_dir.c_str(), (out / "session").c_str(), heldout);
   std::printf("  wrote %s, %s, %s\n", (out / "metrics.json").c_str(), (out / "heldout.png").c_str(),
               (out / "heldout_truth.png").c_str());
 }
@@ -340,8 +330,10 @@ void RegisterDemo(CLI::App& app) {
       "compared with the simulator's truth: once under the lighting measured at that time, once\n"
       "under lighting predicted from the other times only (sun by extinction, sky interpolated,\n"
       "environment by photometric stereo). Writes DIR/metrics.json, DIR/heldout.png and\n"
-      "DIR/heldout_predicted.png beside DIR/heldout_truth.png, the session (DIR/session) and\n"
-      "intermediate files (DIR/work).");
+      "DIR/heldout_predicted.png beside DIR/heldout_truth.png, the session (DIR/session), the\n"
+      "solved scene (DIR/scene, as `rouen solve` writes it) and intermediate files (DIR/work).\n"
+      "The held-out photographs are also compared as `rouen validate` compares them; the demo\n"
+      "prints that command, which reproduces its figures.");
   c->add_option("--out", a->out, "Output folder")->capture_default_str();
   c->add_flag("--quick", a->quick, "Smaller images and fewer samples (about a minute)");
   c->add_flag("--true-response", a->true_response,

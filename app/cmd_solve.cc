@@ -19,7 +19,7 @@ namespace {
 struct SolveArgs {
   std::string session, out, work;
   std::vector<int> holdout;
-  bool quick = false;
+  bool quick = false, force = false;
 };
 
 void Run(const SolveArgs& a) {
@@ -51,9 +51,17 @@ void Run(const SolveArgs& a) {
   po.quick = a.quick;
   po.exclude_albedo_slots = a.holdout;
   po.log = [](const std::string& s) { std::fprintf(stderr, "solve: %s\n", s.c_str()); };
-  const SolveResult solved = SolveToScene(session, po, out);
+  const SceneSolve r = SolveToScene(session, po, out, a.force);
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (r.up_to_date) {
+    std::printf(
+        "%s: up to date (session, model and options unchanged); nothing to do (%.1f s; "
+        "--force solves again)\n",
+        out.c_str(), seconds);
+    return;
+  }
+  const SolveResult& solved = r.solved;
   std::printf("%s: %zu slots, %d grid points, %s (%.1f s)\n", out.c_str(), solved.slots.size(),
               solved.grid.size(), solved.albedo.summary.BriefReport().c_str(), seconds);
 }
@@ -70,6 +78,8 @@ void RegisterSolve(CLI::App& app) {
       "irradiance at the building's surface grid and its two pseudo-albedos (§4). Writes the\n"
       "scene folder OUT (scene.json, model.obj, albedo_*.exr) whole, replacing an earlier scene\n"
       "only once the new one is complete; `rouen render OUT ...` then renders without solving.\n"
+      "When OUT was solved from the same session files (names, sizes, times), model and\n"
+      "options by this version of rouen, nothing is done: a workflow engine can run it again.\n"
       "--holdout-slot keeps a time of day's architecture photos out of the albedos, so that\n"
       "renders at that time can be compared with them.\n"
       "Example: rouen solve s --out s.scene --holdout-slot 2");
@@ -81,6 +91,7 @@ void RegisterSolve(CLI::App& app) {
       ->check(Within(0, 1000));
   c->add_option("--work", a->work, "Working folder for calib/ (default: OUT.work)");
   c->add_flag("--quick", a->quick, "Fewer samples (faster, rougher)");
+  c->add_flag("--force", a->force, "Solve even when OUT is up to date");
   c->callback([a] { Run(*a); });
 }
 

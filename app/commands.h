@@ -14,10 +14,11 @@ void RegisterCalibEnvmap(CLI::App* calib);       // rouen calib envmap|orient
 void RegisterHdr(CLI::App& app);
 void RegisterDemo(CLI::App& app);
 void RegisterDevices(CLI::App& app);
-void RegisterImport(CLI::App& app);  // rouen import: a session from existing photos
-void RegisterSolve(CLI::App& app);   // rouen solve: a session solved into a scene folder
-void RegisterRender(CLI::App& app);  // rouen render: a scene at any time of day
-void RegisterSky(CLI::App& app);     // rouen sky fit / rouen sky render
+void RegisterImport(CLI::App& app);    // rouen import: a session from existing photos
+void RegisterSolve(CLI::App& app);     // rouen solve: a session solved into a scene folder
+void RegisterRender(CLI::App& app);    // rouen render: a scene at any time of day
+void RegisterValidate(CLI::App& app);  // rouen validate: a scene against a slot's photos
+void RegisterSky(CLI::App& app);       // rouen sky fit / rouen sky render
 
 }  // namespace rouen
 

@@ -24,6 +24,7 @@ int main(int argc, char** argv) {
   rouen::RegisterSky(app);
   rouen::RegisterSolve(app);
   rouen::RegisterRender(app);
+  rouen::RegisterValidate(app);
   // Ctrl-C or SIGTERM removes the temporaries of the files being written.
   rouen::RemoveTemporariesOnSignal();
   try {

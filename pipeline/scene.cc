@@ -2,6 +2,8 @@
 
 #include <unistd.h>
 
+#include <algorithm>
+#include <map>
 #include <memory>
 #include <system_error>
 #include <utility>
@@ -11,6 +13,7 @@
 #include "core/limits.h"
 #include "core/solar.h"
 #include "core/temporaries.h"
+#include "core/version.h"
 #include "render/render.h"
 
 namespace rouen {
@@ -44,11 +47,66 @@ void CheckSceneOutput(const fs::path& out) {
                 ": exists and is not a scene folder (no scene.json); give a new folder");
 }
 
-SolveResult SolveToScene(const Session& session, const PipelineOptions& options,
-                         const fs::path& out) {
+nlohmann::json SolveOptionsJson(const PipelineOptions& options) {
+  std::vector<int> holdout = options.exclude_albedo_slots;
+  std::sort(holdout.begin(), holdout.end());
+  holdout.erase(std::unique(holdout.begin(), holdout.end()), holdout.end());
+  nlohmann::json j = {
+      {"quick", options.quick},
+      {"holdout_slots", holdout},
+      {"grid", options.grid},
+      {"hemisphere",
+       {{"directions", options.hemisphere.directions}, {"seed", options.hemisphere.seed}}}};
+  j["response"] = options.response ? nlohmann::json(*options.response) : nlohmann::json(nullptr);
+  return j;
+}
+
+std::string SolveInputsSha256(const Session& session, const PipelineOptions& options) {
+  // Paths in order, so the walk's order does not matter.
+  std::map<std::string, std::string> files;
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(session.dir(), ec);
+       !ec && it != fs::recursive_directory_iterator(); it.increment(ec)) {
+    if (!it->is_regular_file()) continue;
+    const std::string name = it->path().filename().string();
+    // The capture lock and temporaries are not inputs.
+    if (name == "session.lock" || name.find(".tmp-") != std::string::npos) continue;
+    const auto size = it->file_size();
+    const auto time = it->last_write_time().time_since_epoch().count();
+    files[fs::relative(it->path(), session.dir()).generic_string()] =
+        std::to_string(size) + " " + std::to_string(time);
+  }
+  if (ec) throw Error(session.dir().string() + ": cannot list the session: " + ec.message());
+  std::string text =
+      std::string("rouen ") + RouenVersion() + "\n" + SolveOptionsJson(options).dump() + "\n";
+  for (const auto& [path, stamp] : files) text += path + " " + stamp + "\n";
+  return Sha256Hex(text);
+}
+
+SceneSolve SolveToScene(const Session& session, const PipelineOptions& options, const fs::path& out,
+                        bool force) {
   CheckSceneOutput(out);
+  SceneSolve result;
+  result.inputs_sha256 = SolveInputsSha256(session, options);
+  std::error_code ec;
+  if (!force && fs::is_regular_file(out / "scene.json", ec)) {
+    try {
+      const nlohmann::json j = nlohmann::json::parse(ReadFileToString(out / "scene.json"));
+      if (j.contains("provenance") &&
+          j["provenance"].value("inputs_sha256", "") == result.inputs_sha256) {
+        Log(options.log, out.string() +
+                             " is up to date: solved from the same session files, "
+                             "model and options; nothing to do");
+        result.up_to_date = true;
+        return result;
+      }
+    } catch (const nlohmann::json::exception&) {
+      // An unreadable scene is solved again and replaced.
+    }
+  }
   const CalibResult calib = CalibrateSession(session, options);
-  SolveResult solved = SolveSession(session, calib, options);
+  result.solved = SolveSession(session, calib, options);
+  const SolveResult& solved = result.solved;
 
   SceneModel scene;
   scene.site = SessionSite(session);
@@ -62,9 +120,11 @@ SolveResult SolveToScene(const Session& session, const PipelineOptions& options,
   for (const auto& [name, g] : calib.groups)
     scene.views[name] = SceneView{g.slot, TargetName(g.target), g.utc, g.intrinsics, g.pose};
   scene.holdout_slots = options.exclude_albedo_slots;
+  scene.inputs_sha256 = result.inputs_sha256;
+  scene.rouen_version = RouenVersion();
+  scene.options = SolveOptionsJson(options);
 
   const fs::path tmp = SiblingTemporary(out);
-  std::error_code ec;
   fs::remove_all(tmp, ec);
   WatchForTemporaries(out.parent_path().empty() ? fs::path(".") : out.parent_path());
   try {
@@ -91,7 +151,7 @@ SolveResult SolveToScene(const Session& session, const PipelineOptions& options,
     fs::remove_all(tmp, ec);
     throw;
   }
-  return solved;
+  return result;
 }
 
 LoadedScene LoadScene(const fs::path& dir, const std::function<void(const std::string&)>& log) {
@@ -149,26 +209,39 @@ void CheckRenderRequest(const LoadedScene& scene, const RenderRequest& request) 
                   FormatNumber(sun.elevation_deg) + " deg); rouen renders daylight only");
     request.relight.Validate();
   }
+  for (int s : request.predict_without_slots)
+    if (s < 0 || s >= nslots)
+      throw Error(scene.dir.string() + ": slot " + std::to_string(s) +
+                  " (to predict without) is not in the scene");
   request.intrinsics.Validate();
+}
+
+Lighting RequestedLighting(const LoadedScene& scene, const RenderRequest& request,
+                           const std::function<void(const std::string&)>& log) {
+  CheckRenderRequest(scene, request);
+  const SolveResult& solved = scene.solved;
+  if (request.slot) return solved.slots[*request.slot].lighting;
+  std::vector<Lighting> measured;
+  for (const SlotSolve& ss : solved.slots)
+    if (std::find(request.predict_without_slots.begin(), request.predict_without_slots.end(),
+                  ss.slot) == request.predict_without_slots.end())
+      measured.push_back(ss.lighting);
+  if (measured.empty())
+    throw Error(scene.dir.string() + ": no slot is left to predict the lighting from");
+  Log(log, "fitting the sun's extinction, the sky interpolation and the environment's normals (" +
+               std::to_string(measured.size()) + " slots)");
+  LightingPredictor predictor(std::move(measured), request.relight);
+  Log(log, predictor.environment().summary.BriefReport());
+  RelightSummary rs;
+  Lighting lighting = predictor.At(*request.time, scene.scene.site, &rs);
+  Log(log, rs.Describe());
+  return lighting;
 }
 
 Image RenderScene(const LoadedScene& scene, const RenderRequest& request,
                   const std::function<void(const std::string&)>& log) {
-  CheckRenderRequest(scene, request);
+  const Lighting lighting = RequestedLighting(scene, request, log);
   const SolveResult& solved = scene.solved;
-  Lighting lighting;
-  if (request.slot) {
-    lighting = solved.slots[*request.slot].lighting;
-  } else {
-    std::vector<Lighting> measured;
-    for (const SlotSolve& ss : solved.slots) measured.push_back(ss.lighting);
-    Log(log, "fitting the sun's extinction, the sky interpolation and the environment's normals");
-    LightingPredictor predictor(std::move(measured), request.relight);
-    Log(log, predictor.environment().summary.BriefReport());
-    RelightSummary rs;
-    lighting = predictor.At(*request.time, scene.scene.site, &rs);
-    Log(log, rs.Describe());
-  }
   Log(log, "irradiance at " + std::to_string(solved.grid.size()) + " grid points");
   const SlotIrradiance irr = IrradianceFor(solved, lighting);
   Log(log, "rendering " + std::to_string(request.intrinsics.width) + "x" +

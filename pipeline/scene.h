@@ -5,8 +5,10 @@
 
 #include <filesystem>
 #include <functional>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "core/camera.h"
 #include "core/image.h"
@@ -23,12 +25,29 @@ namespace rouen {
 // naming `out`.
 void CheckSceneOutput(const std::filesystem::path& out);
 
+// The solve's options as the scene records them (and as its inputs hash covers them): those
+// that change the result, not where intermediate files go or how progress is told.
+nlohmann::json SolveOptionsJson(const PipelineOptions& options);
+
+// One hash of everything a solve of `session` with `options` reads: every file in the session
+// folder (path, size and modification time: the journal holds each frame's sha256, and a file
+// changed behind it changes its time), the options and rouen's version. Throws rouen::Error
+// naming a file that cannot be read.
+std::string SolveInputsSha256(const Session& session, const PipelineOptions& options);
+
+struct SceneSolve {
+  bool up_to_date = false;  // `out` was already solved from the same inputs: nothing was done
+  SolveResult solved;       // empty when up_to_date
+  std::string inputs_sha256;
+};
+
 // Calibrates and solves `session` (CalibrateSession, then SolveSession with
 // options.exclude_albedo_slots held out) and writes the scene folder `out`: the folder is built
 // as "<out>.tmp-<pid>" and renamed into place only when whole, so an error or a crash leaves
-// the earlier scene (or none), never half of one. Returns the solve, for its summaries.
-SolveResult SolveToScene(const Session& session, const PipelineOptions& options,
-                         const std::filesystem::path& out);
+// the earlier scene (or none), never half of one. When `out` already holds a scene solved from
+// the same inputs (SolveInputsSha256) it does nothing and says so, unless `force`.
+SceneSolve SolveToScene(const Session& session, const PipelineOptions& options,
+                        const std::filesystem::path& out, bool force = false);
 
 // A scene folder read back, ready to render: the model, its grid and visibility pattern
 // rebuilt from the recorded options, each slot's lighting, the albedos, the views' cameras.
@@ -48,6 +67,9 @@ struct RenderRequest {
   std::optional<int> slot;
   std::optional<UtcTime> time;
   RelightOptions relight;  // used with `time`
+  // With `time`: slots whose measured lighting the prediction leaves out (e.g. the slot being
+  // validated, so its lighting is predicted from the other times only).
+  std::vector<int> predict_without_slots;
   Intrinsics intrinsics;
   Pose pose;
 };
@@ -60,6 +82,11 @@ const SceneView& FindView(const LoadedScene& scene, const std::string& name);
 // is in the scene, the sun is above the horizon at the time, the camera is valid. Throws
 // rouen::Error saying what is wrong.
 void CheckRenderRequest(const LoadedScene& scene, const RenderRequest& request);
+
+// The lighting a request asks for: the slot's measured lighting, or the lighting predicted for
+// the time from the scene's slots (less `predict_without_slots`).
+Lighting RequestedLighting(const LoadedScene& scene, const RenderRequest& request,
+                           const std::function<void(const std::string&)>& log = {});
 
 // The building's radiance through the request's camera (§6), with irradiance (sun, sky,
 // environment, one bounce) computed for the requested lighting.

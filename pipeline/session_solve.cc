@@ -161,6 +161,77 @@ Image MergeRadianceFrames(const std::vector<Image>& images,
   }
 }
 
+// One bracket merged to radiance: LDR frames through `response`, HDR frames averaged; each
+// channel divided by its ND filter's transmission, then the vignetting removed.
+HdrGroup MergeGroup(const Session& session, const std::string& name,
+                    const std::vector<const FrameRecord*>& frames, bool hdr,
+                    const ResponseCurve& response, const nlohmann::json& nd_filters,
+                    const std::map<std::string, VignettingModel>& vignetting) {
+  const std::string where = session.dir().string();
+  std::vector<Image> images;
+  std::vector<double> exposures;  // seconds x gain (the ND filter is applied per channel)
+  std::vector<std::array<double, 3>> transmission;
+  std::vector<UtcTime> times;
+  const VignettingModel* vmodel = nullptr;
+  for (size_t k = 0; k < frames.size(); ++k) {
+    const FrameRecord* f = frames[k];
+    images.push_back(LoadCheckedFrame(session, *f, k ? &images[0] : nullptr, frames[0]));
+    exposures.push_back(f->exposure_s * f->gain);
+    transmission.push_back(NdTransmissionRgb(f->nd_density, nd_filters));
+    times.push_back(f->utc);
+    const VignettingModel* v = FindVignetting(vignetting, *f);
+    if (k > 0 && v != vmodel)
+      throw Error(where + ": bracket " + name +
+                  " mixes frames with different vignetting models (frame " + std::to_string(f->id) +
+                  ")");
+    vmodel = v;
+  }
+  HdrGroup g;
+  g.name = name;
+  const FrameRecord& first = *frames.front();
+  g.slot = first.slot;
+  g.target = first.target == Target::kAureole ? Target::kSky : first.target;
+  g.nd_density = first.nd_density;
+  if (!first.intrinsics || !first.pose)
+    throw Error(where + ": frame " + std::to_string(first.id) +
+                " has no intrinsics/pose; calibrate the camera geometry first");
+  g.intrinsics = *first.intrinsics;
+  g.pose = *first.pose;
+  std::sort(times.begin(), times.end());
+  g.utc = times[times.size() / 2];
+  if (hdr) {
+    g.radiance = MergeRadianceFrames(images, frames, exposures, transmission, &g.valid);
+  } else {
+    if (!response.valid())
+      throw Error(where + ": bracket " + name + " is LDR but no response curve is known");
+    g.radiance = MergeLdrFrames(images, exposures, transmission, response, &g.valid);
+  }
+  // Vignetting multiplies every frame of a bracket alike, so dividing the merge is dividing
+  // each frame before merging (for LDR frames: ln L = g(z) - ln X - ln V).
+  if (vmodel) {
+    try {
+      RemoveVignetting(*vmodel, &g.radiance);
+    } catch (const Error& e) {
+      throw Error(where + ": bracket " + name + ": " + e.what());
+    }
+  }
+  return g;
+}
+
+// The session's brackets by merge key (sky and aureole of a slot together), frames in journal
+// order.
+std::map<std::string, std::vector<const FrameRecord*>> SessionBrackets(const Session& session) {
+  std::map<std::string, std::vector<const FrameRecord*>> groups;
+  for (const FrameRecord& f : session.frames()) groups[MergeKey(f)].push_back(&f);
+  return groups;
+}
+
+const nlohmann::json& SessionNdFilters(const Session& session) {
+  static const nlohmann::json no_filters = nlohmann::json::object();
+  const nlohmann::json& extra = session.info().extra;
+  return extra.contains("nd_filters") ? extra["nd_filters"] : no_filters;
+}
+
 }  // namespace
 
 std::vector<uint8_t> SkyMaskFor(const Session& session, const HdrGroup& group,
@@ -277,8 +348,7 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
   CheckSessionFrames(session);
   CalibResult out;
   const std::string where = session.dir().string();
-  std::map<std::string, std::vector<const FrameRecord*>> groups;
-  for (const FrameRecord& f : session.frames()) groups[MergeKey(f)].push_back(&f);
+  std::map<std::string, std::vector<const FrameRecord*>> groups = SessionBrackets(session);
   if (groups.empty()) throw Error(where + ": the session has no frames");
   // A bracket is all LDR (merged through the response curve) or all HDR (radiance frames,
   // e.g. imported RAW/EXR, averaged); mixing both in one bracket is refused.
@@ -291,10 +361,7 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
                     std::to_string(frames.front()->id) + " and " + std::to_string(f->id) + ")");
     group_hdr[name] = hdr;
   }
-  const nlohmann::json& extra = session.info().extra;
-  const nlohmann::json no_filters = nlohmann::json::object();
-  const nlohmann::json& nd_filters =
-      extra.contains("nd_filters") ? extra["nd_filters"] : no_filters;
+  const nlohmann::json& nd_filters = SessionNdFilters(session);
   const std::map<std::string, VignettingModel> vignetting = ReadSessionVignetting(session);
 
   // Response curve (Debevec-Malik) from the LDR architecture and landscape brackets, unless
@@ -344,59 +411,29 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
 
   // HDR radiance per bracket.
   for (const auto& [name, frames] : groups) {
-    std::vector<Image> images;
-    std::vector<double> exposures;  // seconds x gain (the ND filter is applied per channel)
-    std::vector<std::array<double, 3>> transmission;
-    std::vector<UtcTime> times;
-    const VignettingModel* vmodel = nullptr;
-    for (size_t k = 0; k < frames.size(); ++k) {
-      const FrameRecord* f = frames[k];
-      images.push_back(LoadCheckedFrame(session, *f, k ? &images[0] : nullptr, frames[0]));
-      exposures.push_back(f->exposure_s * f->gain);
-      transmission.push_back(NdTransmissionRgb(f->nd_density, nd_filters));
-      times.push_back(f->utc);
-      const VignettingModel* v = FindVignetting(vignetting, *f);
-      if (k > 0 && v != vmodel)
-        throw Error(where + ": bracket " + name +
-                    " mixes frames with different vignetting models (frame " +
-                    std::to_string(f->id) + ")");
-      vmodel = v;
-    }
-    HdrGroup g;
-    g.name = name;
-    const FrameRecord& first = *frames.front();
-    g.slot = first.slot;
-    g.target = first.target == Target::kAureole ? Target::kSky : first.target;
-    g.nd_density = first.nd_density;
-    if (!first.intrinsics || !first.pose)
-      throw Error(where + ": frame " + std::to_string(first.id) +
-                  " has no intrinsics/pose; calibrate the camera geometry first");
-    g.intrinsics = *first.intrinsics;
-    g.pose = *first.pose;
-    std::sort(times.begin(), times.end());
-    g.utc = times[times.size() / 2];
-    if (group_hdr[name]) {
-      g.radiance = MergeRadianceFrames(images, frames, exposures, transmission, &g.valid);
-    } else {
-      if (!out.response.valid())
-        throw Error(where + ": bracket " + name + " is LDR but no response curve is known");
-      g.radiance = MergeLdrFrames(images, exposures, transmission, out.response, &g.valid);
-    }
-    // Vignetting multiplies every frame of a bracket alike, so dividing the merge is dividing
-    // each frame before merging (for LDR frames: ln L = g(z) - ln X - ln V).
-    if (vmodel) {
-      try {
-        RemoveVignetting(*vmodel, &g.radiance);
-      } catch (const Error& e) {
-        throw Error(where + ": bracket " + name + ": " + e.what());
-      }
-    }
+    HdrGroup g =
+        MergeGroup(session, name, frames, group_hdr[name], out.response, nd_filters, vignetting);
     WriteImage((options.work_dir / "calib" / "hdr" / (SafeName(name) + ".exr")).string(),
                g.radiance, StoredType::kFloat);
     out.groups.emplace(name, std::move(g));
   }
   Log(options, "merged " + std::to_string(out.groups.size()) + " brackets to radiance");
   return out;
+}
+
+HdrGroup MergeSessionBracket(const Session& session, const std::string& name,
+                             const ResponseCurve& response) {
+  CheckSessionFrames(session);
+  const auto groups = SessionBrackets(session);
+  const auto it = groups.find(name);
+  if (it == groups.end())
+    throw Error(session.dir().string() + ": the session has no bracket " + name);
+  const bool hdr = it->second.front()->hdr;
+  for (const FrameRecord* f : it->second)
+    if (f->hdr != hdr)
+      throw Error(session.dir().string() + ": bracket " + name + " mixes LDR and HDR frames");
+  return MergeGroup(session, name, it->second, hdr, response, SessionNdFilters(session),
+                    ReadSessionVignetting(session));
 }
 
 SolveResult SolveSession(const Session& session, const CalibResult& calib,

@@ -65,6 +65,12 @@ struct CalibResult {
 // image is not the size of its intrinsics is an error naming it.
 CalibResult CalibrateSession(const Session& session, const PipelineOptions& options);
 
+// One bracket of the session (e.g. "slot2/architecture/view0") merged to radiance as
+// CalibrateSession merges it: LDR frames through `response`, HDR frames averaged. Throws
+// rouen::Error naming the session and the bracket when there is no such bracket.
+HdrGroup MergeSessionBracket(const Session& session, const std::string& name,
+                             const ResponseCurve& response);
+
 // Checks the journal's values the pipeline computes with: the exposure of LDR frames and the
 // ND density (core/limits.h), the gain. Throws rouen::Error naming frames.jsonl, the frame's
 // id, file and bracket.

@@ -160,6 +160,9 @@ void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const
   }
   j["views"] = views;
   j["holdout_slots"] = scene.holdout_slots;
+  j["provenance"] = {{"inputs_sha256", scene.inputs_sha256},
+                     {"rouen_version", scene.rouen_version},
+                     {"options", scene.options}};
   j["albedo"] = {{"sun", "albedo_sun.exr"},
                  {"se", "albedo_se.exr"},
                  {"info", "albedo_info.exr"},
@@ -232,6 +235,13 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
       const int slot = h.get<int>();
       if (slot < 0) throw Error("holdout slot " + std::to_string(slot) + " is negative");
       scene.holdout_slots.push_back(slot);
+    }
+    if (j.contains("provenance")) {
+      const auto& p = j.at("provenance");
+      scene.inputs_sha256 = p.at("inputs_sha256").get<std::string>();
+      scene.rouen_version = p.at("rouen_version").get<std::string>();
+      scene.options = p.at("options");
+      if (!scene.options.is_object()) throw Error("provenance.options is not an object");
     }
     const auto& a = j.at("albedo");
     files[0] = a.at("sun").get<std::string>();

@@ -7,6 +7,7 @@
 #include <Eigen/Core>
 #include <filesystem>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -57,6 +58,12 @@ struct SceneModel {
   std::string model_file;  // OBJ, relative to the scene folder
   std::map<std::string, SceneView> views;
   std::vector<int> holdout_slots;  // slots whose architecture photos the albedos did not use
+  // Provenance: a hash of everything the solve read (the session's files, the model, the
+  // options), which a later solve compares to know whether there is work; the version of
+  // rouen that wrote the scene; the solve's options as the pipeline records them.
+  std::string inputs_sha256;
+  std::string rouen_version;
+  nlohmann::json options = nlohmann::json::object();
 };
 
 constexpr int kAlbedoImageWidth = 1024;

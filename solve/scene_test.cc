@@ -50,6 +50,9 @@ SceneModel MakeScene(const Mesh& mesh, SurfaceGrid* grid_out) {
   view.pose = Pose::LookAt({10.25, -30.5, 1.7}, {0, 0, 12});
   s.views["slot1/architecture/view0"] = view;
   s.holdout_slots = {1};
+  s.inputs_sha256 = std::string(64, 'a');
+  s.rouen_version = "9.8.7";
+  s.options = {{"quick", true}, {"grid", {{"spacing_m", 0.6}}}};
   s.hemisphere.directions = 64;
   s.hemisphere.seed = 7;
   s.albedo.summary.points = grid.size();
@@ -108,6 +111,9 @@ TEST(SceneTest, RoundTrip) {
   EXPECT_EQ(v.pose.rotation, w.pose.rotation);
   EXPECT_EQ(v.pose.position, w.pose.position);
   EXPECT_EQ(r.holdout_slots, std::vector<int>{1});
+  EXPECT_EQ(r.inputs_sha256, s.inputs_sha256);
+  EXPECT_EQ(r.rouen_version, "9.8.7");
+  EXPECT_EQ(r.options, s.options);
   EXPECT_EQ(r.hemisphere.directions, 64);
   EXPECT_EQ(r.hemisphere.seed, 7u);
   std::filesystem::remove_all(dir);

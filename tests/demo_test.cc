@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -40,7 +41,9 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
         "sky_rel_error_median", "sky_rel_error_p90", "albedo_sun_rel_error_mean",
         "albedo_skyenv_rel_error_mean", "heldout_render_rel_rmse", "heldout_render_psnr_db",
         "heldout_predicted_render_rel_rmse", "heldout_predicted_sky_rel_error_median",
-        "heldout_predicted_sun_radiance_rel_error", "frames_captured", "wall_seconds"}) {
+        "heldout_predicted_sun_radiance_rel_error", "validate_measured_rel_rmse",
+        "validate_measured_psnr_db", "validate_predicted_rel_rmse", "validate_predicted_psnr_db",
+        "frames_captured", "wall_seconds"}) {
     ASSERT_TRUE(m.contains(k)) << k;
     ASSERT_TRUE(m[k].is_number()) << k;
   }
@@ -83,20 +86,58 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
   }
   EXPECT_EQ(a.info().site_source, b.info().site_source);
 
-  // rouen solve, once, into a scene; rouen render reads the scene under a captured slot's
-  // lighting, and at another time under predicted lighting with part of the sun blocked
-  // (§5, §6.3). Render never solves: the session is moved away first.
+  // The demo solved its session into DIR/scene through the library, as `rouen solve` does with
+  // the same options: solving again finds the scene up to date and does nothing.
+  for (const char* f : {"scene.json", "model.obj", "albedo_sun.exr", "albedo_se.exr"})
+    EXPECT_TRUE(fs::is_regular_file(dir / "scene" / f)) << f;
+  const int heldout = 3;  // rigs/sim.toml: heldout = "16:00", the fourth of five times
+  const std::string scene_json_before = rouen::ReadFileToString(dir / "scene" / "scene.json");
   out.clear();
-  ASSERT_EQ(RunRouen("solve " + (dir / "session").string() + " --quick --holdout-slot 3 --out " +
-                         (dir / "s.scene").string(),
+  ASSERT_EQ(RunRouen("solve " + (dir / "session").string() + " --quick --holdout-slot " +
+                         std::to_string(heldout) + " --out " + (dir / "scene").string(),
                      &out),
             0)
       << out;
-  EXPECT_NE(out.find("grid points"), std::string::npos) << out;
-  for (const char* f : {"scene.json", "model.obj", "albedo_sun.exr", "albedo_se.exr"})
-    EXPECT_TRUE(fs::is_regular_file(dir / "s.scene" / f)) << f;
+  EXPECT_NE(out.find("up to date"), std::string::npos) << out;
+  EXPECT_EQ(rouen::ReadFileToString(dir / "scene" / "scene.json"), scene_json_before);
+
+  // rouen validate on the demo's scene and held-out slot gives the demo's figures.
+  out.clear();
+  ASSERT_EQ(
+      RunRouen("validate " + (dir / "scene").string() + " --session " + (dir / "session").string() +
+                   " --slot " + std::to_string(heldout) + " --exclude-block plaza --json " +
+                   (dir / "v.json").string() + " --images " + (dir / "v").string(),
+               &out),
+      0)
+      << out;
+  {
+    const nlohmann::json v = nlohmann::json::parse(std::ifstream(dir / "v.json"));
+    EXPECT_TRUE(v["held_out"].get<bool>());
+    for (const char* lighting : {"measured", "predicted"})
+      for (const char* figure : {"rel_rmse", "psnr_db", "median_rel_error"})
+        EXPECT_NEAR(v[lighting][figure].get<double>(),
+                    m[std::string("validate_") + lighting + "_" + figure].get<double>(), 1e-3)
+            << lighting << " " << figure;
+    ASSERT_GE(v["photos"].size(), 1u);
+    const std::string first = v["photos"][0]["view"].get<std::string>();
+    std::string base = first;
+    std::replace(base.begin(), base.end(), '/', '_');
+    for (const char* suffix : {"_photo.exr", "_render.exr", "_difference.exr",
+                               "_render_predicted.exr", "_difference_predicted.exr"})
+      EXPECT_TRUE(fs::is_regular_file(dir / "v" / (base + suffix))) << base << suffix;
+  }
+  // A block the model does not have is named with the ones it has; nothing is written.
+  out.clear();
+  EXPECT_NE(
+      RunRouen("validate " + (dir / "scene").string() + " --session " + (dir / "session").string() +
+                   " --slot 3 --exclude-block patio --json " + (dir / "w.json").string(),
+               &out),
+      0);
+  EXPECT_NE(out.find("no block named 'patio' (blocks: "), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir / "w.json"));
+
   fs::rename(dir / "session", dir / "session-away");
-  const std::string scene = " " + (dir / "s.scene").string();
+  const std::string scene = " " + (dir / "scene").string();
   out.clear();
   ASSERT_EQ(RunRouen("render" + scene + " --slot 1 --view slot1/architecture/view0 --out " +
                          (dir / "slot1.exr").string(),
@@ -183,13 +224,14 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
       << out;
   EXPECT_FALSE(fs::exists(dir / "n.exr"));
   {
-    const nlohmann::json j = nlohmann::json::parse(std::ifstream(dir / "s.scene" / "scene.json"));
-    EXPECT_EQ(j["holdout_slots"], nlohmann::json::array({3}));
+    const nlohmann::json j = nlohmann::json::parse(std::ifstream(dir / "scene" / "scene.json"));
+    EXPECT_EQ(j["holdout_slots"], nlohmann::json::array({heldout}));
     EXPECT_EQ(j["slots"].size(), 5u);
   }
-  // A solve that fails half-way (a frame changed behind the journal) leaves the earlier scene
-  // as it was and no temporary folder.
-  const std::string scene_json = rouen::ReadFileToString(dir / "s.scene" / "scene.json");
+  // A frame changed behind the journal makes the scene out of date (its file's time changed);
+  // the solve then fails half-way, and leaves the earlier scene as it was and no temporary
+  // folder.
+  const std::string scene_json = rouen::ReadFileToString(dir / "scene" / "scene.json");
   {
     const rouen::Session s = rouen::Session::Load(dir / "session-away");
     const fs::path last = dir / "session-away" / s.frames().back().file;
@@ -198,12 +240,12 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
     rouen::WriteFileAtomic(last, bytes);
   }
   out.clear();
-  EXPECT_NE(RunRouen("solve " + (dir / "session-away").string() + " --quick --out " +
-                         (dir / "s.scene").string(),
+  EXPECT_NE(RunRouen("solve " + (dir / "session-away").string() + " --quick --holdout-slot " +
+                         std::to_string(heldout) + " --out " + (dir / "scene").string(),
                      &out),
             0);
   EXPECT_NE(out.find("does not match its journal"), std::string::npos) << out;
-  EXPECT_EQ(rouen::ReadFileToString(dir / "s.scene" / "scene.json"), scene_json);
+  EXPECT_EQ(rouen::ReadFileToString(dir / "scene" / "scene.json"), scene_json);
   for (const auto& e : fs::directory_iterator(dir))
     EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
   fs::remove_all(dir);

@@ -1,0 +1,17 @@
+// Order statistics with one rounding rule for the whole tree.
+#pragma once
+
+#include <vector>
+
+namespace rouen {
+
+// The p-quantile (0 <= p <= 1, clamped) of `v` by the lower nearest rank: the element of rank
+// floor(p (n - 1)) in ascending order (p = 0.5 of an even count is the lower middle). 0 for an
+// empty vector. Takes `v` by value: it is partially reordered.
+double Quantile(std::vector<double> v, double p);
+float Quantile(std::vector<float> v, double p);
+
+// Arithmetic mean; 0 for an empty vector.
+double Mean(const std::vector<double>& v);
+
+}  // namespace rouen

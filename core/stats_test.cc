@@ -1,0 +1,29 @@
+#include "core/stats.h"
+
+#include <gtest/gtest.h>
+
+namespace rouen {
+namespace {
+
+TEST(StatsTest, QuantileIsTheLowerNearestRank) {
+  // Ranks 0..4 of {10, 20, 30, 40, 50}: p (n - 1) = 4p, rounded down.
+  const std::vector<double> v{50, 10, 40, 20, 30};
+  EXPECT_EQ(Quantile(v, 0.0), 10);
+  EXPECT_EQ(Quantile(v, 0.5), 30);
+  EXPECT_EQ(Quantile(v, 0.74), 30);  // 2.96 -> rank 2
+  EXPECT_EQ(Quantile(v, 0.75), 40);
+  EXPECT_EQ(Quantile(v, 1.0), 50);
+  EXPECT_EQ(Quantile(v, 7.0), 50);  // clamped
+  // An even count's median is the lower middle.
+  EXPECT_EQ(Quantile(std::vector<double>{4, 1, 3, 2}, 0.5), 2);
+  EXPECT_EQ(Quantile(std::vector<float>{4, 1, 3, 2}, 0.5), 2.0f);
+  EXPECT_EQ(Quantile(std::vector<double>{}, 0.5), 0);
+}
+
+TEST(StatsTest, Mean) {
+  EXPECT_DOUBLE_EQ(Mean({1, 2, 3, 6}), 3.0);
+  EXPECT_EQ(Mean({}), 0.0);
+}
+
+}  // namespace
+}  // namespace rouen

@@ -1,0 +1,140 @@
+#include "pipeline/validate.h"
+
+#include <algorithm>
+
+#include "core/error.h"
+#include "core/limits.h"
+#include "render/render.h"
+
+namespace rouen {
+namespace {
+
+void Log(const std::function<void(const std::string&)>& log, const std::string& s) {
+  if (log) log(s);
+}
+
+// The model blocks scored: every block not excluded.
+std::vector<int> ScoredBlocks(const LoadedScene& scene, const std::vector<std::string>& exclude) {
+  const std::vector<std::string>& names = scene.solved.mesh.block_names;
+  for (const std::string& e : exclude) {
+    if (std::find(names.begin(), names.end(), e) != names.end()) continue;
+    std::string known;
+    for (const std::string& n : names) known += (known.empty() ? "" : ", ") + n;
+    throw Error(scene.dir.string() + ": the model has no block named '" + e +
+                "' (blocks: " + known + ")");
+  }
+  std::vector<int> blocks;
+  for (int b = 0; b < static_cast<int>(names.size()); ++b)
+    if (std::find(exclude.begin(), exclude.end(), names[b]) == exclude.end()) blocks.push_back(b);
+  if (blocks.empty()) throw Error(scene.dir.string() + ": every block of the model is excluded");
+  return blocks;
+}
+
+std::string Brief(const RenderMetrics& m) {
+  return "relative RMSE " + FormatNumber(m.rel_rmse) + ", PSNR " + FormatNumber(m.psnr_db) +
+         " dB, median relative error " + FormatNumber(m.median_rel_error);
+}
+
+}  // namespace
+
+void ValidateOptions::Validate() const {
+  if (erode_px < 0 || erode_px > 64)
+    throw Error("validate: the mask erosion must be 0..64 pixels, not " + std::to_string(erode_px));
+  relight.Validate();
+}
+
+Validation ValidateSlot(const LoadedScene& scene, const Session& session, int slot,
+                        const ValidateOptions& options,
+                        const std::function<void(const std::string&)>& log) {
+  options.Validate();
+  const SolveResult& solved = scene.solved;
+  const int nslots = static_cast<int>(solved.slots.size());
+  if (slot < 0 || slot >= nslots)
+    throw Error(scene.dir.string() + ": slot " + std::to_string(slot) +
+                " is not in the scene (it has slots 0.." + std::to_string(nslots - 1) + ")");
+  std::vector<std::string> views;
+  for (const auto& [name, v] : scene.scene.views)
+    if (v.slot == slot && v.target == "architecture") views.push_back(name);
+  if (views.empty())
+    throw Error(scene.dir.string() + ": slot " + std::to_string(slot) +
+                " has no architecture photo to validate against");
+  if (options.predicted && nslots < 2)
+    throw Error(scene.dir.string() +
+                ": the scene has one slot; there is no other to predict its lighting from");
+  const std::vector<int> blocks = ScoredBlocks(scene, options.exclude_blocks);
+
+  Validation out;
+  out.slot = slot;
+  const std::vector<int>& held = scene.scene.holdout_slots;
+  out.held_out = std::find(held.begin(), held.end(), slot) != held.end();
+  if (!out.held_out)
+    Log(log, "slot " + std::to_string(slot) +
+                 " was not held out: its photos shaped the albedos, so these figures are a fit, "
+                 "not a prediction (rouen solve --holdout-slot " +
+                 std::to_string(slot) + ")");
+
+  // Irradiance once per lighting, for every photo of the slot.
+  const Lighting measured = solved.slots[slot].lighting;
+  Log(log, "irradiance under slot " + std::to_string(slot) + "'s measured lighting");
+  const SlotIrradiance irr_measured = IrradianceFor(solved, measured);
+  std::optional<Lighting> predicted;
+  SlotIrradiance irr_predicted;
+  if (options.predicted) {
+    RenderRequest request;
+    request.time = solved.slots[slot].utc;
+    request.relight = options.relight;
+    request.predict_without_slots = {slot};
+    request.intrinsics = scene.scene.views.at(views.front()).intrinsics;
+    predicted = RequestedLighting(scene, request, log);
+    Log(log, "irradiance under the lighting predicted from the other slots");
+    irr_predicted = IrradianceFor(solved, *predicted);
+  }
+
+  MetricsOptions mo;
+  mo.response = &scene.scene.response;
+  MetricsAccumulator all_measured(mo), all_predicted(mo);
+  for (const std::string& name : views) {
+    const SceneView& view = scene.scene.views.at(name);
+    HdrGroup g = MergeSessionBracket(session, name, scene.scene.response);
+    if (g.radiance.width != view.intrinsics.width || g.radiance.height != view.intrinsics.height)
+      throw Error(session.dir().string() + ": bracket " + name + " is " +
+                  std::to_string(g.radiance.width) + "x" + std::to_string(g.radiance.height) +
+                  " but the scene's view is " + std::to_string(view.intrinsics.width) + "x" +
+                  std::to_string(view.intrinsics.height) +
+                  ": was the scene solved from this session?");
+    PhotoValidation p;
+    p.view = name;
+    const Image ids = RenderBlockIds(solved.mesh, *solved.caster, view.intrinsics, view.pose);
+    p.mask = ErodeMask(BlockMask(ids, blocks), ids.width, ids.height, options.erode_px);
+    size_t scored = 0;
+    for (size_t i = 0; i < p.mask.size(); ++i) {
+      p.mask[i] = p.mask[i] && g.valid[i];
+      scored += p.mask[i];
+    }
+    if (scored == 0)
+      throw Error(name +
+                  ": no building pixel to score (the model is not in view, or every "
+                  "pixel in view is excluded or unexposed)");
+    p.photo = std::move(g.radiance);
+    // §6: the re-rendering at the photo's camera.
+    p.rendered_measured = RenderView(solved.mesh, solved.grid, *solved.caster, solved.albedo,
+                                     measured, irr_measured, view.intrinsics, view.pose);
+    p.measured = CompareRadiance(p.rendered_measured, p.photo, p.mask, mo);
+    all_measured.Add(p.rendered_measured, p.photo, p.mask);
+    std::string line = name + ": measured lighting " + Brief(p.measured);
+    if (predicted) {
+      p.rendered_predicted = RenderView(solved.mesh, solved.grid, *solved.caster, solved.albedo,
+                                        *predicted, irr_predicted, view.intrinsics, view.pose);
+      p.predicted = CompareRadiance(p.rendered_predicted, p.photo, p.mask, mo);
+      all_predicted.Add(p.rendered_predicted, p.photo, p.mask);
+      line += "; predicted " + Brief(*p.predicted);
+    }
+    Log(log, line);
+    out.photos.push_back(std::move(p));
+  }
+  out.measured = all_measured.Result();
+  if (predicted) out.predicted = all_predicted.Result();
+  return out;
+}
+
+}  // namespace rouen

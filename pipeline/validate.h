@@ -1,0 +1,58 @@
+// Validation of a solved scene against photographs (§6 compares re-renderings with real
+// photographs): every architecture bracket of a slot is rendered at its camera and time and
+// compared with its merged radiance over the building's pixels, once under the lighting
+// measured at that slot and once under lighting predicted from the other slots only (§5).
+#pragma once
+
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/image.h"
+#include "core/session.h"
+#include "pipeline/scene.h"
+#include "render/metrics.h"
+#include "solve/relight.h"
+
+namespace rouen {
+
+struct ValidateOptions {
+  // Model blocks (OBJ groups) left out of the scored pixels, e.g. the ground around the
+  // building, which photographs see at grazing angles.
+  std::vector<std::string> exclude_blocks;
+  // The scored mask is eroded by this many pixels: silhouette and block-edge pixels mix two
+  // surfaces in a photograph.
+  int erode_px = 1;
+  bool predicted = true;   // also render under lighting predicted from the other slots
+  RelightOptions relight;  // for the prediction
+  void Validate() const;   // throws rouen::Error
+};
+
+struct PhotoValidation {
+  std::string view;  // the bracket, e.g. "slot4/architecture/view0"
+  RenderMetrics measured;
+  std::optional<RenderMetrics> predicted;
+  Image photo;  // the bracket merged to radiance
+  Image rendered_measured;
+  Image rendered_predicted;   // empty without the prediction
+  std::vector<uint8_t> mask;  // the scored pixels
+};
+
+struct Validation {
+  int slot = 0;
+  bool held_out = false;  // the albedos did not use this slot's photos
+  std::vector<PhotoValidation> photos;
+  RenderMetrics measured;  // pooled over every photo
+  std::optional<RenderMetrics> predicted;
+};
+
+// Validates slot `slot` of `scene` against the architecture photos of `session` (the session
+// the scene was solved from: each photo's bracket must be one of the scene's views). The
+// photos are merged through the scene's response curve; the PSNR is measured through it too
+// (render/metrics.h). Throws rouen::Error naming the scene, session or bracket.
+Validation ValidateSlot(const LoadedScene& scene, const Session& session, int slot,
+                        const ValidateOptions& options,
+                        const std::function<void(const std::string&)>& log = {});
+
+}  // namespace rouen
