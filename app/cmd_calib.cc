@@ -24,13 +24,7 @@ namespace rouen {
 void ForEachListLine(const std::string& list,
                      const std::function<void(const std::vector<std::string>& words,
                                               const std::string& where)>& line) {
-  std::error_code ec;
-  if (std::filesystem::is_directory(list, ec)) throw Error(list + ": is a folder, not a list file");
-  if (!std::filesystem::is_regular_file(list, ec))
-    throw Error(list + ": cannot open the list file");
-  const std::vector<ListLine> lines = ParseListText(ReadFileToString(list), list);
-  if (lines.empty()) throw Error(list + ": no images listed");
-  for (const ListLine& l : lines) line(l.words, l.where);
+  for (const ListLine& l : ReadListFile(list)) line(l.words, l.where);
 }
 
 nlohmann::json ReadJsonFile(const std::string& path, const char* what) {
@@ -42,14 +36,6 @@ nlohmann::json ReadJsonFile(const std::string& path, const char* what) {
   } catch (const nlohmann::json::exception& e) {
     throw Error(path + ": not valid JSON (" + e.what() + ")");
   }
-}
-
-// A pose file: {"rotation": 3x3, "position": [x, y, z], ...} (as `rouen calib pose` and
-// `rouen calib orient` write them).
-Pose ReadPose(const std::string& path) {
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) throw Error(path + ": no such pose file");
-  return ParsePose(ReadFileToString(path), path);
 }
 
 std::vector<ListedExposure> ReadExposureList(const std::string& list) {

@@ -29,27 +29,6 @@ namespace {
 namespace fs = std::filesystem;
 
 // "a,b,c" -> n numbers; throws naming the option.
-std::vector<double> ParseNumbers(const std::string& text, size_t n, const std::string& option) {
-  std::vector<double> v;
-  std::stringstream ss(text);
-  std::string item;
-  while (std::getline(ss, item, ',')) {
-    try {
-      size_t used = 0;
-      v.push_back(std::stod(item, &used));
-      if (used != item.size()) throw std::invalid_argument("");
-    } catch (const std::exception&) {
-      throw Error(option + " '" + text + "': '" + item + "' is not a number");
-    }
-    if (!std::isfinite(v.back())) throw Error(option + " '" + text + "': not finite");
-  }
-  if (v.size() != n) {
-    throw Error(option + " '" + text + "': expected " + std::to_string(n) +
-                " comma-separated numbers");
-  }
-  return v;
-}
-
 // Replaces the extension of `out`: ENV.exr -> ENV<suffix>.
 std::string Beside(const std::string& out, const std::string& suffix) {
   fs::path p(out);
@@ -96,7 +75,7 @@ void RunEnvmap(const EnvmapArgs& a) {
     const LensFile lens = ReadLensFile(resolve(words[1]));
     l.lens = lens.intrinsics;
     l.max_field_deg = lens.max_field_deg;
-    l.pose = ReadPose(resolve(words[2]));
+    l.pose = ReadPoseFile(resolve(words[2]));
     l.image = ReadImage(l.name);
     if (l.image.units != PixelUnits::kRadiance) {
       throw Error(l.name +
@@ -162,9 +141,7 @@ void RunOrient(const OrientArgs& a) {
         "calib orient: give --landmark, --horizon or --level (the sun alone leaves the "
         "roll about the sun axis free)");
   }
-  const std::vector<double> s = ParseNumbers(a.site, 3, "--site");
-  const Site site{s[0], s[1], s[2]};
-  CheckSite(site, "--site '" + a.site + "'");
+  const Site site = ParseSiteOption(a.site, "--site");
   const UtcTime t = ParseIso8601(a.time);
   OutputSet outputs;
   const std::string out = outputs.Add("--out", a.out, OutputKind::kFile);
@@ -180,12 +157,12 @@ void RunOrient(const OrientArgs& a) {
   const SunDisc d = DetectSunDisc(img, k, so, a.image);
   std::vector<SkyLandmark> lms;
   for (const std::string& l : a.landmarks) {
-    const std::vector<double> v = ParseNumbers(l, 4, "--landmark");
+    const std::vector<double> v = ParseNumberList(l, 4, "--landmark");
     lms.push_back({{v[0], v[1]}, EnuFromAzEl(v[2], v[3]), a.landmark_sigma});
   }
   std::vector<HorizonPoint> hz;
   for (const std::string& h : a.horizon) {
-    const std::vector<double> v = ParseNumbers(h, 2, "--horizon");
+    const std::vector<double> v = ParseNumberList(h, 2, "--horizon");
     hz.push_back({{v[0], v[1]}, a.horizon_sigma});
   }
   OrientOptions oo;
@@ -197,7 +174,7 @@ void RunOrient(const OrientArgs& a) {
     throw Error(a.image + ": " + e.what());
   }
   if (!a.position.empty()) {
-    const std::vector<double> p = ParseNumbers(a.position, 3, "--position");
+    const std::vector<double> p = ParseNumberList(a.position, 3, "--position");
     o.pose.position = Eigen::Vector3d(p[0], p[1], p[2]);
   }
   nlohmann::json j = o.pose;

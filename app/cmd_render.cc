@@ -60,7 +60,7 @@ void Run(const RenderArgs& a) {
   const std::string png = a.png.empty() ? "" : outputs.Add("--png", a.png, OutputKind::kImage);
   if (!a.lens.empty()) {
     request.intrinsics = ReadLensFile(a.lens).intrinsics;
-    request.pose = ReadPose(a.pose);
+    request.pose = ReadPoseFile(a.pose);
   }
   auto say = [](const std::string& s) { std::fprintf(stderr, "render: %s\n", s.c_str()); };
 

@@ -62,10 +62,6 @@ void ForEachListLine(const std::string& list,
 
 // A JSON file parsed; `what` names it in errors ("no such lens file", "not valid JSON").
 nlohmann::json ReadJsonFile(const std::string& path, const char* what);
-// A pose file: {"rotation": 3x3, "position": [x, y, z], ...} (as `rouen calib pose` and
-// `rouen calib orient` write them).
-Pose ReadPose(const std::string& path);
-
 struct ListedExposure {
   std::string path;
   double seconds;

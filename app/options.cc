@@ -2,7 +2,10 @@
 
 #include <cmath>
 #include <optional>
+#include <sstream>
+#include <stdexcept>
 
+#include "core/error.h"
 #include "core/limits.h"
 
 namespace rouen {
@@ -47,6 +50,52 @@ CLI::Validator Obeys(std::string (*problem)(double)) {
         return v ? problem(*v) : "'" + text + "' is not a number";
       },
       "");
+}
+
+std::vector<double> ParseNumberList(const std::string& text, size_t n, const std::string& option) {
+  std::vector<double> v;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    try {
+      size_t used = 0;
+      v.push_back(std::stod(item, &used));
+      if (used != item.size()) throw std::invalid_argument("");
+    } catch (const std::exception&) {
+      throw Error(option + " '" + text + "': '" + item + "' is not a number");
+    }
+    if (!std::isfinite(v.back())) throw Error(option + " '" + text + "': not finite");
+  }
+  if (v.size() != n || (!text.empty() && text.back() == ','))
+    throw Error(option + " '" + text + "': expected " + std::to_string(n) +
+                " comma-separated numbers");
+  return v;
+}
+
+Site ParseSiteOption(const std::string& text, const std::string& option) {
+  const std::string where = option + " '" + text + "'";
+  std::vector<std::string> parts;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) parts.push_back(item);
+  if (parts.size() != 3 || text.back() == ',')
+    throw Error(where +
+                ": expected LAT,LON,H (degrees north, degrees east, metres), e.g. "
+                "38.6247,-90.1848,147");
+  double v[3];
+  const char* names[3] = {"latitude", "longitude", "height"};
+  for (int k = 0; k < 3; ++k) {
+    try {
+      size_t used = 0;
+      v[k] = std::stod(parts[k], &used);
+      if (used != parts[k].size() || !std::isfinite(v[k])) throw std::invalid_argument("");
+    } catch (const std::exception&) {
+      throw Error(where + ": " + names[k] + " '" + parts[k] + "' is not a number");
+    }
+  }
+  const Site site{v[0], v[1], v[2]};
+  CheckSite(site, where);
+  return site;
 }
 
 }  // namespace rouen

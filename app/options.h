@@ -4,6 +4,9 @@
 
 #include <CLI/CLI.hpp>
 #include <string>
+#include <vector>
+
+#include "core/solar.h"
 
 namespace rouen {
 
@@ -14,5 +17,12 @@ CLI::Validator Within(double lo, double hi, const std::string& unit = "");
 CLI::Validator Positive();
 // A number one of core/limits.h's rules accepts (LatitudeProblem, HeightProblem, ...).
 CLI::Validator Obeys(std::string (*problem)(double));
+
+// `n` comma-separated finite numbers ("1.5,2,3"); throws rouen::Error naming `option`.
+std::vector<double> ParseNumberList(const std::string& text, size_t n, const std::string& option);
+
+// A site "LAT,LON,H" (degrees north, degrees east, metres) within core/limits.h's ranges;
+// throws rouen::Error naming `option` and the coordinate at fault.
+Site ParseSiteOption(const std::string& text, const std::string& option);
 
 }  // namespace rouen

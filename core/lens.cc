@@ -113,6 +113,12 @@ LensFile ReadLensFile(const std::string& path) {
   return ParseLensFile(ReadFileToString(path), path);
 }
 
+Pose ReadPoseFile(const std::string& path) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) throw Error(path + ": no such pose file");
+  return ParsePose(ReadFileToString(path), path);
+}
+
 LensFile ParseLensFile(std::string_view text, const std::string& path) {
   LensFile lens;
   try {

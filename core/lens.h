@@ -58,4 +58,8 @@ LensFile ReadLensFile(const std::string& path);
 // The same from the text of a lens file; `name` (the file) is used in messages.
 LensFile ParseLensFile(std::string_view text, const std::string& name);
 
+// A pose file: {"rotation": 3x3, "position": [x, y, z], ...} (as `rouen calib pose` and
+// `rouen calib orient` write them). Throws rouen::Error naming the file.
+Pose ReadPoseFile(const std::string& path);
+
 }  // namespace rouen

@@ -1,5 +1,10 @@
 #include "core/list_file.h"
 
+#include <filesystem>
+#include <system_error>
+
+#include "core/error.h"
+#include "core/files.h"
 #include "core/text.h"
 
 namespace rouen {
@@ -37,6 +42,16 @@ std::vector<ListLine> ParseListText(std::string_view text, const std::string& na
     out.push_back(std::move(entry));
   }
   return out;
+}
+
+std::vector<ListLine> ReadListFile(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) throw Error(path + ": is a folder, not a list file");
+  if (!std::filesystem::is_regular_file(path, ec))
+    throw Error(path + ": cannot open the list file");
+  std::vector<ListLine> lines = ParseListText(ReadFileToString(path), path);
+  if (lines.empty()) throw Error(path + ": lists nothing");
+  return lines;
 }
 
 }  // namespace rouen

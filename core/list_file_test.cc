@@ -1,6 +1,13 @@
 #include "core/list_file.h"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <string>
+
+#include "core/error.h"
+#include "core/files.h"
 
 namespace rouen {
 namespace {
@@ -31,6 +38,26 @@ TEST(ListFileTest, EmptyAndCommentOnlyTextsListNothing) {
   const std::vector<ListLine> lines = ParseListText(std::string_view("a\0b c", 5), "l");
   ASSERT_EQ(lines.size(), 1u);
   EXPECT_EQ(lines[0].words[0], std::string("a\0b", 3));
+}
+
+TEST(ListFileTest, ReadListFileNamesTheFileItCannotUse) {
+  namespace fs = std::filesystem;
+  const fs::path d = fs::temp_directory_path() / ("rouen_list_" + std::to_string(::getpid()));
+  fs::create_directories(d);
+  WriteFileAtomic(d / "a.txt", "# photos\nimg.jpg 1/250\n");
+  const std::vector<ListLine> lines = ReadListFile((d / "a.txt").string());
+  ASSERT_EQ(lines.size(), 1u);
+  EXPECT_EQ(lines[0].where, (d / "a.txt").string() + ":2");
+  WriteFileAtomic(d / "empty.txt", "# nothing\n");
+  for (const fs::path& bad : {d / "empty.txt", d / "missing.txt", d}) {
+    try {
+      ReadListFile(bad.string());
+      ADD_FAILURE() << bad;
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(bad.string()), std::string::npos) << e.what();
+    }
+  }
+  fs::remove_all(d);
 }
 
 }  // namespace

@@ -200,6 +200,34 @@ Target ParseTarget(const std::string& s) {
               "\" (sun, aureole, sky, landscape, architecture or calibration)");
 }
 
+std::string BracketName(int slot, Target target, int view) {
+  return "slot" + std::to_string(slot) + "/" + TargetName(target) + "/view" + std::to_string(view);
+}
+
+BracketKey ParseBracketName(const std::string& name) {
+  const auto bad = [&](const std::string& why) {
+    return Error("bracket \"" + name + "\": " + why + " (expected slot<k>/<target>/view<v>)");
+  };
+  const size_t a = name.find('/'), b = name.rfind('/');
+  if (a == std::string::npos || a == b) throw bad("not three parts");
+  const auto number = [&](const std::string& text, const char* prefix) {
+    const size_t n = std::char_traits<char>::length(prefix);
+    if (text.rfind(prefix, 0) != 0 || text.size() == n || text.size() > n + 6 ||
+        text.find_first_not_of("0123456789", n) != std::string::npos)
+      throw bad(std::string("'") + text + "' is not " + prefix + "<number>");
+    return std::stoi(text.substr(n));
+  };
+  BracketKey k;
+  k.slot = number(name.substr(0, a), "slot");
+  try {
+    k.target = ParseTarget(name.substr(a + 1, b - a - 1));
+  } catch (const Error& e) {
+    throw bad(e.what());
+  }
+  k.view = number(name.substr(b + 1), "view");
+  return k;
+}
+
 void to_json(json& j, const FrameRecord& f) {
   json gps = nullptr;
   if (f.gps) {

@@ -21,6 +21,20 @@ enum class Target { kSun, kAureole, kSky, kLandscape, kArchitecture, kCalibratio
 const char* TargetName(Target t);
 Target ParseTarget(const std::string& s);  // throws rouen::Error
 
+// A bracket's name, "slot<k>/<target>/view<v>" (e.g. "slot2/architecture/view1"): the one
+// printer and parser of the key frames, merged images and scene views are filed under.
+struct BracketKey {
+  int slot = 0;
+  Target target = Target::kArchitecture;
+  int view = 0;
+};
+std::string BracketName(int slot, Target target, int view);
+inline std::string BracketName(const BracketKey& k) {
+  return BracketName(k.slot, k.target, k.view);
+}
+// Throws rouen::Error saying what is wrong with `name`.
+BracketKey ParseBracketName(const std::string& name);
+
 struct GpsFix {
   UtcTime utc;
   double lat_deg = 0, lon_deg = 0, height_m = 0;

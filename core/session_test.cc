@@ -513,3 +513,22 @@ TEST_F(SessionTest, IntegersOutOfRangeAreRefusedNotTruncated) {
 
 }  // namespace
 }  // namespace rouen
+
+namespace rouen {
+namespace {
+
+TEST(BracketNameTest, PrintsAndParsesTheOneKey) {
+  EXPECT_EQ(BracketName(2, Target::kArchitecture, 1), "slot2/architecture/view1");
+  const BracketKey k = ParseBracketName("slot12/sky/view0");
+  EXPECT_EQ(k.slot, 12);
+  EXPECT_EQ(k.target, Target::kSky);
+  EXPECT_EQ(k.view, 0);
+  EXPECT_EQ(BracketName(k), "slot12/sky/view0");
+  for (const char* bad :
+       {"", "slot1", "slot1/sky", "slotx/sky/view0", "slot1/roof/view0", "slot1/sky/view",
+        "slot-1/sky/view0", "slot1/sky/view0/x", "slot99999999/sky/view0"})
+    EXPECT_THROW(ParseBracketName(bad), Error) << bad;
+}
+
+}  // namespace
+}  // namespace rouen

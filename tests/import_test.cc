@@ -461,7 +461,7 @@ TEST(ImportTest, BadInputsFailCleanly) {
   fs::create_directories(noexp);
   WritePng(noexp / "IMG_1.png", 8, 8, 10);
   expect_fail("--photos " + Q(noexp) + site,
-              "IMG_1.png: no exposure time in EXIF and not in --list");
+              "IMG_1.png: no exposure time in EXIF and not in the list");
   WriteText(dir / "exp.txt", "IMG_1.png 0.5\n");
   expect_fail("--photos " + Q(noexp) + " --list " + Q(dir / "exp.txt") + site,
               "IMG_1.png: no capture time");
@@ -529,6 +529,101 @@ TEST(ImportTest, BadInputsFailCleanly) {
   r = RunRouen("import --photos " + Q(good) + site + " --out " + Q(dir / "out"));
   EXPECT_EQ(r.code, 0) << r.out;
   EXPECT_EQ(Session::Load(dir / "out").frames().size(), 1u);
+  fs::remove_all(dir);
+}
+
+// What a user with their own photographs needs and no longer edits JSON for: the building
+// model, the sky mask, ND-filtered sun photos (one density or one per channel), and the
+// files `rouen calib intrinsics` / `rouen calib pose` write, by image, by group or for all.
+TEST(ImportTest, ModelSkyMaskNdFiltersAndCalibFiles) {
+  const fs::path dir = TempDir("userpath");
+  const fs::path photos = dir / "photos";
+  fs::create_directories(photos);
+  WriteJpeg(photos / "w1.jpg", 32, 24, 1.f / 100, "2024:06:21 09:00:00");
+  WriteJpeg(photos / "w2.jpg", 32, 24, 1.f / 25, "2024:06:21 09:00:02");
+  WriteJpeg(photos / "e1.jpg", 32, 24, 1.f / 50, "2024:06:21 09:01:00");
+  WriteJpeg(photos / "sun1.jpg", 32, 24, 1.f / 1000, "2024:06:21 09:02:00");
+  WriteJpeg(photos / "sun2.jpg", 32, 24, 1.f / 4000, "2024:06:21 09:02:01");
+  WriteJpeg(photos / "sky.jpg", 32, 24, 1.f / 500, "2024:06:21 09:03:00");
+  WriteText(dir / "list.txt",
+            "w1.jpg - group=west\n"
+            "w2.jpg - group=west\n"
+            "e1.jpg - group=east\n"
+            "sun1.jpg - target=sun nd=4.5\n"
+            "sun2.jpg - target=sun nd=4.4,4.5,4.9\n"
+            "sky.jpg - target=sky\n");
+  WriteText(dir / "lens.json", R"({"projection": "pinhole", "width": 32, "height": 24,
+      "fx": 30, "fy": 30, "cx": 16, "cy": 12})");
+  WriteText(dir / "west-pose.json",
+            R"({"rotation": [[1,0,0],[0,1,0],[0,0,1]], "position": [-5, 0, 1.6]})");
+  WriteText(dir / "cameras.json", R"({"*": {"lens": "lens.json"},
+      "group=west": {"pose": "west-pose.json"},
+      "e1.jpg": {"pose": {"rotation": [[1,0,0],[0,1,0],[0,0,1]], "position": [5, 0, 1.6]}}})");
+  WriteText(dir / "tower.obj", "g tower\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  WritePng(dir / "mask.png", 32, 24, 200);
+  // The import's arguments with the given list and cameras files.
+  const auto args = [&](const std::string& list, const std::string& cameras) {
+    return "import --photos " + Q(photos) + " --list " + Q(dir / list) + " --cameras " +
+           Q(dir / cameras) + " --timezone +02:00 --site 48.8566,2.3522,35";
+  };
+  const std::string common = args("list.txt", "cameras.json");
+  const fs::path out = dir / "s";
+  Result r = RunRouen(common + " --model " + Q(dir / "tower.obj") + " --sky-mask " +
+                      Q(dir / "mask.png") + " --out " + Q(out));
+  ASSERT_EQ(r.code, 0) << r.out;
+  const Session s = Session::Load(out);
+  EXPECT_EQ(s.info().model, "model.obj");
+  EXPECT_EQ(ReadFileToString(out / "model.obj"), ReadFileToString(dir / "tower.obj"));
+  EXPECT_EQ(s.info().extra.at("sky_masks").at("*"), "sky_mask.png");
+  EXPECT_EQ(ReadFileToString(out / "sky_mask.png"), ReadFileToString(dir / "mask.png"));
+  const auto sources = SourcesById(s);
+  std::map<std::string, FrameRecord> by;
+  for (const FrameRecord& f : s.frames()) by[sources.at(f.id).at("source")] = f;
+  EXPECT_EQ(by["sun1.jpg"].nd_density, 4.5);
+  EXPECT_NEAR(by["sun2.jpg"].nd_density, (4.4 + 4.5 + 4.9) / 3, 1e-12);
+  EXPECT_EQ(by["w1.jpg"].nd_density, 0);
+  const nlohmann::json filters = s.info().extra.at("nd_filters");
+  ASSERT_EQ(filters.size(), 1u);
+  EXPECT_EQ(filters.begin().value(), nlohmann::json::array({4.4, 4.5, 4.9}));
+  // Every photo has the lens ("*"); the west group its pose file; e1 its own inline pose.
+  for (const auto& [name, f] : by) {
+    ASSERT_TRUE(f.intrinsics) << name;
+    EXPECT_EQ(f.intrinsics->fx, 30) << name;
+  }
+  ASSERT_TRUE(by["w2.jpg"].pose);
+  EXPECT_EQ(by["w2.jpg"].pose->position.x(), -5);
+  ASSERT_TRUE(by["e1.jpg"].pose);
+  EXPECT_EQ(by["e1.jpg"].pose->position.x(), 5);
+  EXPECT_FALSE(by["sky.jpg"].pose);
+
+  // --sky-mask auto is recorded as such.
+  r = RunRouen(common + " --sky-mask auto --out " + Q(dir / "s2"));
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_EQ(Session::Load(dir / "s2").info().extra.at("sky_masks").at("*"), "auto");
+
+  // Each bad input is named, and nothing is left behind.
+  const auto expect_fail = [&](const std::string& command, const std::string& phrase) {
+    const Result f = RunRouen(command + " --out " + Q(dir / "bad"));
+    EXPECT_EQ(f.code, 1) << command << "\n" << f.out;
+    EXPECT_NE(f.out.find(phrase), std::string::npos) << command << "\n" << f.out;
+    EXPECT_FALSE(fs::exists(dir / "bad")) << command;
+    EXPECT_TRUE(Leftovers(dir, "bad").empty()) << command;
+  };
+  expect_fail(common + " --model " + Q(dir / "none.obj"), "none.obj: no such model file");
+  WriteText(dir / "empty.obj", "# nothing\n");
+  expect_fail(common + " --model " + Q(dir / "empty.obj"), "empty.obj");
+  WritePng(dir / "small.png", 8, 8, 200);
+  expect_fail(common + " --sky-mask " + Q(dir / "small.png"), "small.png");
+  WriteText(dir / "list2.txt", "sun1.jpg - target=sun nd=4.5,4\n");
+  expect_fail(args("list2.txt", "cameras.json"), "list2.txt:1: nd=4.5,4: expected");
+  WriteText(dir / "list2.txt", "sun1.jpg - target=sun nd=-1\n");
+  expect_fail(args("list2.txt", "cameras.json"), "list2.txt:1");
+  WriteText(dir / "cameras2.json", R"({"group=north": {"lens": "lens.json"}})");
+  expect_fail(args("list.txt", "cameras2.json"), "\"group=north\": no listed photo has that group");
+  WriteText(dir / "cameras2.json", R"({"*": {"lens": "missing-lens.json"}})");
+  expect_fail(args("list.txt", "cameras2.json"), "missing-lens.json: no such lens file");
+  WriteText(dir / "cameras2.json", R"({"*": {"lens": "../../etc/passwd"}})");
+  expect_fail(args("list.txt", "cameras2.json"), "cameras2.json");
   fs::remove_all(dir);
 }
 
