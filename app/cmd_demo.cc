@@ -85,7 +85,7 @@ void Run(const DemoArgs& a) {
   Session session = Session::Load(out / "session");
   PipelineOptions po;
   po.work_dir = out / "work";
-  po.quick = a.quick;
+  po.config = DefaultSolveConfig(a.quick);
   po.log = say;
   const int heldout = rig.heldout_slot;
   if (heldout >= 0) po.exclude_albedo_slots = {heldout};

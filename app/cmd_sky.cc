@@ -17,6 +17,8 @@
 #include "core/image.h"
 #include "core/outputs.h"
 #include "core/solar.h"
+#include "core/stats.h"
+#include "pipeline/solve_config.h"
 #include "solve/sky_cie.h"
 #include "solve/sky_fit.h"
 #include "solve/sky_model.h"
@@ -28,11 +30,12 @@ namespace {
 constexpr double kDeg = 3.14159265358979323846 / 180.0;
 
 struct SkyFitArgs {
-  std::string image, projection = "equirect", mask, out, model = "7", weighting = "paper";
+  std::string image, projection = "equirect", mask, out, model = "7", weighting;
   std::string residuals;
   double sun_azimuth = 0, sun_elevation = 0, azimuth_offset = 0;
   double min_elevation = 3, sun_exclusion = 3;
   int max_samples = 20000;
+  double norm_p = 0;  // 0: the solve's default
   bool no_segment = false;
 };
 
@@ -41,13 +44,6 @@ struct SkyRenderArgs {
   int width = 1024;
   double azimuth_offset = 0;
 };
-
-double Percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * (v.size() - 1) + 0.5));
-  std::nth_element(v.begin(), v.begin() + k, v.end());
-  return v[k];
-}
 
 // Equirect convention of `rouen sky`: row 0 the zenith, the last row the nadir, column x at
 // azimuth (x + 0.5) / W * 360 deg + offset from north through east (Pose::Level, azimuth 0).
@@ -66,15 +62,17 @@ void RunFit(const SkyFitArgs& a) {
   }
   if (!std::isfinite(a.sun_azimuth) || !std::isfinite(a.azimuth_offset))
     throw Error("sky fit: --sun-azimuth and --azimuth-offset must be finite");
-  SkyFitOptions fo;
+  // The fit `rouen solve` makes, unless told otherwise.
+  SkyFitOptions fo = DefaultSolveConfig(false).sky_fit;
   fo.model = ParseSkyModelKind(a.model);
   if (a.weighting == "paper") {
     fo.weighting = SkyWeighting::kPaper;
   } else if (a.weighting == "relative") {
     fo.weighting = SkyWeighting::kRelative;
-  } else {
+  } else if (!a.weighting.empty()) {
     throw Error("sky fit: --weighting '" + a.weighting + "' is not one of paper, relative");
   }
+  if (a.norm_p > 0) fo.norm_p = a.norm_p;
   OutputSet outputs;
   const std::string out = outputs.Add("--out", a.out, OutputKind::kFile);
   const std::string residuals =
@@ -168,7 +166,8 @@ void RunFit(const SkyFitArgs& a) {
     j["cie_type"] = summary.cie_type;
     j["cie_name"] = CieStandardSky(summary.cie_type).name;
   }
-  j["weighting"] = a.weighting;
+  j["weighting"] = fo.weighting == SkyWeighting::kPaper ? "paper" : "relative";
+  j["norm_p"] = fo.norm_p;
   j["projection"] = "equirect";
   j["image"] = a.image;
   j["width"] = img.width;
@@ -181,12 +180,12 @@ void RunFit(const SkyFitArgs& a) {
   j["fitted_pixels"] = rel[0].size();
   j["seconds"] = summary.seconds;
   for (int c = 0; c < 3; ++c) {
-    j["channels"][c]["rel_error_median"] = Percentile(rel[c], 0.5);
-    j["channels"][c]["rel_error_p90"] = Percentile(rel[c], 0.9);
+    j["channels"][c]["rel_error_median"] = Quantile(rel[c], 0.5);
+    j["channels"][c]["rel_error_p90"] = Quantile(rel[c], 0.9);
     j["channels"][c]["iterations"] = summary.channel[c].iterations;
   }
-  j["rel_error_median"] = Percentile(pooled, 0.5);
-  j["rel_error_p90"] = Percentile(pooled, 0.9);
+  j["rel_error_median"] = Quantile(pooled, 0.5);
+  j["rel_error_p90"] = Quantile(pooled, 0.9);
   if (!a.residuals.empty()) {
     WriteImage(residuals, res, StoredType::kFloat);
     j["residual_map"] = a.residuals;
@@ -204,8 +203,7 @@ void RunFit(const SkyFitArgs& a) {
     std::printf(
         "  %s  Lz %.5g a %.4f b %.4f c %.4f d %.4f e %.4f h %.4f   rel error median "
         "%.4f p90 %.4f\n",
-        names[c], p.Lz, p.a, p.b, p.c, p.d, p.e, p.h, Percentile(rel[c], 0.5),
-        Percentile(rel[c], 0.9));
+        names[c], p.Lz, p.a, p.b, p.c, p.d, p.e, p.h, Quantile(rel[c], 0.5), Quantile(rel[c], 0.9));
   }
   std::printf("wrote %s\n", a.out.c_str());
 }
@@ -281,7 +279,12 @@ void RegisterSky(CLI::App& app) {
   c->add_flag("--no-segment", f->no_segment, "Without --mask: use every pixel, no segmentation");
   c->add_option("--model", f->model, "7 (eq. 9), perez5 (h = 1) or cie (best CIE standard sky)");
   c->add_option("--weighting", f->weighting,
-                "paper (eq. 10, sigma = y / log y) or relative (sigma = y)");
+                "paper (eq. 10, sigma = y / log y) or relative (sigma = y; the default, as in "
+                "rouen solve)");
+  c->add_option("--norm", f->norm_p,
+                "Exponent p of the residuals' norm: 2 is eq. 10's least squares, 1 (the "
+                "default, as in rouen solve) is robust to regions eq. 9 cannot follow")
+      ->check(Within(1, 16));
   c->add_option("--min-elevation", f->min_elevation, "Skip pixels below this elevation, deg")
       ->check(Within(-90, 90, "deg"));
   c->add_option("--sun-exclusion", f->sun_exclusion, "Skip pixels this close to the sun, deg")

@@ -17,14 +17,23 @@ namespace rouen {
 namespace {
 
 struct SolveArgs {
-  std::string session, out, work;
+  std::string session, out, work, config;
   std::vector<int> holdout;
-  bool quick = false, force = false;
+  bool quick = false, force = false, print_config = false;
 };
 
 void Run(const SolveArgs& a) {
   namespace fs = std::filesystem;
   const auto start = std::chrono::steady_clock::now();
+  PipelineOptions po;
+  po.config = DefaultSolveConfig(a.quick);
+  if (!a.config.empty()) po.config = ReadSolveConfigFile(a.config, po.config);
+  if (a.print_config) {
+    std::printf("%s\n", SolveConfigJson(po.config).dump(2).c_str());
+    return;
+  }
+  if (a.session.empty() || a.out.empty())
+    throw Error("rouen solve needs a SESSION folder and --out SCENE (see rouen solve --help)");
   // The outputs first, then the session: every mistake is told before any work.
   fs::path out = fs::path(a.out).lexically_normal();
   if (!out.has_filename()) out = out.parent_path();  // "s.scene/" -> "s.scene"
@@ -46,9 +55,7 @@ void Run(const SolveArgs& a) {
       throw Error("--holdout-slot " + std::to_string(h) + ": the session has slots 0.." +
                   std::to_string(nslots - 1));
 
-  PipelineOptions po;
   po.work_dir = work;
-  po.quick = a.quick;
   po.exclude_albedo_slots = a.holdout;
   po.log = [](const std::string& s) { std::fprintf(stderr, "solve: %s\n", s.c_str()); };
   const SceneSolve r = SolveToScene(session, po, out, a.force);
@@ -82,16 +89,26 @@ void RegisterSolve(CLI::App& app) {
       "options by this version of rouen, nothing is done: a workflow engine can run it again.\n"
       "--holdout-slot keeps a time of day's architecture photos out of the albedos, so that\n"
       "renders at that time can be compared with them.\n"
+      "Every choice of the solve (grid spacing per block, the sky fit's weighting and norm, the\n"
+      "environment's sampling, the albedo and irradiance options, the response's brackets) is\n"
+      "an option with a default, recorded in the scene; --config FILE.toml overrides any of them\n"
+      "with the tables and keys --print-config shows, e.g.\n"
+      "  [sky_fit]\n  norm_p = 2\n  [grid.block_spacing_m]\n  ground = 2.0\n"
+      "A key rouen does not know is an error, not a silent default.\n"
       "Example: rouen solve s --out s.scene --holdout-slot 2");
-  c->add_option("session", a->session, "Session folder (from rouen capture or rouen import)")
-      ->required();
-  c->add_option("--out", a->out, "Scene folder to write (new, or an earlier scene)")->required();
+  c->add_option("session", a->session, "Session folder (from rouen capture or rouen import)");
+  c->add_option("--out", a->out, "Scene folder to write (new, or an earlier scene)");
   c->add_option("--holdout-slot", a->holdout,
                 "A slot whose architecture photos the albedos do not use (repeatable)")
       ->check(Within(0, 1000));
   c->add_option("--work", a->work, "Working folder for calib/ (default: OUT.work)");
   c->add_flag("--quick", a->quick, "Fewer samples (faster, rougher)");
   c->add_flag("--force", a->force, "Solve even when OUT is up to date");
+  c->add_option("--config", a->config,
+                "TOML file overriding the solve's options (rouen solve --print-config lists them)");
+  c->add_flag("--print-config", a->print_config,
+              "Print every option of the solve with its value (with --quick and --config "
+              "applied) as TOML-like JSON, and exit");
   c->callback([a] { Run(*a); });
 }
 

@@ -51,36 +51,14 @@ nlohmann::json SolveOptionsJson(const PipelineOptions& options) {
   std::vector<int> holdout = options.exclude_albedo_slots;
   std::sort(holdout.begin(), holdout.end());
   holdout.erase(std::unique(holdout.begin(), holdout.end()), holdout.end());
-  nlohmann::json j = {
-      {"quick", options.quick},
-      {"holdout_slots", holdout},
-      {"grid", options.grid},
-      {"hemisphere",
-       {{"directions", options.hemisphere.directions}, {"seed", options.hemisphere.seed}}}};
+  nlohmann::json j = {{"holdout_slots", holdout}, {"config", SolveConfigJson(options.config)}};
   j["response"] = options.response ? nlohmann::json(*options.response) : nlohmann::json(nullptr);
   return j;
 }
 
 std::string SolveInputsSha256(const Session& session, const PipelineOptions& options) {
-  // Paths in order, so the walk's order does not matter.
-  std::map<std::string, std::string> files;
-  std::error_code ec;
-  for (auto it = fs::recursive_directory_iterator(session.dir(), ec);
-       !ec && it != fs::recursive_directory_iterator(); it.increment(ec)) {
-    if (!it->is_regular_file()) continue;
-    const std::string name = it->path().filename().string();
-    // The capture lock and temporaries are not inputs.
-    if (name == "session.lock" || name.find(".tmp-") != std::string::npos) continue;
-    const auto size = it->file_size();
-    const auto time = it->last_write_time().time_since_epoch().count();
-    files[fs::relative(it->path(), session.dir()).generic_string()] =
-        std::to_string(size) + " " + std::to_string(time);
-  }
-  if (ec) throw Error(session.dir().string() + ": cannot list the session: " + ec.message());
-  std::string text =
-      std::string("rouen ") + RouenVersion() + "\n" + SolveOptionsJson(options).dump() + "\n";
-  for (const auto& [path, stamp] : files) text += path + " " + stamp + "\n";
-  return Sha256Hex(text);
+  return Sha256Hex(std::string("rouen ") + RouenVersion() + "\n" +
+                   SolveOptionsJson(options).dump() + "\n" + SessionFilesStamp(session));
 }
 
 SceneSolve SolveToScene(const Session& session, const PipelineOptions& options, const fs::path& out,
@@ -111,8 +89,8 @@ SceneSolve SolveToScene(const Session& session, const PipelineOptions& options, 
   SceneModel scene;
   scene.site = SessionSite(session);
   scene.response = calib.response;
-  scene.grid_options = options.grid;
-  scene.hemisphere = options.hemisphere;
+  scene.grid_options = options.config.grid;
+  scene.hemisphere = options.config.hemisphere;
   for (const SlotSolve& s : solved.slots)
     scene.slots.push_back(SlotModel::FromLighting(s.lighting));
   scene.albedo = solved.albedo;
@@ -161,6 +139,12 @@ LoadedScene LoadScene(const fs::path& dir, const std::function<void(const std::s
   if (!fs::is_directory(dir, ec))
     throw Error(dir.string() + ": no such scene folder (rouen solve writes one)");
   r.scene = ReadScene(dir, &r.solved.mesh, &r.solved.grid);
+  // The options the solve used (a scene from before they were recorded: the defaults).
+  r.config = DefaultSolveConfig(false);
+  if (r.scene.options.contains("config"))
+    r.config = ApplySolveConfig(r.scene.options["config"], r.config,
+                                (dir / "scene.json").string() + ": provenance.options.config");
+  r.solved.albedo_options = r.config.albedo;
   r.solved.caster = std::make_unique<RayCaster>(r.solved.mesh);
   r.solved.hemisphere = BuildHemisphereCache(r.solved.grid, *r.solved.caster, r.scene.hemisphere);
   r.solved.albedo = std::move(r.scene.albedo);

@@ -55,6 +55,7 @@ struct LoadedScene {
   std::filesystem::path dir;
   SceneModel scene;    // site, response, views, held-out slots (its albedo moved to `solved`)
   SolveResult solved;  // mesh, grid, caster, hemisphere, slots' lighting and times, albedo
+  SolveConfig config;  // the options the scene was solved with
 };
 // Throws rouen::Error naming the file when the folder is not a whole, consistent scene.
 LoadedScene LoadScene(const std::filesystem::path& dir,

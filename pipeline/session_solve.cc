@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <optional>
 #include <set>
 
 #include "calib/hdr.h"
@@ -12,6 +13,7 @@
 #include "core/files.h"
 #include "core/limits.h"
 #include "core/temporaries.h"
+#include "core/version.h"
 #include "solve/sky_segment.h"
 
 namespace rouen {
@@ -161,6 +163,29 @@ Image MergeRadianceFrames(const std::vector<Image>& images,
   }
 }
 
+// A bracket's name, slot, target, camera (its first frame's) and time (its median frame's),
+// without its pixels.
+HdrGroup BracketCameraAndTime(const Session& session, const std::string& name,
+                              const std::vector<const FrameRecord*>& frames) {
+  HdrGroup g;
+  g.name = name;
+  const FrameRecord& first = *frames.front();
+  g.slot = first.slot;
+  g.target = first.target == Target::kAureole ? Target::kSky : first.target;
+  g.nd_density = first.nd_density;
+  if (!first.intrinsics || !first.pose)
+    throw Error(session.dir().string() + ": frame " + std::to_string(first.id) +
+                " has no intrinsics/pose; calibrate the camera geometry first (rouen calib "
+                "intrinsics, rouen calib pose, then rouen import --cameras)");
+  g.intrinsics = *first.intrinsics;
+  g.pose = *first.pose;
+  std::vector<UtcTime> times;
+  for (const FrameRecord* f : frames) times.push_back(f->utc);
+  std::sort(times.begin(), times.end());
+  g.utc = times[times.size() / 2];
+  return g;
+}
+
 // One bracket merged to radiance: LDR frames through `response`, HDR frames averaged; each
 // channel divided by its ND filter's transmission, then the vignetting removed.
 HdrGroup MergeGroup(const Session& session, const std::string& name,
@@ -186,19 +211,7 @@ HdrGroup MergeGroup(const Session& session, const std::string& name,
                   ")");
     vmodel = v;
   }
-  HdrGroup g;
-  g.name = name;
-  const FrameRecord& first = *frames.front();
-  g.slot = first.slot;
-  g.target = first.target == Target::kAureole ? Target::kSky : first.target;
-  g.nd_density = first.nd_density;
-  if (!first.intrinsics || !first.pose)
-    throw Error(where + ": frame " + std::to_string(first.id) +
-                " has no intrinsics/pose; calibrate the camera geometry first");
-  g.intrinsics = *first.intrinsics;
-  g.pose = *first.pose;
-  std::sort(times.begin(), times.end());
-  g.utc = times[times.size() / 2];
+  HdrGroup g = BracketCameraAndTime(session, name, frames);
   if (hdr) {
     g.radiance = MergeRadianceFrames(images, frames, exposures, transmission, &g.valid);
   } else {
@@ -232,7 +245,73 @@ const nlohmann::json& SessionNdFilters(const Session& session) {
   return extra.contains("nd_filters") ? extra["nd_filters"] : no_filters;
 }
 
+// The merged bracket's valid mask as an 8-bit image: 255 where some frame was well exposed.
+Image ValidMaskImage(const HdrGroup& g) {
+  Image m(g.radiance.width, g.radiance.height, 1, PixelUnits::kDigital, 0.f);
+  for (size_t p = 0; p < g.valid.size(); ++p) m.data[p] = g.valid[p] ? 255.f : 0.f;
+  return m;
+}
+
+// What a calibration depends on: the session's files, the response curve given (if any), the
+// response's options, rouen's version.
+std::string CalibInputsSha256(const Session& session, const PipelineOptions& options) {
+  nlohmann::json j = {
+      {"version", RouenVersion()},
+      {"max_brackets", options.config.response_max_brackets},
+      {"response", options.response ? nlohmann::json(*options.response) : nlohmann::json(nullptr)}};
+  return Sha256Hex(j.dump() + "\n" + SessionFilesStamp(session));
+}
+
+// The calibration in `dir` when its manifest says it was made from `inputs` and every file it
+// names reads back whole; else nothing (the calibration is then made again).
+std::optional<CalibResult> ReadCalibration(
+    const Session& session, const std::filesystem::path& dir, const std::string& inputs,
+    const std::map<std::string, std::vector<const FrameRecord*>>& groups) {
+  try {
+    const nlohmann::json m = nlohmann::json::parse(ReadFileToString(dir / "manifest.json"));
+    if (m.at("inputs_sha256").get<std::string>() != inputs) return std::nullopt;
+    CalibResult out;
+    if (m.at("response").get<bool>())
+      out.response = ReadResponseCurve((dir / "response.json").string());
+    if (m.at("brackets").size() != groups.size()) return std::nullopt;
+    for (const auto& [name, frames] : groups) {
+      HdrGroup g = BracketCameraAndTime(session, name, frames);
+      const std::string base = (dir / "hdr" / SafeName(name)).string();
+      g.radiance = ReadImage(base + ".exr");
+      if (g.radiance.channels != 3 || g.radiance.units != PixelUnits::kRadiance ||
+          g.radiance.width != g.intrinsics.width || g.radiance.height != g.intrinsics.height)
+        return std::nullopt;
+      g.valid = ReadMask(base + ".valid.png", g.radiance.width, g.radiance.height, name);
+      out.groups.emplace(name, std::move(g));
+    }
+    return out;
+  } catch (const std::exception&) {
+    return std::nullopt;  // missing, partial or unreadable: calibrate again
+  }
+}
+
 }  // namespace
+
+std::string SessionFilesStamp(const Session& session) {
+  // Paths in order, so the walk's order does not matter.
+  std::map<std::string, std::string> files;
+  std::error_code ec;
+  namespace fs = std::filesystem;
+  for (auto it = fs::recursive_directory_iterator(session.dir(), ec);
+       !ec && it != fs::recursive_directory_iterator(); it.increment(ec)) {
+    if (!it->is_regular_file()) continue;
+    const std::string name = it->path().filename().string();
+    // The capture lock and temporaries are not inputs.
+    if (name == "session.lock" || name.find(".tmp-") != std::string::npos) continue;
+    files[fs::relative(it->path(), session.dir()).generic_string()] =
+        std::to_string(it->file_size()) + " " +
+        std::to_string(it->last_write_time().time_since_epoch().count());
+  }
+  if (ec) throw Error(session.dir().string() + ": cannot list the session: " + ec.message());
+  std::string text;
+  for (const auto& [path, stamp] : files) text += path + " " + stamp + "\n";
+  return text;
+}
 
 std::vector<uint8_t> SkyMaskFor(const Session& session, const HdrGroup& group,
                                 const Eigen::Vector3d& sun_dir, std::string* source) {
@@ -337,13 +416,6 @@ Mesh ReadSessionModel(const Session& session) {
   return ReadObj(ResolveInside(session.dir(), session.info().model).string());
 }
 
-GridOptions DefaultGridOptions() {
-  GridOptions go;
-  go.spacing_m = 0.6;
-  go.block_spacing_m["plaza"] = 1.5;
-  return go;
-}
-
 CalibResult CalibrateSession(const Session& session, const PipelineOptions& options) {
   CheckSessionFrames(session);
   CalibResult out;
@@ -364,6 +436,19 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
   const nlohmann::json& nd_filters = SessionNdFilters(session);
   const std::map<std::string, VignettingModel> vignetting = ReadSessionVignetting(session);
 
+  // An earlier calibration of the same session files with the same options is read back.
+  const std::filesystem::path calib_dir = options.work_dir / "calib";
+  const std::string inputs = CalibInputsSha256(session, options);
+  if (std::optional<CalibResult> done = ReadCalibration(session, calib_dir, inputs, groups)) {
+    Log(options, calib_dir.string() +
+                     " is up to date (same session files and options): "
+                     "the response curve and " +
+                     std::to_string(done->groups.size()) + " merged brackets read back");
+    return std::move(*done);
+  }
+  std::error_code ec;
+  std::filesystem::remove(calib_dir / "manifest.json", ec);
+
   // Response curve (Debevec-Malik) from the LDR architecture and landscape brackets, unless
   // one is given. A session of HDR frames only needs none.
   bool any_ldr = false;
@@ -382,7 +467,7 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
       for (const FrameRecord* f : frames) exps.insert(EffectiveExposure(*f));
       if (exps.size() >= 2) names.push_back(name);
     }
-    const size_t max_brackets = options.quick ? 6 : 12;
+    const size_t max_brackets = static_cast<size_t>(options.config.response_max_brackets);
     for (size_t i = 0; i < names.size() && brackets.size() < max_brackets;
          i += std::max<size_t>(1, names.size() / max_brackets)) {
       Bracket br;
@@ -413,11 +498,21 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
   for (const auto& [name, frames] : groups) {
     HdrGroup g =
         MergeGroup(session, name, frames, group_hdr[name], out.response, nd_filters, vignetting);
-    WriteImage((options.work_dir / "calib" / "hdr" / (SafeName(name) + ".exr")).string(),
-               g.radiance, StoredType::kFloat);
+    const std::string base = (calib_dir / "hdr" / SafeName(name)).string();
+    WriteImage(base + ".exr", g.radiance, StoredType::kFloat);
+    WriteImage(base + ".valid.png", ValidMaskImage(g), StoredType::kUint8);
     out.groups.emplace(name, std::move(g));
   }
   Log(options, "merged " + std::to_string(out.groups.size()) + " brackets to radiance");
+  // Written last: the files above are whole when the manifest names them.
+  nlohmann::json names = nlohmann::json::array();
+  for (const auto& [name, g] : out.groups) names.push_back(name);
+  WriteFileAtomic(calib_dir / "manifest.json", nlohmann::json{{"inputs_sha256", inputs},
+                                                              {"rouen_version", RouenVersion()},
+                                                              {"response", out.response.valid()},
+                                                              {"brackets", names}}
+                                                       .dump(1) +
+                                                   "\n");
   return out;
 }
 
@@ -485,10 +580,9 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
     ss.sky_summary = FitSky(samples, sun_dir, sky_fit_options, &sky);
     // §3.3: the environment from the landscape panoramas, one layer per height (e.g. from the
     // ground and from a mast at the top of the building).
-    EnvOptions eo;
-    if (options.quick) eo.pixel_stride = 2;
-    EnvironmentMap env = BuildEnvironmentMap(panoramas, *r.caster, sun_dir,
-                                             ss.sun.angular_radius_deg * M_PI / 180, sky, eo);
+    EnvironmentMap env =
+        BuildEnvironmentMap(panoramas, *r.caster, sun_dir, ss.sun.angular_radius_deg * M_PI / 180,
+                            sky, options.config.environment);
     ss.lighting.utc = ss.utc;
     ss.lighting.sun_dir = sun_dir;
     ss.lighting.sun_radiance = ss.sun_measured.radiance;
@@ -503,8 +597,8 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   }
 
   // Surface grid and geometry-only visibility, computed once.
-  r.grid = BuildSurfaceGrid(r.mesh, options.grid);
-  r.hemisphere = BuildHemisphereCache(r.grid, *r.caster, options.hemisphere);
+  r.grid = BuildSurfaceGrid(r.mesh, options.config.grid);
+  r.hemisphere = BuildHemisphereCache(r.grid, *r.caster, options.config.hemisphere);
   Log(options, "surface grid: " + std::to_string(r.grid.size()) + " points");
 
   // Observations from the architecture photos of the training slots.
@@ -527,20 +621,22 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   // Sun directions per slot let footprints that straddle a shadow edge be dropped.
   std::vector<Eigen::Vector3d> sun_dirs;
   for (const SlotSolve& ss : r.slots) sun_dirs.push_back(ss.lighting.sun_dir);
-  std::vector<Observation> obs = CollectObservations(r.grid, *r.caster, photos, {}, &os, &sun_dirs);
+  std::vector<Observation> obs = CollectObservations(
+      r.grid, *r.caster, photos, options.config.albedo.observation, &os, &sun_dirs);
   Log(options, std::to_string(obs.size()) + " observations of " +
                    std::to_string(os.points_observed) + " grid points in " +
                    std::to_string(photos.size()) + " photos");
   std::vector<Lighting> lighting;
   for (const SlotSolve& ss : r.slots) lighting.push_back(ss.lighting);
-  AlbedoOptions ao;
-  r.albedo = SolveAlbedo(r.grid, r.hemisphere, *r.caster, lighting, obs, ao, &r.irradiance);
+  r.albedo_options = options.config.albedo;
+  r.albedo =
+      SolveAlbedo(r.grid, r.hemisphere, *r.caster, lighting, obs, r.albedo_options, &r.irradiance);
   Log(options, "pseudo-albedos: " + r.albedo.summary.BriefReport());
   return r;
 }
 
 SlotIrradiance IrradianceFor(const SolveResult& solved, const Lighting& lighting) {
-  const AlbedoOptions ao;
+  const AlbedoOptions& ao = solved.albedo_options;
   IrradianceOptions io = ao.irradiance;
   io.mesh = &solved.mesh;
   SlotIrradiance irr =

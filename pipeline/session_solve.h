@@ -14,6 +14,7 @@
 #include "calib/response.h"
 #include "core/mesh.h"
 #include "core/session.h"
+#include "pipeline/solve_config.h"
 #include "solve/albedo.h"
 #include "solve/environment.h"
 #include "solve/grid.h"
@@ -24,17 +25,11 @@
 
 namespace rouen {
 
-// 0.6 m between grid points, 1.5 m on a block named "plaza" (the ground around the building).
-GridOptions DefaultGridOptions();
-
 struct PipelineOptions {
   std::filesystem::path work_dir;         // calib/ is written here
   std::vector<int> exclude_albedo_slots;  // held-out slots: their architecture photos unused
-  bool quick = false;
-  // The surface grid the albedos are solved on, and the gathering pattern of its irradiance
-  // (both recorded in the scene, which rebuilds them from the model).
-  GridOptions grid = DefaultGridOptions();
-  HemisphereOptions hemisphere;
+  // Every choice of the calibration and the solve (recorded in the scene).
+  SolveConfig config = DefaultSolveConfig(false);
   // A response curve known from an earlier calibration: used instead of recovering one.
   std::optional<ResponseCurve> response;
   std::function<void(const std::string&)> log;  // progress lines
@@ -60,8 +55,12 @@ struct CalibResult {
 };
 
 // Response curve from the session's LDR brackets, then every bracket merged to radiance
-// (sky and aureole brackets of a slot merge together). Writes calib/response.json and
-// calib/hdr/<group>.exr. First checks every frame record (CheckSessionFrames); a frame whose
+// (sky and aureole brackets of a slot merge together). Writes calib/response.json,
+// calib/hdr/<group>.exr (RGB radiance), <group>.valid.png (nonzero where some frame was well
+// exposed) and, last,
+// calib/manifest.json with the hash of its inputs (the session's files, the response options):
+// when the manifest in the work folder has the same hash, the calibration is read back
+// instead of made again. First checks every frame record (CheckSessionFrames); a frame whose
 // image is not the size of its intrinsics is an error naming it.
 CalibResult CalibrateSession(const Session& session, const PipelineOptions& options);
 
@@ -98,6 +97,7 @@ struct SolveResult {
   std::vector<SlotSolve> slots;
   std::vector<SlotIrradiance> irradiance;  // per slot, with interreflection
   AlbedoResult albedo;
+  AlbedoOptions albedo_options;  // what the albedos were solved with (irradiance, bounces)
 };
 
 // Sun, sky and environment per slot; irradiance at the surface grid; pseudo-albedos from the
@@ -127,6 +127,11 @@ std::vector<uint8_t> SkyMaskFor(const Session& session, const HdrGroup& group,
 std::vector<SkySample> SlotSkySamples(const Session& session, const CalibResult& calib, int slot,
                                       const Eigen::Vector3d& sun_dir,
                                       std::string* sources = nullptr);
+
+// The session folder's files, one line each: relative path, size and modification time (the
+// journal holds each frame's sha256, and a file changed behind it changes its time). What a
+// stage's inputs hash covers of the session.
+std::string SessionFilesStamp(const Session& session);
 
 // Site of a session: the GPS fixes' mean when there are any, else session.json's site.
 // Throws rouen::Error naming frames.jsonl or session.json when it is outside core/limits.h's

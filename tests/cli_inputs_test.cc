@@ -215,7 +215,21 @@ TEST(CliInputs, RenderArgumentErrorsComeFirstAndNameTheOption) {
               {"missing", "does not exist"});
   ExpectError(RunRouen("solve " + Q(dir / "none") + " --out " + Q(dir / "s.scene")),
               {(dir / "none").string()});
-  EXPECT_EQ(Extra(dir, {"work"}), std::vector<std::string>{});
+  // A solve configuration is read before the session; a misspelt key is named.
+  WriteFileAtomic(dir / "solve.toml", "[sky_fit]\nnorm = 2\n");
+  ExpectError(RunRouen("solve " + Q(dir / "none") + " --out " + Q(dir / "s.scene") +
+                       " --config " + Q(dir / "solve.toml")),
+              {"solve.toml: sky_fit.norm is not a known key"});
+  ExpectError(RunRouen("solve --out " + Q(dir / "s.scene")), {"needs a SESSION folder"});
+  // --print-config shows every option with the file applied.
+  WriteFileAtomic(dir / "solve.toml", "[sky_fit]\nnorm_p = 2\n");
+  const Result printed =
+      RunRouen("solve --quick --print-config --config " + Q(dir / "solve.toml"));
+  EXPECT_EQ(printed.code, 0) << printed.out;
+  const nlohmann::json config = nlohmann::json::parse(printed.out);
+  EXPECT_EQ(config["sky_fit"]["norm_p"], 2.0);
+  EXPECT_EQ(config["response"]["max_brackets"], 6);
+  EXPECT_EQ(Extra(dir, {"work", "solve.toml"}), std::vector<std::string>{});
   fs::remove_all(dir);
 }
 

@@ -1,0 +1,342 @@
+#include "pipeline/solve_config.h"
+
+#include <toml++/toml.h>
+
+#include <cmath>
+#include <limits>
+#include <map>
+#include <set>
+#include <sstream>
+#include <utility>
+#include <vector>
+
+#include "core/error.h"
+#include "core/files.h"
+#include "core/mesh.h"
+
+namespace rouen {
+namespace {
+
+using nlohmann::json;
+
+// Reads the fields of one table strictly: each key known, of the right type, in range; the
+// keys not read are errors naming the table's path and what it accepts.
+class Fields {
+ public:
+  Fields(const json& j, std::string where, std::string path)
+      : j_(j), where_(std::move(where)), path_(std::move(path)) {
+    if (!j_.is_object()) Fail(path_.empty() ? "the configuration" : path_, "must be a table");
+  }
+  [[noreturn]] void Fail(const std::string& key, const std::string& what) const {
+    throw Error(where_ + ": " + key + " " + what);
+  }
+  std::string Path(const char* key) const { return path_.empty() ? key : path_ + "." + key; }
+  const json* Find(const char* key) {
+    known_.insert(key);
+    const auto it = j_.find(key);
+    return it == j_.end() ? nullptr : &*it;
+  }
+  void Number(const char* key, double* v, double lo, double hi) {
+    const json* n = Find(key);
+    if (!n) return;
+    if (!n->is_number() || !std::isfinite(n->get<double>()) || n->get<double>() < lo ||
+        n->get<double>() > hi)
+      Fail(Path(key), "must be a number within " + Range(lo, hi));
+    *v = n->get<double>();
+  }
+  void Int(const char* key, int* v, int lo, int hi) {
+    int64_t w = *v;
+    Int64(key, &w, lo, hi);
+    *v = static_cast<int>(w);
+  }
+  void Int64(const char* key, int64_t* v, int64_t lo, int64_t hi) {
+    const json* n = Find(key);
+    if (!n) return;
+    if (!n->is_number_integer() || n->get<int64_t>() < lo || n->get<int64_t>() > hi)
+      Fail(Path(key),
+           "must be an integer within " + std::to_string(lo) + ".." + std::to_string(hi));
+    *v = n->get<int64_t>();
+  }
+  void Seed(const char* key, uint64_t* v) {
+    int64_t w = static_cast<int64_t>(*v);
+    Int64(key, &w, 0, std::numeric_limits<int64_t>::max());
+    *v = static_cast<uint64_t>(w);
+  }
+  void Bool(const char* key, bool* v) {
+    const json* n = Find(key);
+    if (!n) return;
+    if (!n->is_boolean()) Fail(Path(key), "must be true or false");
+    *v = n->get<bool>();
+  }
+  template <typename E>
+  void Enum(const char* key, E* v, const std::vector<std::pair<const char*, E>>& names) {
+    const json* n = Find(key);
+    if (!n) return;
+    std::string list;
+    for (const auto& [name, e] : names) {
+      list += (list.empty() ? "" : ", ") + std::string(name);
+      if (n->is_string() && n->get<std::string>() == name) {
+        *v = e;
+        return;
+      }
+    }
+    Fail(Path(key), "must be one of " + list);
+  }
+  // A sub-table, or nullptr when absent.
+  const json* Table(const char* key) {
+    const json* n = Find(key);
+    if (n && !n->is_object()) Fail(Path(key), "must be a table");
+    return n;
+  }
+  void Finish() const {
+    for (const auto& [key, value] : j_.items()) {
+      if (known_.count(key)) continue;
+      std::string list;
+      for (const std::string& k : known_) list += (list.empty() ? "" : ", ") + k;
+      Fail(path_.empty() ? key : path_ + "." + key,
+           "is not a known key (" + (path_.empty() ? std::string("tables") : path_) +
+               " takes: " + list + ")");
+    }
+  }
+  const std::string& where() const { return where_; }
+
+ private:
+  static std::string Range(double lo, double hi) {
+    std::ostringstream os;
+    os << lo << ".." << hi;
+    return os.str();
+  }
+  const json& j_;
+  std::string where_, path_;
+  std::set<std::string> known_;
+};
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+const std::vector<std::pair<const char*, SkyWeighting>> kWeightings = {
+    {"paper", SkyWeighting::kPaper}, {"relative", SkyWeighting::kRelative}};
+const std::vector<std::pair<const char*, SkyModelKind>> kSkyModels = {
+    {"seven", SkyModelKind::kSevenParam},
+    {"perez5", SkyModelKind::kPerez5},
+    {"cie", SkyModelKind::kCie}};
+const std::vector<std::pair<const char*, RobustLoss>> kLosses = {
+    {"none", RobustLoss::kNone}, {"huber", RobustLoss::kHuber}, {"paper", RobustLoss::kPaper}};
+const std::vector<std::pair<const char*, IrradianceMethod>> kMethods = {
+    {"monte_carlo", IrradianceMethod::kMonteCarlo}, {"vector_flux", IrradianceMethod::kVectorFlux}};
+const std::vector<std::pair<const char*, GridSubdivision>> kSubdivisions = {
+    {"longest_edge", GridSubdivision::kLongestEdge},
+    {"equivalent_area", GridSubdivision::kEquivalentArea}};
+
+template <typename E>
+const char* NameOf(E v, const std::vector<std::pair<const char*, E>>& names) {
+  for (const auto& [name, e] : names)
+    if (e == v) return name;
+  return "?";
+}
+
+}  // namespace
+
+void SolveConfig::Validate() const {
+  grid.Validate();
+  hemisphere.Validate();
+  if (response_max_brackets < 1 || response_max_brackets > 1000)
+    throw Error("response.max_brackets must be within 1..1000");
+  sky_fit.Validate();
+  environment.Validate();
+  // The model the vector-flux irradiance needs is the pipeline's to give at solve time.
+  static const Mesh kNoModelYet;
+  AlbedoOptions a = albedo;
+  if (!a.irradiance.mesh) a.irradiance.mesh = &kNoModelYet;
+  a.Validate();
+}
+
+SolveConfig DefaultSolveConfig(bool quick) {
+  SolveConfig c;
+  c.grid.spacing_m = 0.6;
+  c.grid.block_spacing_m["plaza"] = 1.5;
+  c.sky_fit.weighting = SkyWeighting::kRelative;
+  c.sky_fit.norm_p = 1;
+  if (quick) {
+    c.response_max_brackets = 6;
+    c.environment.pixel_stride = 2;
+  }
+  return c;
+}
+
+json SolveConfigJson(const SolveConfig& c) {
+  const AlbedoOptions& a = c.albedo;
+  const IrradianceOptions& ir = a.irradiance;
+  const ObservationOptions& ob = a.observation;
+  return {{"grid",
+           {{"spacing_m", c.grid.spacing_m},
+            {"block_spacing_m", c.grid.block_spacing_m},
+            {"subdivision", NameOf(c.grid.subdivision, kSubdivisions)},
+            {"max_subdivision", c.grid.max_subdivision}}},
+          {"hemisphere", {{"directions", c.hemisphere.directions}, {"seed", c.hemisphere.seed}}},
+          {"response", {{"max_brackets", c.response_max_brackets}}},
+          {"sky_fit",
+           {{"model", NameOf(c.sky_fit.model, kSkyModels)},
+            {"weighting", NameOf(c.sky_fit.weighting, kWeightings)},
+            {"norm_p", c.sky_fit.norm_p},
+            {"norm_eps", c.sky_fit.norm_eps},
+            {"max_iterations", c.sky_fit.max_iterations},
+            {"multiple_starts", c.sky_fit.multiple_starts},
+            {"random_starts", c.sky_fit.random_starts},
+            {"seed", c.sky_fit.seed}}},
+          {"environment",
+           {{"bands_below", c.environment.bands_below},
+            {"bands_above", c.environment.bands_above},
+            {"sectors", c.environment.sectors},
+            {"sun_exclusion_deg", c.environment.sun_exclusion_deg},
+            {"pixel_stride", c.environment.pixel_stride},
+            {"min_region_pixels", c.environment.min_region_pixels},
+            {"sky_fill_samples", c.environment.sky_fill_samples},
+            {"layer_merge_m", c.environment.layer_merge_m}}},
+          {"albedo",
+           {{"loss", NameOf(a.loss, kLosses)},
+            {"huber_k", a.huber_k},
+            {"min_scale", a.min_scale},
+            {"irls_iterations", a.irls_iterations},
+            {"outer_iterations", a.outer_iterations},
+            {"bounces", a.bounces},
+            {"sunlit_threshold", a.sunlit_threshold},
+            {"never_shadowed_prior", a.never_shadowed_prior},
+            {"ratio_prior", a.ratio_prior},
+            {"fill_radius_m", a.fill_radius_m},
+            {"slot_weighting", a.slot_weighting},
+            {"observation",
+             {{"margin_px", ob.margin_px},
+              {"occlusion_tolerance", ob.occlusion_tolerance},
+              {"min_cos_view", ob.min_cos_view},
+              {"check_footprint", ob.check_footprint},
+              {"nearest_pixel_fallback", ob.nearest_pixel_fallback},
+              {"plane_tolerance_m", ob.plane_tolerance_m}}},
+            {"irradiance",
+             {{"method", NameOf(ir.method, kMethods)},
+              {"sun_samples", ir.sun_samples},
+              {"ground_shadow", ir.ground_shadow},
+              {"sky_tolerance", ir.vector_flux.sky_tolerance},
+              {"sky_tree_levels", ir.vector_flux.sky_tree_levels}}}}}};
+}
+
+SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& where) {
+  Fields root(j, where, "");
+  if (const json* t = root.Table("grid")) {
+    Fields f(*t, where, "grid");
+    f.Number("spacing_m", &c.grid.spacing_m, 0.01, 100);
+    if (const json* b = f.Table("block_spacing_m")) {
+      c.grid.block_spacing_m.clear();
+      for (const auto& [block, v] : b->items()) {
+        if (!v.is_number() || !(v.get<double>() >= 0.01 && v.get<double>() <= 100))
+          f.Fail("grid.block_spacing_m." + block, "must be a number within 0.01..100");
+        c.grid.block_spacing_m[block] = v.get<double>();
+      }
+    }
+    f.Enum("subdivision", &c.grid.subdivision, kSubdivisions);
+    f.Int("max_subdivision", &c.grid.max_subdivision, 1, 4096);
+    f.Finish();
+  }
+  if (const json* t = root.Table("hemisphere")) {
+    Fields f(*t, where, "hemisphere");
+    f.Int("directions", &c.hemisphere.directions, 1, 65536);
+    f.Seed("seed", &c.hemisphere.seed);
+    f.Finish();
+  }
+  if (const json* t = root.Table("response")) {
+    Fields f(*t, where, "response");
+    f.Int("max_brackets", &c.response_max_brackets, 1, 1000);
+    f.Finish();
+  }
+  if (const json* t = root.Table("sky_fit")) {
+    Fields f(*t, where, "sky_fit");
+    f.Enum("model", &c.sky_fit.model, kSkyModels);
+    f.Enum("weighting", &c.sky_fit.weighting, kWeightings);
+    f.Number("norm_p", &c.sky_fit.norm_p, 1, 16);
+    f.Number("norm_eps", &c.sky_fit.norm_eps, 1e-12, 1);
+    f.Int("max_iterations", &c.sky_fit.max_iterations, 1, 100000);
+    f.Bool("multiple_starts", &c.sky_fit.multiple_starts);
+    f.Int("random_starts", &c.sky_fit.random_starts, 0, 10000);
+    f.Seed("seed", &c.sky_fit.seed);
+    f.Finish();
+  }
+  if (const json* t = root.Table("environment")) {
+    Fields f(*t, where, "environment");
+    EnvOptions& e = c.environment;
+    f.Int("bands_below", &e.bands_below, 1, 180);
+    f.Int("bands_above", &e.bands_above, 1, 180);
+    f.Int("sectors", &e.sectors, 1, 720);
+    f.Number("sun_exclusion_deg", &e.sun_exclusion_deg, 0, 90);
+    f.Int("pixel_stride", &e.pixel_stride, 1, 64);
+    f.Int("min_region_pixels", &e.min_region_pixels, 1, 1000000);
+    f.Int("sky_fill_samples", &e.sky_fill_samples, 1, 1000);
+    f.Number("layer_merge_m", &e.layer_merge_m, 0, 1000);
+    f.Finish();
+  }
+  if (const json* t = root.Table("albedo")) {
+    Fields f(*t, where, "albedo");
+    AlbedoOptions& a = c.albedo;
+    f.Enum("loss", &a.loss, kLosses);
+    f.Number("huber_k", &a.huber_k, 1e-6, 100);
+    f.Number("min_scale", &a.min_scale, 1e-9, 10);
+    f.Int("irls_iterations", &a.irls_iterations, 1, 1000);
+    f.Int("outer_iterations", &a.outer_iterations, 1, 100);
+    f.Int("bounces", &a.bounces, 0, 16);
+    f.Number("sunlit_threshold", &a.sunlit_threshold, 0, kInf);
+    f.Number("never_shadowed_prior", &a.never_shadowed_prior, 0, kInf);
+    f.Number("ratio_prior", &a.ratio_prior, 0, kInf);
+    f.Number("fill_radius_m", &a.fill_radius_m, 0, 1000);
+    f.Bool("slot_weighting", &a.slot_weighting);
+    if (const json* o = f.Table("observation")) {
+      Fields g(*o, where, "albedo.observation");
+      ObservationOptions& ob = a.observation;
+      g.Number("margin_px", &ob.margin_px, 0, 1000);
+      g.Number("occlusion_tolerance", &ob.occlusion_tolerance, 0, 0.5);
+      g.Number("min_cos_view", &ob.min_cos_view, 0, 1);
+      g.Bool("check_footprint", &ob.check_footprint);
+      g.Bool("nearest_pixel_fallback", &ob.nearest_pixel_fallback);
+      g.Number("plane_tolerance_m", &ob.plane_tolerance_m, 0, 100);
+      g.Finish();
+    }
+    if (const json* o = f.Table("irradiance")) {
+      Fields g(*o, where, "albedo.irradiance");
+      IrradianceOptions& ir = a.irradiance;
+      g.Enum("method", &ir.method, kMethods);
+      g.Int("sun_samples", &ir.sun_samples, 1, 4096);
+      g.Bool("ground_shadow", &ir.ground_shadow);
+      g.Number("sky_tolerance", &ir.vector_flux.sky_tolerance, 1e-6, 10);
+      g.Int("sky_tree_levels", &ir.vector_flux.sky_tree_levels, 0, 12);
+      g.Finish();
+    }
+    f.Finish();
+  }
+  root.Finish();
+  try {
+    c.Validate();
+  } catch (const Error& e) {
+    throw Error(where + ": " + e.what());
+  }
+  return c;
+}
+
+SolveConfig ReadSolveConfigFile(const std::string& path, const SolveConfig& base) {
+  toml::table root;
+  try {
+    root = toml::parse(ReadFileToString(path), path);
+  } catch (const toml::parse_error& e) {
+    std::ostringstream os;
+    os << path << ":" << e.source().begin.line << ": " << e.description();
+    throw Error(os.str());
+  }
+  // TOML to JSON through toml++'s own JSON writer, then the one strict reader.
+  std::ostringstream text;
+  text << toml::json_formatter{root};
+  json j;
+  try {
+    j = json::parse(text.str());
+  } catch (const json::exception&) {
+    throw Error(path + ": every value must be a finite number, a string, a boolean or a table");
+  }
+  return ApplySolveConfig(j, base, path);
+}
+
+}  // namespace rouen

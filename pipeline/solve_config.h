@@ -1,0 +1,45 @@
+// Every choice a solve makes, typed, with its default: `rouen solve --config solve.toml`
+// overrides any of them (strict keys: a misspelt key is an error, not a silent default), and
+// the scene records them all, so render and validate use what the solve used.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "solve/albedo.h"
+#include "solve/environment.h"
+#include "solve/grid.h"
+#include "solve/irradiance.h"
+#include "solve/sky_fit.h"
+
+namespace rouen {
+
+struct SolveConfig {
+  // The surface grid the albedos are solved on; 0.6 m, 1.5 m on a block named "plaza".
+  GridOptions grid;
+  HemisphereOptions hemisphere;  // the irradiance's gathering pattern over that grid
+  // LDR brackets the response curve is recovered from, spread evenly over the session.
+  int response_max_brackets = 12;
+  // §3.2. Relative residuals (sigma = y) fit the physically based sky better than eq. 10's
+  // sigma = y / log y, and their L1 norm keeps the horizon and inner aureole, which eq. 9
+  // cannot follow exactly, from pulling the rest of the fit (bench/sky_bench.cc).
+  SkyFitOptions sky_fit;
+  EnvOptions environment;  // §3.3
+  AlbedoOptions albedo;    // §4, with the irradiance options
+  void Validate() const;   // throws rouen::Error naming the bad field
+};
+
+// The defaults; `quick` halves the work where it costs least accuracy (6 response brackets,
+// every second panorama pixel).
+SolveConfig DefaultSolveConfig(bool quick);
+
+// Every field, keyed as in solve.toml.
+nlohmann::json SolveConfigJson(const SolveConfig& config);
+// `base` with the fields `j` gives replaced. Unknown keys, wrong types and out-of-range values
+// throw rouen::Error naming `where` and the key path (e.g. "solve.toml: sky_fit.norm_p").
+SolveConfig ApplySolveConfig(const nlohmann::json& j, SolveConfig base, const std::string& where);
+// The same from a TOML file (tables as in SolveConfigJson: [grid], [grid.block_spacing_m],
+// [hemisphere], [response], [sky_fit], [environment], [albedo], [albedo.irradiance]).
+SolveConfig ReadSolveConfigFile(const std::string& path, const SolveConfig& base);
+
+}  // namespace rouen

@@ -1,0 +1,124 @@
+#include "pipeline/solve_config.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <string>
+
+#include "core/error.h"
+#include "core/files.h"
+
+namespace rouen {
+namespace {
+
+using nlohmann::json;
+
+std::string ErrorOf(const json& j) {
+  try {
+    ApplySolveConfig(j, DefaultSolveConfig(false), "solve.toml");
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
+  SolveConfig c = DefaultSolveConfig(true);
+  c.grid.block_spacing_m["ground"] = 2.5;
+  c.sky_fit.weighting = SkyWeighting::kPaper;
+  c.sky_fit.norm_p = 2;
+  c.environment.sectors = 36;
+  c.albedo.loss = RobustLoss::kPaper;
+  c.albedo.irradiance.method = IrradianceMethod::kVectorFlux;
+  c.albedo.observation.check_footprint = false;
+  const json j = SolveConfigJson(c);
+  const SolveConfig back = ApplySolveConfig(j, DefaultSolveConfig(false), "x");
+  EXPECT_EQ(SolveConfigJson(back), j);
+  EXPECT_EQ(back.response_max_brackets, 6);
+  EXPECT_EQ(back.environment.pixel_stride, 2);
+  EXPECT_EQ(back.albedo.irradiance.method, IrradianceMethod::kVectorFlux);
+}
+
+TEST(SolveConfigTest, DefaultsAndQuick) {
+  const SolveConfig full = DefaultSolveConfig(false), quick = DefaultSolveConfig(true);
+  EXPECT_EQ(full.response_max_brackets, 12);
+  EXPECT_EQ(quick.response_max_brackets, 6);
+  EXPECT_EQ(full.environment.pixel_stride, 1);
+  EXPECT_EQ(quick.environment.pixel_stride, 2);
+  EXPECT_EQ(full.sky_fit.weighting, SkyWeighting::kRelative);
+  EXPECT_EQ(full.sky_fit.norm_p, 1);
+  EXPECT_EQ(full.grid.SpacingFor("plaza"), 1.5);
+  EXPECT_EQ(full.grid.SpacingFor("tower"), 0.6);
+}
+
+TEST(SolveConfigTest, AFileChangesOnlyWhatItNames) {
+  const SolveConfig c =
+      ApplySolveConfig(json::parse(R"({"sky_fit": {"norm_p": 2}})"), DefaultSolveConfig(true), "x");
+  EXPECT_EQ(c.sky_fit.norm_p, 2);
+  json expected = SolveConfigJson(DefaultSolveConfig(true));
+  expected["sky_fit"]["norm_p"] = 2.0;
+  EXPECT_EQ(SolveConfigJson(c), expected);
+}
+
+TEST(SolveConfigTest, StrictKeysTypesAndRanges) {
+  EXPECT_NE(ErrorOf(json::parse(R"({"skyfit": {}})")).find("solve.toml: skyfit is not a known key"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(json::parse(R"({"sky_fit": {"norm": 2}})"))
+                .find("solve.toml: sky_fit.norm is not a known key (sky_fit takes: "),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(json::parse(R"({"sky_fit": {"norm_p": 0.5}})"))
+                .find("sky_fit.norm_p must be a number within 1..16"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(json::parse(R"({"sky_fit": {"weighting": "absolute"}})"))
+                .find("sky_fit.weighting must be one of paper, relative"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(json::parse(R"({"hemisphere": {"directions": 2.5}})"))
+                .find("hemisphere.directions must be an integer"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(json::parse(R"({"albedo": {"irradiance": {"ground_shadow": 1}}})"))
+                .find("albedo.irradiance.ground_shadow must be true or false"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(json::parse(R"({"grid": {"block_spacing_m": {"plaza": -1}}})"))
+                .find("grid.block_spacing_m.plaza must be a number"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(json::parse(R"({"grid": 3})")).find("grid must be a table"), std::string::npos);
+}
+
+TEST(SolveConfigTest, TomlFile) {
+  namespace fs = std::filesystem;
+  const fs::path d = fs::temp_directory_path() / ("rouen_solve_config_" + std::to_string(getpid()));
+  fs::create_directories(d);
+  WriteFileAtomic(d / "solve.toml",
+                  "# a user's overrides\n[sky_fit]\nnorm_p = 2\nweighting = \"paper\"\n"
+                  "[grid.block_spacing_m]\nground = 2\n[albedo.irradiance]\nmethod = "
+                  "\"vector_flux\"\n");
+  const SolveConfig c = ReadSolveConfigFile((d / "solve.toml").string(), DefaultSolveConfig(false));
+  EXPECT_EQ(c.sky_fit.norm_p, 2);
+  EXPECT_EQ(c.sky_fit.weighting, SkyWeighting::kPaper);
+  EXPECT_EQ(c.grid.SpacingFor("ground"), 2);
+  EXPECT_EQ(c.grid.SpacingFor("plaza"), 0.6);  // the table replaces the defaults' entries
+  EXPECT_EQ(c.albedo.irradiance.method, IrradianceMethod::kVectorFlux);
+  WriteFileAtomic(d / "bad.toml", "[sky_fit]\nnorm_p = = 2\n");
+  try {
+    ReadSolveConfigFile((d / "bad.toml").string(), DefaultSolveConfig(false));
+    ADD_FAILURE();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("bad.toml:2"), std::string::npos) << e.what();
+  }
+  WriteFileAtomic(d / "typo.toml", "[enviroment]\npixel_stride = 2\n");
+  try {
+    ReadSolveConfigFile((d / "typo.toml").string(), DefaultSolveConfig(false));
+    ADD_FAILURE();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("typo.toml: enviroment is not a known key"),
+              std::string::npos)
+        << e.what();
+  }
+  WriteFileAtomic(d / "nan.toml", "[sky_fit]\nnorm_p = nan\n");
+  EXPECT_THROW(ReadSolveConfigFile((d / "nan.toml").string(), DefaultSolveConfig(false)), Error);
+  fs::remove_all(d);
+}
+
+}  // namespace
+}  // namespace rouen
