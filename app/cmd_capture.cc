@@ -1,17 +1,16 @@
 // rouen capture: run a rig's capture plan into a session folder.
-#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
 
 #include "app/commands.h"
 #include "app/progress.h"
+#include "app/stop_signal.h"
 #include "capture/controller.h"
+#include "capture/devices/devices.h"
 #include "capture/rig.h"
 #include "core/error.h"
-#include "core/files.h"
-#include "core/lens.h"
-#include "core/mesh.h"
+#include "pipeline/capture_session.h"
 
 namespace rouen {
 namespace {
@@ -45,7 +44,19 @@ void Run(const CaptureArgs& a) {
   opts.resume = a.resume;
   opts.new_slot = a.new_slot;
   opts.from_session = a.from;
-  CaptureSummary s = CaptureToSession(rig, dev, a.out, opts, /*show_progress=*/true);
+  ProgressLine line(true);
+  opts.progress = CaptureProgressPrinter(&line);
+  // Ctrl-C and SIGTERM stop the capture after the frame in flight; what is written stays.
+  StopOnSignals stop;
+  opts.stop = stop.flag();
+  CaptureSummary s;
+  try {
+    s = CaptureToSession(rig, dev, a.out, opts);
+  } catch (...) {
+    line.Done();
+    throw;
+  }
+  line.Done();
   std::fprintf(stderr, "\n%s: %d frames in %d slot(s)%s\n", a.out.c_str(), s.frames, s.slots_done,
                s.stopped ? " (stopped; run again with --resume to complete)" : "");
   for (const std::string& w : s.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
@@ -53,150 +64,20 @@ void Run(const CaptureArgs& a) {
 
 }  // namespace
 
-namespace {
-std::atomic<bool> g_stop{false};
-void OnSignal(int) { g_stop.store(true); }
-}  // namespace
-
-CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
-                                const std::filesystem::path& out, const CaptureSessionOptions& opts,
-                                bool show_progress) {
-  namespace fs = std::filesystem;
-  const bool field = !rig.simulated() && rig.kind != "replay";
-  if (opts.new_slot && !field)
-    throw Error(
-        "--new-slot adds a time of day to a field session; simulated and replay rigs "
-        "capture all their slots in one run");
-  if (opts.new_slot && !fs::exists(out / "session.json"))
-    throw Error(out.string() + ": --new-slot needs an existing session (run without it first)");
-  // The recorded session of a replay, read once for its site, notes and model.
-  std::optional<Session> src;
-  if (!opts.from_session.empty()) src.emplace(Session::Load(opts.from_session));
-  std::optional<SessionWriter> writer;
-  if ((opts.resume || opts.new_slot) && fs::exists(out / "session.json")) {
-    writer.emplace(SessionWriter::Resume(out));
-    if (field) {
-      // A field run is one slot: --resume continues the session's last slot, --new-slot
-      // starts the next one now.
-      int last = -1;
-      for (const FrameRecord& f : writer->frames()) last = std::max(last, f.slot);
-      dev.plan.first_slot = opts.new_slot ? last + 1 : std::max(last, 0);
-      if (opts.new_slot) {
-        SessionInfo info = writer->info();
-        if (info.extra.contains("plan") && info.extra["plan"].contains("slots"))
-          info.extra["plan"]["slots"].push_back(dev.plan.slots.front().Iso8601(9));
-        writer->UpdateInfo(info);
-      }
+std::function<void(const CaptureProgress&)> CaptureProgressPrinter(ProgressLine* line) {
+  return [line](const CaptureProgress& p) {
+    if (!p.event.empty()) {
+      line->Message(p.event);
+      return;
     }
-  } else {
-    SessionInfo info;
-    info.site = rig.site;
-    info.site_source = "rig";
-    info.rig = fs::path(rig.path).filename().string();
-    info.created_utc = NowUtc().Iso8601(3);
-    info.extra["plan"] = PlanToJson(dev.plan);
-    info.extra["nd_filters"] = {{"sun", rig.sun_nd_density_rgb}};
-    if (rig.heldout_slot >= 0) info.extra["heldout_slot"] = rig.heldout_slot;
-    if (src) {
-      info.site = src->info().site;
-      info.site_source = src->info().site_source;
-      info.clock_offset_s = src->info().clock_offset_s;
-      info.notes = "replayed from " + opts.from_session.string();
-      for (const char* key : {"heldout_slot", "nd_filters", "vignetting"})
-        if (src->info().extra.contains(key)) info.extra[key] = src->info().extra[key];
-    }
-    writer.emplace(SessionWriter::Create(out, info));
-  }
-  // A lens file's vignetting model travels with the session too, keyed by the frames' device
-  // and target (app/pipeline.cc divides it out); one already there (e.g. from `rouen calib
-  // vignetting --session`) is kept.
-  if (rig.kind != "replay" && dev.camera) {
-    SessionInfo info = writer->info();
-    bool changed = false;
-    for (Target t : dev.plan.targets) {
-      const std::string path = rig.LensPath(t);
-      if (path.empty()) continue;
-      const std::optional<VignettingModel> v = ReadLensFile(path).vignetting;
-      const std::string key = dev.camera->Id() + "/" + TargetName(t);
-      if (!v || (info.extra.contains("vignetting") && info.extra["vignetting"].contains(key)))
-        continue;
-      info.extra["vignetting"][key] = *v;
-      changed = true;
-    }
-    if (changed) writer->UpdateInfo(info);
-  }
-  // The building model travels with the session (also after a crash before it was written).
-  if (writer->info().model.empty() && (dev.model || (src && !src->info().model.empty()))) {
-    if (dev.model) {
-      WriteObj((out / "model.obj").string(), *dev.model);
-    } else {
-      WriteFileAtomic(out / "model.obj",
-                      ReadFileToString(ResolveInside(src->dir(), src->info().model)));
-    }
-    SessionInfo info = writer->info();
-    info.model = "model.obj";
-    writer->UpdateInfo(info);
-  }
-  DeviceLossOptions loss;
-  loss.policy = rig.on_device_lost;
-  loss.reconnect_timeout_s = rig.reconnect_timeout_s;
-  CaptureController controller(dev.Devices(), dev.plan, writer->info().site, loss);
-  g_stop.store(false);
-  auto old_int = std::signal(SIGINT, OnSignal);
-  auto old_term = std::signal(SIGTERM, OnSignal);
-  ProgressLine line(show_progress);
-  // Field rigs: report USB cameras and receivers pulled out or plugged back in as it happens.
-  std::shared_ptr<void> usb_watch;
-  if (!rig.simulated() && rig.kind != "replay")
-    usb_watch = WatchUsb([&line](const std::string& m) { line.Message(m); });
-  CaptureSummary s;
-  try {
-    s = controller.Run(
-        *writer,
-        [&](const CaptureProgress& p) {
-          if (!p.event.empty()) {
-            line.Message(p.event);
-            return;
-          }
-          char buf[256];
-          std::snprintf(
-              buf, sizeof buf,
-              "slot %d/%d  %-12s view %d  frames %5d  exposure %9.6f s  saturated %5.2f%%  "
-              "GPS %s",
-              p.slot + 1, p.slots, TargetName(p.target), p.view, p.frames_total, p.exposure_s,
-              100 * p.saturated_fraction, p.gps_status.c_str());
-          line.Update(buf);
-        },
-        &g_stop);
-  } catch (const Error& e) {
-    // A full disk, a read-only disk: everything journalled so far is whole and stays.
-    std::signal(SIGINT, old_int);
-    std::signal(SIGTERM, old_term);
-    line.Done();
-    throw Error(std::string(e.what()) + "\n" + out.string() + ": the " +
-                std::to_string(writer->frames().size()) +
-                " frames journalled so far are kept; once the problem is fixed, continue with "
-                "`rouen capture --rig ... --out " +
-                out.string() + " --resume`");
-  }
-  usb_watch.reset();
-  std::signal(SIGINT, old_int);
-  std::signal(SIGTERM, old_term);
-  line.Done();
-  // The site actually used: the GPS fix if one came, else the rig's fallback (stated).
-  SessionInfo info = writer->info();
-  for (const FrameRecord& f : writer->frames()) {
-    if (f.gps && f.gps->valid()) {
-      info.site = {f.gps->lat_deg, f.gps->lon_deg, f.gps->height_m};
-      info.site_source = "gps";
-    }
-  }
-  if (info.site_source != "gps")
-    s.warnings.push_back("no GPS fix: sun positions use the rig's fallback site (" +
-                         std::to_string(info.site.lat_deg) + ", " +
-                         std::to_string(info.site.lon_deg) + ")");
-  writer->UpdateInfo(info);
-  return s;
+    char buf[256];
+    std::snprintf(buf, sizeof buf,
+                  "slot %d/%d  %-12s view %d  frames %5d  exposure %9.6f s  saturated %5.2f%%  "
+                  "GPS %s",
+                  p.slot + 1, p.slots, TargetName(p.target), p.view, p.frames_total, p.exposure_s,
+                  100 * p.saturated_fraction, p.gps_status.c_str());
+    line->Update(buf);
+  };
 }
 
 void RegisterCapture(CLI::App& app) {

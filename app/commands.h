@@ -27,21 +27,14 @@ void RegisterSky(CLI::App& app);     // rouen sky fit / rouen sky render
 #include <vector>
 
 #include "capture/controller.h"
-#include "capture/devices/devices.h"
-#include "capture/rig.h"
 
 namespace rouen {
 
-struct CaptureSessionOptions {
-  bool resume = false;
-  bool new_slot = false;  // field rigs: add this run as a new time-of-day slot to the session
-  std::filesystem::path from_session;  // replay source
-};
-// Creates (or resumes) a session folder and runs the plan with the rig's devices. Installs a
-// SIGINT/SIGTERM handler for the duration so Ctrl-C stops cleanly after the frame in flight.
-CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
-                                const std::filesystem::path& out, const CaptureSessionOptions& opts,
-                                bool show_progress);
+class ProgressLine;
+// A capture's progress on `line` (slot, target, view, frames, exposure, saturated fraction,
+// GPS status) and its events on lines of their own: CaptureSessionOptions::progress for
+// `rouen capture` and `rouen demo`.
+std::function<void(const CaptureProgress&)> CaptureProgressPrinter(ProgressLine* line);
 
 }  // namespace rouen
 
