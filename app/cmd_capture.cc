@@ -1,4 +1,5 @@
 // rouen capture: run a rig's capture plan into a session folder.
+#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -31,6 +32,32 @@ void PromptOperator(const OperatorRequest& r) {
         "when the camera is aimed by other means");
 }
 
+// A word of a shell command line, quoted when it holds more than plain path characters.
+std::string ShellWord(const std::string& w) {
+  const char* plain = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789_-./:=+,@%";
+  if (!w.empty() && w.find_first_not_of(plain) == std::string::npos) return w;
+  std::string q = "'";
+  for (char c : w) {
+    if (c == '\'') {
+      q += "'\\''";
+    } else {
+      q += c;
+    }
+  }
+  return q + "'";
+}
+
+// The command that continues this capture: the same rig, folder and options, with --resume
+// (after --new-slot too: the new slot is the session's last, which --resume continues).
+std::string ResumeCommand(const CaptureArgs& a) {
+  std::string c = "rouen capture --rig " + ShellWord(a.rig) + " --out " + ShellWord(a.out);
+  if (!a.from.empty()) c += " --from " + ShellWord(a.from);
+  if (a.target != "all") c += " --target " + a.target;
+  if (a.quick) c += " --quick";
+  if (a.no_prompt) c += " --no-prompt";
+  return c + " --resume";
+}
+
 void Run(const CaptureArgs& a) {
   RigConfig rig = LoadRig(a.rig);
   if (a.quick) rig.quick = true;
@@ -49,7 +76,7 @@ void Run(const CaptureArgs& a) {
   // Ctrl-C and SIGTERM stop the capture after the frame in flight; what is written stays.
   StopOnSignals stop;
   opts.stop = stop.flag();
-  CaptureSummary s;
+  CaptureSessionSummary s;
   try {
     s = CaptureToSession(rig, dev, a.out, opts);
   } catch (...) {
@@ -57,9 +84,33 @@ void Run(const CaptureArgs& a) {
     throw;
   }
   line.Done();
-  std::fprintf(stderr, "\n%s: %d frames in %d slot(s)%s\n", a.out.c_str(), s.frames, s.slots_done,
-               s.stopped ? " (stopped; run again with --resume to complete)" : "");
-  for (const std::string& w : s.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  if (s.already_complete) {
+    std::fprintf(stderr,
+                 "%s: the session is complete (%d frames; all %d brackets of the plan are "
+                 "journalled): nothing to capture, nothing changed\n",
+                 a.out.c_str(), s.frames_total, s.brackets_planned);
+    return;
+  }
+  const CaptureSummary& c = s.capture;
+  std::fprintf(stderr, "\n%s: %d frames in %d slot(s)\n", a.out.c_str(), c.frames, c.slots_done);
+  for (const std::string& w : c.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  if (!c.stopped) return;
+  // Stopped: what of the plan is left, and the command that captures it.
+  const int sig = stop.signal();
+  const std::string why = sig == SIGINT    ? "stopped by Ctrl-C (SIGINT)"
+                          : sig == SIGTERM ? "stopped by SIGTERM"
+                          : c.camera_lost  ? "stopped: the camera was lost"
+                                           : "stopped";
+  std::string next;
+  if (!s.brackets_left.empty()) next = " (next: " + s.brackets_left.front() + ")";
+  std::fprintf(stderr,
+               "%s: %s with %d frames journalled; left of the plan: %zu of %d brackets in %d "
+               "slot(s)%s (frames per bracket depend on the light)\n"
+               "continue with:\n  %s\n",
+               a.out.c_str(), why.c_str(), s.frames_total, s.brackets_left.size(),
+               s.brackets_planned, s.slots_left, next.c_str(), ResumeCommand(a).c_str());
+  // A signal ends the process as a shell expects of one: 128 + the signal (130, 143).
+  if (sig != 0) throw ExitStatus{128 + sig};
 }
 
 }  // namespace
@@ -98,8 +149,12 @@ void RegisterCapture(CLI::App& app) {
       "current exposure, saturated fraction and GPS status. Without a GPS fix the rig's [site]\n"
       "is used (stated in session.json). If the camera is unplugged the rig's [capture]\n"
       "on_device_lost decides: stop, or reconnect (plug it back in; the bracket is redone).\n"
-      "Ctrl-C stops after the frame in flight and keeps everything written; --resume continues\n"
-      "an interrupted session. `rouen devices` lists cameras and GPS receivers.\n"
+      "Ctrl-C (or SIGTERM) stops after the frame in flight and keeps everything written, says\n"
+      "how many brackets of the plan are left and the command that continues, and exits 130\n"
+      "(SIGTERM: 143). --resume continues an interrupted session: the folder must exist; a\n"
+      "session whose plan is complete is left untouched (exit 0). A session is written by one\n"
+      "capture at a time (a lock): a second one is refused. `rouen devices` lists cameras and\n"
+      "GPS receivers.\n"
       "Examples:\n"
       "  rouen capture --rig rigs/uvc-webcam.toml --out sessions/rouen-0930\n"
       "  rouen capture --rig rigs/uvc-webcam.toml --out sessions/rouen-0930 --resume\n"

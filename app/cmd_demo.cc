@@ -100,7 +100,7 @@ void Run(const DemoArgs& a) {
     StopOnSignals stop;
     capture.stop = stop.flag();
     try {
-      cap = CaptureToSession(rig, dev, out / "session", capture);
+      cap = CaptureToSession(rig, dev, out / "session", capture).capture;
     } catch (...) {
       line.Done();
       throw;

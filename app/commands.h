@@ -5,6 +5,13 @@
 
 namespace rouen {
 
+// Thrown by a command that has said what it had to say and ends the process with `code`
+// instead of 0 (rouen capture stopped by a signal: 128 + the signal; rouen status: 2 when the
+// session cannot be solved). main returns the code.
+struct ExitStatus {
+  int code = 1;
+};
+
 void RegisterSun(CLI::App& app);
 void RegisterCapture(CLI::App& app);
 void RegisterCalib(CLI::App& app);               // rouen calib response

@@ -30,6 +30,8 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
+  } catch (const rouen::ExitStatus& e) {
+    return e.code;
   } catch (const rouen::Error& e) {
     std::fprintf(stderr, "rouen: error: %s\n", e.what());
     return 1;

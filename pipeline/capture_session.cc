@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <memory>
 #include <optional>
+#include <set>
 
 #include "core/error.h"
 #include "core/files.h"
@@ -11,12 +12,62 @@
 #include "core/session.h"
 
 namespace rouen {
+namespace {
 
-CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
-                                const std::filesystem::path& out,
-                                const CaptureSessionOptions& opts) {
+struct PlannedGroup {
+  std::string name;  // GroupName(slot, target, view)
+  int slot = 0;
+};
+
+// The brackets the plan captures, in the controller's order: slot, target, view.
+std::vector<PlannedGroup> PlannedGroups(const CapturePlan& plan, const Camera* camera) {
+  std::vector<PlannedGroup> out;
+  for (int k = 0; k < static_cast<int>(plan.slots.size()); ++k) {
+    const int s = plan.first_slot + k;
+    for (Target t : plan.targets) {
+      const int views = camera ? std::max(1, camera->ViewCount(t)) : 1;
+      for (int v = 0; v < views; ++v) out.push_back({GroupName(s, t, v), s});
+    }
+  }
+  return out;
+}
+
+// What a --resume would capture (CaptureController::Run): the planned brackets not in the
+// journal and, unless the last run finished, the one journalled last (it may be partial).
+void CountLeft(const std::vector<PlannedGroup>& planned, const std::vector<FrameRecord>& frames,
+               bool finished, CaptureSessionSummary* summary) {
+  std::set<std::string> done;
+  for (const FrameRecord& f : frames) done.insert(f.group);
+  if (!finished && !frames.empty()) done.erase(frames.back().group);
+  std::set<int> slots;
+  summary->brackets_planned = static_cast<int>(planned.size());
+  summary->brackets_left.clear();
+  for (const PlannedGroup& g : planned) {
+    if (done.count(g.name)) continue;
+    summary->brackets_left.push_back(g.name);
+    slots.insert(g.slot);
+  }
+  summary->slots_left = static_cast<int>(slots.size());
+  summary->frames_total = static_cast<int>(frames.size());
+}
+
+bool MarkedComplete(const SessionInfo& info) {
+  auto it = info.extra.find(kCaptureCompleteKey);
+  return it != info.extra.end() && it->is_boolean() && it->get<bool>();
+}
+
+}  // namespace
+
+CaptureSessionSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
+                                       const std::filesystem::path& out,
+                                       const CaptureSessionOptions& opts) {
   namespace fs = std::filesystem;
   const bool field = !rig.simulated() && rig.kind != "replay";
+  std::error_code ec;
+  if (opts.resume && !fs::exists(out, ec))
+    throw Error(out.string() +
+                ": no session to resume (no such folder); drop --resume to start a new session "
+                "there");
   if (opts.new_slot && !field)
     throw Error(
         "--new-slot adds a time of day to a field session; simulated and replay rigs "
@@ -48,6 +99,14 @@ CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
         writer->UpdateInfo(info);
       }
     }
+    // --resume of a finished plan: nothing to capture, nothing written.
+    CaptureSessionSummary summary;
+    CountLeft(PlannedGroups(dev.plan, dev.camera.get()), writer->frames(),
+              MarkedComplete(writer->info()), &summary);
+    if (opts.resume && MarkedComplete(writer->info()) && summary.brackets_left.empty()) {
+      summary.already_complete = true;
+      return summary;
+    }
   } else {
     SessionInfo info;
     info.site = rig.site;
@@ -56,6 +115,7 @@ CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
     info.created_utc = NowUtc().Iso8601(3);
     info.extra["plan"] = PlanToJson(dev.plan);
     info.extra["nd_filters"] = {{"sun", rig.sun_nd_density_rgb}};
+    info.extra[kCaptureCompleteKey] = false;
     if (rig.heldout_slot >= 0) info.extra["heldout_slot"] = rig.heldout_slot;
     if (src) {
       info.site = src->info().site;
@@ -97,6 +157,15 @@ CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
     info.model = "model.obj";
     writer->UpdateInfo(info);
   }
+  // Unfinished from here until the plan is done (a finished run is left alone by --resume).
+  {
+    SessionInfo info = writer->info();
+    auto it = info.extra.find(kCaptureCompleteKey);
+    if (it == info.extra.end() || *it != false) {
+      info.extra[kCaptureCompleteKey] = false;
+      writer->UpdateInfo(info);
+    }
+  }
   DeviceLossOptions loss;
   loss.policy = rig.on_device_lost;
   loss.reconnect_timeout_s = rig.reconnect_timeout_s;
@@ -104,7 +173,8 @@ CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
   // Field rigs: report USB cameras and receivers pulled out or plugged back in as it happens.
   std::shared_ptr<void> usb_watch;
   if (field) usb_watch = WatchUsb(event);
-  CaptureSummary s;
+  CaptureSessionSummary summary;
+  CaptureSummary& s = summary.capture;
   try {
     s = controller.Run(*writer, opts.progress, opts.stop);
   } catch (const Error& e) {
@@ -128,8 +198,10 @@ CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
     s.warnings.push_back("no GPS fix: sun positions use the rig's fallback site (" +
                          std::to_string(info.site.lat_deg) + ", " +
                          std::to_string(info.site.lon_deg) + ")");
+  if (!s.stopped) info.extra[kCaptureCompleteKey] = true;
   writer->UpdateInfo(info);
-  return s;
+  CountLeft(PlannedGroups(dev.plan, dev.camera.get()), writer->frames(), !s.stopped, &summary);
+  return summary;
 }
 
 }  // namespace rouen
