@@ -69,11 +69,15 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
 // ND density (core/limits.h), the gain. Throws rouen::Error naming frames.jsonl, the frame's
 // id, file and bracket.
 void CheckSessionFrames(const Session& session);
+// What CheckSessionFrames finds wrong with one frame's values ("" when nothing).
+std::string FrameValuesProblem(const FrameRecord& f);
 
 // The session's building model (session.json "model", inside the session folder). Throws
 // rouen::Error naming session.json when there is none, or the model file when it is
 // malformed or has no faces.
 Mesh ReadSessionModel(const Session& session);
+// The same for a session folder `dir` whose session.json is `info`.
+Mesh ReadSessionModel(const std::filesystem::path& dir, const SessionInfo& info);
 
 struct SlotSolve {
   int slot = 0;
@@ -126,5 +130,8 @@ std::vector<SkySample> SlotSkySamples(const Session& session, const CalibResult&
 // Throws rouen::Error naming frames.jsonl or session.json when it is outside core/limits.h's
 // ranges.
 Site SessionSite(const Session& session);
+// The same for a session folder `dir` whose session.json is `info` and journal `frames`.
+Site SessionSite(const std::filesystem::path& dir, const SessionInfo& info,
+                 const std::vector<FrameRecord>& frames);
 
 }  // namespace rouen
