@@ -25,6 +25,7 @@ void RegisterImport(CLI::App& app);  // rouen import: a session from existing ph
 void RegisterSolve(CLI::App& app);   // rouen solve: a session solved into a scene folder
 void RegisterRender(CLI::App& app);  // rouen render: a scene at any time of day
 void RegisterSky(CLI::App& app);     // rouen sky fit / rouen sky render
+void RegisterStatus(CLI::App& app);  // rouen status: what a session holds and what it lacks
 
 }  // namespace rouen
 

@@ -21,6 +21,7 @@ int main(int argc, char** argv) {
   rouen::RegisterHdr(app);
   rouen::RegisterSun(app);
   rouen::RegisterImport(app);
+  rouen::RegisterStatus(app);
   rouen::RegisterSky(app);
   rouen::RegisterSolve(app);
   rouen::RegisterRender(app);
