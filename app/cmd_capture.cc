@@ -6,12 +6,12 @@
 
 #include "app/commands.h"
 #include "app/progress.h"
+#include "app/stop_signal.h"
 #include "capture/controller.h"
+#include "capture/devices/devices.h"
 #include "capture/rig.h"
 #include "core/error.h"
-#include "core/files.h"
-#include "core/lens.h"
-#include "core/mesh.h"
+#include "pipeline/capture_session.h"
 
 namespace rouen {
 namespace {
@@ -32,6 +32,32 @@ void PromptOperator(const OperatorRequest& r) {
         "when the camera is aimed by other means");
 }
 
+// A word of a shell command line, quoted when it holds more than plain path characters.
+std::string ShellWord(const std::string& w) {
+  const char* plain = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789_-./:=+,@%";
+  if (!w.empty() && w.find_first_not_of(plain) == std::string::npos) return w;
+  std::string q = "'";
+  for (char c : w) {
+    if (c == '\'') {
+      q += "'\\''";
+    } else {
+      q += c;
+    }
+  }
+  return q + "'";
+}
+
+// The command that continues this capture: the same rig, folder and options, with --resume
+// (after --new-slot too: the new slot is the session's last, which --resume continues).
+std::string ResumeCommand(const CaptureArgs& a) {
+  std::string c = "rouen capture --rig " + ShellWord(a.rig) + " --out " + ShellWord(a.out);
+  if (!a.from.empty()) c += " --from " + ShellWord(a.from);
+  if (a.target != "all") c += " --target " + a.target;
+  if (a.quick) c += " --quick";
+  if (a.no_prompt) c += " --no-prompt";
+  return c + " --resume";
+}
+
 void Run(const CaptureArgs& a) {
   RigConfig rig = LoadRig(a.rig);
   if (a.quick) rig.quick = true;
@@ -45,158 +71,64 @@ void Run(const CaptureArgs& a) {
   opts.resume = a.resume;
   opts.new_slot = a.new_slot;
   opts.from_session = a.from;
-  CaptureSummary s = CaptureToSession(rig, dev, a.out, opts, /*show_progress=*/true);
-  std::fprintf(stderr, "\n%s: %d frames in %d slot(s)%s\n", a.out.c_str(), s.frames, s.slots_done,
-               s.stopped ? " (stopped; run again with --resume to complete)" : "");
-  for (const std::string& w : s.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  ProgressLine line(true);
+  opts.progress = CaptureProgressPrinter(&line);
+  // Ctrl-C and SIGTERM stop the capture after the frame in flight; what is written stays.
+  StopOnSignals stop;
+  opts.stop = stop.flag();
+  CaptureSessionSummary s;
+  try {
+    s = CaptureToSession(rig, dev, a.out, opts);
+  } catch (...) {
+    line.Done();
+    throw;
+  }
+  line.Done();
+  if (s.already_complete) {
+    std::fprintf(stderr,
+                 "%s: the session is complete (%d frames; all %d brackets of the plan are "
+                 "journalled): nothing to capture, nothing changed\n",
+                 a.out.c_str(), s.frames_total, s.brackets_planned);
+    return;
+  }
+  const CaptureSummary& c = s.capture;
+  std::fprintf(stderr, "\n%s: %d frames in %d slot(s)\n", a.out.c_str(), c.frames, c.slots_done);
+  for (const std::string& w : c.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  if (!c.stopped) return;
+  // Stopped: what of the plan is left, and the command that captures it.
+  const int sig = stop.signal();
+  const std::string why = sig == SIGINT    ? "stopped by Ctrl-C (SIGINT)"
+                          : sig == SIGTERM ? "stopped by SIGTERM"
+                          : c.camera_lost  ? "stopped: the camera was lost"
+                                           : "stopped";
+  std::string next;
+  if (!s.brackets_left.empty()) next = " (next: " + s.brackets_left.front() + ")";
+  std::fprintf(stderr,
+               "%s: %s with %d frames journalled; left of the plan: %zu of %d brackets in %d "
+               "slot(s)%s (frames per bracket depend on the light)\n"
+               "continue with:\n  %s\n",
+               a.out.c_str(), why.c_str(), s.frames_total, s.brackets_left.size(),
+               s.brackets_planned, s.slots_left, next.c_str(), ResumeCommand(a).c_str());
+  // A signal ends the process as a shell expects of one: 128 + the signal (130, 143).
+  if (sig != 0) throw ExitStatus{128 + sig};
 }
 
 }  // namespace
 
-namespace {
-std::atomic<bool> g_stop{false};
-void OnSignal(int) { g_stop.store(true); }
-}  // namespace
-
-CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
-                                const std::filesystem::path& out, const CaptureSessionOptions& opts,
-                                bool show_progress) {
-  namespace fs = std::filesystem;
-  const bool field = !rig.simulated() && rig.kind != "replay";
-  if (opts.new_slot && !field)
-    throw Error(
-        "--new-slot adds a time of day to a field session; simulated and replay rigs "
-        "capture all their slots in one run");
-  if (opts.new_slot && !fs::exists(out / "session.json"))
-    throw Error(out.string() + ": --new-slot needs an existing session (run without it first)");
-  // The recorded session of a replay, read once for its site, notes and model.
-  std::optional<Session> src;
-  if (!opts.from_session.empty()) src.emplace(Session::Load(opts.from_session));
-  std::optional<SessionWriter> writer;
-  if ((opts.resume || opts.new_slot) && fs::exists(out / "session.json")) {
-    writer.emplace(SessionWriter::Resume(out));
-    if (field) {
-      // A field run is one slot: --resume continues the session's last slot, --new-slot
-      // starts the next one now.
-      int last = -1;
-      for (const FrameRecord& f : writer->frames()) last = std::max(last, f.slot);
-      dev.plan.first_slot = opts.new_slot ? last + 1 : std::max(last, 0);
-      if (opts.new_slot) {
-        SessionInfo info = writer->info();
-        if (info.extra.contains("plan") && info.extra["plan"].contains("slots"))
-          info.extra["plan"]["slots"].push_back(dev.plan.slots.front().Iso8601(9));
-        writer->UpdateInfo(info);
-      }
+std::function<void(const CaptureProgress&)> CaptureProgressPrinter(ProgressLine* line) {
+  return [line](const CaptureProgress& p) {
+    if (!p.event.empty()) {
+      line->Message(p.event);
+      return;
     }
-  } else {
-    SessionInfo info;
-    info.site = rig.site;
-    info.site_source = "rig";
-    info.rig = fs::path(rig.path).filename().string();
-    info.created_utc = NowUtc().Iso8601(3);
-    info.extra["plan"] = PlanToJson(dev.plan);
-    info.extra["nd_filters"] = {{"sun", rig.sun_nd_density_rgb}};
-    if (rig.heldout_slot >= 0) info.extra["heldout_slot"] = rig.heldout_slot;
-    if (src) {
-      info.site = src->info().site;
-      info.site_source = src->info().site_source;
-      info.clock_offset_s = src->info().clock_offset_s;
-      info.notes = "replayed from " + opts.from_session.string();
-      for (const char* key : {"heldout_slot", "nd_filters", "vignetting"})
-        if (src->info().extra.contains(key)) info.extra[key] = src->info().extra[key];
-    }
-    writer.emplace(SessionWriter::Create(out, info));
-  }
-  // A lens file's vignetting model travels with the session too, keyed by the frames' device
-  // and target (app/pipeline.cc divides it out); one already there (e.g. from `rouen calib
-  // vignetting --session`) is kept.
-  if (rig.kind != "replay" && dev.camera) {
-    SessionInfo info = writer->info();
-    bool changed = false;
-    for (Target t : dev.plan.targets) {
-      const std::string path = rig.LensPath(t);
-      if (path.empty()) continue;
-      const std::optional<VignettingModel> v = ReadLensFile(path).vignetting;
-      const std::string key = dev.camera->Id() + "/" + TargetName(t);
-      if (!v || (info.extra.contains("vignetting") && info.extra["vignetting"].contains(key)))
-        continue;
-      info.extra["vignetting"][key] = *v;
-      changed = true;
-    }
-    if (changed) writer->UpdateInfo(info);
-  }
-  // The building model travels with the session (also after a crash before it was written).
-  if (writer->info().model.empty() && (dev.model || (src && !src->info().model.empty()))) {
-    if (dev.model) {
-      WriteObj((out / "model.obj").string(), *dev.model);
-    } else {
-      WriteFileAtomic(out / "model.obj",
-                      ReadFileToString(ResolveInside(src->dir(), src->info().model)));
-    }
-    SessionInfo info = writer->info();
-    info.model = "model.obj";
-    writer->UpdateInfo(info);
-  }
-  DeviceLossOptions loss;
-  loss.policy = rig.on_device_lost;
-  loss.reconnect_timeout_s = rig.reconnect_timeout_s;
-  CaptureController controller(dev.Devices(), dev.plan, writer->info().site, loss);
-  g_stop.store(false);
-  auto old_int = std::signal(SIGINT, OnSignal);
-  auto old_term = std::signal(SIGTERM, OnSignal);
-  ProgressLine line(show_progress);
-  // Field rigs: report USB cameras and receivers pulled out or plugged back in as it happens.
-  std::shared_ptr<void> usb_watch;
-  if (!rig.simulated() && rig.kind != "replay")
-    usb_watch = WatchUsb([&line](const std::string& m) { line.Message(m); });
-  CaptureSummary s;
-  try {
-    s = controller.Run(
-        *writer,
-        [&](const CaptureProgress& p) {
-          if (!p.event.empty()) {
-            line.Message(p.event);
-            return;
-          }
-          char buf[256];
-          std::snprintf(
-              buf, sizeof buf,
-              "slot %d/%d  %-12s view %d  frames %5d  exposure %9.6f s  saturated %5.2f%%  "
-              "GPS %s",
-              p.slot + 1, p.slots, TargetName(p.target), p.view, p.frames_total, p.exposure_s,
-              100 * p.saturated_fraction, p.gps_status.c_str());
-          line.Update(buf);
-        },
-        &g_stop);
-  } catch (const Error& e) {
-    // A full disk, a read-only disk: everything journalled so far is whole and stays.
-    std::signal(SIGINT, old_int);
-    std::signal(SIGTERM, old_term);
-    line.Done();
-    throw Error(std::string(e.what()) + "\n" + out.string() + ": the " +
-                std::to_string(writer->frames().size()) +
-                " frames journalled so far are kept; once the problem is fixed, continue with "
-                "`rouen capture --rig ... --out " +
-                out.string() + " --resume`");
-  }
-  usb_watch.reset();
-  std::signal(SIGINT, old_int);
-  std::signal(SIGTERM, old_term);
-  line.Done();
-  // The site actually used: the GPS fix if one came, else the rig's fallback (stated).
-  SessionInfo info = writer->info();
-  for (const FrameRecord& f : writer->frames()) {
-    if (f.gps && f.gps->valid()) {
-      info.site = {f.gps->lat_deg, f.gps->lon_deg, f.gps->height_m};
-      info.site_source = "gps";
-    }
-  }
-  if (info.site_source != "gps")
-    s.warnings.push_back("no GPS fix: sun positions use the rig's fallback site (" +
-                         std::to_string(info.site.lat_deg) + ", " +
-                         std::to_string(info.site.lon_deg) + ")");
-  writer->UpdateInfo(info);
-  return s;
+    char buf[256];
+    std::snprintf(buf, sizeof buf,
+                  "slot %d/%d  %-12s view %d  frames %5d  exposure %9.6f s  saturated %5.2f%%  "
+                  "GPS %s",
+                  p.slot + 1, p.slots, TargetName(p.target), p.view, p.frames_total, p.exposure_s,
+                  100 * p.saturated_fraction, p.gps_status.c_str());
+    line->Update(buf);
+  };
 }
 
 void RegisterCapture(CLI::App& app) {
@@ -217,8 +149,12 @@ void RegisterCapture(CLI::App& app) {
       "current exposure, saturated fraction and GPS status. Without a GPS fix the rig's [site]\n"
       "is used (stated in session.json). If the camera is unplugged the rig's [capture]\n"
       "on_device_lost decides: stop, or reconnect (plug it back in; the bracket is redone).\n"
-      "Ctrl-C stops after the frame in flight and keeps everything written; --resume continues\n"
-      "an interrupted session. `rouen devices` lists cameras and GPS receivers.\n"
+      "Ctrl-C (or SIGTERM) stops after the frame in flight and keeps everything written, says\n"
+      "how many brackets of the plan are left and the command that continues, and exits 130\n"
+      "(SIGTERM: 143). --resume continues an interrupted session: the folder must exist; a\n"
+      "session whose plan is complete is left untouched (exit 0). A session is written by one\n"
+      "capture at a time (a lock): a second one is refused. `rouen status SESSION` says what a\n"
+      "session holds and what its solve lacks; `rouen devices` lists cameras and GPS receivers.\n"
       "Examples:\n"
       "  rouen capture --rig rigs/uvc-webcam.toml --out sessions/rouen-0930\n"
       "  rouen capture --rig rigs/uvc-webcam.toml --out sessions/rouen-0930 --resume\n"

@@ -10,11 +10,15 @@
 #include <nlohmann/json.hpp>
 
 #include "app/commands.h"
+#include "app/progress.h"
+#include "app/stop_signal.h"
+#include "capture/devices/devices.h"
 #include "capture/sim/sim_devices.h"
 #include "core/error.h"
 #include "core/files.h"
 #include "core/stats.h"
 #include "core/temporaries.h"
+#include "pipeline/capture_session.h"
 #include "pipeline/scene.h"
 #include "pipeline/session_solve.h"
 #include "pipeline/validate.h"
@@ -77,7 +81,22 @@ void Run(const DemoArgs& a) {
   RigDevices dev = OpenRig(rig);
   auto* sim_cam = dynamic_cast<SimCamera*>(dev.camera.get());
   auto world = std::static_pointer_cast<SimWorld>(dev.keep_alive);
-  CaptureSummary cap = CaptureToSession(rig, dev, out / "session", {}, /*show_progress=*/true);
+  CaptureSessionOptions capture;
+  ProgressLine line(true);
+  capture.progress = CaptureProgressPrinter(&line);
+  CaptureSummary cap;
+  {
+    // Ctrl-C and SIGTERM stop the capture after the frame in flight.
+    StopOnSignals stop;
+    capture.stop = stop.flag();
+    try {
+      cap = CaptureToSession(rig, dev, out / "session", capture).capture;
+    } catch (...) {
+      line.Done();
+      throw;
+    }
+    line.Done();
+  }
   for (const std::string& w : cap.warnings) say("capture warning: " + w);
   if (cap.stopped) throw Error("demo interrupted during capture");
 

@@ -5,6 +5,13 @@
 
 namespace rouen {
 
+// Thrown by a command that has said what it had to say and ends the process with `code`
+// instead of 0 (rouen capture stopped by a signal: 128 + the signal; rouen status: 2 when the
+// session cannot be solved). main returns the code.
+struct ExitStatus {
+  int code = 1;
+};
+
 void RegisterSun(CLI::App& app);
 void RegisterCapture(CLI::App& app);
 void RegisterCalib(CLI::App& app);               // rouen calib response
@@ -19,6 +26,7 @@ void RegisterSolve(CLI::App& app);     // rouen solve: a session solved into a s
 void RegisterRender(CLI::App& app);    // rouen render: a scene at any time of day
 void RegisterValidate(CLI::App& app);  // rouen validate: a scene against a slot's photos
 void RegisterSky(CLI::App& app);       // rouen sky fit / rouen sky render
+void RegisterStatus(CLI::App& app);    // rouen status: what a session holds and what it lacks
 
 }  // namespace rouen
 
@@ -28,21 +36,14 @@ void RegisterSky(CLI::App& app);       // rouen sky fit / rouen sky render
 #include <vector>
 
 #include "capture/controller.h"
-#include "capture/devices/devices.h"
-#include "capture/rig.h"
 
 namespace rouen {
 
-struct CaptureSessionOptions {
-  bool resume = false;
-  bool new_slot = false;  // field rigs: add this run as a new time-of-day slot to the session
-  std::filesystem::path from_session;  // replay source
-};
-// Creates (or resumes) a session folder and runs the plan with the rig's devices. Installs a
-// SIGINT/SIGTERM handler for the duration so Ctrl-C stops cleanly after the frame in flight.
-CaptureSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
-                                const std::filesystem::path& out, const CaptureSessionOptions& opts,
-                                bool show_progress);
+class ProgressLine;
+// A capture's progress on `line` (slot, target, view, frames, exposure, saturated fraction,
+// GPS status) and its events on lines of their own: CaptureSessionOptions::progress for
+// `rouen capture` and `rouen demo`.
+std::function<void(const CaptureProgress&)> CaptureProgressPrinter(ProgressLine* line);
 
 }  // namespace rouen
 

@@ -21,6 +21,7 @@ int main(int argc, char** argv) {
   rouen::RegisterHdr(app);
   rouen::RegisterSun(app);
   rouen::RegisterImport(app);
+  rouen::RegisterStatus(app);
   rouen::RegisterSky(app);
   rouen::RegisterSolve(app);
   rouen::RegisterRender(app);
@@ -31,6 +32,8 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
+  } catch (const rouen::ExitStatus& e) {
+    return e.code;
   } catch (const rouen::Error& e) {
     std::fprintf(stderr, "rouen: error: %s\n", e.what());
     return 1;

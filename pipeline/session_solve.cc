@@ -380,9 +380,14 @@ std::vector<SkySample> SlotSkySamples(const Session& session, const CalibResult&
 }
 
 Site SessionSite(const Session& session) {
+  return SessionSite(session.dir(), session.info(), session.frames());
+}
+
+Site SessionSite(const std::filesystem::path& dir, const SessionInfo& info,
+                 const std::vector<FrameRecord>& frames) {
   double lat = 0, lon = 0, h = 0;
   int n = 0;
-  for (const FrameRecord& f : session.frames()) {
+  for (const FrameRecord& f : frames) {
     if (f.gps && f.gps->valid()) {
       lat += f.gps->lat_deg;
       lon += f.gps->lon_deg;
@@ -391,29 +396,43 @@ Site SessionSite(const Session& session) {
     }
   }
   if (n == 0) {
-    CheckSite(session.info().site, (session.dir() / "session.json").string() + ": site");
-    return session.info().site;
+    CheckSite(info.site, (dir / "session.json").string() + ": site");
+    return info.site;
   }
   const Site mean{lat / n, lon / n, h / n};
-  CheckSite(mean, (session.dir() / "frames.jsonl").string() + ": the mean of " + std::to_string(n) +
-                      " GPS fixes");
+  CheckSite(mean,
+            (dir / "frames.jsonl").string() + ": the mean of " + std::to_string(n) + " GPS fixes");
   return mean;
 }
 
-void CheckSessionFrames(const Session& session) {
-  for (const FrameRecord& f : session.frames()) {
-    // HDR frames are radiance already; their exposure is provenance, unused.
-    if (!f.hdr) Require(ExposureProblem(f.exposure_s), FrameWhere(session, f));
-    Require(NdDensityProblem(f.nd_density), FrameWhere(session, f));
-    if (!(f.gain > 0) || !std::isfinite(f.gain))
-      throw Error(FrameWhere(session, f) + ": gain " + FormatNumber(f.gain) + " is not positive");
+std::string FrameValuesProblem(const FrameRecord& f) {
+  // HDR frames are radiance already; their exposure is provenance, unused.
+  if (!f.hdr) {
+    const std::string p = ExposureProblem(f.exposure_s);
+    if (!p.empty()) return p;
   }
+  const std::string p = NdDensityProblem(f.nd_density);
+  if (!p.empty()) return p;
+  if (!(f.gain > 0) || !std::isfinite(f.gain))
+    return "gain " + FormatNumber(f.gain) + " is not positive";
+  return "";
+}
+
+void CheckSessionFrames(const Session& session) {
+  for (const FrameRecord& f : session.frames())
+    Require(FrameValuesProblem(f), FrameWhere(session, f));
 }
 
 Mesh ReadSessionModel(const Session& session) {
-  if (session.info().model.empty())
-    throw Error(session.dir().string() + "/session.json: no building model ('model') given");
-  return ReadObj(ResolveInside(session.dir(), session.info().model).string());
+  return ReadSessionModel(session.dir(), session.info());
+}
+
+Mesh ReadSessionModel(const std::filesystem::path& dir, const SessionInfo& info) {
+  if (info.model.empty())
+    throw Error(dir.string() +
+                "/session.json: no building model ('model') given (rouen import --model "
+                "BUILDING.obj adds one; rouen status lists what the session lacks)");
+  return ReadObj(ResolveInside(dir, info.model).string());
 }
 
 CalibResult CalibrateSession(const Session& session, const PipelineOptions& options) {
@@ -557,7 +576,8 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
     }
     if (!sun_g || !sky_g || panoramas.empty())
       throw Error(session.dir().string() + ": slot " + std::to_string(s) +
-                  " lacks a sun, sky or landscape bracket");
+                  " lacks a sun, sky or landscape bracket (rouen status " + session.dir().string() +
+                  " lists each slot's brackets and the command that adds a missing one)");
     ss.utc = sky_g->utc;
     ss.sun = ComputeSunPosition(ss.utc, site);
     const Eigen::Vector3d sun_dir = ss.sun.DirectionEnu();

@@ -74,11 +74,15 @@ HdrGroup MergeSessionBracket(const Session& session, const std::string& name,
 // ND density (core/limits.h), the gain. Throws rouen::Error naming frames.jsonl, the frame's
 // id, file and bracket.
 void CheckSessionFrames(const Session& session);
+// What CheckSessionFrames finds wrong with one frame's values ("" when nothing).
+std::string FrameValuesProblem(const FrameRecord& f);
 
 // The session's building model (session.json "model", inside the session folder). Throws
 // rouen::Error naming session.json when there is none, or the model file when it is
 // malformed or has no faces.
 Mesh ReadSessionModel(const Session& session);
+// The same for a session folder `dir` whose session.json is `info`.
+Mesh ReadSessionModel(const std::filesystem::path& dir, const SessionInfo& info);
 
 struct SlotSolve {
   int slot = 0;
@@ -137,5 +141,8 @@ std::string SessionFilesStamp(const Session& session);
 // Throws rouen::Error naming frames.jsonl or session.json when it is outside core/limits.h's
 // ranges.
 Site SessionSite(const Session& session);
+// The same for a session folder `dir` whose session.json is `info` and journal `frames`.
+Site SessionSite(const std::filesystem::path& dir, const SessionInfo& info,
+                 const std::vector<FrameRecord>& frames);
 
 }  // namespace rouen
