@@ -217,14 +217,13 @@ TEST(CliInputs, RenderArgumentErrorsComeFirstAndNameTheOption) {
               {(dir / "none").string()});
   // A solve configuration is read before the session; a misspelt key is named.
   WriteFileAtomic(dir / "solve.toml", "[sky_fit]\nnorm = 2\n");
-  ExpectError(RunRouen("solve " + Q(dir / "none") + " --out " + Q(dir / "s.scene") +
-                       " --config " + Q(dir / "solve.toml")),
+  ExpectError(RunRouen("solve " + Q(dir / "none") + " --out " + Q(dir / "s.scene") + " --config " +
+                       Q(dir / "solve.toml")),
               {"solve.toml: sky_fit.norm is not a known key"});
   ExpectError(RunRouen("solve --out " + Q(dir / "s.scene")), {"needs a SESSION folder"});
   // --print-config shows every option with the file applied.
   WriteFileAtomic(dir / "solve.toml", "[sky_fit]\nnorm_p = 2\n");
-  const Result printed =
-      RunRouen("solve --quick --print-config --config " + Q(dir / "solve.toml"));
+  const Result printed = RunRouen("solve --quick --print-config --config " + Q(dir / "solve.toml"));
   EXPECT_EQ(printed.code, 0) << printed.out;
   const nlohmann::json config = nlohmann::json::parse(printed.out);
   EXPECT_EQ(config["sky_fit"]["norm_p"], 2.0);
