@@ -14,6 +14,7 @@
 #include "app/stop_signal.h"
 #include "capture/devices/devices.h"
 #include "capture/sim/sim_devices.h"
+#include "core/angles.h"
 #include "core/error.h"
 #include "core/files.h"
 #include "core/stats.h"
@@ -43,8 +44,8 @@ struct DemoArgs {
 // Evenly spread unit directions over the upper hemisphere (Fibonacci lattice).
 std::vector<Eigen::Vector3d> HemisphereDirections(int n, double min_elevation_deg) {
   std::vector<Eigen::Vector3d> out;
-  const double golden = M_PI * (3 - std::sqrt(5.0));
-  const double zmin = std::sin(min_elevation_deg * M_PI / 180);
+  const double golden = kPi * (3 - std::sqrt(5.0));
+  const double zmin = std::sin(min_elevation_deg * kPi / 180);
   for (int i = 0; i < n; ++i) {
     double z = zmin + (1 - zmin) * (i + 0.5) / n;
     double r = std::sqrt(1 - z * z), phi = golden * i;
@@ -143,13 +144,13 @@ void Run(const DemoArgs& a) {
     world->SetTime(rig.plan.slots.at(ss.slot));
     Eigen::Vector3d truth_dir = world->TrueSunDirection();
     sun_dir_err.push_back(std::acos(std::clamp(truth_dir.dot(ss.lighting.sun_dir), -1.0, 1.0)) *
-                          180 / M_PI);
+                          180 / kPi);
     Eigen::Vector3d true_sun = world->TrueSunRadiance();
     for (int c = 0; c < 3; ++c)
       sun_rad_err.push_back(std::abs(to_truth[c] * ss.lighting.sun_radiance[c] - true_sun[c]) /
                             true_sun[c]);
     for (const Eigen::Vector3d& d : HemisphereDirections(2000, 3.0)) {
-      if (d.dot(truth_dir) > std::cos(3.0 * M_PI / 180)) continue;  // the sun's own disc
+      if (d.dot(truth_dir) > std::cos(3.0 * kPi / 180)) continue;  // the sun's own disc
       Eigen::Vector3d fit = ss.lighting.sky.Radiance(d), tru = world->TrueSkyRadiance(d);
       for (int c = 0; c < 3; ++c)
         sky_err.push_back(std::abs(to_truth[c] * fit[c] - tru[c]) / tru[c]);
@@ -278,7 +279,7 @@ void Run(const DemoArgs& a) {
     std::vector<double> err;
     const Eigen::Vector3d truth_dir = world->TrueSunDirection();
     for (const Eigen::Vector3d& d : HemisphereDirections(2000, 3.0)) {
-      if (d.dot(truth_dir) > std::cos(3.0 * M_PI / 180)) continue;
+      if (d.dot(truth_dir) > std::cos(3.0 * kPi / 180)) continue;
       Eigen::Vector3d fit = predicted.sky.Radiance(d), tru = world->TrueSkyRadiance(d);
       for (int c = 0; c < 3; ++c) err.push_back(std::abs(to_truth[c] * fit[c] - tru[c]) / tru[c]);
     }

@@ -2,6 +2,8 @@
 // under lighting predicted for another time (§5-6): interpolated sky, sunset, overcast.
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
+#include <functional>
 #include <memory>
 #include <string>
 
@@ -22,42 +24,113 @@ struct RenderArgs {
   std::string scene, out, png;
   int slot = 0;
   bool have_slot = false;
-  std::string time;
+  std::string time, from, to, step;
   std::string view;
   std::string lens, pose;
+  std::string look_at, from_point, size = "640x480";
+  double fov_deg = 50;
   double pbs = 0;
   std::vector<double> overcast_colour;
   double overcast_brightness = 1;
   double exposure = 0;
 };
 
+// The longest sequence --from/--to/--step renders (a day at one frame a minute is 1440).
+constexpr int kMaxSequenceFrames = 5000;
+
+UtcTime TimeOption(const std::string& text, const std::string& option) {
+  try {
+    return ParseIso8601(text);
+  } catch (const Error& e) {
+    throw Error(option + ": " + e.what());
+  }
+}
+
+// "WIDTHxHEIGHT" within core/image.h's limits.
+std::pair<int, int> ParseSize(const std::string& text) {
+  int w = 0, h = 0;
+  char x = 0, rest = 0;
+  if (std::sscanf(text.c_str(), "%d%c%d%c", &w, &x, &h, &rest) != 3 || x != 'x' || w < 1 || h < 1 ||
+      w > kMaxImageSide || h > kMaxImageSide || static_cast<int64_t>(w) * h > kMaxImagePixels)
+    throw Error("--size '" + text + "': expected WIDTHxHEIGHT, each 1.." +
+                std::to_string(kMaxImageSide));
+  return {w, h};
+}
+
+// A frame of a sequence is named by its time: DIR/20260825T194000Z.exr.
+std::string FrameName(UtcTime t) {
+  const CivilTime c = ToCivil(t);
+  char name[32];
+  std::snprintf(name, sizeof name, "%04d%02d%02dT%02d%02d%02dZ", c.year, c.month, c.day, c.hour,
+                c.minute, static_cast<int>(c.second));
+  return name;
+}
+
 void Run(const RenderArgs& a) {
+  namespace fs = std::filesystem;
   // Arguments first (CLI11 has checked each option's range and the options that exclude
   // each other), then the outputs, then the camera files and the scene: every mistake is told
   // before any work.
-  if (a.have_slot == !a.time.empty())
-    throw Error("give exactly one of --slot (a captured time of day) or --time (any other)");
+  const bool sequence = !a.from.empty();
+  if (sequence && (a.to.empty() || a.step.empty()))
+    throw Error("--from needs --to and --step (e.g. --step 15min)");
+  if (static_cast<int>(a.have_slot) + static_cast<int>(!a.time.empty()) +
+          static_cast<int>(sequence) !=
+      1)
+    throw Error(
+        "give exactly one of --slot (a captured time of day), --time (any other) or "
+        "--from/--to/--step (a sequence)");
   if (!a.lens.empty() != !a.pose.empty()) throw Error("--lens and --pose go together");
-  if (!a.view.empty() && !a.lens.empty()) throw Error("give --view or --lens/--pose, not both");
+  if (a.look_at.empty() != a.from_point.empty())
+    throw Error("--look-at and --from-point go together");
+  if (static_cast<int>(!a.view.empty()) + static_cast<int>(!a.lens.empty()) +
+          static_cast<int>(!a.look_at.empty()) >
+      1)
+    throw Error("give one camera: --view, --lens/--pose or --look-at/--from-point");
   if (!a.overcast_colour.empty() && a.overcast_colour.size() != 3)
     throw Error("--overcast-colour takes three numbers R,G,B");
   RenderRequest request;
   if (a.have_slot) request.slot = a.slot;
-  if (!a.time.empty()) {
-    try {
-      request.time = ParseIso8601(a.time);
-    } catch (const Error& e) {
-      throw Error(std::string("--time: ") + e.what());
-    }
+  if (!a.time.empty()) request.time = TimeOption(a.time, "--time");
+  std::vector<UtcTime> times;
+  if (sequence) {
+    const UtcTime from = TimeOption(a.from, "--from"), to = TimeOption(a.to, "--to");
+    if (to < from) throw Error("--to " + a.to + " is before --from " + a.from);
+    const double step = ParseDurationSeconds(a.step, 86400, "--step");
+    const double span = to.UnixSeconds() - from.UnixSeconds();
+    if (span / step + 1 > kMaxSequenceFrames)
+      throw Error("--from/--to/--step make " +
+                  std::to_string(static_cast<int64_t>(span / step) + 1) + " frames, more than " +
+                  std::to_string(kMaxSequenceFrames) + "; take a longer --step");
+    for (double t = 0; t <= span + 1e-6; t += step) times.push_back(from.PlusSeconds(t));
   }
   request.relight.pbs = a.pbs;
   if (!a.overcast_colour.empty())
     request.relight.overcast_colour =
         Eigen::Vector3d(a.overcast_colour[0], a.overcast_colour[1], a.overcast_colour[2]);
   request.relight.overcast_brightness = a.overcast_brightness;
+  if (!a.look_at.empty()) {
+    const std::vector<double> target = ParseNumberList(a.look_at, 3, "--look-at");
+    const std::vector<double> eye = ParseNumberList(a.from_point, 3, "--from-point");
+    const Eigen::Vector3d t(target[0], target[1], target[2]), e(eye[0], eye[1], eye[2]);
+    if ((t - e).norm() < 1e-6)
+      throw Error("--look-at and --from-point are the same point: no direction to look in");
+    const auto [w, h] = ParseSize(a.size);
+    request.intrinsics = Intrinsics::PinholeFov(w, h, a.fov_deg);
+    request.pose = Pose::LookAt(e, t);
+  }
+
+  // Outputs: one image (and PNG), or folders of frames named by their times (declared once
+  // the scene has accepted every time, so a refused sequence creates no folder).
   OutputSet outputs;
-  const std::string out = outputs.Add("--out", a.out, OutputKind::kRadiance);
-  const std::string png = a.png.empty() ? "" : outputs.Add("--png", a.png, OutputKind::kImage);
+  std::vector<std::string> out_files, png_files;
+  if (!sequence) {
+    out_files.push_back(outputs.Add("--out", a.out, OutputKind::kRadiance));
+    if (!a.png.empty()) png_files.push_back(outputs.Add("--png", a.png, OutputKind::kImage));
+  } else {
+    CheckWritableFolder("--out", a.out);
+    if (!a.png.empty()) CheckWritableFolder("--png", a.png);
+  }
   if (!a.lens.empty()) {
     request.intrinsics = ReadLensFile(a.lens).intrinsics;
     request.pose = ReadPoseFile(a.pose);
@@ -65,26 +138,65 @@ void Run(const RenderArgs& a) {
   auto say = [](const std::string& s) { std::fprintf(stderr, "render: %s\n", s.c_str()); };
 
   const LoadedScene scene = LoadScene(a.scene, say);
-  if (a.lens.empty()) {
+  if (a.lens.empty() && a.look_at.empty()) {
     const SceneView& view = FindView(scene, a.view);
     request.intrinsics = view.intrinsics;
     request.pose = view.pose;
   }
-  CheckRenderRequest(scene, request);
+  std::vector<RenderRequest> requests;
+  if (!sequence) requests.push_back(request);
+  for (UtcTime t : times) {
+    RenderRequest r = request;
+    r.time = t;
+    requests.push_back(r);
+  }
+  for (const RenderRequest& r : requests) {
+    try {
+      CheckRenderRequest(scene, r);
+    } catch (const Error& e) {
+      if (!sequence) throw;
+      throw Error("--from/--to: at " + r.time->Iso8601(0) + ": " + e.what());
+    }
+  }
   const ResponseCurve& response = scene.scene.response;
   if (!a.png.empty() && !response.valid())
     throw Error(a.scene +
                 ": the scene has no response curve (its photos were HDR), which --png "
                 "needs; write the radiance only");
-  const Image image = RenderScene(scene, request, say);
-  WriteImage(out, image, StoredType::kFloat);
-  double exposure = 0;
-  if (!a.png.empty()) {
-    exposure = a.exposure > 0 ? a.exposure : AutoExposure(image, response);
-    WriteImage(png, ToDigital(image, response, exposure), StoredType::kUint8);
+  if (sequence) {
+    fs::create_directories(a.out);
+    if (!a.png.empty()) fs::create_directories(a.png);
+    for (UtcTime t : times) {
+      out_files.push_back(outputs.Add("--out", (fs::path(a.out) / (FrameName(t) + ".exr")).string(),
+                                      OutputKind::kRadiance));
+      if (!a.png.empty())
+        png_files.push_back(outputs.Add(
+            "--png", (fs::path(a.png) / (FrameName(t) + ".png")).string(), OutputKind::kImage));
+    }
+  }
+  // One exposure for every frame of a sequence (so that it darkens towards sunset): --exposure,
+  // else the first frame's automatic one.
+  double exposure = a.exposure;
+  Image image;
+  for (size_t i = 0; i < requests.size(); ++i) {
+    if (sequence)
+      std::fprintf(stderr, "render: %zu/%zu %s\n", i + 1, requests.size(),
+                   requests[i].time->Iso8601(0).c_str());
+    image = RenderScene(scene, requests[i],
+                        sequence ? std::function<void(const std::string&)>{}
+                                 : std::function<void(const std::string&)>(say));
+    WriteImage(out_files[i], image, StoredType::kFloat);
+    if (!a.png.empty()) {
+      if (exposure <= 0) exposure = AutoExposure(image, response);
+      WriteImage(png_files[i], ToDigital(image, response, exposure), StoredType::kUint8);
+    }
   }
   outputs.Commit();
-  std::printf("%s: radiance %dx%d\n", a.out.c_str(), image.width, image.height);
+  if (sequence)
+    std::printf("%s: %zu frames %dx%d, %s to %s\n", a.out.c_str(), requests.size(), image.width,
+                image.height, times.front().Iso8601(0).c_str(), times.back().Iso8601(0).c_str());
+  else
+    std::printf("%s: radiance %dx%d\n", a.out.c_str(), image.width, image.height);
   if (!a.png.empty())
     std::printf("%s: through the recovered response, exposure factor %.4g\n", a.png.c_str(),
                 exposure);
@@ -106,20 +218,38 @@ void RegisterRender(CLI::App& app) {
       "               skies by sun position, the environment from its recovered normals and\n"
       "               albedos; --pbs blocks that fraction of the sunlight and blends towards an\n"
       "               overcast sky (paper §6.3).\n"
-      "The camera is one of the scene's views (--view, the names `rouen solve` lists), or a lens\n"
-      "file and a pose file (as `rouen calib intrinsics` and `rouen calib pose` write them).\n"
+      "  --from ISO --to ISO --step 15min   a sequence under predicted lighting, one EXR per time\n"
+      "               in the --out folder (and PNGs in the --png folder, all at one exposure:\n"
+      "               --exposure, else the first frame's), named by the time (20260825T194000Z).\n"
+      "The camera is one of the scene's views (--view, the names `rouen solve` lists), a lens\n"
+      "file and a pose file (as `rouen calib intrinsics` and `rouen calib pose` write them), or\n"
+      "a new pinhole camera at --from-point looking at --look-at (ENU metres, the model's frame)\n"
+      "with --fov and --size.\n"
       "Example: rouen render s.scene --time 2026-08-25T19:40:00-07:00 --out sunset.exr "
-      "--png sunset.png");
+      "--png sunset.png\n"
+      "         rouen render s.scene --from 2026-08-25T08:00:00-07:00 --to "
+      "2026-08-25T19:00:00-07:00"
+      " \\\n           --step 30min --look-at 0,0,10 --from-point 40,-30,5 --out day/ --png day/");
   c->add_option("scene", a->scene, "Scene folder (from rouen solve)")->required();
   CLI::Option* slot = c->add_option("--slot", a->slot,
                                     "Render under the lighting of this captured slot (0, 1, ...)")
                           ->check(Within(0, INFINITY));
   c->add_option("--time", a->time,
                 "Render at this time (ISO 8601 with offset, e.g. 2026-08-25T19:40:00-07:00)");
+  c->add_option("--from", a->from, "Render a sequence from this time (with --to and --step)");
+  c->add_option("--to", a->to, "Last time of the sequence (ISO 8601)");
+  c->add_option("--step", a->step, "Time between frames of the sequence (e.g. 15min, 1h, 30s)");
   c->add_option("--view", a->view,
                 "Camera of this bracket (e.g. slot0/architecture/view1; default: the first)");
   c->add_option("--lens", a->lens, "Camera intrinsics JSON (with --pose)");
   c->add_option("--pose", a->pose, "Camera pose JSON (with --lens)");
+  c->add_option("--look-at", a->look_at, "A new camera looking at this point X,Y,Z (metres, ENU)");
+  c->add_option("--from-point", a->from_point, "... from this point X,Y,Z (with --look-at)");
+  c->add_option("--fov", a->fov_deg, "Horizontal field of view of the --look-at camera (deg)")
+      ->check(Within(1, 170, "deg"))
+      ->capture_default_str();
+  c->add_option("--size", a->size, "Image size WIDTHxHEIGHT of the --look-at camera")
+      ->capture_default_str();
   // The predicted sky's options have no meaning for a captured slot's lighting.
   c->add_option("--pbs", a->pbs, "Blocked sunlight fraction 0..1 (0 clear, 1 overcast)")
       ->check(Within(0, 1))
@@ -134,9 +264,12 @@ void RegisterRender(CLI::App& app) {
       ->check(Positive())
       ->excludes(slot)
       ->capture_default_str();
-  c->add_option("--out", a->out, "Radiance to write (.exr, or .hdr, .pfm, .tif)")->required();
-  CLI::Option* png =
-      c->add_option("--png", a->png, "Also write an 8-bit PNG through the recovered response");
+  c->add_option("--out", a->out,
+                "Radiance to write (.exr, or .hdr, .pfm, .tif); with --from a folder of EXRs")
+      ->required();
+  CLI::Option* png = c->add_option(
+      "--png", a->png,
+      "Also write an 8-bit PNG through the recovered response; with --from a folder of PNGs");
   c->add_option("--exposure", a->exposure, "Exposure factor for --png (default: automatic)")
       ->check(Positive())
       ->needs(png);

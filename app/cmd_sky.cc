@@ -11,6 +11,7 @@
 
 #include "app/commands.h"
 #include "app/options.h"
+#include "core/angles.h"
 #include "core/camera.h"
 #include "core/error.h"
 #include "core/files.h"
@@ -26,8 +27,6 @@
 
 namespace rouen {
 namespace {
-
-constexpr double kDeg = 3.14159265358979323846 / 180.0;
 
 struct SkyFitArgs {
   std::string image, projection = "equirect", mask, out, model = "7", weighting;

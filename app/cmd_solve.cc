@@ -2,7 +2,6 @@
 // every later command) reads.
 #include <chrono>
 #include <cstdio>
-#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -10,7 +9,6 @@
 #include "app/commands.h"
 #include "app/options.h"
 #include "core/error.h"
-#include "core/outputs.h"
 #include "pipeline/scene.h"
 
 namespace rouen {
@@ -23,54 +21,42 @@ struct SolveArgs {
 };
 
 void Run(const SolveArgs& a) {
-  namespace fs = std::filesystem;
   const auto start = std::chrono::steady_clock::now();
-  PipelineOptions po;
-  po.config = DefaultSolveConfig(a.quick);
-  if (!a.config.empty()) po.config = ReadSolveConfigFile(a.config, po.config);
+  SolveConfig config = DefaultSolveConfig(a.quick);
+  if (!a.config.empty()) config = ReadSolveConfigFile(a.config, config);
   if (a.print_config) {
-    std::printf("%s\n", SolveConfigJson(po.config).dump(2).c_str());
+    std::printf("%s\n", SolveConfigJson(config).dump(2).c_str());
     return;
   }
   if (a.session.empty() || a.out.empty())
     throw Error("rouen solve needs a SESSION folder and --out SCENE (see rouen solve --help)");
-  // The outputs first, then the session: every mistake is told before any work.
-  fs::path out = fs::path(a.out).lexically_normal();
-  if (!out.has_filename()) out = out.parent_path();  // "s.scene/" -> "s.scene"
-  CheckSceneOutput(out);
-  fs::path session_dir = fs::path(a.session).lexically_normal();
-  if (!session_dir.has_filename()) session_dir = session_dir.parent_path();
-  const fs::path work = a.work.empty() ? fs::path(out.string() + ".work") : fs::path(a.work);
-  CheckWritableFolder(a.work.empty() ? "the working folder" : "--work", work.string());
-
-  const Session session = Session::Load(session_dir);
-  // What the solve reads besides the frames, checked before the long work.
-  CheckSessionFrames(session);
-  SessionSite(session);
-  ReadSessionModel(session);
-  int nslots = 0;
-  for (const FrameRecord& f : session.frames()) nslots = std::max(nslots, f.slot + 1);
-  for (int h : a.holdout)
-    if (h >= nslots)
-      throw Error("--holdout-slot " + std::to_string(h) + ": the session has slots 0.." +
-                  std::to_string(nslots - 1));
-
-  po.work_dir = work;
-  po.exclude_albedo_slots = a.holdout;
-  po.log = [](const std::string& s) { std::fprintf(stderr, "solve: %s\n", s.c_str()); };
-  const SceneSolve r = SolveToScene(session, po, out, a.force);
+  SolveFolderRequest request;
+  request.session = a.session;
+  request.out = a.out;
+  request.work = a.work;
+  request.holdout_slots = a.holdout;
+  request.config = config;
+  request.force = a.force;
+  request.log = [](const std::string& s) { std::fprintf(stderr, "solve: %s\n", s.c_str()); };
+  const SceneSolve r = SolveSessionFolder(request);
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (r.up_to_date) {
     std::printf(
         "%s: up to date (session, model and options unchanged); nothing to do (%.1f s; "
         "--force solves again)\n",
-        out.c_str(), seconds);
+        a.out.c_str(), seconds);
     return;
   }
   const SolveResult& solved = r.solved;
-  std::printf("%s: %zu slots, %d grid points, %s (%.1f s)\n", out.c_str(), solved.slots.size(),
+  std::printf("%s: %zu slots, %d grid points, %s (%.1f s)\n", a.out.c_str(), solved.slots.size(),
               solved.grid.size(), solved.albedo.summary.BriefReport().c_str(), seconds);
+  std::printf("  %-44s %8s\n", "stage", "seconds");
+  for (const StageTime& t : r.stages) std::printf("  %-44s %8.2f\n", t.stage.c_str(), t.seconds);
+  for (const SlotSolve& s : solved.slots)
+    std::printf("  slot %d: sun elevation %.2f deg, sky fit median/p90 error %.4f/%.4f (green)\n",
+                s.slot, s.sun.elevation_deg, s.sky_summary.channel[1].rel_error_median,
+                s.sky_summary.channel[1].rel_error_p90);
 }
 
 }  // namespace

@@ -27,14 +27,6 @@ struct ValidateArgs {
   bool no_predicted = false;
 };
 
-nlohmann::json ToJson(const RenderMetrics& m) {
-  return {{"pixels", m.pixels},
-          {"rel_rmse", m.rel_rmse},
-          {"psnr_db", m.psnr_db},
-          {"median_rel_error", m.median_rel_error},
-          {"mean_ratio", m.mean_ratio}};
-}
-
 std::string SafeName(std::string s) {
   std::replace(s.begin(), s.end(), '/', '_');
   return s;
@@ -90,20 +82,12 @@ void Run(const ValidateArgs& a) {
   mo.response = &scene.scene.response;
   nlohmann::json j = {{"scene", a.scene},
                       {"session", a.session},
-                      {"slot", v.slot},
-                      {"held_out", v.held_out},
                       {"exclude_blocks", vo.exclude_blocks},
-                      {"erode_px", vo.erode_px},
-                      {"measured", ToJson(v.measured)}};
-  if (v.predicted) j["predicted"] = ToJson(*v.predicted);
-  j["photos"] = nlohmann::json::array();
-  for (size_t i = 0; i < v.photos.size(); ++i) {
-    const PhotoValidation& p = v.photos[i];
-    nlohmann::json pj = {{"view", p.view}, {"measured", ToJson(p.measured)}};
-    if (p.predicted) pj["predicted"] = ToJson(*p.predicted);
-    j["photos"].push_back(pj);
-    if (files.empty()) continue;
-    const ImageFiles& f = files.at(i);
+                      {"erode_px", vo.erode_px}};
+  j.update(ValidationToJson(v));
+  for (size_t i = 0; i < files.size(); ++i) {
+    const PhotoValidation& p = v.photos.at(i);
+    const ImageFiles& f = files[i];
     WriteImage(f.photo, p.photo, StoredType::kFloat);
     WriteImage(f.rendered, p.rendered_measured, StoredType::kFloat);
     WriteImage(f.difference, RelativeDifference(p.rendered_measured, p.photo, p.mask, mo),

@@ -72,6 +72,27 @@ std::vector<double> ParseNumberList(const std::string& text, size_t n, const std
   return v;
 }
 
+double ParseDurationSeconds(const std::string& text, double max_s, const std::string& option) {
+  const std::string where = option + " '" + text + "'";
+  size_t used = 0;
+  double value = 0;
+  try {
+    value = std::stod(text, &used);
+  } catch (const std::exception&) {
+    throw Error(where + ": not a duration (e.g. 15min, 1h, 30s)");
+  }
+  const std::string unit = text.substr(used);
+  double scale = 0;
+  if (unit.empty() || unit == "s") scale = 1;
+  if (unit == "min") scale = 60;
+  if (unit == "h") scale = 3600;
+  if (scale == 0) throw Error(where + ": unknown unit '" + unit + "' (s, min or h)");
+  const double seconds = value * scale;
+  if (!std::isfinite(seconds) || seconds <= 0 || seconds > max_s)
+    throw Error(where + ": must be above 0 and at most " + FormatNumber(max_s) + " s");
+  return seconds;
+}
+
 Site ParseSiteOption(const std::string& text, const std::string& option) {
   const std::string where = option + " '" + text + "'";
   std::vector<std::string> parts;

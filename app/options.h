@@ -21,6 +21,10 @@ CLI::Validator Obeys(std::string (*problem)(double));
 // `n` comma-separated finite numbers ("1.5,2,3"); throws rouen::Error naming `option`.
 std::vector<double> ParseNumberList(const std::string& text, size_t n, const std::string& option);
 
+// A duration "15min", "1h", "30s" (units s, min, h; a bare number is seconds), above 0 and at
+// most `max_s`; throws rouen::Error naming `option`.
+double ParseDurationSeconds(const std::string& text, double max_s, const std::string& option);
+
 // A site "LAT,LON,H" (degrees north, degrees east, metres) within core/limits.h's ranges;
 // throws rouen::Error naming `option` and the coordinate at fault.
 Site ParseSiteOption(const std::string& text, const std::string& option);

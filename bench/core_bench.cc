@@ -6,6 +6,7 @@
 #include <random>
 
 #include "calib/hdr.h"
+#include "core/angles.h"
 #include "core/solar.h"
 #include "solve/sky_fit.h"
 
@@ -60,7 +61,7 @@ void BM_FitSky20k(benchmark::State& state) {
   std::uniform_real_distribution<double> u(0, 1);
   std::vector<SkySample> samples;
   while (samples.size() < 20000) {
-    double z = u(rng), phi = 2 * M_PI * u(rng), r = std::sqrt(1 - z * z);
+    double z = u(rng), phi = 2 * kPi * u(rng), r = std::sqrt(1 - z * z);
     Eigen::Vector3d d(r * std::cos(phi), r * std::sin(phi), z);
     if (z < 0.05 || d.dot(sun) > std::cos(0.06)) continue;
     double xi = std::acos(z), gamma = std::acos(std::clamp(d.dot(sun), -1.0, 1.0));

@@ -33,6 +33,7 @@
 #include <vector>
 
 #include "capture/sim/sim_scene.h"
+#include "core/angles.h"
 #include "core/mesh.h"
 #include "solve/grid.h"
 #include "solve/irradiance.h"
@@ -42,8 +43,6 @@
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 // This thread's CPU time, seconds (the machine is shared: wall time would measure the load).
 double CpuNow() {

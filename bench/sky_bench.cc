@@ -24,15 +24,14 @@
 #include "capture/sim/almanac.h"
 #include "capture/sim/atmosphere.h"
 #include "capture/sim/sim_world.h"
+#include "core/angles.h"
 #include "core/solar.h"
+#include "core/stats.h"
 #include "core/time.h"
 #include "solve/sky_fit.h"
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180;
 
 struct TruthSky {
   std::string label;
@@ -112,13 +111,6 @@ std::vector<Eigen::Vector3d> ScoreDirections(const Eigen::Vector3d& sun) {
   return out;
 }
 
-double Percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * (v.size() - 1) + 0.5));
-  std::nth_element(v.begin(), v.begin() + k, v.end());
-  return v[k];
-}
-
 void AppendErrors(const SkyModel& fit, const TruthSky& sky, std::vector<double>* err) {
   for (const Eigen::Vector3d& d : ScoreDirections(sky.sun)) {
     const Eigen::Vector3d f = fit.Radiance(d), t = sky.table.Radiance(d);
@@ -165,14 +157,14 @@ void PrintAccuracy() {
       std::vector<double> err;
       AppendErrors(fit, s, &err);
       all.insert(all.end(), err.begin(), err.end());
-      std::printf("  %.4f  %.4f", Percentile(err, 0.5), Percentile(err, 0.9));
+      std::printf("  %.4f  %.4f", Quantile(err, 0.5), Quantile(err, 0.9));
       if (v.model == SkyModelKind::kCie) {
         std::printf(" T%-2d", sum.cie_type);
       } else {
         std::printf("    ");
       }
     }
-    std::printf("  %.4f  %.4f\n", Percentile(all, 0.5), Percentile(all, 0.9));
+    std::printf("  %.4f  %.4f\n", Quantile(all, 0.5), Quantile(all, 0.9));
   }
   std::printf("\n");
 }
@@ -207,10 +199,10 @@ void PrintDiagnostics() {
       }
       std::printf("  by elevation (10 deg bands): ");
       for (int i = 0; i < 9; ++i)
-        std::printf(" %.3f(%+.3f)", Percentile(by_el[i], 0.5),
+        std::printf(" %.3f(%+.3f)", Quantile(by_el[i], 0.5),
                     by_el[i].empty() ? 0.0 : sgn_el[i] / by_el[i].size());
       std::printf("\n  by sun distance (15 deg bands): ");
-      for (const auto& v : by_sun) std::printf(" %.3f", Percentile(v, 0.5));
+      for (const auto& v : by_sun) std::printf(" %.3f", Quantile(v, 0.5));
       std::printf("\n");
     }
   }
@@ -245,7 +237,7 @@ std::vector<ScoredError> Score(const SkyModel& fit, const TruthSky& sky, int slo
 double P(const std::vector<ScoredError>& v, double q) {
   std::vector<double> r;
   for (const ScoredError& e : v) r.push_back(e.rel);
-  return Percentile(r, q);
+  return Quantile(r, q);
 }
 
 // Median / p90 of the pooled errors and the share of the pooled tail (errors above the

@@ -9,13 +9,11 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "core/angles.h"
 #include "core/error.h"
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180.0;
 
 // One photo prepared for lookups.
 struct Prepared {

@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "core/angles.h"
 #include "core/camera.h"
 #include "core/error.h"
 #include "core/solar.h"
@@ -17,9 +18,6 @@ namespace rouen {
 namespace {
 
 using ::testing::HasSubstr;
-
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180.0;
 
 // The analytic environment: smooth and positive. Along any unit-speed great circle its second
 // derivative is at most about 5 per channel (linear terms: |b|; the products: <= 4 |coef|).

@@ -13,14 +13,13 @@
 #include <opencv2/calib3d.hpp>
 #include <random>
 
+#include "core/angles.h"
 #include "core/error.h"
 #include "core/files.h"
 #include "core/lens.h"
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 Eigen::Matrix3d Rot(double ax_deg, double ay_deg, double az_deg) {
   const double d = kPi / 180;

@@ -7,16 +7,10 @@
 
 #include "calib/hdr.h"
 #include "core/error.h"
+#include "core/stats.h"
 
 namespace rouen {
 namespace {
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  const size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + mid, v.end());
-  return v[mid];
-}
 
 void CheckRadiance(const Image& im, const char* which) {
   if (im.units != PixelUnits::kRadiance)

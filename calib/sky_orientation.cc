@@ -9,13 +9,12 @@
 #include <limits>
 #include <string>
 
+#include "core/angles.h"
 #include "core/error.h"
+#include "core/stats.h"
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180.0;
 
 std::string Fmt(const char* f, double a) {
   char buf[64];
@@ -31,14 +30,6 @@ std::string Px(double x, double y) {
 
 double AngleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return std::atan2(a.cross(b).norm(), a.dot(b)) / kDeg;
-}
-
-// Median of a copy (nth_element), 0 for none.
-double Median(std::vector<float> v) {
-  if (v.empty()) return 0;
-  auto mid = v.begin() + v.size() / 2;
-  std::nth_element(v.begin(), mid, v.end());
-  return *mid;
 }
 
 // Any unit vector perpendicular to `v`.

@@ -8,6 +8,7 @@
 #include <random>
 #include <string>
 
+#include "core/angles.h"
 #include "core/camera.h"
 #include "core/error.h"
 #include "core/solar.h"
@@ -17,8 +18,6 @@ namespace {
 
 using ::testing::HasSubstr;
 
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180.0;
 constexpr double kSunRadiusDeg = 0.265;  // 0.53 deg disc
 constexpr double kSunRadiance = 5e4;     // relative to a sky of about 1
 

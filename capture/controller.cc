@@ -6,6 +6,7 @@
 #include <set>
 #include <thread>
 
+#include "core/angles.h"
 #include "core/error.h"
 
 namespace rouen {
@@ -197,7 +198,7 @@ void CaptureController::Meter(const CapturedFrame& frame, Target target, double*
   // architecture views (the sun itself is measured through the ND filter).
   bool exclude_sun = target != Target::kSun && frame.intrinsics && frame.pose;
   Eigen::Vector3d sun_cam;
-  double cos_excl = std::cos(plan_.sun_exclusion_deg * M_PI / 180);
+  double cos_excl = std::cos(plan_.sun_exclusion_deg * kPi / 180);
   if (exclude_sun) {
     Site site = last_fix_ && last_fix_->valid()
                     ? Site{last_fix_->lat_deg, last_fix_->lon_deg, last_fix_->height_m}

@@ -6,14 +6,12 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "core/angles.h"
 #include "core/error.h"
 #include "core/solar.h"
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDegToRad = kPi / 180.0;
 
 // Brown-Conrady distortion of normalised coordinates (x, y) -> (xd, yd), with Jacobian.
 Eigen::Vector2d Distort(const Intrinsics& k, const Eigen::Vector2d& p, Eigen::Matrix2d* jac) {
@@ -91,7 +89,7 @@ Intrinsics Intrinsics::PinholeFov(int width, int height, double hfov_deg) {
   k.projection = Projection::kPinhole;
   k.width = width;
   k.height = height;
-  k.fx = k.fy = 0.5 * width / std::tan(0.5 * hfov_deg * kDegToRad);
+  k.fx = k.fy = 0.5 * width / std::tan(0.5 * hfov_deg * kDeg);
   k.cx = 0.5 * width;
   k.cy = 0.5 * height;
   return k;
@@ -102,7 +100,7 @@ Intrinsics Intrinsics::FisheyeFov(int width, int height, double fov_deg) {
   k.projection = Projection::kFisheye;
   k.width = width;
   k.height = height;
-  k.fx = k.fy = 0.5 * std::min(width, height) / (0.5 * fov_deg * kDegToRad);
+  k.fx = k.fy = 0.5 * std::min(width, height) / (0.5 * fov_deg * kDeg);
   k.cx = 0.5 * width;
   k.cy = 0.5 * height;
   return k;

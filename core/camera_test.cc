@@ -5,13 +5,12 @@
 #include <cmath>
 #include <nlohmann/json.hpp>
 
+#include "core/angles.h"
 #include "core/error.h"
 #include "core/solar.h"
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 Intrinsics DistortedPinhole() {
   Intrinsics k = Intrinsics::PinholeFov(640, 480, 70.0);

@@ -4,12 +4,12 @@
 
 #include <cmath>
 
+#include "core/angles.h"
 #include "core/error.h"
 
 namespace rouen {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 constexpr double kA = 6378137.0;            // WGS84 semi-major axis, m
 constexpr double kF = 1.0 / 298.257223563;  // WGS84 flattening
 constexpr double kE2 = kF * (2 - kF);       // first eccentricity squared

@@ -5,13 +5,12 @@
 #include <cmath>
 #include <string>
 
+#include "core/angles.h"
 #include "core/error.h"
 
 namespace rouen {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDegToRad = kPi / 180.0;
 constexpr double kRadToDeg = 180.0 / kPi;
 constexpr double kSunRadiusKm = 695700.0;     // IAU 2015 nominal solar radius
 constexpr double kAuKm = 149597870.700;       // IAU 2012 astronomical unit
@@ -23,7 +22,7 @@ constexpr double kSpaRefractionDeg = 0.5667;  // NREL SPA's refraction at the ho
 double SpaRefractionDeg(double e0_deg, double pressure_mbar, double temperature_c) {
   if (!(e0_deg >= -(kSpaSunRadiusDeg + kSpaRefractionDeg))) return 0.0;
   return (pressure_mbar / 1010.0) * (283.0 / (273.0 + temperature_c)) * 1.02 /
-         (60.0 * std::tan((e0_deg + 10.3 / (e0_deg + 5.11)) * kDegToRad));
+         (60.0 * std::tan((e0_deg + 10.3 / (e0_deg + 5.11)) * kDeg));
 }
 
 }  // namespace
@@ -33,7 +32,7 @@ Eigen::Vector3d SunPosition::DirectionEnu() const {
 }
 
 double SunPosition::SolidAngleSr() const {
-  return 2.0 * kPi * (1.0 - std::cos(angular_radius_deg * kDegToRad));
+  return 2.0 * kPi * (1.0 - std::cos(angular_radius_deg * kDeg));
 }
 
 SunPosition ComputeSunPosition(UtcTime t, const Site& site, const Weather& weather) {
@@ -57,8 +56,8 @@ SunPosition ComputeSunPosition(UtcTime t, const Site& site, const Weather& weath
   double eo = 0;
   // Pressure 0: ERFA's refraction is off; SPA's formula is applied below.
   const int status =
-      eraApco13(utc1, utc2, /*dut1=*/0.0, site.lon_deg * kDegToRad, site.lat_deg * kDegToRad,
-                site.height_m, /*xp=*/0.0, /*yp=*/0.0,
+      eraApco13(utc1, utc2, /*dut1=*/0.0, site.lon_deg * kDeg, site.lat_deg * kDeg, site.height_m,
+                /*xp=*/0.0, /*yp=*/0.0,
                 /*phpa=*/0.0, weather.temperature_c, /*rh=*/0.0, /*wl=*/0.55, &astrom, &eo);
   if (status < 0) throw Error("solar position: ERFA refused the date " + t.Iso8601());
   // Observer-to-Sun natural direction (astrom.eh is the Sun-to-observer unit vector).
@@ -94,7 +93,7 @@ SunPosition ComputeSunPosition(UtcTime t, const Site& site, const Weather& weath
 }
 
 Eigen::Vector3d EnuFromAzEl(double azimuth_deg, double elevation_deg) {
-  const double az = azimuth_deg * kDegToRad, el = elevation_deg * kDegToRad;
+  const double az = azimuth_deg * kDeg, el = elevation_deg * kDeg;
   return Eigen::Vector3d(std::sin(az) * std::cos(el), std::cos(az) * std::cos(el), std::sin(el));
 }
 

@@ -5,12 +5,11 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/angles.h"
 #include "core/error.h"
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 TEST(SolarTest, ReproducesSpaWorkedExample) {
   // Reda & Andreas (2008), NREL SPA, Table A5.1 / A5.2.

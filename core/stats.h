@@ -11,6 +11,11 @@ namespace rouen {
 double Quantile(std::vector<double> v, double p);
 float Quantile(std::vector<float> v, double p);
 
+// The sample median: the middle element, or the mean of the two middle ones for an even count
+// (the robust centre the solvers estimate with; reports use Quantile). 0 for an empty vector.
+double Median(std::vector<double> v);
+float Median(std::vector<float> v);
+
 // Arithmetic mean; 0 for an empty vector.
 double Mean(const std::vector<double>& v);
 

@@ -20,6 +20,15 @@ TEST(StatsTest, QuantileIsTheLowerNearestRank) {
   EXPECT_EQ(Quantile(std::vector<double>{}, 0.5), 0);
 }
 
+TEST(StatsTest, MedianIsTheSampleMedian) {
+  EXPECT_EQ(Median(std::vector<double>{50, 10, 40, 20, 30}), 30);
+  // An even count: the mean of the two middle values (unlike Quantile's lower middle).
+  EXPECT_EQ(Median(std::vector<double>{4, 1, 3, 2}), 2.5);
+  EXPECT_EQ(Median(std::vector<float>{4, 1, 3, 2}), 2.5f);
+  EXPECT_EQ(Median(std::vector<double>{-7}), -7);
+  EXPECT_EQ(Median(std::vector<double>{}), 0);
+}
+
 TEST(StatsTest, Mean) {
   EXPECT_DOUBLE_EQ(Mean({1, 2, 3, 6}), 3.0);
   EXPECT_EQ(Mean({}), 0.0);

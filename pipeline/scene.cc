@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <map>
 #include <memory>
 #include <system_error>
@@ -11,6 +12,7 @@
 #include "core/error.h"
 #include "core/files.h"
 #include "core/limits.h"
+#include "core/outputs.h"
 #include "core/solar.h"
 #include "core/temporaries.h"
 #include "core/version.h"
@@ -101,6 +103,12 @@ SceneSolve SolveToScene(const Session& session, const PipelineOptions& options, 
   scene.inputs_sha256 = result.inputs_sha256;
   scene.rouen_version = RouenVersion();
   scene.options = SolveOptionsJson(options);
+  result.stages = calib.stages;
+  result.stages.insert(result.stages.end(), solved.stages.begin(), solved.stages.end());
+  scene.timings = nlohmann::json::array();
+  for (const StageTime& t : result.stages)
+    scene.timings.push_back({{"stage", t.stage}, {"seconds", t.seconds}});
+  const auto write_start = std::chrono::steady_clock::now();
 
   const fs::path tmp = SiblingTemporary(out);
   fs::remove_all(tmp, ec);
@@ -129,7 +137,40 @@ SceneSolve SolveToScene(const Session& session, const PipelineOptions& options, 
     fs::remove_all(tmp, ec);
     throw;
   }
+  result.stages.push_back(
+      {"write the scene",
+       std::chrono::duration<double>(std::chrono::steady_clock::now() - write_start).count()});
+  if (options.log) options.log("wrote " + out.string());
   return result;
+}
+
+SceneSolve SolveSessionFolder(const SolveFolderRequest& request) {
+  fs::path out = request.out.lexically_normal();
+  if (!out.has_filename()) out = out.parent_path();  // "s.scene/" -> "s.scene"
+  CheckSceneOutput(out);
+  fs::path session_dir = request.session.lexically_normal();
+  if (!session_dir.has_filename()) session_dir = session_dir.parent_path();
+  const fs::path work = request.work.empty() ? fs::path(out.string() + ".work") : request.work;
+  CheckWritableFolder(request.work.empty() ? "the working folder" : "--work", work.string());
+
+  const Session session = Session::Load(session_dir);
+  // What the solve reads besides the frames, checked before the long work.
+  CheckSessionFrames(session);
+  SessionSite(session);
+  ReadSessionModel(session);
+  int nslots = 0;
+  for (const FrameRecord& f : session.frames()) nslots = std::max(nslots, f.slot + 1);
+  for (int h : request.holdout_slots)
+    if (h < 0 || h >= nslots)
+      throw Error("held-out slot " + std::to_string(h) + ": " + session_dir.string() +
+                  " has slots 0.." + std::to_string(nslots - 1));
+
+  PipelineOptions po;
+  po.config = request.config;
+  po.work_dir = work;
+  po.exclude_albedo_slots = request.holdout_slots;
+  po.log = request.log;
+  return SolveToScene(session, po, out, request.force);
 }
 
 LoadedScene LoadScene(const fs::path& dir, const std::function<void(const std::string&)>& log) {

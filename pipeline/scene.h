@@ -39,6 +39,7 @@ struct SceneSolve {
   bool up_to_date = false;  // `out` was already solved from the same inputs: nothing was done
   SolveResult solved;       // empty when up_to_date
   std::string inputs_sha256;
+  std::vector<StageTime> stages;  // calibration, solve and writing the scene, in order
 };
 
 // Calibrates and solves `session` (CalibrateSession, then SolveSession with
@@ -48,6 +49,22 @@ struct SceneSolve {
 // the same inputs (SolveInputsSha256) it does nothing and says so, unless `force`.
 SceneSolve SolveToScene(const Session& session, const PipelineOptions& options,
                         const std::filesystem::path& out, bool force = false);
+
+// A whole `rouen solve` from folders: what the CLI and the Python bindings both call.
+struct SolveFolderRequest {
+  std::filesystem::path session;   // session folder (rouen capture / rouen import)
+  std::filesystem::path out;       // scene folder: new, or an earlier scene
+  std::filesystem::path work;      // calib/ goes here; empty: "<out>.work"
+  std::vector<int> holdout_slots;  // slots whose architecture photos the albedos leave out
+  SolveConfig config = DefaultSolveConfig(false);
+  bool force = false;  // solve even when `out` is up to date
+  std::function<void(const std::string&)> log;
+};
+
+// Checks every input before the long work (the output and work folders, each frame record,
+// the site, the model, the held-out slots against the session's), then SolveToScene. Throws
+// rouen::Error naming the folder, file or slot that is wrong.
+SceneSolve SolveSessionFolder(const SolveFolderRequest& request);
 
 // A scene folder read back, ready to render: the model, its grid and visibility pattern
 // rebuilt from the recorded options, each slot's lighting, the albedos, the views' cameras.

@@ -2,13 +2,16 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <optional>
 #include <set>
 
 #include "calib/hdr.h"
 #include "calib/nd.h"
 #include "calib/vignetting.h"
+#include "core/angles.h"
 #include "core/error.h"
 #include "core/files.h"
 #include "core/limits.h"
@@ -22,6 +25,27 @@ namespace {
 void Log(const PipelineOptions& o, const std::string& s) {
   if (o.log) o.log(s);
 }
+
+// Records the time since the previous lap as a stage and tells it.
+class StageClock {
+ public:
+  StageClock(const PipelineOptions& options, std::vector<StageTime>* stages)
+      : options_(options), stages_(stages), last_(std::chrono::steady_clock::now()) {}
+  void Lap(const std::string& stage) {
+    const auto now = std::chrono::steady_clock::now();
+    const double s = std::chrono::duration<double>(now - last_).count();
+    stages_->push_back({stage, s});
+    last_ = now;
+    char buf[32];
+    std::snprintf(buf, sizeof buf, " (%.2f s)", s);
+    Log(options_, "done: " + stage + buf);
+  }
+
+ private:
+  const PipelineOptions& options_;
+  std::vector<StageTime>* stages_;
+  std::chrono::steady_clock::time_point last_;
+};
 
 // Sky and aureole brackets of a slot share the sky camera's view: they merge together.
 std::string MergeKey(const FrameRecord& f) {
@@ -438,6 +462,7 @@ Mesh ReadSessionModel(const std::filesystem::path& dir, const SessionInfo& info)
 CalibResult CalibrateSession(const Session& session, const PipelineOptions& options) {
   CheckSessionFrames(session);
   CalibResult out;
+  StageClock clock(options, &out.stages);
   const std::string where = session.dir().string();
   std::map<std::string, std::vector<const FrameRecord*>> groups = SessionBrackets(session);
   if (groups.empty()) throw Error(where + ": the session has no frames");
@@ -463,6 +488,8 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
                      " is up to date (same session files and options): "
                      "the response curve and " +
                      std::to_string(done->groups.size()) + " merged brackets read back");
+    clock.Lap("calibration read back");
+    done->stages = std::move(out.stages);
     return std::move(*done);
   }
   std::error_code ec;
@@ -512,6 +539,7 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
   WatchForTemporaries(options.work_dir / "calib" / "hdr");
   if (out.response.valid())
     WriteResponseCurve((options.work_dir / "calib" / "response.json").string(), out.response);
+  clock.Lap("response curve");
 
   // HDR radiance per bracket.
   for (const auto& [name, frames] : groups) {
@@ -523,6 +551,7 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
     out.groups.emplace(name, std::move(g));
   }
   Log(options, "merged " + std::to_string(out.groups.size()) + " brackets to radiance");
+  clock.Lap("merge brackets to radiance");
   // Written last: the files above are whole when the manifest names them.
   nlohmann::json names = nlohmann::json::array();
   for (const auto& [name, g] : out.groups) names.push_back(name);
@@ -553,6 +582,7 @@ HdrGroup MergeSessionBracket(const Session& session, const std::string& name,
 SolveResult SolveSession(const Session& session, const CalibResult& calib,
                          const PipelineOptions& options) {
   SolveResult r;
+  StageClock clock(options, &r.stages);
   r.mesh = ReadSessionModel(session);
   r.caster = std::make_unique<RayCaster>(r.mesh);
   const Site site = SessionSite(session);
@@ -590,18 +620,11 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
     std::string mask_source;
     const std::vector<SkySample> samples = SlotSkySamples(session, calib, s, sun_dir, &mask_source);
     SkyModel sky;
-    // Relative residuals (sigma = y) fit the physically based sky better than eq. 10's
-    // sigma = y / log y (bench/sky_bench.cc); SkyWeighting::kPaper gives the paper's weights.
-    // Their L1 norm (robust) keeps the horizon and inner aureole, which eq. 9 cannot follow
-    // exactly, from pulling the fit of the rest of the sky (bench/sky_bench.cc error study).
-    SkyFitOptions sky_fit_options;
-    sky_fit_options.weighting = SkyWeighting::kRelative;
-    sky_fit_options.norm_p = 1;
-    ss.sky_summary = FitSky(samples, sun_dir, sky_fit_options, &sky);
+    ss.sky_summary = FitSky(samples, sun_dir, options.config.sky_fit, &sky);
     // §3.3: the environment from the landscape panoramas, one layer per height (e.g. from the
     // ground and from a mast at the top of the building).
     EnvironmentMap env =
-        BuildEnvironmentMap(panoramas, *r.caster, sun_dir, ss.sun.angular_radius_deg * M_PI / 180,
+        BuildEnvironmentMap(panoramas, *r.caster, sun_dir, ss.sun.angular_radius_deg * kPi / 180,
                             sky, options.config.environment);
     ss.lighting.utc = ss.utc;
     ss.lighting.sun_dir = sun_dir;
@@ -614,12 +637,14 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
                      ", sky fit median error " +
                      std::to_string(ss.sky_summary.channel[1].rel_error_median));
     r.slots.push_back(std::move(ss));
+    clock.Lap("slot " + std::to_string(s) + " lighting (sun, sky, environment)");
   }
 
   // Surface grid and geometry-only visibility, computed once.
   r.grid = BuildSurfaceGrid(r.mesh, options.config.grid);
   r.hemisphere = BuildHemisphereCache(r.grid, *r.caster, options.config.hemisphere);
   Log(options, "surface grid: " + std::to_string(r.grid.size()) + " points");
+  clock.Lap("surface grid and visibility");
 
   // Observations from the architecture photos of the training slots.
   std::vector<ArchitecturePhoto> photos;
@@ -646,12 +671,14 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   Log(options, std::to_string(obs.size()) + " observations of " +
                    std::to_string(os.points_observed) + " grid points in " +
                    std::to_string(photos.size()) + " photos");
+  clock.Lap("observations");
   std::vector<Lighting> lighting;
   for (const SlotSolve& ss : r.slots) lighting.push_back(ss.lighting);
   r.albedo_options = options.config.albedo;
   r.albedo =
       SolveAlbedo(r.grid, r.hemisphere, *r.caster, lighting, obs, r.albedo_options, &r.irradiance);
   Log(options, "pseudo-albedos: " + r.albedo.summary.BriefReport());
+  clock.Lap("irradiance and pseudo-albedos");
   return r;
 }
 

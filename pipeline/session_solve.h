@@ -48,7 +48,14 @@ struct HdrGroup {
   double nd_density = 0;
 };
 
+// How long one stage of a solve took (rouen solve prints them; scene.json keeps them).
+struct StageTime {
+  std::string stage;
+  double seconds = 0;
+};
+
 struct CalibResult {
+  std::vector<StageTime> stages;
   ResponseCurve response;
   ResponseSummary response_summary;
   std::map<std::string, HdrGroup> groups;
@@ -94,6 +101,7 @@ struct SlotSolve {
 };
 
 struct SolveResult {
+  std::vector<StageTime> stages;
   Mesh mesh;
   SurfaceGrid grid;
   std::unique_ptr<RayCaster> caster;

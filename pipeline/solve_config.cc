@@ -154,8 +154,6 @@ SolveConfig DefaultSolveConfig(bool quick) {
   SolveConfig c;
   c.grid.spacing_m = 0.6;
   c.grid.block_spacing_m["plaza"] = 1.5;
-  c.sky_fit.weighting = SkyWeighting::kRelative;
-  c.sky_fit.norm_p = 1;
   if (quick) {
     c.response_max_brackets = 6;
     c.environment.pixel_stride = 2;

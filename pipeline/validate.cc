@@ -137,4 +137,27 @@ Validation ValidateSlot(const LoadedScene& scene, const Session& session, int sl
   return out;
 }
 
+namespace {
+nlohmann::json MetricsJson(const RenderMetrics& m) {
+  return {{"pixels", m.pixels},
+          {"rel_rmse", m.rel_rmse},
+          {"psnr_db", m.psnr_db},
+          {"median_rel_error", m.median_rel_error},
+          {"mean_ratio", m.mean_ratio}};
+}
+}  // namespace
+
+nlohmann::json ValidationToJson(const Validation& v) {
+  nlohmann::json j = {{"slot", v.slot}, {"held_out", v.held_out}};
+  j["measured"] = MetricsJson(v.measured);
+  if (v.predicted) j["predicted"] = MetricsJson(*v.predicted);
+  j["photos"] = nlohmann::json::array();
+  for (const PhotoValidation& p : v.photos) {
+    nlohmann::json pj = {{"view", p.view}, {"measured", MetricsJson(p.measured)}};
+    if (p.predicted) pj["predicted"] = MetricsJson(*p.predicted);
+    j["photos"].push_back(pj);
+  }
+  return j;
+}
+
 }  // namespace rouen

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <functional>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
@@ -54,5 +55,9 @@ struct Validation {
 Validation ValidateSlot(const LoadedScene& scene, const Session& session, int slot,
                         const ValidateOptions& options,
                         const std::function<void(const std::string&)>& log = {});
+
+// The figures as JSON (what `rouen validate --json` writes): slot, held_out, measured and
+// predicted metrics pooled and per photo.
+nlohmann::json ValidationToJson(const Validation& v);
 
 }  // namespace rouen

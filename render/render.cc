@@ -7,13 +7,12 @@
 #include <cmath>
 #include <string>
 
+#include "core/angles.h"
 #include "core/error.h"
 
 namespace rouen {
 
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 void CheckSizes(const SurfaceGrid& grid, const AlbedoResult& albedo, const SlotIrradiance& irr) {
   const size_t n = grid.points.size();

@@ -4,13 +4,12 @@
 
 #include <cmath>
 
+#include "core/angles.h"
 #include "core/error.h"
 #include "solve/test_scenes.h"
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 struct Fixture {
   Mesh mesh;

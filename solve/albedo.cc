@@ -12,27 +12,16 @@
 #include <string>
 #include <unordered_map>
 
+#include "core/angles.h"
 #include "core/error.h"
+#include "core/stats.h"
 
 namespace rouen {
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
-
 double Seconds(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  const size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + mid, v.end());
-  double m = v[mid];
-  if (v.size() % 2 == 0) {
-    m = 0.5 * (m + *std::max_element(v.begin(), v.begin() + mid));
-  }
-  return m;
 }
 
 // One equation of eqs. 11-12 for a point: y = pi I = rho_se e_se + rho_sun e_sun, per channel.

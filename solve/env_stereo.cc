@@ -15,13 +15,14 @@
 #include <limits>
 #include <string>
 
+#include "core/angles.h"
 #include "core/error.h"
+#include "core/stats.h"
 
 namespace rouen {
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 constexpr int kNumParams = 8;  // k_sky (3), two free k_sun, n (3)
 
 // Eq. 18's smooth clamp of x = n.l for a unit normal: x when x >= 0, else (e^{alpha x} - 1) /
@@ -223,13 +224,6 @@ void CheckLighting(const EnvLighting& l, const std::string& what) {
   if (!z.allFinite() || z.minCoeff() < 0) {
     throw Error(what + ": the sky model gives a negative or non-finite zenith radiance");
   }
-}
-
-double Percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  const size_t k = static_cast<size_t>(std::clamp(p, 0.0, 1.0) * (v.size() - 1));
-  std::nth_element(v.begin(), v.begin() + k, v.end());
-  return v[k];
 }
 
 // Sky-only fit for a fixed unit normal: k_sky per channel by weighted linear least squares.
@@ -679,8 +673,8 @@ EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
     res.summary.fallback_bad_fit += fallback_reason[gi] == 1;
     res.summary.fallback_never_lit += fallback_reason[gi] == 2;
   }
-  res.summary.rel_rms_median = Percentile(rms, 0.5);
-  res.summary.rel_rms_p90 = Percentile(rms, 0.9);
+  res.summary.rel_rms_median = Quantile(rms, 0.5);
+  res.summary.rel_rms_p90 = Quantile(rms, 0.9);
   res.summary.seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return res;

@@ -6,12 +6,11 @@
 #include <cmath>
 #include <random>
 
+#include "core/angles.h"
 #include "core/error.h"
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 Eigen::Vector3d Dir(double el_deg, double az_deg) {
   const double el = el_deg * kPi / 180, az = az_deg * kPi / 180;

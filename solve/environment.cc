@@ -9,13 +9,12 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "core/angles.h"
 #include "core/error.h"
 
 namespace rouen {
 
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 // A panorama pixel kept for the map: direction from the panorama, solid angle, radiance.
 struct UsedPixel {

@@ -5,13 +5,12 @@
 #include <cmath>
 #include <nlohmann/json.hpp>
 
+#include "core/angles.h"
 #include "core/error.h"
 #include "solve/test_scenes.h"
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 Eigen::Vector3d Dir(double az_deg, double el_deg) {
   const double az = az_deg * kPi / 180, el = el_deg * kPi / 180;

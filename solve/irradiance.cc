@@ -9,23 +9,14 @@
 #include <memory>
 #include <string>
 
+#include "core/angles.h"
 #include "core/error.h"
+#include "core/hash_random.h"
 #include "solve/vector_flux_cache.h"
 
 namespace rouen {
 
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
-
-uint64_t SplitMix64(uint64_t x) {
-  x += 0x9E3779B97F4A7C15ull;
-  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
-  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
-  return x ^ (x >> 31);
-}
-
-double ToUnit(uint64_t x) { return static_cast<double>(x >> 11) * (1.0 / 9007199254740992.0); }
 
 // Orthonormal tangent frame (t, b) for a unit normal n (Duff et al. 2017).
 void TangentFrame(const Eigen::Vector3d& n, Eigen::Vector3d* t, Eigen::Vector3d* b) {
@@ -73,8 +64,8 @@ void IrradianceOptions::Validate() const {
 }
 
 Eigen::Vector3d HemisphereCache::Direction(const GridPoint& p, int point_index, int k) const {
-  const uint64_t h = SplitMix64(seed * 0x100000001B3ull + static_cast<uint64_t>(point_index));
-  const double s1 = ToUnit(h), s2 = ToUnit(SplitMix64(h));
+  const uint64_t h = MixHash(seed * 0x100000001B3ull + static_cast<uint64_t>(point_index));
+  const double s1 = HashUniform53(h), s2 = HashUniform53(MixHash(h));
   const int a = k / strata, b = k % strata;
   double u1 = (a + 0.5) / strata + s1;
   double u2 = (b + 0.5) / strata + s2;

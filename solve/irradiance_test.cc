@@ -5,13 +5,12 @@
 #include <cmath>
 #include <memory>
 
+#include "core/angles.h"
 #include "core/error.h"
 #include "solve/test_scenes.h"
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 Lighting UniformSky(const Eigen::Vector3d& sky, const Eigen::Vector3d& ground) {
   Lighting l;

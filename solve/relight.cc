@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "core/angles.h"
 #include "core/error.h"
 
 namespace rouen {
@@ -111,7 +112,7 @@ Lighting LightingPredictor::At(UtcTime utc, const Site& site, RelightSummary* su
     OvercastSky overcast;
     // CIE overcast: E_horizontal = 7 pi Lz / 9.
     overcast.zenith_radiance =
-        colour * (options_.overcast_brightness * clear_e.mean() * 9 / (7 * M_PI));
+        colour * (options_.overcast_brightness * clear_e.mean() * 9 / (7 * kPi));
     IntermediateSky blend = MakeIntermediateSky(out.sky, overcast, options_.pbs);
     IntermediateFitSummary fs;
     // Its sun_dir is the zenith when pbs = 1 (the overcast form of eq. 9 is fitted that way).

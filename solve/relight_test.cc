@@ -4,6 +4,7 @@
 
 #include <cmath>
 
+#include "core/angles.h"
 #include "core/error.h"
 
 namespace rouen {
@@ -113,11 +114,11 @@ TEST(RelightTest, BlockedSunlightBlendsTowardsOvercast) {
   // 2.2% at most per sky_time's fit).
   const Eigen::Vector3d zen = lo.sky.Radiance(Eigen::Vector3d::UnitZ());
   const Eigen::Vector3d low =
-      lo.sky.Radiance(Eigen::Vector3d(0, std::sin(85 * M_PI / 180), std::cos(85 * M_PI / 180)));
+      lo.sky.Radiance(Eigen::Vector3d(0, std::sin(85 * kPi / 180), std::cos(85 * kPi / 180)));
   for (int c = 0; c < 3; ++c) {
     EXPECT_NEAR(zen[c] / zen.mean(), 1, 0.03);
     EXPECT_NEAR(low[c] / low.mean(), 1, 0.03);
-    EXPECT_NEAR(zen[c] / low[c], 3 / (1 + 2 * std::cos(85 * M_PI / 180)), 0.05 * 2.56);
+    EXPECT_NEAR(zen[c] / low[c], 3 / (1 + 2 * std::cos(85 * kPi / 180)), 0.05 * 2.56);
   }
   EXPECT_GT(lc.sun_radiance.minCoeff(), 0);
   EXPECT_THROW(

@@ -1,5 +1,6 @@
 #include "solve/scene.h"
 
+#include <cctype>
 #include <cmath>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -8,6 +9,7 @@
 #include "core/error.h"
 #include "core/files.h"
 #include "core/image.h"
+#include "solve/atlas.h"
 
 namespace rouen {
 
@@ -107,6 +109,61 @@ std::vector<Eigen::Vector3d> UnpackPointValues(const Image& image, int count) {
   return out;
 }
 
+namespace {
+
+// A block's name as a file name: letters, digits, '-' and '_' kept, anything else '_', after
+// the block's index (names need not be unique or non-empty).
+std::string BlockFileName(int index, const std::string& name) {
+  std::string out = std::to_string(index) + "_";
+  for (char c : name) out += std::isalnum(static_cast<unsigned char>(c)) || c == '-' ? c : '_';
+  return out;
+}
+
+// What other tools read without rouen's grid: the grid points' positions and normals beside
+// the packed albedos, each block's albedos as texture atlases (solve/atlas.h) and the model
+// with texture coordinates into them. Returns scene.json's "atlas" entry.
+nlohmann::json WriteAlbedoAtlases(const std::filesystem::path& dir, const SceneModel& scene,
+                                  const Mesh& mesh) {
+  const SurfaceGrid grid = BuildSurfaceGrid(mesh, scene.grid_options);
+  const AlbedoResult& a = scene.albedo;
+  if (static_cast<size_t>(grid.size()) != a.rho_sun.size())
+    throw Error(dir.string() + ": the model's grid has " + std::to_string(grid.size()) +
+                " points, the albedos " + std::to_string(a.rho_sun.size()));
+  std::vector<Eigen::Vector3d> positions, normals;
+  for (const GridPoint& p : grid.points) {
+    positions.push_back(p.position);
+    normals.push_back(p.normal);
+  }
+  WriteImage((dir / "points.exr").string(), PackPointValues(positions), StoredType::kFloat);
+  WriteImage((dir / "normals.exr").string(), PackPointValues(normals), StoredType::kFloat);
+  const AtlasOptions options;
+  const AtlasLayout layout = LayoutAtlases(mesh, grid, options);
+  std::filesystem::create_directories(dir / "atlas");
+  std::vector<std::string> textures(mesh.block_names.size());
+  nlohmann::json blocks = nlohmann::json::object();
+  for (int b = 0; b < static_cast<int>(mesh.block_names.size()); ++b) {
+    if (layout.width[b] == 0) continue;
+    const std::string base = "atlas/" + BlockFileName(b, mesh.block_names[b]);
+    WriteImage((dir / (base + "_sun.exr")).string(), BakeAtlas(layout, grid, a.rho_sun, b),
+               StoredType::kHalf);
+    WriteImage((dir / (base + "_se.exr")).string(), BakeAtlas(layout, grid, a.rho_se, b),
+               StoredType::kHalf);
+    textures[b] = base + "_sun.exr";
+    blocks[mesh.block_names[b]] = {{"sun", base + "_sun.exr"},
+                                   {"se", base + "_se.exr"},
+                                   {"width", layout.width[b]},
+                                   {"height", layout.height[b]}};
+  }
+  WriteTexturedObj(dir / "model_textured.obj", mesh, layout, textures);
+  return {{"model", "model_textured.obj"},
+          {"texels_per_cell", options.texels_per_cell},
+          {"blocks", blocks},
+          {"points", "points.exr"},
+          {"normals", "normals.exr"}};
+}
+
+}  // namespace
+
 void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const Mesh* mesh) {
   if (scene.model_file.empty()) throw Error(dir.string() + ": scene has no model_file");
   std::filesystem::create_directories(dir);
@@ -160,6 +217,7 @@ void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const
   }
   j["views"] = views;
   j["holdout_slots"] = scene.holdout_slots;
+  j["timings"] = scene.timings;
   j["provenance"] = {{"inputs_sha256", scene.inputs_sha256},
                      {"rouen_version", scene.rouen_version},
                      {"options", scene.options}};
@@ -173,6 +231,7 @@ void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const
   std::vector<Eigen::Vector3d> info(n);
   for (size_t i = 0; i < n; ++i) info[i] = Eigen::Vector3d(a.observations[i], a.flags[i], 0);
   WriteImage((dir / "albedo_info.exr").string(), PackPointValues(info), StoredType::kFloat);
+  j["atlas"] = WriteAlbedoAtlases(dir, scene, mesh ? *mesh : ReadObj(model_path.string()));
   WriteFileAtomic(dir / "scene.json", j.dump(1));
 }
 
@@ -236,6 +295,7 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
       if (slot < 0) throw Error("holdout slot " + std::to_string(slot) + " is negative");
       scene.holdout_slots.push_back(slot);
     }
+    if (j.contains("timings")) scene.timings = j.at("timings");
     if (j.contains("provenance")) {
       const auto& p = j.at("provenance");
       scene.inputs_sha256 = p.at("inputs_sha256").get<std::string>();

@@ -64,11 +64,16 @@ struct SceneModel {
   std::string inputs_sha256;
   std::string rouen_version;
   nlohmann::json options = nlohmann::json::object();
+  // Seconds per stage of the solve that wrote it: [{"stage": ..., "seconds": ...}] (or null).
+  nlohmann::json timings;
 };
 
 constexpr int kAlbedoImageWidth = 1024;
 
-// Writes scene.json and the albedo EXRs (atomically, through core). The model OBJ must
+// Writes scene.json and the albedo EXRs (atomically, through core), and for other tools the
+// grid points' positions and normals (points.exr, normals.exr, packed as the albedos), each
+// block's albedo atlases (atlas/<index>_<block>_sun.exr and _se.exr, solve/atlas.h) and the
+// model with texture coordinates into them (model_textured.obj and .mtl). The model OBJ must
 // already be at dir/model_file (or be given as `mesh`, which is then written there).
 void WriteScene(const std::filesystem::path& dir, const SceneModel& scene,
                 const Mesh* mesh = nullptr);

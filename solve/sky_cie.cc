@@ -3,12 +3,11 @@
 #include <cmath>
 #include <string>
 
+#include "core/angles.h"
 #include "core/error.h"
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 struct Gradation {
   double a, b;

@@ -4,13 +4,11 @@
 
 #include <cmath>
 
+#include "core/angles.h"
 #include "core/error.h"
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180;
 
 TEST(CieSky, FifteenTypesFromTheGroups) {
   // Type 12 (CIE clear, V.4): gradation V (-1, -0.32), indicatrix 4 (10, -3, 0.45).

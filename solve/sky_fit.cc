@@ -12,7 +12,9 @@
 #include <random>
 #include <string>
 
+#include "core/angles.h"
 #include "core/error.h"
+#include "core/stats.h"
 #include "solve/internal/sky_cost.h"
 #include "solve/sky_cie.h"
 
@@ -21,9 +23,6 @@ namespace {
 
 using internal::SkyCost;
 using internal::SkyPoint;
-
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180.0;
 
 // Bounds per parameter {Lz, a, b, c, d, e, h}; Lz's upper bound is open.
 constexpr double kLower[7] = {1e-12, -3.0, -10.0, 0.0, -20.0, -0.9, 0.3};
@@ -56,13 +55,6 @@ double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
 
-double Percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * (v.size() - 1) + 0.5));
-  std::nth_element(v.begin(), v.begin() + k, v.end());
-  return v[k];
-}
-
 struct StartResult {
   double params[7] = {1, 0, -1, 0, -1, 0, 1};
   double initial_cost = 0, final_cost = std::numeric_limits<double>::infinity();
@@ -70,7 +62,7 @@ struct StartResult {
 };
 
 // Gradation factor 1 + a exp(b / cos xi) at the zenith, where it is smallest (b < 0).
-double ZenithGradation(const double* p) { return 1 + p[1] * std::exp(p[2]); }
+double ZenithGradation(const double* p) { return SkyGradationFactor(p[1], p[2], 1.0); }
 
 // Levenberg-Marquardt from `p` (modified in place), with the box bounds; `a_lower` replaces
 // the lower bound of a.
@@ -250,8 +242,8 @@ SkyResidualStats SummarizeSkyResiduals(const std::vector<Eigen::Vector3d>& resid
       a[i] = std::abs(residuals[i][c]);
       sum += a[i];
     }
-    s.median[c] = Percentile(a, 0.5);
-    s.p90[c] = Percentile(a, 0.9);
+    s.median[c] = Quantile(a, 0.5);
+    s.p90[c] = Quantile(a, 0.9);
     s.max[c] = *std::max_element(a.begin(), a.end());
     s.mean[c] = sum / a.size();
   }
@@ -578,8 +570,8 @@ SkyFitSummary FitSky(const std::vector<SkySample>& samples, const Eigen::Vector3
     }
     cs.iterations = b.iterations;
     cs.initial_cost = b.initial_cost;
-    cs.rel_error_median = Percentile(rel, 0.5);
-    cs.rel_error_p90 = Percentile(rel, 0.9);
+    cs.rel_error_median = Quantile(rel, 0.5);
+    cs.rel_error_p90 = Quantile(rel, 0.9);
     cs.rel_error_max = *std::max_element(rel.begin(), rel.end());
     cs.rel_error_mean = sum / rel.size();
   }

@@ -53,9 +53,12 @@ enum class SkyWeighting {
   kRelative,  // sigma_i = y_i: plain relative residuals
 };
 
+// The defaults are the one sky fit of rouen (rouen solve, rouen sky fit, the library): relative
+// residuals and their L1 norm, which fit physically based skies better than the paper's eq. 10
+// (weighting kPaper, norm_p 2; bench/sky_bench.cc measures both).
 struct SkyFitOptions {
   SkyModelKind model = SkyModelKind::kSevenParam;
-  SkyWeighting weighting = SkyWeighting::kPaper;
+  SkyWeighting weighting = SkyWeighting::kRelative;
   int max_iterations = 200;  // Levenberg-Marquardt iterations per start
   int min_samples = 20;
   // Try the eight starting shapes (CIE general skies, Perez-like); false: CIE clear only.
@@ -69,13 +72,13 @@ struct SkyFitOptions {
   // the units of r: relative error for kRelative). p = 2 is eq. 10's least squares (exact,
   // eps unused). p < 2 is robust: sky regions the model cannot follow (the last degrees above
   // the horizon, the inner aureole) pull the rest of the fit less; p > 2 weighs the largest
-  // residuals more (on the demo's skies p > 2 raised both median and p90: the largest errors
-  // are where the model cannot follow). From the least-squares optimum and each starting
+  // residuals more, which helps only where the largest residuals are noise rather than sky
+  // the model cannot follow. From the least-squares optimum and each starting
   // shape: p < 2 by iteratively reweighted least squares (majorise-minimise, each step lowers
   // the objective); p > 2 by LM on sign(r_i) sqrt(rho(r_i)). final_cost is then
   // half sum rho(r_i). Costs several times a least-squares fit.
   // In [1, 16]. Not used by kCie.
-  double norm_p = 2;
+  double norm_p = 1;
   double norm_eps = 1e-3;
   double function_tolerance = 1e-10;
 

@@ -9,6 +9,7 @@
 #include <random>
 #include <vector>
 
+#include "core/angles.h"
 #include "core/error.h"
 #include "solve/internal/sky_cost.h"
 #include "solve/sky_cie.h"
@@ -17,9 +18,6 @@
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180;
 
 Eigen::Vector3d AzEl(double az_deg, double el_deg) {
   const double az = az_deg * kDeg, el = el_deg * kDeg;
@@ -69,6 +67,25 @@ TEST(SkyModel, RadianceIsEquationNineAndClampsBelowHorizon) {
   EXPECT_TRUE(m.Radiance(Eigen::Vector3d(0, 0, -1)).allFinite());
   // At the sun itself gamma = 0 stays finite.
   EXPECT_TRUE(m.Radiance(sun).allFinite());
+}
+
+// The fit's cost evaluates eq. 9 with its analytic gradient; its values are the model's, at
+// every direction of the sky (the one formula of solve/sky_model.h).
+TEST(SkyModel, FitCostEvaluatesTheSameFormula) {
+  const Eigen::Vector3d sun = AzEl(120, 30);
+  const SkyModel m = ClearSkyTruth(sun);
+  for (int c = 0; c < 3; ++c) {
+    const SkyParams& p = m.channel[c];
+    const double params[internal::kNumSkyParams] = {p.Lz, p.a, p.b, p.c, p.d, p.e, p.h};
+    for (double az = 0; az < 360; az += 37)
+      for (double el = 1; el < 90; el += 11) {
+        const Eigen::Vector3d d = AzEl(az, el);
+        const double model = m.Radiance(d)[c];
+        const double cost =
+            internal::SkyModelAt(params, internal::MakeSkyPoint(d, sun, 2), nullptr);
+        EXPECT_NEAR(cost, model, 1e-9 * model) << c << " " << az << " " << el;
+      }
+  }
 }
 
 TEST(SkyModel, JsonRoundTripAndErrors) {

@@ -9,13 +9,18 @@
 
 namespace rouen {
 
+double SkyBackground(const SkyParams& p, double xi) {
+  return SkyGradationFactor(p.a, p.b, SkyInvCosXi(xi));
+}
+
+double SkyScattering(const SkyParams& p, double gamma) {
+  const double cos_g = std::cos(gamma);
+  return SkyScatteringFactor(p.c, p.d, p.e, p.h, SkyLogGamma(gamma), cos_g * cos_g);
+}
+
 // Eq. 9.
 double SkyRadiance(const SkyParams& p, double xi, double gamma) {
-  const double cos_xi = std::max(std::cos(xi), 0.01);
-  const double g = std::max(gamma, 1e-6);
-  const double cos_g = std::cos(gamma);
-  return p.Lz * (1 + p.a * std::exp(p.b / cos_xi)) *
-         (1 + p.c * std::exp(p.d * std::pow(g, p.h)) + p.e * cos_g * cos_g);
+  return p.Lz * SkyBackground(p, xi) * SkyScattering(p, gamma);
 }
 
 Eigen::Vector3d SkyModel::Radiance(const Eigen::Vector3d& dir) const {

@@ -5,22 +5,16 @@
 #include <deque>
 #include <string>
 
+#include "core/angles.h"
 #include "core/error.h"
+#include "core/stats.h"
 
 namespace rouen {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180.0;
 // Angles between neighbouring pixels below this (deg) count as this much, so that the
 // converging columns of an equirect image near the zenith do not turn noise into gradient.
 constexpr double kMinNeighbourAngleDeg = 0.5;
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
 
 }  // namespace
 

@@ -4,15 +4,13 @@
 
 #include <cmath>
 
+#include "core/angles.h"
 #include "core/error.h"
 #include "core/solar.h"
 #include "solve/sky_model.h"
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180;
 
 // A 360x180 equirect scene: a clear sky (eq. 9, bluish) above the horizon; a building from
 // azimuth 60 to 120 deg up to 30 deg elevation (left half a smooth grey wall, right half

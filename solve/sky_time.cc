@@ -8,13 +8,12 @@
 #include <limits>
 #include <string>
 
+#include "core/angles.h"
 #include "core/error.h"
 #include "solve/sky_fit.h"
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 // The parameter box of FitSky (solve/sky_fit.h), so interpolated skies stay in its domain.
 constexpr double kALo = -3, kAHi = 30, kBLo = -10, kBHi = -0.01;
@@ -66,7 +65,7 @@ struct BgResidual {
   double inv_cos, target;
   template <typename T>
   bool operator()(const T* ab, T* r) const {
-    const T bg = T(1) + ab[0] * exp(ab[1] * inv_cos);
+    const T bg = SkyGradationFactor(ab[0], ab[1], inv_cos);
     if (!(bg > T(0))) return false;  // keeps the zenith gradation positive
     r[0] = bg / target - T(1);
     return true;
@@ -78,7 +77,7 @@ struct SaResidual {
   double log_gamma, cos2, target;
   template <typename T>
   bool operator()(const T* p, T* r) const {
-    const T sa = T(1) + p[0] * exp(p[1] * exp(p[3] * log_gamma)) + p[2] * cos2;
+    const T sa = SkyScatteringFactor(p[0], p[1], p[2], p[3], log_gamma, cos2);
     r[0] = sa / target - T(1);
     return true;
   }
@@ -90,9 +89,9 @@ struct OvercastResidual {
   double inv_u, log_xi, cos2, target;
   template <typename T>
   bool operator()(const T* p, T* r) const {
-    const T bg = T(1) + p[1] * exp(p[2] * inv_u);
+    const T bg = SkyGradationFactor(p[1], p[2], inv_u);
     if (!(bg > T(0))) return false;
-    const T sa = T(1) + p[3] * exp(p[4] * exp(p[6] * log_xi)) + p[5] * cos2;
+    const T sa = SkyScatteringFactor(p[3], p[4], p[5], p[6], log_xi, cos2);
     if (!(sa > T(0))) return false;
     r[0] = p[0] * bg * sa / target - T(1);
     return true;
@@ -104,9 +103,9 @@ struct FullResidual {
   double inv_cos, log_gamma, cos2, target;
   template <typename T>
   bool operator()(const T* p, T* r) const {
-    const T bg = T(1) + p[1] * exp(p[2] * inv_cos);
+    const T bg = SkyGradationFactor(p[1], p[2], inv_cos);
     if (!(bg > T(0))) return false;
-    const T sa = T(1) + p[3] * exp(p[4] * exp(p[6] * log_gamma)) + p[5] * cos2;
+    const T sa = SkyScatteringFactor(p[3], p[4], p[5], p[6], log_gamma, cos2);
     r[0] = p[0] * bg * sa / target - T(1);
     return true;
   }
@@ -167,17 +166,6 @@ Eigen::Vector3d HorizontalIrradiance(const SkyModel& sky) {
 }
 
 // ---------------------------------------------------------------------------------------------
-
-double SkyBackground(const SkyParams& p, double xi) {
-  const double cos_xi = std::max(std::cos(xi), 0.01);
-  return 1 + p.a * std::exp(p.b / cos_xi);
-}
-
-double SkyScattering(const SkyParams& p, double gamma) {
-  const double g = std::max(gamma, 1e-6);
-  const double cos_g = std::cos(gamma);
-  return 1 + p.c * std::exp(p.d * std::pow(g, p.h)) + p.e * cos_g * cos_g;
-}
 
 void SkyInterpOptions::Validate() const {
   if (grid_zenith < 4 || grid_zenith > 2000)
@@ -288,10 +276,10 @@ SkyModel InterpolateSky(const std::vector<TimedSky>& skies, const Eigen::Vector3
 
     // Refit Bg: {a, b}.
     double ab[2] = {std::clamp(start[0], kALo, kAHi), std::clamp(start[1], kBLo, kBHi)};
-    if (!(1 + ab[0] * std::exp(ab[1]) > 0)) ab[0] = std::max(ab[0], -0.999);
+    if (!(SkyGradationFactor(ab[0], ab[1], 1.0) > 0)) ab[0] = std::max(ab[0], -0.999);
     ceres::Problem bg_problem;
     for (int i = 0; i <= rings; ++i) {
-      const double inv_cos = 1.0 / std::max(std::cos(ring_xi[i]), 0.01);
+      const double inv_cos = SkyInvCosXi(ring_xi[i]);
       bg_problem.AddResidualBlock(
           new ceres::AutoDiffCostFunction<BgResidual, 1, 2>(new BgResidual{inv_cos, bg_avg[i]}),
           nullptr, ab);
@@ -523,8 +511,8 @@ SkyModel OvercastAsSkyModel(const OvercastSky& overcast, OvercastFitSummary* sum
       const double u = i < kN ? (i + 0.5) / kN : 1.0;
       const double xi = std::acos(u);
       problem.AddResidualBlock(
-          new ceres::AutoDiffCostFunction<OvercastResidual, 1, 7>(new OvercastResidual{
-              1.0 / std::max(u, 0.01), std::log(std::max(xi, 1e-6)), u * u, (1 + 2 * u) / 3}),
+          new ceres::AutoDiffCostFunction<OvercastResidual, 1, 7>(
+              new OvercastResidual{SkyInvCosXi(xi), SkyLogGamma(xi), u * u, (1 + 2 * u) / 3}),
           nullptr, p);
     }
     for (int q = 0; q < 7; ++q) {
@@ -634,7 +622,11 @@ SkyModel IntermediateAsSkyModel(const IntermediateSky& sky, int grid_zenith, int
       samples.push_back({d, r});
     }
     const Eigen::Vector3d sun = checked.clear.sun_dir.normalized();
+    // The blend is noiseless and has no regions the model cannot follow: least squares with
+    // eq. 10's weights, a start for the polish below.
     SkyFitOptions fo;
+    fo.weighting = SkyWeighting::kPaper;
+    fo.norm_p = 2;
     fo.min_samples = 20;
     SkyModel fitsky;
     FitSky(samples, sun, fo, &fitsky);
@@ -654,7 +646,7 @@ SkyModel IntermediateAsSkyModel(const IntermediateSky& sky, int grid_zenith, int
       for (const SkyParams& st : {f, k}) {
         double p[7] = {st.Lz, st.a, st.b, st.c, st.d, st.e, st.h};
         for (int q = 0; q < 7; ++q) p[q] = std::clamp(p[q], lo[q], hi[q]);
-        if (!(1 + p[1] * std::exp(p[2]) > 0)) p[1] = std::max(p[1], -0.999);
+        if (!(SkyGradationFactor(p[1], p[2], 1.0) > 0)) p[1] = std::max(p[1], -0.999);
         ceres::Problem problem;
         for (const SkySample& smp : samples) {
           const double g = std::max(AngleBetween(smp.dir, sun), 1e-6);

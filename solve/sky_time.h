@@ -82,11 +82,6 @@ std::vector<double> SkyInterpWeights(const std::vector<TimedSky>& skies,
 SkyModel InterpolateSky(const std::vector<TimedSky>& skies, const Eigen::Vector3d& sun_dir,
                         const SkyInterpOptions& options, SkyInterpSummary* summary);
 
-// The parts of eq. 9 (with SkyRadiance's clamps: cos xi >= 0.01, gamma >= 1e-6), so that
-// SkyRadiance(p, xi, gamma) == p.Lz * SkyBackground(p, xi) * SkyScattering(p, gamma).
-double SkyBackground(const SkyParams& p, double xi);     // Bg(xi) = 1 + a exp(b / cos xi)
-double SkyScattering(const SkyParams& p, double gamma);  // Sa = 1 + c exp(d g^h) + e cos^2 g
-
 // Equal-area grid on the upper hemisphere: `rings` uniform in cos(xi), `columns` uniform in
 // azimuth (from north through east), cell centres; ENU unit vectors.
 std::vector<Eigen::Vector3d> HemisphereGrid(int rings, int columns);

@@ -8,13 +8,11 @@
 #include <limits>
 #include <vector>
 
+#include "core/angles.h"
 #include "core/error.h"
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180;
 
 Eigen::Vector3d SunAt(double azimuth_deg, double elevation_deg) {
   const double az = azimuth_deg * kDeg, el = elevation_deg * kDeg;
@@ -97,7 +95,7 @@ TEST(SkyParts, HorizontalIrradianceOfUniformAndCosineSkies) {
   sky.sun_dir = SunAt(90, 30);
   for (int c = 0; c < 3; ++c) sky.channel[c] = SkyParams{0.5 + c, 0, -1, 0, -3, 0, 1};
   const Eigen::Vector3d e = HorizontalIrradiance(sky);
-  for (int c = 0; c < 3; ++c) EXPECT_NEAR(e[c], M_PI * (0.5 + c), 1e-12 * (0.5 + c));
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(e[c], kPi * (0.5 + c), 1e-12 * (0.5 + c));
   // The grid is equal-area and covers the upper hemisphere once.
   const std::vector<Eigen::Vector3d> grid = HemisphereGrid(6, 12);
   ASSERT_EQ(grid.size(), 72u);

@@ -4,13 +4,12 @@
 #include <cmath>
 #include <string>
 
+#include "core/angles.h"
 #include "core/error.h"
+#include "core/stats.h"
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180.0;
 
 double Angle(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   // atan2 form: accurate for the tiny angles of a sun disc.
@@ -23,14 +22,6 @@ double TriangleSolidAngle(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
   const double num = std::abs(a.dot(b.cross(c)));
   const double den = 1 + a.dot(b) + b.dot(c) + c.dot(a);
   return 2 * std::atan2(num, den);
-}
-
-double Median(std::vector<double>* v) {
-  const size_t k = v->size() / 2;
-  std::nth_element(v->begin(), v->begin() + k, v->end());
-  double m = (*v)[k];
-  if (v->size() % 2 == 0) m = 0.5 * (m + *std::max_element(v->begin(), v->begin() + k));
-  return m;
 }
 
 }  // namespace
@@ -209,7 +200,7 @@ SunMeasurement MeasureSun(const Image& hdr, const Intrinsics& k, const Pose& pos
       throw Error("sun: only " + std::to_string(annulus_count) +
                   " background pixels around the disc; is the sun at the image border?");
     }
-    for (int c3 = 0; c3 < 3; ++c3) bg[c3] = Median(&ch[c3]);
+    for (int c3 = 0; c3 < 3; ++c3) bg[c3] = Median(ch[c3]);
   };
 
   // Centroid of the background-subtracted brightness within the disc radius, iterated.

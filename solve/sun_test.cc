@@ -6,13 +6,11 @@
 #include <cmath>
 #include <vector>
 
+#include "core/angles.h"
 #include "core/error.h"
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180;
 
 Eigen::Vector3d AzEl(double az_deg, double el_deg) {
   const double az = az_deg * kDeg, el = el_deg * kDeg;

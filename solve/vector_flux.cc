@@ -7,13 +7,13 @@
 #include <string>
 #include <unordered_map>
 
+#include "core/angles.h"
 #include "core/error.h"
 
 namespace rouen {
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 // Plane-side tolerance for unit vectors (about 2e-7 degrees).
 constexpr double kSideEps = 1e-12;
 

@@ -177,8 +177,8 @@ struct VectorFluxOptions {
   // (SkyPatchTree, solve/vector_flux_cache.h; 6: 1.4-degree deepest triangles), and whether the
   // occluders are found with the building model (SelectOccluders) rather than taking every
   // face in front of each point (with exact culling of faces hidden behind one other face).
-  // On the demo's 144-triangle model every face is both exact and faster (0.44 vs 0.59 ms per
-  // point, bench/irradiance_bench); the id buffer pays off on larger models.
+  // On small models every face is both exact and faster; the id buffer pays off on larger
+  // ones (bench/irradiance_bench measures both).
   int sky_tree_levels = 6;
   bool select_occluders = false;
   OccluderSelectOptions select;

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/angles.h"
 #include "core/error.h"
 #include "solve/grid.h"
 #include "solve/irradiance.h"
@@ -13,8 +14,6 @@
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 // Two buildings on a plaza: a tall box, a low box behind it, a small box hidden inside the
 // tall one's shadow region seen from the test points, and the ground.

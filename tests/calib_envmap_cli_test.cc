@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "core/angles.h"
 #include "core/camera.h"
 #include "core/files.h"
 #include "core/image.h"
@@ -27,8 +28,6 @@ using rouen::cli_test::Q;
 using rouen::cli_test::Result;
 using rouen::cli_test::RunRouen;
 using rouen::cli_test::TempDir;
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180.0;
 
 Eigen::Vector3d Env(const Eigen::Vector3d& d) {
   return Eigen::Vector3d(1.5 + 0.5 * d.z() + 0.3 * d.x(), 1.2 + 0.4 * d.y(), 1.0 + 0.3 * d.z());

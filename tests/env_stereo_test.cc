@@ -16,6 +16,7 @@
 
 #include "capture/sim/sim_scene.h"
 #include "capture/sim/sim_world.h"
+#include "core/angles.h"
 #include "core/time.h"
 #include "solve/environment.h"
 #include "solve/raycast.h"
@@ -23,8 +24,6 @@
 
 namespace rouen {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 double Percentile(std::vector<double> v, double p) {
   if (v.empty()) return 0;

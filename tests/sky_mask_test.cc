@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "core/angles.h"
 #include "core/error.h"
 #include "core/image.h"
 #include "core/session.h"
@@ -21,7 +22,6 @@ namespace fs = std::filesystem;
 using cli_test::TempDir;
 
 constexpr int kSize = 96;
-constexpr double kDeg = M_PI / 180;
 
 // The building seen from the camera.
 bool Building(const Eigen::Vector3d& d) {

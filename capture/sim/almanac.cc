@@ -3,11 +3,11 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/angles.h"
+
 namespace rouen {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180.0;
 constexpr double kSunRadiusKm = 695700.0;  // IAU 2015 nominal solar radius
 constexpr double kAuKm = 149597870.7;
 

@@ -5,6 +5,7 @@
 #include <Eigen/Geometry>
 #include <cmath>
 
+#include "core/angles.h"
 #include "core/solar.h"
 #include "core/time.h"
 
@@ -12,11 +13,11 @@ namespace rouen {
 namespace {
 
 double AngleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
-  return std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / M_PI;
+  return std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / kPi;
 }
 
 Eigen::Vector3d Enu(double az_deg, double el_deg) {
-  const double az = az_deg * M_PI / 180, el = el_deg * M_PI / 180;
+  const double az = az_deg * kPi / 180, el = el_deg * kPi / 180;
   return Eigen::Vector3d(std::cos(el) * std::sin(az), std::cos(el) * std::cos(az), std::sin(el));
 }
 

@@ -7,12 +7,12 @@
 #include <limits>
 #include <string>
 
+#include "core/angles.h"
 #include "core/error.h"
 
 namespace rouen {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr int kTableH = 128;    // altitude samples (sqrt spacing)
 constexpr int kTableT = 256;    // zenith-cosine samples (sqrt spacing above the horizon)

@@ -5,13 +5,14 @@
 #include <Eigen/Geometry>
 #include <cmath>
 
+#include "core/angles.h"
 #include "core/error.h"
 
 namespace rouen {
 namespace {
 
 Eigen::Vector3d Dir(double az_deg, double el_deg) {
-  const double az = az_deg * M_PI / 180, el = el_deg * M_PI / 180;
+  const double az = az_deg * kPi / 180, el = el_deg * kPi / 180;
   return Eigen::Vector3d(std::cos(el) * std::sin(az), std::cos(el) * std::cos(az), std::sin(el));
 }
 
@@ -62,7 +63,7 @@ TEST(AtmosphereTest, TableAgreesWithDirectIntegration) {
 TEST(AtmosphereTest, SunReddensAsItSinks) {
   double prev_ratio = 0, prev_green = 2;
   for (double el : {80.0, 60.0, 40.0, 20.0, 10.0, 5.0, 2.0}) {
-    const Eigen::Vector3d t = Atm().Transmittance(60, std::sin(el * M_PI / 180));
+    const Eigen::Vector3d t = Atm().Transmittance(60, std::sin(el * kPi / 180));
     EXPECT_GT(t[0] / t[2], prev_ratio) << el;  // R/B grows
     EXPECT_LT(t[1], prev_green);               // and less light gets through
     prev_ratio = t[0] / t[2];
@@ -102,13 +103,13 @@ TEST(AtmosphereTest, PlaneIrradianceMatchesIndependentQuadrature) {
     for (int i = 0; i < m; ++i) {
       for (int j = 0; j < m; ++j) {
         const double u1 = (i + 0.5) / m, u2 = (j + 0.5) / m;
-        const double r = std::sqrt(u1), phi = 2 * M_PI * u2;
+        const double r = std::sqrt(u1), phi = 2 * kPi * u2;
         const Eigen::Vector3d d =
             a * r * std::cos(phi) + b * r * std::sin(phi) + n * std::sqrt(1 - u1);
         if (d.z() > 0) sum += sky.Radiance(d);
       }
     }
-    const Eigen::Vector3d expected = sum * (M_PI / (m * m));
+    const Eigen::Vector3d expected = sum * (kPi / (m * m));
     const Eigen::Vector3d got = sky.PlaneIrradiance(n);
     for (int c = 0; c < 3; ++c)
       EXPECT_NEAR(got[c], expected[c], 5e-3 * expected[c]) << n.transpose();
@@ -137,14 +138,14 @@ namespace rouen {
 namespace {
 
 TEST(AtmosphereTest, RowMarchMatchesPerDirectionMarch) {
-  const double sun_el = 25 * M_PI / 180;
+  const double sun_el = 25 * kPi / 180;
   const Eigen::Vector3d toa = Atm().params().solar_toa;
   for (double el_deg : {0.0, 3.0, 30.0, 89.0}) {
-    const double el = el_deg * M_PI / 180;
+    const double el = el_deg * kPi / 180;
     std::vector<Atmosphere::Scatter> row(19);
     Atm().SingleScatterRow(60, el, sun_el, toa, 19, row.data());
     for (int j = 0; j < 19; ++j) {
-      const double phi = M_PI * j / 18;
+      const double phi = kPi * j / 18;
       const Eigen::Vector3d v(std::cos(el) * std::sin(phi), std::cos(el) * std::cos(phi),
                               std::sin(el));
       const Eigen::Vector3d sun(0, std::cos(sun_el), std::sin(sun_el));

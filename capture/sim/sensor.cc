@@ -7,30 +7,12 @@
 #include <cmath>
 #include <string>
 
+#include "core/angles.h"
 #include "core/error.h"
+#include "core/hash_random.h"
 
 namespace rouen {
-namespace {
-
-constexpr double kPi = 3.14159265358979323846;
-
-uint64_t Mix(uint64_t x) {
-  x += 0x9E3779B97F4A7C15ULL;
-  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
-  x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
-  return x ^ (x >> 31);
-}
-
-// Two independent standard normal numbers from a hash (Box-Muller).
-void Normals(uint64_t h, double* n1, double* n2) {
-  const double u1 = ((h >> 32) + 0.5) * (1.0 / 4294967296.0);
-  const double u2 = ((h & 0xffffffffULL) + 0.5) * (1.0 / 4294967296.0);
-  const double r = std::sqrt(-2.0 * std::log(u1));
-  *n1 = r * std::cos(2 * kPi * u2);
-  *n2 = r * std::sin(2 * kPi * u2);
-}
-
-}  // namespace
+namespace {}  // namespace
 
 void SensorParams::Validate() const {
   auto fail = [](const std::string& m) { throw Error("sensor parameters: " + m); };
@@ -108,7 +90,7 @@ Image SimSensor::CaptureLinear(const Image& radiance, double exposure_s, double 
   const double e_per_radiance =
       p_.sensitivity * exposure_s * std::pow(10.0, -nd_density) * p_.full_well_e;
   const double fw = p_.full_well_e;
-  const uint64_t base = Mix(seed ^ 0xC0FFEE1234ULL);
+  const uint64_t base = MixHash(seed ^ 0xC0FFEE1234ULL);
   tbb::parallel_for(tbb::blocked_range<int>(0, radiance.height, 8),
                     [&](const tbb::blocked_range<int>& r) {
                       for (int y = r.begin(); y != r.end(); ++y) {
@@ -118,7 +100,7 @@ Image SimSensor::CaptureLinear(const Image& radiance, double exposure_s, double 
                             const double l = std::max(0.0, static_cast<double>(radiance.data[idx]));
                             const double mean_e = l * e_per_radiance;
                             double n1, n2;
-                            Normals(Mix(base + idx), &n1, &n2);
+                            HashNormals(MixHash(base + idx), &n1, &n2);
                             // Shot noise (Gaussian approximation of Poisson), full well, read
                             // noise.
                             double e = std::clamp(mean_e + std::sqrt(mean_e) * n1, 0.0, fw);

@@ -4,22 +4,16 @@
 #include <cmath>
 #include <string>
 
+#include "core/angles.h"
+#include "core/hash_random.h"
+
 namespace rouen {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
-
-uint64_t Mix(uint64_t x) {
-  x += 0x9E3779B97F4A7C15ULL;
-  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
-  x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
-  return x ^ (x >> 31);
-}
-
 double Normal(uint64_t h) {
-  const double u1 = ((h >> 32) + 0.5) * (1.0 / 4294967296.0);
-  const double u2 = ((h & 0xffffffffULL) + 0.5) * (1.0 / 4294967296.0);
-  return std::sqrt(-2.0 * std::log(u1)) * std::cos(2 * kPi * u2);
+  double n1 = 0, n2 = 0;
+  HashNormals(h, &n1, &n2);
+  return n1;
 }
 
 UtcTime DefaultStart() { return FromCivil(CivilTime{2026, 8, 25, 20, 0, 0.0}); }
@@ -131,7 +125,8 @@ CapturedFrame SimCamera::Grab() {
   const Image& radiance = CurrentRadiance();
   const SimView v = CurrentView();
   CapturedFrame f;
-  f.image = sensor_.Capture(radiance, exposure_, gain_, nd_, Mix(seed_ * 1000003ULL + frames_++));
+  f.image =
+      sensor_.Capture(radiance, exposure_, gain_, nd_, MixHash(seed_ * 1000003ULL + frames_++));
   f.hdr = false;
   f.exposure_s = exposure_;
   f.gain = gain_;
@@ -152,10 +147,10 @@ SimGps::SimGps(std::shared_ptr<SimWorld> world, SimClock* clock, uint64_t seed,
 
 std::optional<GpsFix> SimGps::Poll() {
   const Site& site = world_->site();
-  const uint64_t h = Mix(seed_ * 0x51ED27ULL + polls_++);
-  const double north = sigma_ * Normal(Mix(h + 1));
-  const double east = sigma_ * Normal(Mix(h + 2));
-  const double up = 1.7 * sigma_ * Normal(Mix(h + 3));
+  const uint64_t h = MixHash(seed_ * 0x51ED27ULL + polls_++);
+  const double north = sigma_ * Normal(MixHash(h + 1));
+  const double east = sigma_ * Normal(MixHash(h + 2));
+  const double up = 1.7 * sigma_ * Normal(MixHash(h + 3));
   // Metres to degrees on the WGS84 ellipsoid (meridian and prime-vertical radii).
   const double a = 6378137.0, e2 = 6.69437999014e-3;
   const double lat = site.lat_deg * kPi / 180;

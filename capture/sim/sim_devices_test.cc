@@ -7,6 +7,7 @@
 #include <memory>
 
 #include "capture/sim/sim_test_world.h"
+#include "core/angles.h"
 
 namespace rouen {
 namespace {
@@ -148,7 +149,7 @@ TEST(SimGpsTest, FixesScatterAroundTheSiteWithTheStatedNoise) {
   SimGps gps(World(), &clock, 9, 1.8);
   const Site& site = SimTestWorld().site();
   const double m_per_deg_lat = 111000.0;
-  const double m_per_deg_lon = 111000.0 * std::cos(site.lat_deg * M_PI / 180);
+  const double m_per_deg_lon = 111000.0 * std::cos(site.lat_deg * kPi / 180);
   double sum_e = 0, sum_n = 0, sum2 = 0;
   const int n = 4000;
   for (int i = 0; i < n; ++i) {

@@ -6,10 +6,10 @@
 #include <cassert>
 #include <cmath>
 
+#include "core/angles.h"
+
 namespace rouen::sim {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 struct Wave {
   Eigen::Vector3d k;  // 2 pi direction / wavelength (1/m)

@@ -12,12 +12,13 @@
 #include <string>
 
 #include "capture/sim/sim_scene.h"
+#include "core/angles.h"
 #include "core/error.h"
+#include "core/hash_random.h"
 
 namespace rouen {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kEps = 1e-3;    // ray origin offset along the normal, metres
 constexpr double kLimb = 0.6;    // limb darkening I(mu) = I0 (1 - kLimb (1 - mu))
@@ -26,15 +27,6 @@ constexpr uint32_t kSampleMask = (1u << kSampleBits) - 1;
 constexpr uint32_t kTargetFar = (1u << (32 - kSampleBits)) - 1;  // missed, below horizon
 constexpr uint32_t kTargetSky = kTargetFar - 1;                  // missed, above horizon
 constexpr int kDiscSuper = 16;  // per-axis subsamples of pixels near the sun's disc
-
-uint64_t Mix(uint64_t x) {
-  x += 0x9E3779B97F4A7C15ULL;
-  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
-  x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
-  return x ^ (x >> 31);
-}
-double Hi(uint64_t h) { return ((h >> 32) + 0.5) * (1.0 / 4294967296.0); }
-double Lo(uint64_t h) { return ((h & 0xffffffffULL) + 0.5) * (1.0 / 4294967296.0); }
 
 double Seconds(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -171,8 +163,8 @@ struct SimWorld::Impl {
     const sim::Patch& p = scene.patches[texel_patch[i]];
     const int a = k % strata, b = k / strata;
     const uint64_t h =
-        Mix(opt.seed * 0x2545F4914F6CDD1DULL ^ Mix((static_cast<uint64_t>(i) << 12) | k));
-    const double u1 = (a + Hi(h)) / strata, u2 = (b + Lo(h)) / strata;
+        MixHash(opt.seed * 0x2545F4914F6CDD1DULL ^ MixHash((static_cast<uint64_t>(i) << 12) | k));
+    const double u1 = (a + HashUniformHigh(h)) / strata, u2 = (b + HashUniformLow(h)) / strata;
     const double r = std::sqrt(u1), phi = 2 * kPi * u2;
     return (p.u * (r * std::cos(phi)) + p.v * (r * std::sin(phi)) +
             p.n * std::sqrt(std::max(0.0, 1.0 - u1)))
@@ -222,8 +214,9 @@ struct SimWorld::Impl {
     const int side = std::max(1, static_cast<int>(std::lround(std::sqrt(m))));
     int visible = 0;
     for (int q = 0; q < side * side; ++q) {
-      const uint64_t h = Mix(seed + q);
-      const double x1 = ((q % side) + Hi(h)) / side, x2 = ((q / side) + Lo(h)) / side;
+      const uint64_t h = MixHash(seed + q);
+      const double x1 = ((q % side) + HashUniformHigh(h)) / side,
+                   x2 = ((q / side) + HashUniformLow(h)) / side;
       if (!Occluded(p + n * kEps, DiscDir(s, x1, x2))) ++visible;
     }
     return s.sun_irr * (c * visible / (side * side));
@@ -496,12 +489,12 @@ std::shared_ptr<const State> SimWorld::Impl::Compute(UtcTime t) const {
         int visible = 0, outside = 0;
         const int m = sun_strata;
         for (int q = 0; q < m * m; ++q) {
-          const uint64_t h = Mix(Mix(opt.seed + 77) ^ (static_cast<uint64_t>(i) << 10 | q));
-          const double su = (k + ((q % m) + Hi(h)) / m) * p.du;
-          const double sv = (j + ((q / m) + Lo(h)) / m) * p.dv;
-          const uint64_t h2 = Mix(h);
+          const uint64_t h = MixHash(MixHash(opt.seed + 77) ^ (static_cast<uint64_t>(i) << 10 | q));
+          const double su = (k + ((q % m) + HashUniformHigh(h)) / m) * p.du;
+          const double sv = (j + ((q / m) + HashUniformLow(h)) / m) * p.dv;
+          const uint64_t h2 = MixHash(h);
           const Eigen::Vector3d x = p.Point(su, sv) + p.n * kEps;
-          const Eigen::Vector3d d = DiscDir(s, Hi(h2), Lo(h2));
+          const Eigen::Vector3d d = DiscDir(s, HashUniformHigh(h2), HashUniformLow(h2));
           const Hit hit = Trace(x, d);
           if (hit.patch >= 0 && d.dot(scene.patches[hit.patch].n) > 0) continue;
           ++outside;
@@ -672,11 +665,12 @@ Image SimWorld::RenderRadiance(const Intrinsics& k, const Pose& pose) const {
         if (!InsideImage(k, x + 0.5, y + 0.5)) continue;
         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
         for (int q = 0; q < 4; ++q) {
-          const uint64_t h = Mix((static_cast<uint64_t>(y) * 65536 + x) * 4 + q);
-          const double px = x + ((q & 1) + Hi(h)) * 0.5, py = y + ((q >> 1) + Lo(h)) * 0.5;
+          const uint64_t h = MixHash((static_cast<uint64_t>(y) * 65536 + x) * 4 + q);
+          const double px = x + ((q & 1) + HashUniformHigh(h)) * 0.5,
+                       py = y + ((q >> 1) + HashUniformLow(h)) * 0.5;
           const Eigen::Vector3d d = pose.rotation * Unproject(k, Eigen::Vector2d(px, py));
-          const uint64_t h2 = Mix(h);
-          sum += im.Shade(s, o, d, Hi(h2), Lo(h2), nullptr);
+          const uint64_t h2 = MixHash(h);
+          sum += im.Shade(s, o, d, HashUniformHigh(h2), HashUniformLow(h2), nullptr);
         }
         Eigen::Vector3d value = sum / 4.0;
         // The sun's disc, supersampled where it may touch the pixel.

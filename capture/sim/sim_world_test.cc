@@ -8,6 +8,7 @@
 #include <set>
 
 #include "capture/sim/sim_test_world.h"
+#include "core/angles.h"
 #include "core/error.h"
 #include "core/mesh.h"
 
@@ -17,7 +18,7 @@ namespace {
 // The tower's solid (and the ground below z = 0), analytically, in world coordinates.
 bool InsideSolid(const Eigen::Vector3d& p) {
   if (p.z() < 0) return true;
-  const double a = -40.0 * M_PI / 180;
+  const double a = -40.0 * kPi / 180;
   const double x = std::cos(a) * p.x() - std::sin(a) * p.y();
   const double y = std::sin(a) * p.x() + std::cos(a) * p.y();
   const double m = std::max(std::abs(x), std::abs(y));
@@ -58,7 +59,7 @@ Eigen::Vector3d RenderedIrradiance(const SimWorld& w, const Eigen::Vector3d& p,
     for (int x = 0; x < size; ++x) {
       const double r = std::hypot(x + 0.5 - k.cx, y + 0.5 - k.cy);
       const double theta = r / k.fx;
-      if (theta >= M_PI / 2) continue;
+      if (theta >= kPi / 2) continue;
       const double d_omega = (theta > 0 ? std::sin(theta) / theta : 1.0) / (k.fx * k.fy);
       for (int c = 0; c < 3; ++c) sum[c] += img.at(x, y, c) * std::cos(theta) * d_omega;
     }
@@ -102,7 +103,7 @@ TEST(SimWorldTest, AlbedoIsSmoothBoundedAndStoneLikeOnTheTower) {
   int n = 0;
   for (double z = 1; z < 47; z += 0.7) {
     for (double s = -4.4; s <= 4.4; s += 0.55) {
-      const double a = 40.0 * M_PI / 180;
+      const double a = 40.0 * kPi / 180;
       const Eigen::Vector3d p(4.5 * std::cos(a) - s * std::sin(a),
                               4.5 * std::sin(a) + s * std::cos(a), z < 8 ? 0 : z);
       if (z < 8) continue;
@@ -168,11 +169,11 @@ TEST(SimWorldTest, OpenGroundIrradianceIsSunPlusSky) {
   for (int i = 0; i < m; ++i) {
     for (int j = 0; j < m; ++j) {
       const double u1 = (i + 0.5) / m, u2 = (j + 0.5) / m, r = std::sqrt(u1);
-      sky += w.TrueSkyRadiance(Eigen::Vector3d(r * std::cos(2 * M_PI * u2),
-                                               r * std::sin(2 * M_PI * u2), std::sqrt(1 - u1)));
+      sky += w.TrueSkyRadiance(Eigen::Vector3d(r * std::cos(2 * kPi * u2),
+                                               r * std::sin(2 * kPi * u2), std::sqrt(1 - u1)));
     }
   }
-  sky *= M_PI / (m * m);
+  sky *= kPi / (m * m);
   const Eigen::Vector3d expected = w.TrueSunIrradiance() * w.TrueSunDirection().z() + sky;
   const Eigen::Vector3d got = w.TrueIrradiance(p);
   // Distant buildings hide < 0.3% of this point's sky and reflect about as much back.
@@ -182,7 +183,7 @@ TEST(SimWorldTest, OpenGroundIrradianceIsSunPlusSky) {
 TEST(SimWorldTest, IrradianceMatchesTheRenderedHemisphere) {
   SimWorld& w = SimTestWorld();
   w.SetTime(SimTestNoon());
-  const double a = 40.0 * M_PI / 180;
+  const double a = 40.0 * kPi / 180;
   const Eigen::Vector3d sw(-std::cos(a), -std::sin(a), 0);  // sunlit at this time
   const Eigen::Vector3d ne(std::cos(a), std::sin(a), 0);    // in shade
   struct Probe {
@@ -240,12 +241,12 @@ TEST(SimWorldTest, SunDiscInAWideViewConservesIrradiance) {
   for (int i = 0; i < m; ++i) {
     for (int j = 0; j < m; ++j) {
       const double u1 = (i + 0.5) / m, u2 = (j + 0.5) / m, r = std::sqrt(u1);
-      sky += w.TrueSkyRadiance(Eigen::Vector3d(r * std::cos(2 * M_PI * u2),
-                                               r * std::sin(2 * M_PI * u2), std::sqrt(1 - u1)));
+      sky += w.TrueSkyRadiance(Eigen::Vector3d(r * std::cos(2 * kPi * u2),
+                                               r * std::sin(2 * kPi * u2), std::sqrt(1 - u1)));
     }
   }
   const Eigen::Vector3d expected =
-      w.TrueSunIrradiance() * w.TrueSunDirection().z() + sky * (M_PI / (m * m));
+      w.TrueSunIrradiance() * w.TrueSunDirection().z() + sky * (kPi / (m * m));
   for (int c = 0; c < 3; ++c) EXPECT_NEAR(rendered[c], expected[c], 0.01 * expected[c]);
 }
 

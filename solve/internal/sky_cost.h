@@ -32,7 +32,8 @@ inline SkyPoint MakeSkyPoint(const Eigen::Vector3d& dir, const Eigen::Vector3d& 
   return {1.0 / cos_xi, std::log(gamma), cos_g * cos_g, y, relative ? 1.0 / y : std::log(y) / y};
 }
 
-// Eq. 9 at a precomputed point, and optionally its gradient with respect to the parameters.
+// Eq. 9 at a precomputed point with its analytic gradient (the fit's speed); the same values as
+// solve/sky_model.h's factors, which sky_fit_test checks.
 inline double SkyModelAt(const double* p, const SkyPoint& q, double* grad) {
   const double e1 = std::exp(p[kB] * q.inv_cos_xi);
   const double g = 1 + p[kA] * e1;

@@ -1,0 +1,242 @@
+// The `rouen` Python module: a second front end over the pipeline library (as app/ is the
+// first). It parses no command line and prints nothing; progress goes to an optional Python
+// callable, errors raise rouen.Error with the library's message.
+#include <pybind11/functional.h>
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <filesystem>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/camera.h"
+#include "core/error.h"
+#include "core/image.h"
+#include "core/lens.h"
+#include "core/session.h"
+#include "core/time.h"
+#include "core/version.h"
+#include "pipeline/scene.h"
+#include "pipeline/solve_config.h"
+#include "pipeline/status.h"
+#include "pipeline/validate.h"
+
+namespace py = pybind11;
+
+namespace rouen {
+namespace {
+
+using Log = std::function<void(const std::string&)>;
+
+// Python objects from JSON through Python's own json module: one conversion, no second
+// printer of the library's structures.
+py::object ToPython(const nlohmann::json& j) {
+  return py::module_::import("json").attr("loads")(j.dump());
+}
+
+nlohmann::json FromPython(const py::object& o) {
+  const std::string text = py::str(py::module_::import("json").attr("dumps")(o));
+  return nlohmann::json::parse(text);
+}
+
+// A height x width x channels float32 array holding a copy of the image.
+py::array_t<float> ToArray(const Image& image) {
+  py::array_t<float> a({image.height, image.width, image.channels});
+  std::copy(image.data.begin(), image.data.end(), a.mutable_data());
+  return a;
+}
+
+// Progress lines to a Python callable (or nowhere). The library calls it from the solving
+// thread with the GIL released, so the call takes the GIL back.
+Log PythonLog(const py::object& callback) {
+  if (callback.is_none()) return {};
+  return [callback](const std::string& line) {
+    py::gil_scoped_acquire gil;
+    callback(line);
+  };
+}
+
+std::filesystem::path PathOf(const py::object& o) {
+  return std::filesystem::path(py::str(py::module_::import("os").attr("fspath")(o)));
+}
+
+class PySession {
+ public:
+  explicit PySession(const py::object& path) : session_(Session::Load(PathOf(path))) {}
+  const Session& session() const { return session_; }
+
+  std::string Path() const { return session_.dir().string(); }
+  int Slots() const {
+    int n = 0;
+    for (const FrameRecord& f : session_.frames()) n = std::max(n, f.slot + 1);
+    return n;
+  }
+  std::vector<std::string> Brackets() const {
+    std::vector<std::string> names;
+    for (const FrameRecord& f : session_.frames()) {
+      const std::string& name = f.group;
+      if (std::find(names.begin(), names.end(), name) == names.end()) names.push_back(name);
+    }
+    return names;
+  }
+  py::object Status(bool verify) const {
+    StatusOptions options;
+    options.verify_contents = verify;
+    return ToPython(StatusToJson(ReadSessionStatus(session_.dir(), options)));
+  }
+
+ private:
+  Session session_;
+};
+
+class PyScene {
+ public:
+  explicit PyScene(const std::filesystem::path& dir, const Log& log = {})
+      : scene_(LoadScene(dir, log)) {}
+
+  std::string Path() const { return scene_.dir.string(); }
+  std::vector<std::string> Views() const {
+    std::vector<std::string> names;
+    for (const auto& [name, view] : scene_.scene.views)
+      if (view.target == "architecture") names.push_back(name);
+    return names;
+  }
+  std::vector<std::string> SlotTimes() const {
+    std::vector<std::string> times;
+    for (const SlotModel& s : scene_.scene.slots) times.push_back(s.utc.Iso8601());
+    return times;
+  }
+  std::vector<int> HoldoutSlots() const { return scene_.scene.holdout_slots; }
+  py::object Config() const { return ToPython(SolveConfigJson(scene_.config)); }
+
+  // Exactly one of `time` (ISO 8601) and `slot`; the camera is `view` (a bracket name, empty:
+  // the first architecture view) or a lens file and a pose file.
+  py::array_t<float> Render(const std::optional<std::string>& time, const std::string& view,
+                            std::optional<int> slot, const py::object& lens, const py::object& pose,
+                            double pbs, const std::vector<int>& predict_without_slots,
+                            const py::object& log) const {
+    RenderRequest request;
+    request.slot = slot;
+    if (time) request.time = ParseIso8601(*time);
+    request.relight.pbs = pbs;
+    request.predict_without_slots = predict_without_slots;
+    if (lens.is_none() != pose.is_none()) throw Error("lens and pose go together");
+    if (!lens.is_none()) {
+      if (!view.empty()) throw Error("give a view or a lens and a pose, not both");
+      request.intrinsics = ReadLensFile(PathOf(lens).string()).intrinsics;
+      request.pose = ReadPoseFile(PathOf(pose).string());
+    } else {
+      const SceneView& v = FindView(scene_, view);
+      request.intrinsics = v.intrinsics;
+      request.pose = v.pose;
+    }
+    CheckRenderRequest(scene_, request);
+    const Log say = PythonLog(log);
+    Image image;
+    {
+      py::gil_scoped_release release;
+      image = RenderScene(scene_, request, say);
+    }
+    return ToArray(image);
+  }
+
+  py::object Validate(const PySession& session, int slot, const std::vector<std::string>& exclude,
+                      int erode_px, bool predicted, const py::object& log) const {
+    ValidateOptions options;
+    options.exclude_blocks = exclude;
+    options.erode_px = erode_px;
+    options.predicted = predicted;
+    options.Validate();
+    const Log say = PythonLog(log);
+    Validation v;
+    {
+      py::gil_scoped_release release;
+      v = ValidateSlot(scene_, session.session(), slot, options, say);
+    }
+    return ToPython(ValidationToJson(v));
+  }
+
+ private:
+  LoadedScene scene_;
+};
+
+// rouen.solve: the same call `rouen solve` makes (SolveSessionFolder).
+PyScene Solve(const py::object& session, const py::object& out,
+              const std::vector<int>& holdout_slots, bool quick, const py::object& config,
+              const py::object& work, bool force, const py::object& log) {
+  SolveFolderRequest request;
+  request.session = py::isinstance<PySession>(session)
+                        ? std::filesystem::path(session.cast<const PySession&>().Path())
+                        : PathOf(session);
+  request.out = PathOf(out);
+  if (!work.is_none()) request.work = PathOf(work);
+  request.holdout_slots = holdout_slots;
+  request.config = DefaultSolveConfig(quick);
+  if (py::isinstance<py::dict>(config))
+    request.config = ApplySolveConfig(FromPython(config), request.config, "config");
+  else if (!config.is_none())
+    request.config = ReadSolveConfigFile(PathOf(config).string(), request.config);
+  request.force = force;
+  request.log = PythonLog(log);
+  {
+    py::gil_scoped_release release;
+    SolveSessionFolder(request);
+  }
+  return PyScene(request.out.lexically_normal(), request.log);
+}
+
+}  // namespace
+}  // namespace rouen
+
+PYBIND11_MODULE(rouen, m) {
+  using namespace rouen;
+  m.doc() =
+      "rouen: recover the lighting and reflectance of a building from photographs (Yu & Malik "
+      "1998) and render it at other times of day. The same library as the rouen command.";
+  m.attr("__version__") = RouenVersion();
+  py::register_exception<Error>(m, "Error", PyExc_RuntimeError);
+
+  py::class_<PySession>(m, "Session", "A session folder (from rouen capture or rouen import).")
+      .def(py::init<const py::object&>(), py::arg("path"))
+      .def_property_readonly("path", &PySession::Path)
+      .def_property_readonly("slots", &PySession::Slots, "Number of times of day captured")
+      .def_property_readonly("brackets", &PySession::Brackets,
+                             "Bracket names, e.g. slot0/architecture/view0")
+      .def("status", &PySession::Status, py::arg("verify") = true,
+           "What the session holds and what its solve lacks (as rouen status --json)");
+
+  py::class_<PyScene>(m, "Scene", "A solved scene folder (from rouen solve or rouen.solve).")
+      .def(py::init([](const py::object& path) { return PyScene(PathOf(path)); }), py::arg("path"))
+      .def_property_readonly("path", &PyScene::Path)
+      .def_property_readonly("views", &PyScene::Views, "The architecture views' names")
+      .def_property_readonly("slot_times", &PyScene::SlotTimes, "Each slot's UTC time (ISO)")
+      .def_property_readonly("holdout_slots", &PyScene::HoldoutSlots)
+      .def_property_readonly("config", &PyScene::Config, "The options it was solved with")
+      .def("render", &PyScene::Render, py::arg("time") = py::none(), py::arg("view") = "",
+           py::kw_only(), py::arg("slot") = py::none(), py::arg("lens") = py::none(),
+           py::arg("pose") = py::none(), py::arg("pbs") = 0.0,
+           py::arg("predict_without_slots") = std::vector<int>{}, py::arg("log") = py::none(),
+           "Radiance of the building (height x width x 3 float32) at `time` (ISO 8601, lighting "
+           "predicted, §5) or at captured `slot` (lighting measured), seen from `view` or from "
+           "`lens` and `pose` files, as rouen render writes it.")
+      .def("validate", &PyScene::Validate, py::arg("session"), py::arg("slot"),
+           py::arg("exclude_blocks") = std::vector<std::string>{}, py::arg("erode_px") = 1,
+           py::arg("predicted") = true, py::arg("log") = py::none(),
+           "Figures of the slot's photos against renders (as rouen validate --json)");
+
+  m.def("solve", &Solve, py::arg("session"), py::arg("out"),
+        py::arg("holdout_slots") = std::vector<int>{}, py::arg("quick") = false,
+        py::arg("config") = py::none(), py::arg("work") = py::none(), py::arg("force") = false,
+        py::arg("log") = py::none(),
+        "Calibrate and solve a session into the scene folder `out` (as rouen solve); "
+        "`config` is a TOML file or a dict of the options rouen solve --print-config lists. "
+        "Does nothing when `out` is up to date. Returns the Scene.");
+  m.def(
+      "read_image",
+      [](const py::object& path) { return ToArray(ReadImage(PathOf(path).string())); },
+      py::arg("path"), "An image file as a height x width x channels float32 array");
+}

@@ -1,0 +1,122 @@
+"""The Python bindings against the rouen command: the same library behind both front ends.
+
+Run by CTest with PYTHONPATH holding the built module and ROUEN_BIN the rouen binary.
+"""
+import math
+import os
+import subprocess
+import tempfile
+import unittest
+
+import numpy as np
+
+import rouen
+
+ROUEN_BIN = os.environ.get("ROUEN_BIN", "rouen")
+HELD_OUT = 3  # rigs/sim.toml: heldout = "16:00", the fourth of five times
+
+
+def run_rouen(*args):
+    r = subprocess.run([ROUEN_BIN, *map(str, args)], capture_output=True, text=True)
+    if r.returncode != 0:
+        raise AssertionError(f"rouen {' '.join(map(str, args))} exited {r.returncode}:\n"
+                             f"{r.stdout}{r.stderr}")
+    return r.stdout + r.stderr
+
+
+class QuickDemoTest(unittest.TestCase):
+    """One quick demo session, solved through the bindings and rendered by both front ends."""
+
+    @classmethod
+    def setUpClass(cls):
+        cls.tmp = tempfile.TemporaryDirectory(prefix="rouen-python-")
+        cls.dir = os.path.join(cls.tmp.name, "demo")
+        run_rouen("demo", "--quick", "--out", cls.dir)
+        cls.session_dir = os.path.join(cls.dir, "session")
+        cls.lines = []
+        # The demo's calibration (DIR/work) is reused: same session files and options.
+        cls.scene = rouen.solve(rouen.Session(cls.session_dir), os.path.join(cls.tmp.name, "py.scene"),
+                                holdout_slots=[HELD_OUT], quick=True,
+                                work=os.path.join(cls.dir, "work"), log=cls.lines.append)
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.tmp.cleanup()
+
+    def test_session(self):
+        s = rouen.Session(self.session_dir)
+        self.assertEqual(s.slots, 5)
+        self.assertIn("slot0/architecture/view0", s.brackets)
+        status = s.status(verify=False)
+        self.assertTrue(status["solvable"], status)
+
+    def test_solve_reported_progress_and_wrote_a_scene(self):
+        self.assertTrue(any("calib" in line or "response" in line for line in self.lines),
+                        self.lines)
+        self.assertTrue(os.path.isfile(os.path.join(self.scene.path, "scene.json")))
+        self.assertEqual(self.scene.holdout_slots, [HELD_OUT])
+        self.assertEqual(len(self.scene.slot_times), 5)
+        self.assertEqual(self.scene.config["response"]["max_brackets"], 6)  # quick
+
+    def test_render_is_the_clis_image(self):
+        view = self.scene.views[0]
+        for how in (["--slot", "0"], ["--time", self.scene.slot_times[HELD_OUT]]):
+            with self.subTest(how=how[0]):
+                out = os.path.join(self.tmp.name, f"cli{how[0]}.exr")
+                run_rouen("render", self.scene.path, *how, "--view", view, "--out", out)
+                cli = rouen.read_image(out)
+                if how[0] == "--slot":
+                    py = self.scene.render(view=view, slot=0)
+                else:
+                    py = self.scene.render(how[1], view)
+                self.assertEqual(py.dtype, np.float32)
+                self.assertEqual(py.shape, cli.shape)
+                self.assertTrue(np.isfinite(py).all())
+                self.assertGreater(float(py.max()), 0.0)  # the building is lit
+                # Bit for bit: one library, and EXR float stores float32 exactly.
+                np.testing.assert_array_equal(py, cli)
+
+    def test_second_solve_is_up_to_date(self):
+        lines = []
+        scene = rouen.solve(self.session_dir, self.scene.path, holdout_slots=[HELD_OUT],
+                            quick=True, log=lines.append)
+        self.assertTrue(any("up to date" in line for line in lines), lines)
+        self.assertEqual(scene.views, self.scene.views)
+
+    def test_validate_matches_the_cli(self):
+        figures = self.scene.validate(rouen.Session(self.session_dir), HELD_OUT)
+        self.assertTrue(figures["held_out"])
+        out = os.path.join(self.tmp.name, "validate.json")
+        run_rouen("validate", self.scene.path, "--session", self.session_dir, "--slot", HELD_OUT,
+                  "--json", out)
+        import json
+        with open(out) as f:
+            cli = json.load(f)
+        for lighting in ("measured", "predicted"):
+            py_rmse = figures[lighting]["rel_rmse"]
+            self.assertTrue(math.isfinite(py_rmse))
+            self.assertAlmostEqual(py_rmse, cli[lighting]["rel_rmse"], places=12)
+
+    def test_errors_raise_rouen_error_naming_the_problem(self):
+        with self.assertRaisesRegex(rouen.Error, "no-such-session"):
+            rouen.Session(os.path.join(self.tmp.name, "no-such-session"))
+        with self.assertRaisesRegex(rouen.Error, "slot0/architecture/view9"):
+            self.scene.render(view="slot0/architecture/view9", slot=0)
+        with self.assertRaisesRegex(rouen.Error, "slot 7"):
+            self.scene.render(slot=7)
+        with self.assertRaisesRegex(rouen.Error, "exactly one"):
+            self.scene.render("2026-06-21T12:00:00Z", slot=0)
+        with self.assertRaisesRegex(rouen.Error, "sky_fit"):
+            rouen.solve(self.session_dir, os.path.join(self.tmp.name, "bad.scene"),
+                        config={"sky_fit": {"no_such_key": 1}})
+        self.assertFalse(os.path.exists(os.path.join(self.tmp.name, "bad.scene")))
+
+
+class ReadImageTest(unittest.TestCase):
+    def test_missing_file_names_it(self):
+        with self.assertRaisesRegex(rouen.Error, "missing.exr"):
+            rouen.read_image("/nonexistent/missing.exr")
+
+
+if __name__ == "__main__":
+    unittest.main()
