@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -82,15 +83,12 @@ Image AverageRadiance(const LoadedList& l) {
   return out;
 }
 
-// Updates session.json's "extra" as the session's one writer (refused while a capture holds
-// the session, whose own session.json updates would otherwise undo this one).
-void UpdateSessionExtra(const std::string& dir, const std::string& key, const std::string& name,
-                        const json& value) {
+// Updates session.json as the session's one writer (refused while a capture holds the
+// session, whose own session.json updates would otherwise undo this one).
+void UpdateSessionInfo(const std::string& dir, const std::function<void(SessionInfo*)>& edit) {
   SessionWriter w = SessionWriter::Resume(dir);
   SessionInfo info = w.info();
-  if (info.extra.contains(key) && !info.extra[key].is_object())
-    throw Error((fs::path(dir) / "session.json").string() + ": extra." + key + " is not an object");
-  info.extra[key][name] = value;
+  edit(&info);
   w.UpdateInfo(info);
 }
 
@@ -139,9 +137,9 @@ void RunNd(const NdArgs& a) {
   j["without"] = a.without;
   if (!a.out.empty()) WriteFileAtomic(out, j.dump(2) + "\n");
   if (!a.session.empty())
-    UpdateSessionExtra(
-        a.session, "nd_filters", a.filter,
-        json::array({cal.channel[0].density, cal.channel[1].density, cal.channel[2].density}));
+    UpdateSessionInfo(a.session, [&](SessionInfo* info) {
+      info->nd_filters[a.filter] = NdFilter{cal.DensityRgb(), nullptr};
+    });
   outputs.Commit();
   std::printf(
       "%s: ND density R %.4f G %.4f B %.4f (95%% +-%.4f %.4f %.4f; transmission %.3g %.3g "
@@ -215,7 +213,8 @@ void RunVignetting(const VignettingArgs& a) {
     WriteFileAtomic(a.lens, lens.dump(2) + "\n");
   }
   if (!a.out.empty()) WriteFileAtomic(out, json(m).dump(2) + "\n");
-  if (!a.session.empty()) UpdateSessionExtra(a.session, "vignetting", a.camera, json(m));
+  if (!a.session.empty())
+    UpdateSessionInfo(a.session, [&](SessionInfo* info) { info->vignetting[a.camera] = m; });
   outputs.Commit();
   std::printf(
       "vignetting from %d flat frame%s (%d bins): V = 1 %+.4f r^2 %+.4f r^4 %+.4f r^6 about "

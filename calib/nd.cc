@@ -151,40 +151,4 @@ NdCalibration EstimateNdTransmission(const Bracket& with, const Bracket& without
   return EstimateNdTransmission(lw, &vw, lo, &vo, options);
 }
 
-std::array<double, 3> NdTransmissionRgb(double frame_density, const nlohmann::json& filters) {
-  const double t = std::pow(10.0, -frame_density);
-  std::array<double, 3> out = {t, t, t};
-  if (frame_density <= 0 || !filters.is_object()) return out;
-  double best = 0.05;
-  for (const auto& [name, v] : filters.items()) {
-    std::array<double, 3> d{};
-    if (v.is_number()) {
-      d.fill(v.get<double>());
-    } else if (v.is_array() && v.size() == 3 && v[0].is_number() && v[1].is_number() &&
-               v[2].is_number()) {
-      for (int c = 0; c < 3; ++c) d[c] = v[c].get<double>();
-    } else if (v.is_object()) {
-      NdCalibration cal;
-      try {
-        cal = v.get<NdCalibration>();
-      } catch (const Error& e) {
-        throw Error("nd_filters." + name + ": " + e.what());
-      }
-      d = cal.DensityRgb();
-    } else {
-      throw Error("nd_filters." + name +
-                  ": expected a density, [r, g, b] densities or {\"density_rgb\": [...]}");
-    }
-    for (double x : d)
-      if (!std::isfinite(x) || x < 0 || x > 10)
-        throw Error("nd_filters." + name + ": density outside 0..10");
-    const double mean = (d[0] + d[1] + d[2]) / 3;
-    if (std::abs(mean - frame_density) <= best) {
-      best = std::abs(mean - frame_density);
-      for (int c = 0; c < 3; ++c) out[c] = std::pow(10.0, -d[c]);
-    }
-  }
-  return out;
-}
-
 }  // namespace rouen

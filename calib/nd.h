@@ -61,10 +61,4 @@ NdCalibration EstimateNdTransmission(const Image& with, const std::vector<uint8_
 NdCalibration EstimateNdTransmission(const Bracket& with, const Bracket& without,
                                      const ResponseCurve& curve, const NdOptions& options);
 
-// Per-channel transmission of a frame with optical density `frame_density`: from `filters`
-// (name -> density per channel, session.json "extra.nd_filters": [r, g, b] or a scalar, or an
-// object with "density_rgb") the filter whose mean density is within 0.05 of the frame's;
-// else 10^-frame_density in every channel. Throws rouen::Error for a malformed entry.
-std::array<double, 3> NdTransmissionRgb(double frame_density, const nlohmann::json& filters);
-
 }  // namespace rouen

@@ -123,27 +123,6 @@ TEST(NdTest, BadInputsAreErrors) {
   EXPECT_THROW(EstimateNdTransmission(none, none, testing::TrueCurve(), NdOptions{}), Error);
 }
 
-TEST(NdTest, TransmissionLookupPrefersTheCalibratedFilter) {
-  const nlohmann::json filters = {{"sun", {4.4, 4.5, 4.6}}, {"grey", 2.0}};
-  const auto t = NdTransmissionRgb(4.5, filters);
-  EXPECT_NEAR(t[0], std::pow(10.0, -4.4), 1e-12);
-  EXPECT_NEAR(t[2], std::pow(10.0, -4.6), 1e-12);
-  const auto g = NdTransmissionRgb(2.0, filters);
-  EXPECT_NEAR(g[1], 0.01, 1e-15);
-  // No filter of that density: the frame's own scalar density.
-  const auto s = NdTransmissionRgb(3.0, filters);
-  for (double v : s) EXPECT_NEAR(v, 1e-3, 1e-15);
-  // No filter in front.
-  for (double v : NdTransmissionRgb(0, filters)) EXPECT_EQ(v, 1);
-  // A calibration object is accepted.
-  NdCalibration cal;
-  for (int c = 0; c < 3; ++c) cal.channel[c].density = 4.45 + 0.05 * c;
-  const auto o = NdTransmissionRgb(4.5, nlohmann::json{{"sun", nlohmann::json(cal)}});
-  EXPECT_NEAR(o[2], std::pow(10.0, -4.55), 1e-12);
-  EXPECT_THROW(NdTransmissionRgb(4.5, nlohmann::json{{"sun", "dark"}}), Error);
-  EXPECT_THROW(NdTransmissionRgb(4.5, nlohmann::json{{"sun", {4.5, -1, 4.5}}}), Error);
-}
-
 TEST(NdTest, JsonRoundTrip) {
   NdCalibration cal;
   for (int c = 0; c < 3; ++c) {

@@ -312,6 +312,143 @@ void from_json(const json& j, FrameRecord& f) {
   f = std::move(r);
 }
 
+namespace {
+
+constexpr double kNdMatch = 0.05;  // a frame's density within this of a filter's mean uses it
+
+std::array<double, 3> NdDensities(const json& v, const std::string& where) {
+  std::array<double, 3> d{};
+  const json* src = &v;
+  if (v.is_object()) {
+    auto it = v.find("density_rgb");
+    if (it == v.end())
+      throw Error(where +
+                  ": a calibration record needs \"density_rgb\" (as rouen calib nd writes)");
+    src = &*it;
+  }
+  if (src->is_number()) {
+    d.fill(src->get<double>());
+  } else if (src->is_array() && src->size() == 3 && (*src)[0].is_number() &&
+             (*src)[1].is_number() && (*src)[2].is_number()) {
+    for (int c = 0; c < 3; ++c) d[c] = (*src)[c].get<double>();
+  } else {
+    throw Error(where + ": expected a density, [r, g, b] densities or {\"density_rgb\": [...]}");
+  }
+  for (double x : d)
+    if (!std::isfinite(x) || x < 0 || x > 10) throw Error(where + ": density outside 0..10");
+  return d;
+}
+
+// Moves the typed tables out of `extra` (what is left stays there).
+void ParseExtraTables(json extra, SessionInfo* r) {
+  const std::string where = "session info: extra.";
+  auto object = [&](const char* key) -> const json* {
+    auto it = extra.find(key);
+    if (it == extra.end() || it->is_null()) return nullptr;
+    if (!it->is_object()) throw Error(where + key + " must be an object");
+    return &*it;
+  };
+  if (const json* t = object("nd_filters"))
+    for (const auto& [name, v] : t->items()) {
+      NdFilter f;
+      f.density_rgb = NdDensities(v, where + "nd_filters." + name);
+      if (v.is_object()) f.record = v;
+      r->nd_filters[name] = f;
+    }
+  if (const json* t = object("vignetting"))
+    for (const auto& [key, v] : t->items()) {
+      try {
+        r->vignetting[key] = v.get<VignettingModel>();
+      } catch (const Error& e) {
+        throw Error(where + "vignetting." + key + ": " + e.what());
+      } catch (const json::exception& e) {
+        throw Error(where + "vignetting." + key + ": " + e.what());
+      }
+    }
+  if (const json* t = object("sky_masks"))
+    for (const auto& [key, v] : t->items()) {
+      if (!v.is_string() || v.get<std::string>().empty())
+        throw Error(where + "sky_masks." + key + " must be an image file name or \"auto\"");
+      SkyMaskSpec m;
+      m.automatic = v == "auto";
+      if (!m.automatic) m.file = v.get<std::string>();
+      r->sky_masks[key] = m;
+    }
+  if (auto it = extra.find("heldout_slot"); it != extra.end() && !it->is_null()) {
+    if (!it->is_number_integer() || it->get<int64_t>() < 0 || it->get<int64_t>() > 1000)
+      throw Error(where + "heldout_slot must be a slot number 0..1000");
+    r->heldout_slot = it->get<int>();
+  }
+  if (auto it = extra.find("capture_complete"); it != extra.end() && !it->is_null()) {
+    if (!it->is_boolean()) throw Error(where + "capture_complete must be true or false");
+    r->capture_complete = it->get<bool>();
+  }
+  for (const char* key :
+       {"nd_filters", "vignetting", "sky_masks", "heldout_slot", "capture_complete"})
+    extra.erase(key);
+  r->extra = std::move(extra);
+}
+
+json ExtraTables(const SessionInfo& s) {
+  json extra = s.extra.is_object() ? s.extra : json::object();
+  if (!s.nd_filters.empty()) {
+    json& t = extra["nd_filters"];
+    for (const auto& [name, f] : s.nd_filters)
+      t[name] = f.record.is_object() ? f.record : json(f.density_rgb);
+  }
+  if (!s.vignetting.empty()) {
+    json& t = extra["vignetting"];
+    for (const auto& [key, v] : s.vignetting) t[key] = v;
+  }
+  if (!s.sky_masks.empty()) {
+    json& t = extra["sky_masks"];
+    for (const auto& [key, m] : s.sky_masks) t[key] = m.automatic ? std::string("auto") : m.file;
+  }
+  if (s.heldout_slot) extra["heldout_slot"] = *s.heldout_slot;
+  if (s.capture_complete) extra["capture_complete"] = *s.capture_complete;
+  return extra;
+}
+
+}  // namespace
+
+const NdFilter* SessionInfo::FindNdFilter(double frame_density) const {
+  const NdFilter* best = nullptr;
+  double best_gap = kNdMatch;
+  if (frame_density <= 0) return nullptr;
+  for (const auto& [name, f] : nd_filters) {
+    const double mean = (f.density_rgb[0] + f.density_rgb[1] + f.density_rgb[2]) / 3;
+    if (std::abs(mean - frame_density) <= best_gap) {
+      best_gap = std::abs(mean - frame_density);
+      best = &f;
+    }
+  }
+  return best;
+}
+
+std::array<double, 3> SessionInfo::NdTransmissionRgb(double frame_density) const {
+  const double t = std::pow(10.0, -std::max(frame_density, 0.0));
+  std::array<double, 3> out = {t, t, t};
+  if (const NdFilter* f = FindNdFilter(frame_density))
+    for (int c = 0; c < 3; ++c) out[c] = std::pow(10.0, -f->density_rgb[c]);
+  return out;
+}
+
+const VignettingModel* SessionInfo::FindVignetting(const std::string& device, Target target) const {
+  for (const std::string& key : {device + "/" + TargetName(target), device, std::string("*")}) {
+    auto it = vignetting.find(key);
+    if (it != vignetting.end()) return &it->second;
+  }
+  return nullptr;
+}
+
+const SkyMaskSpec* SessionInfo::FindSkyMask(const std::string& bracket) const {
+  for (const std::string& key : {bracket, std::string("*")}) {
+    auto it = sky_masks.find(key);
+    if (it != sky_masks.end()) return &it->second;
+  }
+  return nullptr;
+}
+
 void to_json(json& j, const SessionInfo& s) {
   j = json{
       {"format_version", s.format_version},
@@ -323,7 +460,7 @@ void to_json(json& j, const SessionInfo& s) {
       {"clock_offset_s", s.clock_offset_s},
       {"model", s.model},
       {"notes", s.notes},
-      {"extra", s.extra}};
+      {"extra", ExtraTables(s)}};
 }
 
 void from_json(const json& j, SessionInfo& s) {
@@ -353,7 +490,7 @@ void from_json(const json& j, SessionInfo& s) {
   auto it = j.find("extra");
   if (it != j.end() && !it->is_null()) {
     if (!it->is_object()) throw Error("session info: key \"extra\" is not an object");
-    r.extra = *it;
+    ParseExtraTables(*it, &r);
   }
   s = std::move(r);
 }

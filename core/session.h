@@ -2,8 +2,10 @@
 // A frame is written under a temporary name, fsynced, renamed and only then journalled.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -12,6 +14,7 @@
 
 #include "core/camera.h"
 #include "core/image.h"
+#include "core/lens.h"
 #include "core/solar.h"
 #include "core/time.h"
 
@@ -68,6 +71,21 @@ struct FrameRecord {
   std::string sha256;
 };
 
+// An ND filter's optical density per channel (session.json extra.nd_filters.NAME: a density,
+// [r, g, b] densities, or the record `rouen calib nd` writes, which holds "density_rgb" and is
+// kept whole).
+struct NdFilter {
+  std::array<double, 3> density_rgb = {0, 0, 0};
+  nlohmann::json record;  // the calibration record it came from; null for plain densities
+};
+
+// Where a sky bracket's sky pixels come from (extra.sky_masks.KEY: "auto" or a mask image
+// relative to the session folder, nonzero = sky).
+struct SkyMaskSpec {
+  bool automatic = false;  // segment the sky (solve/sky_segment)
+  std::string file;        // when not automatic
+};
+
 struct SessionInfo {
   int format_version = 1;
   Site site;
@@ -77,7 +95,26 @@ struct SessionInfo {
   double clock_offset_s = 0;  // GPS time minus laptop clock, applied to frame times
   std::string model;          // optional relative path to the building model (OBJ)
   std::string notes;
-  nlohmann::json extra = nlohmann::json::object();
+  // The typed tables of session.json's "extra" (one parser and one printer: from_json and
+  // to_json below), with their keys:
+  std::map<std::string, NdFilter> nd_filters;  // filter name -> densities ("sun" for a rig's)
+  // "<device>/<target>", "<device>" or "*" -> the lens's vignetting (calib/vignetting.h)
+  std::map<std::string, VignettingModel> vignetting;
+  std::map<std::string, SkyMaskSpec> sky_masks;  // bracket name or "*" -> its sky pixels
+  std::optional<int> heldout_slot;               // the rig's held-out time of day
+  std::optional<bool> capture_complete;  // false while a capture runs; true once it finished
+  nlohmann::json extra = nlohmann::json::object();  // every other key (the plan, import, ...)
+
+  // The filter of a frame with optical density `frame_density`: the one whose mean density is
+  // within 0.05 of it (the closest), else none.
+  const NdFilter* FindNdFilter(double frame_density) const;
+  // Per-channel transmission of a frame with optical density `frame_density`: its filter's
+  // (FindNdFilter), else 10^-frame_density in every channel; 1 without a filter.
+  std::array<double, 3> NdTransmissionRgb(double frame_density) const;
+  // The vignetting of a frame's device and target ("<device>/<target>", then "<device>", "*").
+  const VignettingModel* FindVignetting(const std::string& device, Target target) const;
+  // The sky mask of a bracket (its name, then "*").
+  const SkyMaskSpec* FindSkyMask(const std::string& bracket) const;
 };
 
 void to_json(nlohmann::json& j, const FrameRecord& f);

@@ -3,7 +3,9 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <array>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <string>
@@ -516,6 +518,69 @@ TEST_F(SessionTest, IntegersOutOfRangeAreRefusedNotTruncated) {
 
 namespace rouen {
 namespace {
+
+// session.json's extra tables: one parser (ParseSessionInfo) and one printer (to_json); what
+// they do not know stays in extra as it was.
+TEST(SessionInfoTest, TypedExtraTablesRoundTripAndLookUp) {
+  const std::string text = R"({"format_version": 1,
+    "site": {"lat_deg": 45, "lon_deg": 7, "height_m": 300},
+    "extra": {"nd_filters": {"sun": [4.4, 4.5, 4.6], "grey": 2.0,
+                             "cal": {"density_rgb": [3.0, 3.1, 3.2], "note": "kept"}},
+              "vignetting": {"cam0": {"width": 64, "height": 48, "cx": 32, "cy": 24,
+                                      "a": [-0.1, 0, 0]}},
+              "sky_masks": {"*": "auto", "slot1/sky/view0": "masks/sky1.png"},
+              "heldout_slot": 3, "capture_complete": false,
+              "plan": {"slots": ["x"]}}})";
+  const SessionInfo info = ParseSessionInfo(text, "session.json");
+  ASSERT_EQ(info.nd_filters.size(), 3u);
+  EXPECT_EQ(info.nd_filters.at("grey").density_rgb, (std::array<double, 3>{2, 2, 2}));
+  EXPECT_EQ(info.heldout_slot, 3);
+  EXPECT_EQ(info.capture_complete, false);
+  EXPECT_TRUE(info.extra.contains("plan"));
+  EXPECT_FALSE(info.extra.contains("nd_filters"));  // typed, not twice
+  // The filter whose mean density is within 0.05 of a frame's gives its per-channel
+  // transmission; other densities are the frame's own; none in front is 1.
+  const auto t = info.NdTransmissionRgb(4.5);
+  EXPECT_NEAR(t[0], std::pow(10.0, -4.4), 1e-15);
+  EXPECT_NEAR(t[2], std::pow(10.0, -4.6), 1e-15);
+  EXPECT_NEAR(info.NdTransmissionRgb(3.1)[2], std::pow(10.0, -3.2), 1e-15);
+  for (double v : info.NdTransmissionRgb(2.5)) EXPECT_NEAR(v, std::pow(10.0, -2.5), 1e-15);
+  for (double v : info.NdTransmissionRgb(0)) EXPECT_EQ(v, 1);
+  ASSERT_NE(info.FindVignetting("cam0", Target::kSky), nullptr);
+  EXPECT_EQ(info.FindVignetting("cam1", Target::kSky), nullptr);
+  ASSERT_NE(info.FindSkyMask("slot1/sky/view0"), nullptr);
+  EXPECT_EQ(info.FindSkyMask("slot1/sky/view0")->file, "masks/sky1.png");
+  EXPECT_TRUE(info.FindSkyMask("slot0/sky/view0")->automatic);
+  // Printed and parsed again: the same tables, the calibration record kept whole.
+  const nlohmann::json printed = info;
+  EXPECT_EQ(printed["extra"]["nd_filters"]["cal"]["note"], "kept");
+  const SessionInfo again = ParseSessionInfo(printed.dump(), "again");
+  EXPECT_EQ(nlohmann::json(again), printed);
+
+  // Each malformed table is an error naming its key.
+  auto error_of = [](const std::string& extra) {
+    try {
+      ParseSessionInfo(R"({"format_version": 1, "site": {"lat_deg": 1, "lon_deg": 2,
+                         "height_m": 3}, "extra": )" +
+                           extra + "}",
+                       "s.json");
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(error_of(R"({"nd_filters": {"sun": [4, -1, 4]}})").find("nd_filters.sun"),
+            std::string::npos);
+  EXPECT_NE(error_of(R"({"nd_filters": {"sun": "dark"}})").find("nd_filters.sun"),
+            std::string::npos);
+  EXPECT_NE(error_of(R"({"nd_filters": [1]})").find("nd_filters must be an object"),
+            std::string::npos);
+  EXPECT_NE(error_of(R"({"sky_masks": {"*": 3}})").find("sky_masks.*"), std::string::npos);
+  EXPECT_NE(error_of(R"({"vignetting": {"cam0": {"model": "nope"}}})").find("vignetting.cam0"),
+            std::string::npos);
+  EXPECT_NE(error_of(R"({"heldout_slot": -2})").find("heldout_slot"), std::string::npos);
+  EXPECT_NE(error_of(R"({"capture_complete": "yes"})").find("capture_complete"), std::string::npos);
+}
 
 TEST(BracketNameTest, PrintsAndParsesTheOneKey) {
   EXPECT_EQ(BracketName(2, Target::kArchitecture, 1), "slot2/architecture/view1");

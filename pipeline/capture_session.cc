@@ -51,10 +51,7 @@ void CountLeft(const std::vector<PlannedGroup>& planned, const std::vector<Frame
   summary->frames_total = static_cast<int>(frames.size());
 }
 
-bool MarkedComplete(const SessionInfo& info) {
-  auto it = info.extra.find(kCaptureCompleteKey);
-  return it != info.extra.end() && it->is_boolean() && it->get<bool>();
-}
+bool MarkedComplete(const SessionInfo& info) { return info.capture_complete.value_or(false); }
 
 }  // namespace
 
@@ -114,16 +111,17 @@ CaptureSessionSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
     info.rig = fs::path(rig.path).filename().string();
     info.created_utc = NowUtc().Iso8601(3);
     info.extra["plan"] = PlanToJson(dev.plan);
-    info.extra["nd_filters"] = {{"sun", rig.sun_nd_density_rgb}};
-    info.extra[kCaptureCompleteKey] = false;
-    if (rig.heldout_slot >= 0) info.extra["heldout_slot"] = rig.heldout_slot;
+    info.nd_filters["sun"].density_rgb = rig.sun_nd_density_rgb;
+    info.capture_complete = false;
+    if (rig.heldout_slot >= 0) info.heldout_slot = rig.heldout_slot;
     if (src) {
       info.site = src->info().site;
       info.site_source = src->info().site_source;
       info.clock_offset_s = src->info().clock_offset_s;
       info.notes = "replayed from " + opts.from_session.string();
-      for (const char* key : {"heldout_slot", "nd_filters", "vignetting"})
-        if (src->info().extra.contains(key)) info.extra[key] = src->info().extra[key];
+      if (src->info().heldout_slot) info.heldout_slot = src->info().heldout_slot;
+      if (!src->info().nd_filters.empty()) info.nd_filters = src->info().nd_filters;
+      info.vignetting = src->info().vignetting;
     }
     writer.emplace(SessionWriter::Create(out, info));
   }
@@ -138,9 +136,8 @@ CaptureSessionSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
       if (path.empty()) continue;
       const std::optional<VignettingModel> v = ReadLensFile(path).vignetting;
       const std::string key = dev.camera->Id() + "/" + TargetName(t);
-      if (!v || (info.extra.contains("vignetting") && info.extra["vignetting"].contains(key)))
-        continue;
-      info.extra["vignetting"][key] = *v;
+      if (!v || info.vignetting.count(key)) continue;
+      info.vignetting[key] = *v;
       changed = true;
     }
     if (changed) writer->UpdateInfo(info);
@@ -160,9 +157,8 @@ CaptureSessionSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
   // Unfinished from here until the plan is done (a finished run is left alone by --resume).
   {
     SessionInfo info = writer->info();
-    auto it = info.extra.find(kCaptureCompleteKey);
-    if (it == info.extra.end() || *it != false) {
-      info.extra[kCaptureCompleteKey] = false;
+    if (info.capture_complete != false) {
+      info.capture_complete = false;
       writer->UpdateInfo(info);
     }
   }
@@ -198,7 +194,7 @@ CaptureSessionSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
     s.warnings.push_back("no GPS fix: sun positions use the rig's fallback site (" +
                          std::to_string(info.site.lat_deg) + ", " +
                          std::to_string(info.site.lon_deg) + ")");
-  if (!s.stopped) info.extra[kCaptureCompleteKey] = true;
+  if (!s.stopped) info.capture_complete = true;
   writer->UpdateInfo(info);
   CountLeft(PlannedGroups(dev.plan, dev.camera.get()), writer->frames(), !s.stopped, &summary);
   return summary;

@@ -44,11 +44,6 @@ struct CaptureSessionSummary {
   int frames_total = 0;  // in the session's journal after this run
 };
 
-// session.json's "extra" key that says whether the last capture run finished its plan
-// (true) or is unfinished (false, from the moment a run starts adding frames). Absent in
-// sessions not written by this function (imports, older captures).
-inline constexpr const char* kCaptureCompleteKey = "capture_complete";
-
 // Creates (or resumes) the session folder `out` and runs the plan of `dev` (OpenRig of
 // `rig`) in it. Throws rouen::Error naming `out` when --resume finds no session folder, when
 // --new-slot finds no session, when the session is in use by another writer, or when a

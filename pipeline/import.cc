@@ -516,12 +516,13 @@ ImportSummary ImportPhotos(const ImportOptions& o, const fs::path& out) {
     std::string mask_file;
     if (!o.model.empty()) info.model = "model.obj";
     if (!o.sky_mask.empty()) {
-      std::string entry = "auto";
-      if (o.sky_mask != "auto") {
+      SkyMaskSpec spec;
+      spec.automatic = o.sky_mask == "auto";
+      if (!spec.automatic) {
         mask_file = "sky_mask" + Lower(fs::path(o.sky_mask).extension().string());
-        entry = mask_file;
+        spec.file = mask_file;
       }
-      info.extra["sky_masks"] = {{"*", entry}};
+      info.sky_masks["*"] = spec;
     }
     // Per-channel ND filters: one named entry per distinct set of densities.
     std::map<std::array<double, 3>, std::string> nd_names;
@@ -529,7 +530,7 @@ ImportSummary ImportPhotos(const ImportOptions& o, const fs::path& out) {
       if (!p.nd_rgb || nd_names.count(*p.nd_rgb)) continue;
       const std::string name = "import-" + std::to_string(nd_names.size() + 1);
       nd_names[*p.nd_rgb] = name;
-      info.extra["nd_filters"][name] = {(*p.nd_rgb)[0], (*p.nd_rgb)[1], (*p.nd_rgb)[2]};
+      info.nd_filters[name].density_rgb = *p.nd_rgb;
     }
     SessionWriter writer = SessionWriter::Create(tmp, info);
     if (!o.model.empty()) WriteFileAtomic(tmp / info.model, ReadFileToString(o.model));

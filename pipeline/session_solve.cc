@@ -85,37 +85,6 @@ std::string SafeName(std::string s) {
   return s;
 }
 
-// session.json "extra.vignetting": {"<device>/<target>" | "<device>" | "*": model} (the
-// models of calib/vignetting.h, e.g. from `rouen calib vignetting`).
-std::map<std::string, VignettingModel> ReadSessionVignetting(const Session& session) {
-  std::map<std::string, VignettingModel> out;
-  const nlohmann::json& extra = session.info().extra;
-  if (!extra.contains("vignetting")) return out;
-  const nlohmann::json& v = extra["vignetting"];
-  if (!v.is_object())
-    throw Error((session.dir() / "session.json").string() +
-                ": extra.vignetting must map a device (or device/target, or *) to a model");
-  for (const auto& [key, model] : v.items()) {
-    try {
-      out[key] = model.get<VignettingModel>();
-    } catch (const Error& e) {
-      throw Error((session.dir() / "session.json").string() + ": extra.vignetting." + key + ": " +
-                  e.what());
-    }
-  }
-  return out;
-}
-
-const VignettingModel* FindVignetting(const std::map<std::string, VignettingModel>& models,
-                                      const FrameRecord& f) {
-  for (const std::string& key :
-       {f.device + "/" + TargetName(f.target), f.device, std::string("*")}) {
-    auto it = models.find(key);
-    if (it != models.end()) return &it->second;
-  }
-  return nullptr;
-}
-
 // LDR bracket through the response curve (Debevec-Malik eq. 6 in calib/hdr), each channel
 // divided by its own ND transmission.
 Image MergeLdrFrames(const std::vector<Image>& images, const std::vector<double>& exposures,
@@ -214,8 +183,7 @@ HdrGroup BracketCameraAndTime(const Session& session, const std::string& name,
 // channel divided by its ND filter's transmission, then the vignetting removed.
 HdrGroup MergeGroup(const Session& session, const std::string& name,
                     const std::vector<const FrameRecord*>& frames, bool hdr,
-                    const ResponseCurve& response, const nlohmann::json& nd_filters,
-                    const std::map<std::string, VignettingModel>& vignetting) {
+                    const ResponseCurve& response) {
   const std::string where = session.dir().string();
   std::vector<Image> images;
   std::vector<double> exposures;  // seconds x gain (the ND filter is applied per channel)
@@ -226,9 +194,9 @@ HdrGroup MergeGroup(const Session& session, const std::string& name,
     const FrameRecord* f = frames[k];
     images.push_back(LoadCheckedFrame(session, *f, k ? &images[0] : nullptr, frames[0]));
     exposures.push_back(f->exposure_s * f->gain);
-    transmission.push_back(NdTransmissionRgb(f->nd_density, nd_filters));
+    transmission.push_back(session.info().NdTransmissionRgb(f->nd_density));
     times.push_back(f->utc);
-    const VignettingModel* v = FindVignetting(vignetting, *f);
+    const VignettingModel* v = session.info().FindVignetting(f->device, f->target);
     if (k > 0 && v != vmodel)
       throw Error(where + ": bracket " + name +
                   " mixes frames with different vignetting models (frame " + std::to_string(f->id) +
@@ -261,12 +229,6 @@ std::map<std::string, std::vector<const FrameRecord*>> SessionBrackets(const Ses
   std::map<std::string, std::vector<const FrameRecord*>> groups;
   for (const FrameRecord& f : session.frames()) groups[MergeKey(f)].push_back(&f);
   return groups;
-}
-
-const nlohmann::json& SessionNdFilters(const Session& session) {
-  static const nlohmann::json no_filters = nlohmann::json::object();
-  const nlohmann::json& extra = session.info().extra;
-  return extra.contains("nd_filters") ? extra["nd_filters"] : no_filters;
 }
 
 // The merged bracket's valid mask as an 8-bit image: 255 where some frame was well exposed.
@@ -343,39 +305,23 @@ std::vector<uint8_t> SkyMaskFor(const Session& session, const HdrGroup& group,
   const size_t np = static_cast<size_t>(group.radiance.width) * group.radiance.height;
   if (group.valid.size() != np)
     throw Error(group.name + ": the valid mask does not match the merged image");
-  const nlohmann::json& extra = session.info().extra;
-  std::string key;
-  if (extra.contains("sky_masks")) {
-    const nlohmann::json& m = extra["sky_masks"];
-    if (!m.is_object()) throw Error(json + ": extra.sky_masks must map group names to masks");
-    if (m.contains(group.name))
-      key = group.name;
-    else if (m.contains("*"))
-      key = "*";
-  }
+  const SkyMaskSpec* spec = session.info().FindSkyMask(group.name);
   std::vector<uint8_t> mask;
-  if (key.empty()) {
+  if (!spec) {
     mask.assign(np, 1);
     if (source) *source = "all";
-  } else {
-    const nlohmann::json& entry = extra["sky_masks"][key];
-    if (!entry.is_string())
-      throw Error(json + ": extra.sky_masks." + key + " must be an image file name or \"auto\"");
-    if (entry == "auto") {
-      try {
-        mask =
-            SegmentSky(group.radiance, group.intrinsics, group.pose, sun_dir, SkySegmentOptions{});
-      } catch (const Error& e) {
-        throw Error(group.name + ": " + e.what() + " (give a mask file in " + json +
-                    " extra.sky_masks." + key + ")");
-      }
-      if (source) *source = "automatic";
-    } else {
-      const std::string path = ResolveInside(session.dir(), entry.get<std::string>()).string();
-      mask =
-          ReadMask(path, group.radiance.width, group.radiance.height, "the merged " + group.name);
-      if (source) *source = path;
+  } else if (spec->automatic) {
+    try {
+      mask = SegmentSky(group.radiance, group.intrinsics, group.pose, sun_dir, SkySegmentOptions{});
+    } catch (const Error& e) {
+      throw Error(group.name + ": " + e.what() + " (give a mask file in " + json +
+                  " extra.sky_masks, or rouen import --sky-mask FILE)");
     }
+    if (source) *source = "automatic";
+  } else {
+    const std::string path = ResolveInside(session.dir(), spec->file).string();
+    mask = ReadMask(path, group.radiance.width, group.radiance.height, "the merged " + group.name);
+    if (source) *source = path;
   }
   for (size_t p = 0; p < np; ++p) mask[p] = mask[p] && group.valid[p];
   return mask;
@@ -477,8 +423,6 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
                     std::to_string(frames.front()->id) + " and " + std::to_string(f->id) + ")");
     group_hdr[name] = hdr;
   }
-  const nlohmann::json& nd_filters = SessionNdFilters(session);
-  const std::map<std::string, VignettingModel> vignetting = ReadSessionVignetting(session);
 
   // An earlier calibration of the same session files with the same options is read back.
   const std::filesystem::path calib_dir = options.work_dir / "calib";
@@ -543,8 +487,7 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
 
   // HDR radiance per bracket.
   for (const auto& [name, frames] : groups) {
-    HdrGroup g =
-        MergeGroup(session, name, frames, group_hdr[name], out.response, nd_filters, vignetting);
+    HdrGroup g = MergeGroup(session, name, frames, group_hdr[name], out.response);
     const std::string base = (calib_dir / "hdr" / SafeName(name)).string();
     WriteImage(base + ".exr", g.radiance, StoredType::kFloat);
     WriteImage(base + ".valid.png", ValidMaskImage(g), StoredType::kUint8);
@@ -575,8 +518,7 @@ HdrGroup MergeSessionBracket(const Session& session, const std::string& name,
   for (const FrameRecord* f : it->second)
     if (f->hdr != hdr)
       throw Error(session.dir().string() + ": bracket " + name + " mixes LDR and HDR frames");
-  return MergeGroup(session, name, it->second, hdr, response, SessionNdFilters(session),
-                    ReadSessionVignetting(session));
+  return MergeGroup(session, name, it->second, hdr, response);
 }
 
 SolveResult SolveSession(const Session& session, const CalibResult& calib,

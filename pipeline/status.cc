@@ -257,9 +257,7 @@ SessionStatus ReadSessionStatus(const fs::path& dir, const StatusOptions& option
   const fs::path info_path = dir / "session.json";
   s.info = ParseSessionInfo(ReadFileToString(info_path), info_path.string());
   const Fixes fixes(dir, s.info);
-  if (auto it = s.info.extra.find(kCaptureCompleteKey);
-      it != s.info.extra.end() && it->is_boolean())
-    s.capture_complete = it->get<bool>();
+  s.capture_complete = s.info.capture_complete;
 
   const std::vector<FrameRecord> frames = ReadJournal(dir, fixes, options.verify_contents, &s);
   s.frames = static_cast<int>(frames.size());

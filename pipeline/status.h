@@ -74,7 +74,7 @@ struct SessionStatus {
   std::vector<SlotStatus> slots;        // 0 .. the last slot in the journal
   std::vector<StatusProblem> problems;  // blocking first, in the order found
   bool contents_verified = false;       // every present frame file's sha256 was compared
-  // session.json's extra.capture_complete (pipeline/capture_session.h); none for sessions
+  // session.json's extra.capture_complete (SessionInfo::capture_complete); none for sessions
   // that do not record it (imports, captures before it was recorded).
   std::optional<bool> capture_complete;
   bool Solvable() const;  // no blocking problem

@@ -28,7 +28,7 @@ void WriteSession(const fs::path& dir) {
   info.rig = "sim.toml";
   info.model = "model.obj";
   info.extra["plan"] = nlohmann::json::object();  // as rouen capture records it
-  info.extra[kCaptureCompleteKey] = true;
+  info.capture_complete = true;
   SessionWriter w = SessionWriter::Create(dir, info);
   const Intrinsics k = Intrinsics::PinholeFov(4, 4, 60);
   const Image pixels(4, 4, 3, PixelUnits::kDigital, 100.f);
@@ -213,7 +213,7 @@ TEST_F(StatusTest, FramesWithoutPoseOrOneExposureOrBadValuesBlockTheSolve) {
 
 TEST_F(StatusTest, AnUnfinishedCaptureIsANoteNotABlock) {
   SessionInfo info = ParseSessionInfo(ReadFileToString(dir_ / "session.json"), "session.json");
-  info.extra[kCaptureCompleteKey] = false;
+  info.capture_complete = false;
   WriteFileAtomic(dir_ / "session.json", nlohmann::json(info).dump(2));
   const SessionStatus s = ReadSessionStatus(dir_);
   EXPECT_TRUE(s.Solvable());

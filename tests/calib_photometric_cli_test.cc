@@ -105,16 +105,15 @@ TEST(CalibNdCliTest, FloatImagesAndSessionUpdate) {
   // A session to store the result in.
   SessionInfo info;
   info.created_utc = "2024-06-21T07:00:00Z";
-  info.extra["nd_filters"] = {{"sun", {4.5, 4.5, 4.5}}};
+  info.nd_filters["sun"].density_rgb = {4.5, 4.5, 4.5};
   SessionWriter::Create(dir / "session", info);
   const Result r =
       RunRouen("calib nd --with " + Q(dir / "nd.txt") + " --without " + Q(dir / "open.txt") +
                " --session " + Q(dir / "session") + " --filter sun");
   ASSERT_EQ(r.code, 0) << r.out;
   const Session s = Session::Load(dir / "session");
-  const json& d = s.info().extra.at("nd_filters").at("sun");
-  ASSERT_EQ(d.size(), 3u);
-  for (int c = 0; c < 3; ++c) EXPECT_NEAR(d[c].get<double>(), kTrueDensity[c], 1e-4) << c;
+  const std::array<double, 3>& d = s.info().nd_filters.at("sun").density_rgb;
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(d[c], kTrueDensity[c], 1e-4) << c;
   fs::remove_all(dir);
 }
 
@@ -339,8 +338,8 @@ TEST(CalibrateSessionTest, MixedLdrAndHdrBracketsAndPerChannelNdAndVignetting) {
       for (int c = 0; c < 3; ++c) vignetted.at(x, y, c) *= vig.Falloff(x + 0.5, y + 0.5);
   SessionInfo info;
   info.created_utc = "2024-06-21T07:00:00Z";
-  info.extra["nd_filters"] = {{"sun", {kTrueDensity[0], kTrueDensity[1], kTrueDensity[2]}}};
-  info.extra["vignetting"] = {{"cam0", vig}};
+  info.nd_filters["sun"].density_rgb = {kTrueDensity[0], kTrueDensity[1], kTrueDensity[2]};
+  info.vignetting["cam0"] = vig;
   {
     SessionWriter wr = SessionWriter::Create(dir / "session", info);
     // LDR architecture bracket (response recovered from it), LDR sun bracket behind the

@@ -100,7 +100,7 @@ TEST_F(CaptureResumeTest, ASignalExitsNonZeroSayingWhatIsLeftAndHowToContinue) {
         "rouen capture --rig " + rig_.string() + " --out " + out.string() + " --quick --resume";
     EXPECT_NE(said.find("continue with:\n  " + resume + "\n"), std::string::npos) << said;
     ASSERT_EQ(Wait(Spawn(CaptureArgs(rig_, out, true), log)), 0) << LogOf(log);
-    EXPECT_EQ(Session::Load(out).info().extra.value("capture_complete", false), true);
+    EXPECT_EQ(Session::Load(out).info().capture_complete, true);
   }
   // Both sessions, stopped at different moments, end with the same brackets.
   EXPECT_EQ(GroupsOf(dir_ / "int"), GroupsOf(dir_ / "term"));

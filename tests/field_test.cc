@@ -168,10 +168,10 @@ TEST(FieldTest, GigeFakeCameraListedThenBracketJournalledWithGpsAndSun) {
     EXPECT_NEAR(f.sun_elevation_deg, sp.elevation_deg, 1e-9);
     EXPECT_EQ(Sha256File(s.dir() / f.file), f.sha256);
   }
-  const nlohmann::json& vig = s.info().extra["vignetting"]["gige0/aureole"];
-  ASSERT_TRUE(vig.is_object()) << s.info().extra.dump();
-  EXPECT_DOUBLE_EQ(vig["a"][0].get<double>(), -0.3);
-  EXPECT_DOUBLE_EQ(vig["a"][1].get<double>(), 0.05);
+  ASSERT_TRUE(s.info().vignetting.count("gige0/aureole")) << nlohmann::json(s.info()).dump();
+  const VignettingModel& vig = s.info().vignetting.at("gige0/aureole");
+  EXPECT_DOUBLE_EQ(vig.a[0], -0.3);
+  EXPECT_DOUBLE_EQ(vig.a[1], 0.05);
   // A recorded log is not live: no clock offset is derived from it.
   EXPECT_DOUBLE_EQ(s.info().clock_offset_s, 0.0);
 

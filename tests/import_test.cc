@@ -574,7 +574,7 @@ TEST(ImportTest, ModelSkyMaskNdFiltersAndCalibFiles) {
   const Session s = Session::Load(out);
   EXPECT_EQ(s.info().model, "model.obj");
   EXPECT_EQ(ReadFileToString(out / "model.obj"), ReadFileToString(dir / "tower.obj"));
-  EXPECT_EQ(s.info().extra.at("sky_masks").at("*"), "sky_mask.png");
+  EXPECT_EQ(s.info().sky_masks.at("*").file, "sky_mask.png");
   EXPECT_EQ(ReadFileToString(out / "sky_mask.png"), ReadFileToString(dir / "mask.png"));
   const auto sources = SourcesById(s);
   std::map<std::string, FrameRecord> by;
@@ -582,9 +582,9 @@ TEST(ImportTest, ModelSkyMaskNdFiltersAndCalibFiles) {
   EXPECT_EQ(by["sun1.jpg"].nd_density, 4.5);
   EXPECT_NEAR(by["sun2.jpg"].nd_density, (4.4 + 4.5 + 4.9) / 3, 1e-12);
   EXPECT_EQ(by["w1.jpg"].nd_density, 0);
-  const nlohmann::json filters = s.info().extra.at("nd_filters");
+  const std::map<std::string, NdFilter>& filters = s.info().nd_filters;
   ASSERT_EQ(filters.size(), 1u);
-  EXPECT_EQ(filters.begin().value(), nlohmann::json::array({4.4, 4.5, 4.9}));
+  EXPECT_EQ(filters.begin()->second.density_rgb, (std::array<double, 3>{4.4, 4.5, 4.9}));
   // Every photo has the lens ("*"); the west group its pose file; e1 its own inline pose.
   for (const auto& [name, f] : by) {
     ASSERT_TRUE(f.intrinsics) << name;
@@ -599,7 +599,7 @@ TEST(ImportTest, ModelSkyMaskNdFiltersAndCalibFiles) {
   // --sky-mask auto is recorded as such.
   r = RunRouen(common + " --sky-mask auto --out " + Q(dir / "s2"));
   ASSERT_EQ(r.code, 0) << r.out;
-  EXPECT_EQ(Session::Load(dir / "s2").info().extra.at("sky_masks").at("*"), "auto");
+  EXPECT_TRUE(Session::Load(dir / "s2").info().sky_masks.at("*").automatic);
 
   // Each bad input is named, and nothing is left behind.
   const auto expect_fail = [&](const std::string& command, const std::string& phrase) {
