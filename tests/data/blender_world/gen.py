@@ -691,9 +691,11 @@ def main():
         "sky": {"model": "Cycles Nishita, sun disc on, sun_intensity 1, air 1, dust 1, ozone 1",
                 "altitude_m": SITE["height_m"], "background_strength": 1.0},
         "albedo_note": ("albedo = Principled BSDF base colour (linear RGB). Matte blocks have "
-                        "roughness 1, specular 0: Cycles' Principled diffuse is then Disney "
-                        "diffuse with retro-reflection, equal to Lambert at normal incidence "
-                        "and up to about 1.5x at grazing light or view."),
+                        "roughness 1, specular 0: Cycles' Principled diffuse is then Burley's "
+                        "(Disney) diffuse with its retro-reflection term, not Lambert: equal "
+                        "to Lambert for light and view along the normal, brighter for light "
+                        "at grazing incidence (1.4x for the held-out sun, 80 deg from the "
+                        "normal, on the south walls seen from arch0)."),
         "blocks": {n: {**m, "in_building_obj": True, "glossy": m["specular"] > 0}
                    for n, m in BLOCK_MATERIALS.items()},
         "surroundings": {n: {"material": mat, **SURROUNDING_MATERIALS[mat], "shape": d, **geo}
