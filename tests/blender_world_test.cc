@@ -142,7 +142,7 @@ TEST(BlenderWorldTest, ImportStatusSolveRenderValidate) {
                 << Median(vals) << ", median rho_se " << Median(se) << " (" << vals.size()
                 << " observed points)\n";
       // Blender's Principled diffuse is Lambert at normal incidence and brighter at grazing
-      // light, so the sun albedo comes out a little high: rouen's medians were 3-6% above the
+      // light, so the sun albedo comes out a little high: rouen's medians were 3-5% above the
       // base colour on this data. 15% allows for that; a sun measured 2x too bright (sun
       // frames scaled by 2) gave medians of half the base colour.
       if (!glossy) EXPECT_NEAR(Median(vals) / want, 1.0, 0.15) << block << " channel " << c;
