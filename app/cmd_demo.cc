@@ -105,7 +105,9 @@ void Run(const DemoArgs& a) {
   Session session = Session::Load(out / "session");
   PipelineOptions po;
   po.work_dir = out / "work";
-  po.config = DefaultSolveConfig(a.quick);
+  // As `rouen solve --quick` would: the defaults, then the rig's [solve] options.
+  po.config =
+      SessionSolveConfig(session.info(), (out / "session" / "session.json").string(), a.quick);
   po.log = say;
   const int heldout = rig.heldout_slot;
   if (heldout >= 0) po.exclude_albedo_slots = {heldout};

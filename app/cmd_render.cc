@@ -33,6 +33,7 @@ struct RenderArgs {
   std::vector<double> overcast_colour;
   double overcast_brightness = 1;
   double exposure = 0;
+  bool use_held_out = false;
 };
 
 // The longest sequence --from/--to/--step renders (a day at one frame a minute is 1440).
@@ -109,6 +110,7 @@ void Run(const RenderArgs& a) {
     request.relight.overcast_colour =
         Eigen::Vector3d(a.overcast_colour[0], a.overcast_colour[1], a.overcast_colour[2]);
   request.relight.overcast_brightness = a.overcast_brightness;
+  request.use_held_out_lighting = a.use_held_out;
   if (!a.look_at.empty()) {
     const std::vector<double> target = ParseNumberList(a.look_at, 3, "--look-at");
     const std::vector<double> eye = ParseNumberList(a.from_point, 3, "--from-point");
@@ -158,11 +160,9 @@ void Run(const RenderArgs& a) {
       throw Error("--from/--to: at " + r.time->Iso8601(0) + ": " + e.what());
     }
   }
+  // PNGs go through the recovered response, or (photos that were HDR: no response) through
+  // the sRGB encoding.
   const ResponseCurve& response = scene.scene.response;
-  if (!a.png.empty() && !response.valid())
-    throw Error(a.scene +
-                ": the scene has no response curve (its photos were HDR), which --png "
-                "needs; write the radiance only");
   if (sequence) {
     fs::create_directories(a.out);
     if (!a.png.empty()) fs::create_directories(a.png);
@@ -187,8 +187,12 @@ void Run(const RenderArgs& a) {
                                  : std::function<void(const std::string&)>(say));
     WriteImage(out_files[i], image, StoredType::kFloat);
     if (!a.png.empty()) {
-      if (exposure <= 0) exposure = AutoExposure(image, response);
-      WriteImage(png_files[i], ToDigital(image, response, exposure), StoredType::kUint8);
+      if (exposure <= 0)
+        exposure = response.valid() ? AutoExposure(image, response) : AutoExposureSrgb(image);
+      WriteImage(
+          png_files[i],
+          response.valid() ? ToDigital(image, response, exposure) : ToSrgbDigital(image, exposure),
+          StoredType::kUint8);
     }
   }
   outputs.Commit();
@@ -198,7 +202,10 @@ void Run(const RenderArgs& a) {
   else
     std::printf("%s: radiance %dx%d\n", a.out.c_str(), image.width, image.height);
   if (!a.png.empty())
-    std::printf("%s: through the recovered response, exposure factor %.4g\n", a.png.c_str(),
+    std::printf("%s: through %s, exposure factor %.4g\n", a.png.c_str(),
+                response.valid() ? "the recovered response"
+                                 : "the sRGB encoding (the scene has no response curve: its "
+                                   "photos were HDR)",
                 exposure);
 }
 
@@ -217,7 +224,8 @@ void RegisterRender(CLI::App& app) {
       "               mass (sunrise/sunset reddening), the sky interpolated between the measured\n"
       "               skies by sun position, the environment from its recovered normals and\n"
       "               albedos; --pbs blocks that fraction of the sunlight and blends towards an\n"
-      "               overcast sky (paper §6.3).\n"
+      "               overcast sky (paper §6.3). Slots the scene holds out (rouen solve\n"
+      "               --holdout-slot) are left out of the prediction unless --use-held-out.\n"
       "  --from ISO --to ISO --step 15min   a sequence under predicted lighting, one EXR per time\n"
       "               in the --out folder (and PNGs in the --png folder, all at one exposure:\n"
       "               --exposure, else the first frame's), named by the time (20260825T194000Z).\n"
@@ -243,6 +251,9 @@ void RegisterRender(CLI::App& app) {
                 "Camera of this bracket (e.g. slot0/architecture/view1; default: the first)");
   c->add_option("--lens", a->lens, "Camera intrinsics JSON (with --pose)");
   c->add_option("--pose", a->pose, "Camera pose JSON (with --lens)");
+  c->add_flag("--use-held-out", a->use_held_out,
+              "With --time/--from: predict also from the lighting of held-out slots")
+      ->excludes(slot);
   c->add_option("--look-at", a->look_at, "A new camera looking at this point X,Y,Z (metres, ENU)");
   c->add_option("--from-point", a->from_point, "... from this point X,Y,Z (with --look-at)");
   c->add_option("--fov", a->fov_deg, "Horizontal field of view of the --look-at camera (deg)")
@@ -269,7 +280,8 @@ void RegisterRender(CLI::App& app) {
       ->required();
   CLI::Option* png = c->add_option(
       "--png", a->png,
-      "Also write an 8-bit PNG through the recovered response; with --from a folder of PNGs");
+      "Also write an 8-bit PNG through the recovered response (sRGB when the photos were HDR); "
+      "with --from a folder of PNGs");
   c->add_option("--exposure", a->exposure, "Exposure factor for --png (default: automatic)")
       ->check(Positive())
       ->needs(png);

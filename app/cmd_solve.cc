@@ -2,6 +2,7 @@
 // every later command) reads.
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -9,6 +10,8 @@
 #include "app/commands.h"
 #include "app/options.h"
 #include "core/error.h"
+#include "core/files.h"
+#include "core/session.h"
 #include "pipeline/scene.h"
 
 namespace rouen {
@@ -22,20 +25,27 @@ struct SolveArgs {
 
 void Run(const SolveArgs& a) {
   const auto start = std::chrono::steady_clock::now();
-  SolveConfig config = DefaultSolveConfig(a.quick);
-  if (!a.config.empty()) config = ReadSolveConfigFile(a.config, config);
-  if (a.print_config) {
-    std::printf("%s\n", SolveConfigJson(config).dump(2).c_str());
-    return;
-  }
-  if (a.session.empty() || a.out.empty())
-    throw Error("rouen solve needs a SESSION folder and --out SCENE (see rouen solve --help)");
   SolveFolderRequest request;
   request.session = a.session;
   request.out = a.out;
   request.work = a.work;
   request.holdout_slots = a.holdout;
-  request.config = config;
+  request.quick = a.quick;
+  request.config_file = a.config;
+  if (a.print_config) {
+    // The session's own options when a session is given, else the defaults; then --config.
+    SessionInfo info;
+    std::string where = "the defaults";
+    if (!a.session.empty()) {
+      where = (std::filesystem::path(a.session) / "session.json").string();
+      info = ParseSessionInfo(ReadFileToString(where), where);
+    }
+    std::printf("%s\n",
+                SolveConfigJson(RequestedSolveConfig(request, info, where)).dump(2).c_str());
+    return;
+  }
+  if (a.session.empty() || a.out.empty())
+    throw Error("rouen solve needs a SESSION folder and --out SCENE (see rouen solve --help)");
   request.force = a.force;
   request.log = [](const std::string& s) { std::fprintf(stderr, "solve: %s\n", s.c_str()); };
   const SceneSolve r = SolveSessionFolder(request);
@@ -77,8 +87,10 @@ void RegisterSolve(CLI::App& app) {
       "renders at that time can be compared with them.\n"
       "Every choice of the solve (grid spacing per block, the sky fit's weighting and norm, the\n"
       "environment's sampling, the albedo and irradiance options, the response's brackets) is\n"
-      "an option with a default, recorded in the scene; --config FILE.toml overrides any of them\n"
-      "with the tables and keys --print-config shows, e.g.\n"
+      "an option with a default, recorded in the scene. The session may carry its own (its\n"
+      "rig's [solve] table, session.json extra.solve_config); --config FILE.toml then sets any\n"
+      "of them with the tables and keys --print-config shows (SESSION --print-config: with the\n"
+      "session's own applied), e.g.\n"
       "  [sky_fit]\n  norm_p = 2\n  [grid.block_spacing_m]\n  ground = 2.0\n"
       "A key rouen does not know is an error, not a silent default.\n"
       "Example: rouen solve s --out s.scene --holdout-slot 2");

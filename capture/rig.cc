@@ -156,6 +156,33 @@ std::string RigConfig::LensPath(Target target) const {
   return p.string();
 }
 
+namespace {
+
+// Through toml++'s own JSON writer, then the strict JSON reader.
+nlohmann::json TableAsJson(const toml::table& table, const std::string& name) {
+  std::ostringstream json_text;
+  json_text << toml::json_formatter{table};
+  try {
+    return nlohmann::json::parse(json_text.str());
+  } catch (const nlohmann::json::exception&) {
+    throw Error(name + ": every value must be a finite number, a string, a boolean or a table");
+  }
+}
+
+}  // namespace
+
+nlohmann::json ParseTomlAsJson(const std::string& text, const std::string& name) {
+  toml::table root;
+  try {
+    root = toml::parse(text, name);
+  } catch (const toml::parse_error& e) {
+    std::ostringstream os;
+    os << name << ":" << e.source().begin.line << ": " << e.description();
+    throw Error(os.str());
+  }
+  return TableAsJson(root, name);
+}
+
 RigConfig ParseRig(const std::string& text, const std::string& name) {
   toml::table root;
   try {
@@ -183,13 +210,14 @@ RigConfig ParseRig(const std::string& text, const std::string& name) {
        {"date", "timezone", "times", "heldout", "targets", "views", "start_exposure_s",
         "sun_start_exposure_s", "aureole_exposures_s"}},
       {"capture", {"on_device_lost", "reconnect_timeout_s"}},
+      {"solve", {}},  // any key of the solve's options, checked by the pipeline
   };
   for (const auto& [key, node] : root) {
     auto it = kSchema.find(std::string(key.str()));
     if (it == kSchema.end()) {
       r.Fail(&node, "unknown table [" + std::string(key.str()) + "]");
     }
-    if (it->first == "lens" || !node.is_table()) continue;
+    if (it->first == "lens" || it->first == "solve" || !node.is_table()) continue;
     for (const auto& [k2, n2] : *node.as_table()) {
       const std::vector<std::string>& known = it->second;
       if (std::find(known.begin(), known.end(), std::string(k2.str())) == known.end()) {
@@ -376,6 +404,8 @@ RigConfig ParseRig(const std::string& text, const std::string& name) {
   } catch (const Error& e) {
     r.Fail(t_b, e.what());
   }
+  if (const toml::table* t_solve = r.Table("solve", false))
+    rig.solve_config = TableAsJson(*t_solve, name + ": [solve]");
   return rig;
 }
 

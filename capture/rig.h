@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <map>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
@@ -64,11 +65,20 @@ struct RigConfig {
   double reconnect_timeout_s = 60;
   bool quick = false;  // sim: smaller images, fewer samples
   uint64_t seed = 1;   // sim: noise seed
+  // [solve]: options `rouen solve` starts from for this rig's sessions, keyed as
+  // `rouen solve --print-config` shows them (e.g. a coarser grid on a large paved block);
+  // copied into each session (SessionInfo::solve_config) and checked by the pipeline.
+  nlohmann::json solve_config = nlohmann::json::object();
 
   bool simulated() const { return kind == "sim" || kind == "aravis-fake"; }
   // A lens file path resolved against the rig's folder ("" when none).
   std::string LensPath(Target target) const;
 };
+
+// TOML text as JSON (tables as objects), the one conversion of rouen's TOML files (rigs, solve
+// configurations). Throws rouen::Error "<name>:<line>: <problem>" for malformed TOML and for
+// values JSON cannot hold (dates, non-finite numbers).
+nlohmann::json ParseTomlAsJson(const std::string& text, const std::string& name);
 
 // Throws rouen::Error "<file>:<line>: <problem>" for malformed rigs.
 RigConfig LoadRig(const std::filesystem::path& path);

@@ -103,6 +103,25 @@ TEST(RigTest, ShippedRigsLoad) {
   EXPECT_GE(sim.heldout_slot, 0);
 }
 
+// [solve] is kept as JSON for the pipeline (which knows the solve's keys); TOML that JSON
+// cannot hold is an error naming the file.
+TEST(RigTest, SolveTableIsKeptForTheSessions) {
+  RigConfig r =
+      ParseRig(std::string(kGood) + "[solve]\ngrid.block_spacing_m.plaza = 2.5\n", "solve.toml");
+  EXPECT_EQ(r.solve_config["grid"]["block_spacing_m"]["plaza"], 2.5);
+  EXPECT_TRUE(ParseRig(kGood, "good.toml").solve_config.empty());
+  EXPECT_EQ(LoadRig(std::filesystem::path(ROUEN_SOURCE_DIR) / "rigs" / "sim.toml")
+                .solve_config["grid"]["block_spacing_m"]["plaza"],
+            1.5);
+  try {
+    ParseTomlAsJson("a = 1\nb = = 2\n", "x.toml");
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("x.toml:2"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(ParseTomlAsJson("[t]\nk = \"v\"\n", "y.toml")["t"]["k"], "v");
+}
+
 TEST(RigTest, MissingFileIsAnError) { EXPECT_THROW(LoadRig("/nonexistent/rig.toml"), Error); }
 
 const char* kField = R"(

@@ -383,8 +383,9 @@ void ParseExtraTables(json extra, SessionInfo* r) {
     if (!it->is_boolean()) throw Error(where + "capture_complete must be true or false");
     r->capture_complete = it->get<bool>();
   }
-  for (const char* key :
-       {"nd_filters", "vignetting", "sky_masks", "heldout_slot", "capture_complete"})
+  if (const json* t = object("solve_config")) r->solve_config = *t;
+  for (const char* key : {"nd_filters", "vignetting", "sky_masks", "heldout_slot",
+                          "capture_complete", "solve_config"})
     extra.erase(key);
   r->extra = std::move(extra);
 }
@@ -406,6 +407,7 @@ json ExtraTables(const SessionInfo& s) {
   }
   if (s.heldout_slot) extra["heldout_slot"] = *s.heldout_slot;
   if (s.capture_complete) extra["capture_complete"] = *s.capture_complete;
+  if (s.solve_config.is_object() && !s.solve_config.empty()) extra["solve_config"] = s.solve_config;
   return extra;
 }
 

@@ -103,6 +103,9 @@ struct SessionInfo {
   std::map<std::string, SkyMaskSpec> sky_masks;  // bracket name or "*" -> its sky pixels
   std::optional<int> heldout_slot;               // the rig's held-out time of day
   std::optional<bool> capture_complete;  // false while a capture runs; true once it finished
+  // Options `rouen solve` starts from for this session, keyed as `rouen solve --print-config`
+  // shows them (an object; checked by the pipeline, pipeline/solve_config.h).
+  nlohmann::json solve_config = nlohmann::json::object();
   nlohmann::json extra = nlohmann::json::object();  // every other key (the plan, import, ...)
 
   // The filter of a frame with optical density `frame_density`: the one whose mean density is

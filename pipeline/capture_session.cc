@@ -10,6 +10,7 @@
 #include "core/lens.h"
 #include "core/mesh.h"
 #include "core/session.h"
+#include "pipeline/solve_config.h"
 
 namespace rouen {
 namespace {
@@ -71,6 +72,8 @@ CaptureSessionSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
         "capture all their slots in one run");
   if (opts.new_slot && !fs::exists(out / "session.json"))
     throw Error(out.string() + ": --new-slot needs an existing session (run without it first)");
+  // The rig's [solve] options are checked now, not after the capture.
+  ApplySolveConfig(rig.solve_config, DefaultSolveConfig(false), rig.path + ": [solve]");
   auto event = [&opts](const std::string& text) {
     if (!opts.progress) return;
     CaptureProgress p;
@@ -114,6 +117,7 @@ CaptureSessionSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
     info.nd_filters["sun"].density_rgb = rig.sun_nd_density_rgb;
     info.capture_complete = false;
     if (rig.heldout_slot >= 0) info.heldout_slot = rig.heldout_slot;
+    info.solve_config = rig.solve_config;
     if (src) {
       info.site = src->info().site;
       info.site_source = src->info().site_source;
@@ -122,6 +126,7 @@ CaptureSessionSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
       if (src->info().heldout_slot) info.heldout_slot = src->info().heldout_slot;
       if (!src->info().nd_filters.empty()) info.nd_filters = src->info().nd_filters;
       info.vignetting = src->info().vignetting;
+      if (!src->info().solve_config.empty()) info.solve_config = src->info().solve_config;
     }
     writer.emplace(SessionWriter::Create(out, info));
   }

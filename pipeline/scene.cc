@@ -144,6 +144,15 @@ SceneSolve SolveToScene(const Session& session, const PipelineOptions& options, 
   return result;
 }
 
+SolveConfig RequestedSolveConfig(const SolveFolderRequest& request, const SessionInfo& info,
+                                 const std::string& session_json) {
+  SolveConfig config = SessionSolveConfig(info, session_json, request.quick);
+  if (!request.config_file.empty()) config = ReadSolveConfigFile(request.config_file, config);
+  if (!request.config_overrides.empty())
+    config = ApplySolveConfig(request.config_overrides, config, "the options given");
+  return config;
+}
+
 SceneSolve SolveSessionFolder(const SolveFolderRequest& request) {
   fs::path out = request.out.lexically_normal();
   if (!out.has_filename()) out = out.parent_path();  // "s.scene/" -> "s.scene"
@@ -152,6 +161,8 @@ SceneSolve SolveSessionFolder(const SolveFolderRequest& request) {
   if (!session_dir.has_filename()) session_dir = session_dir.parent_path();
   const fs::path work = request.work.empty() ? fs::path(out.string() + ".work") : request.work;
   CheckWritableFolder(request.work.empty() ? "the working folder" : "--work", work.string());
+  // The user's options are checked before the session is read.
+  RequestedSolveConfig(request, SessionInfo{}, "the defaults");
 
   const Session session = Session::Load(session_dir);
   // What the solve reads besides the frames, checked before the long work.
@@ -166,7 +177,8 @@ SceneSolve SolveSessionFolder(const SolveFolderRequest& request) {
                   " has slots 0.." + std::to_string(nslots - 1));
 
   PipelineOptions po;
-  po.config = request.config;
+  po.config =
+      RequestedSolveConfig(request, session.info(), (session_dir / "session.json").string());
   po.work_dir = work;
   po.exclude_albedo_slots = request.holdout_slots;
   po.log = request.log;
@@ -246,13 +258,18 @@ Lighting RequestedLighting(const LoadedScene& scene, const RenderRequest& reques
   CheckRenderRequest(scene, request);
   const SolveResult& solved = scene.solved;
   if (request.slot) return solved.slots[*request.slot].lighting;
+  std::vector<int> without = request.predict_without_slots;
+  if (!request.use_held_out_lighting)
+    without.insert(without.end(), scene.scene.holdout_slots.begin(),
+                   scene.scene.holdout_slots.end());
   std::vector<Lighting> measured;
   for (const SlotSolve& ss : solved.slots)
-    if (std::find(request.predict_without_slots.begin(), request.predict_without_slots.end(),
-                  ss.slot) == request.predict_without_slots.end())
+    if (std::find(without.begin(), without.end(), ss.slot) == without.end())
       measured.push_back(ss.lighting);
   if (measured.empty())
-    throw Error(scene.dir.string() + ": no slot is left to predict the lighting from");
+    throw Error(scene.dir.string() +
+                ": no slot is left to predict the lighting from (every slot is held out or left "
+                "out)");
   Log(log, "fitting the sun's extinction, the sky interpolation and the environment's normals (" +
                std::to_string(measured.size()) + " slots)");
   LightingPredictor predictor(std::move(measured), request.relight);

@@ -56,14 +56,24 @@ struct SolveFolderRequest {
   std::filesystem::path out;       // scene folder: new, or an earlier scene
   std::filesystem::path work;      // calib/ goes here; empty: "<out>.work"
   std::vector<int> holdout_slots;  // slots whose architecture photos the albedos leave out
-  SolveConfig config = DefaultSolveConfig(false);
+  // The options: the defaults (quick: fewer samples), then the session's own
+  // (SessionSolveConfig), then `config_file` (TOML), then `config_overrides` (JSON, keyed the
+  // same way), each setting the keys it names.
+  bool quick = false;
+  std::string config_file;
+  nlohmann::json config_overrides = nlohmann::json::object();
   bool force = false;  // solve even when `out` is up to date
   std::function<void(const std::string&)> log;
 };
 
-// Checks every input before the long work (the output and work folders, each frame record,
-// the site, the model, the held-out slots against the session's), then SolveToScene. Throws
-// rouen::Error naming the folder, file or slot that is wrong.
+// The options a request solves its session with (see SolveFolderRequest). Throws rouen::Error
+// naming the file or key at fault.
+SolveConfig RequestedSolveConfig(const SolveFolderRequest& request, const SessionInfo& info,
+                                 const std::string& session_json);
+
+// Checks every input before the long work (the output and work folders, the options, each
+// frame record, the site, the model, the held-out slots against the session's), then
+// SolveToScene. Throws rouen::Error naming the folder, file, key or slot that is wrong.
 SceneSolve SolveSessionFolder(const SolveFolderRequest& request);
 
 // A scene folder read back, ready to render: the model, its grid and visibility pattern
@@ -86,8 +96,10 @@ struct RenderRequest {
   std::optional<UtcTime> time;
   RelightOptions relight;  // used with `time`
   // With `time`: slots whose measured lighting the prediction leaves out (e.g. the slot being
-  // validated, so its lighting is predicted from the other times only).
+  // validated, so its lighting is predicted from the other times only). The scene's held-out
+  // slots are left out too, unless `use_held_out_lighting`: what was held out stays out.
   std::vector<int> predict_without_slots;
+  bool use_held_out_lighting = false;
   Intrinsics intrinsics;
   Pose pose;
 };

@@ -1,7 +1,5 @@
 #include "pipeline/solve_config.h"
 
-#include <toml++/toml.h>
-
 #include <cmath>
 #include <limits>
 #include <map>
@@ -10,6 +8,7 @@
 #include <utility>
 #include <vector>
 
+#include "capture/rig.h"
 #include "core/error.h"
 #include "core/files.h"
 #include "core/mesh.h"
@@ -153,7 +152,6 @@ void SolveConfig::Validate() const {
 SolveConfig DefaultSolveConfig(bool quick) {
   SolveConfig c;
   c.grid.spacing_m = 0.6;
-  c.grid.block_spacing_m["plaza"] = 1.5;
   if (quick) {
     c.response_max_brackets = 6;
     c.environment.pixel_stride = 2;
@@ -222,8 +220,9 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
   if (const json* t = root.Table("grid")) {
     Fields f(*t, where, "grid");
     f.Number("spacing_m", &c.grid.spacing_m, 0.01, 100);
+    // Blocks named here are set; the others keep their spacing (a rig's [solve] table, then
+    // a user's file, each add to what came before).
     if (const json* b = f.Table("block_spacing_m")) {
-      c.grid.block_spacing_m.clear();
       for (const auto& [block, v] : b->items()) {
         if (!v.is_number() || !(v.get<double>() >= 0.01 && v.get<double>() <= 100))
           f.Fail("grid.block_spacing_m." + block, "must be a number within 0.01..100");
@@ -317,24 +316,13 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
 }
 
 SolveConfig ReadSolveConfigFile(const std::string& path, const SolveConfig& base) {
-  toml::table root;
-  try {
-    root = toml::parse(ReadFileToString(path), path);
-  } catch (const toml::parse_error& e) {
-    std::ostringstream os;
-    os << path << ":" << e.source().begin.line << ": " << e.description();
-    throw Error(os.str());
-  }
-  // TOML to JSON through toml++'s own JSON writer, then the one strict reader.
-  std::ostringstream text;
-  text << toml::json_formatter{root};
-  json j;
-  try {
-    j = json::parse(text.str());
-  } catch (const json::exception&) {
-    throw Error(path + ": every value must be a finite number, a string, a boolean or a table");
-  }
-  return ApplySolveConfig(j, base, path);
+  return ApplySolveConfig(ParseTomlAsJson(ReadFileToString(path), path), base, path);
+}
+
+SolveConfig SessionSolveConfig(const SessionInfo& info, const std::string& session_json,
+                               bool quick) {
+  return ApplySolveConfig(info.solve_config, DefaultSolveConfig(quick),
+                          session_json + ": extra.solve_config");
 }
 
 }  // namespace rouen

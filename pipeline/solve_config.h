@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "core/session.h"
 #include "solve/albedo.h"
 #include "solve/environment.h"
 #include "solve/grid.h"
@@ -41,5 +42,10 @@ SolveConfig ApplySolveConfig(const nlohmann::json& j, SolveConfig base, const st
 // The same from a TOML file (tables as in SolveConfigJson: [grid], [grid.block_spacing_m],
 // [hemisphere], [response], [sky_fit], [environment], [albedo], [albedo.irradiance]).
 SolveConfig ReadSolveConfigFile(const std::string& path, const SolveConfig& base);
+// The options a session's solve starts from: the defaults with the session's own
+// (session.json extra.solve_config, e.g. from its rig's [solve] table) applied; errors name
+// `session_json`.
+SolveConfig SessionSolveConfig(const SessionInfo& info, const std::string& session_json,
+                               bool quick);
 
 }  // namespace rouen

@@ -48,8 +48,32 @@ TEST(SolveConfigTest, DefaultsAndQuick) {
   EXPECT_EQ(quick.environment.pixel_stride, 2);
   EXPECT_EQ(full.sky_fit.weighting, SkyWeighting::kRelative);
   EXPECT_EQ(full.sky_fit.norm_p, 1);
-  EXPECT_EQ(full.grid.SpacingFor("plaza"), 1.5);
-  EXPECT_EQ(full.grid.SpacingFor("tower"), 0.6);
+  // No block of any particular model is special by default.
+  EXPECT_TRUE(full.grid.block_spacing_m.empty());
+  EXPECT_EQ(full.grid.SpacingFor("plaza"), 0.6);
+}
+
+// A session's own options (its rig's [solve] table) come between the defaults and a user's
+// file; each layer sets the keys it names and keeps the others.
+TEST(SolveConfigTest, SessionOptionsAreTheStart) {
+  SessionInfo info;
+  info.solve_config = json::parse(R"({"grid": {"block_spacing_m": {"plaza": 1.5}}})");
+  const SolveConfig c = SessionSolveConfig(info, "s/session.json", true);
+  EXPECT_EQ(c.grid.SpacingFor("plaza"), 1.5);
+  EXPECT_EQ(c.response_max_brackets, 6);  // quick
+  const SolveConfig user = ApplySolveConfig(
+      json::parse(R"({"grid": {"block_spacing_m": {"ground": 2}}})"), c, "solve.toml");
+  EXPECT_EQ(user.grid.SpacingFor("plaza"), 1.5);
+  EXPECT_EQ(user.grid.SpacingFor("ground"), 2);
+  info.solve_config = json::parse(R"({"grid": {"spacing": 1}})");
+  try {
+    SessionSolveConfig(info, "s/session.json", false);
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("s/session.json: extra.solve_config"), std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("grid.spacing"), std::string::npos) << e.what();
+  }
 }
 
 TEST(SolveConfigTest, AFileChangesOnlyWhatItNames) {
@@ -97,7 +121,7 @@ TEST(SolveConfigTest, TomlFile) {
   EXPECT_EQ(c.sky_fit.norm_p, 2);
   EXPECT_EQ(c.sky_fit.weighting, SkyWeighting::kPaper);
   EXPECT_EQ(c.grid.SpacingFor("ground"), 2);
-  EXPECT_EQ(c.grid.SpacingFor("plaza"), 0.6);  // the table replaces the defaults' entries
+  EXPECT_EQ(c.grid.SpacingFor("plaza"), 0.6);
   EXPECT_EQ(c.albedo.irradiance.method, IrradianceMethod::kVectorFlux);
   WriteFileAtomic(d / "bad.toml", "[sky_fit]\nnorm_p = = 2\n");
   try {

@@ -118,12 +118,13 @@ class PyScene {
   py::array_t<float> Render(const std::optional<std::string>& time, const std::string& view,
                             std::optional<int> slot, const py::object& lens, const py::object& pose,
                             double pbs, const std::vector<int>& predict_without_slots,
-                            const py::object& log) const {
+                            bool use_held_out, const py::object& log) const {
     RenderRequest request;
     request.slot = slot;
     if (time) request.time = ParseIso8601(*time);
     request.relight.pbs = pbs;
     request.predict_without_slots = predict_without_slots;
+    request.use_held_out_lighting = use_held_out;
     if (lens.is_none() != pose.is_none()) throw Error("lens and pose go together");
     if (!lens.is_none()) {
       if (!view.empty()) throw Error("give a view or a lens and a pose, not both");
@@ -175,11 +176,11 @@ PyScene Solve(const py::object& session, const py::object& out,
   request.out = PathOf(out);
   if (!work.is_none()) request.work = PathOf(work);
   request.holdout_slots = holdout_slots;
-  request.config = DefaultSolveConfig(quick);
+  request.quick = quick;
   if (py::isinstance<py::dict>(config))
-    request.config = ApplySolveConfig(FromPython(config), request.config, "config");
+    request.config_overrides = FromPython(config);
   else if (!config.is_none())
-    request.config = ReadSolveConfigFile(PathOf(config).string(), request.config);
+    request.config_file = PathOf(config).string();
   request.force = force;
   request.log = PythonLog(log);
   {
@@ -216,13 +217,16 @@ PYBIND11_MODULE(rouen, m) {
       .def_property_readonly("slot_times", &PyScene::SlotTimes, "Each slot's UTC time (ISO)")
       .def_property_readonly("holdout_slots", &PyScene::HoldoutSlots)
       .def_property_readonly("config", &PyScene::Config, "The options it was solved with")
-      .def("render", &PyScene::Render, py::arg("time") = py::none(), py::arg("view") = "",
-           py::kw_only(), py::arg("slot") = py::none(), py::arg("lens") = py::none(),
-           py::arg("pose") = py::none(), py::arg("pbs") = 0.0,
-           py::arg("predict_without_slots") = std::vector<int>{}, py::arg("log") = py::none(),
-           "Radiance of the building (height x width x 3 float32) at `time` (ISO 8601, lighting "
-           "predicted, §5) or at captured `slot` (lighting measured), seen from `view` or from "
-           "`lens` and `pose` files, as rouen render writes it.")
+      .def(
+          "render", &PyScene::Render, py::arg("time") = py::none(), py::arg("view") = "",
+          py::kw_only(), py::arg("slot") = py::none(), py::arg("lens") = py::none(),
+          py::arg("pose") = py::none(), py::arg("pbs") = 0.0,
+          py::arg("predict_without_slots") = std::vector<int>{}, py::arg("use_held_out") = false,
+          py::arg("log") = py::none(),
+          "Radiance of the building (height x width x 3 float32) at `time` (ISO 8601, lighting "
+          "predicted, §5, from the slots not held out unless `use_held_out`) or at captured `slot` "
+          "(lighting measured), seen from `view` or from "
+          "`lens` and `pose` files, as rouen render writes it.")
       .def("validate", &PyScene::Validate, py::arg("session"), py::arg("slot"),
            py::arg("exclude_blocks") = std::vector<std::string>{}, py::arg("erode_px") = 1,
            py::arg("predicted") = true, py::arg("log") = py::none(),

@@ -106,7 +106,7 @@ class QuickDemoTest(unittest.TestCase):
             self.scene.render(slot=7)
         with self.assertRaisesRegex(rouen.Error, "exactly one"):
             self.scene.render("2026-06-21T12:00:00Z", slot=0)
-        with self.assertRaisesRegex(rouen.Error, "sky_fit"):
+        with self.assertRaisesRegex(rouen.Error, "the options given: sky_fit.no_such_key"):
             rouen.solve(self.session_dir, os.path.join(self.tmp.name, "bad.scene"),
                         config={"sky_fit": {"no_such_key": 1}})
         self.assertFalse(os.path.exists(os.path.join(self.tmp.name, "bad.scene")))

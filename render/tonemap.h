@@ -18,4 +18,11 @@ Image ToDigital(const Image& radiance, const ResponseCurve& response, double exp
 double AutoExposure(const Image& radiance, const ResponseCurve& response, double percentile = 0.99,
                     double target_dn = 230);
 
+// Without a recovered response (a scene solved from HDR photos only): radiance x
+// exposure_factor clipped to 0..1 and encoded as sRGB (IEC 61966-2-1), 0..255.
+Image ToSrgbDigital(const Image& radiance, double exposure_factor);
+// The exposure factor that maps the given percentile of the radiance to `target` (of white)
+// before the sRGB encoding.
+double AutoExposureSrgb(const Image& radiance, double percentile = 0.99, double target = 0.9);
+
 }  // namespace rouen

@@ -73,8 +73,11 @@ TEST(BlenderWorldTest, ImportStatusSolveRenderValidate) {
   const std::string view = "slot" + std::to_string(heldout) + "/architecture/view0";
   const std::string local = truth["times"][heldout]["local"].get<std::string>();
   r = RunRouen("render " + Q(scene) + " --time " + local + " --view " + view + " --out " +
-               Q(dir / "heldout.exr"));
+               Q(dir / "heldout.exr") + " --png " + Q(dir / "heldout.png"));
   ASSERT_EQ(r.code, 0) << r.out;
+  // The photos were HDR (no response curve): the PNG is the sRGB encoding.
+  EXPECT_NE(r.out.find("the sRGB encoding"), std::string::npos) << r.out;
+  EXPECT_EQ(ReadImage((dir / "heldout.png").string()).width, 480);
   const Image img = ReadImage((dir / "heldout.exr").string());
   EXPECT_EQ(img.width, 480);
   EXPECT_EQ(img.height, 360);

@@ -232,6 +232,20 @@ TEST(CliInputs, RenderArgumentErrorsComeFirstAndNameTheOption) {
   fs::remove_all(dir);
 }
 
+// A rig's [solve] options are checked before the capture starts: a misspelt key is named
+// with the rig file, and no session is started.
+TEST(CliInputs, ARigsSolveOptionsAreCheckedBeforeTheCapture) {
+  const fs::path dir = TempDir("rigsolve");
+  WriteFileAtomic(
+      dir / "rig.toml",
+      ReadFileToString(fs::path(ROUEN_SOURCE_DIR) / "rigs" / "sim.toml") + "grid.spacing = 1\n");
+  ExpectError(RunRouen("capture --rig " + Q(dir / "rig.toml") + " --out " + Q(dir / "s") +
+                       " --no-prompt --quick"),
+              {"rig.toml: [solve]: grid.spacing is not a known key"});
+  EXPECT_FALSE(fs::exists(dir / "s"));
+  fs::remove_all(dir);
+}
+
 TEST(CliInputs, ListsAndCsvWithAByteOrderMarkAreRead) {
   const fs::path dir = TempDir("bom");
   const std::string csv = "utc,lat,lon,elev_m\n2026-08-25T20:30:00Z,37.8722,-122.2578,60\n";

@@ -102,6 +102,15 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
       << out;
   EXPECT_NE(out.find("up to date"), std::string::npos) << out;
   EXPECT_EQ(rouen::ReadFileToString(dir / "scene" / "scene.json"), scene_json_before);
+  // The session carries its rig's [solve] options, which `rouen solve` starts from.
+  {
+    const rouen::cli_test::Result printed = rouen::cli_test::RunRouen(
+        "solve " + (dir / "session").string() + " --quick --print-config");
+    ASSERT_EQ(printed.code, 0) << printed.out;
+    const nlohmann::json config = nlohmann::json::parse(printed.out);
+    EXPECT_EQ(config["grid"]["block_spacing_m"]["plaza"], 1.5);
+    EXPECT_EQ(config["grid"]["spacing_m"], 0.6);
+  }
   // --force solves again; the calibration in the work folder (from the demo's solve) is read
   // back rather than made again, and the scene comes out the same.
   out.clear();
@@ -247,6 +256,17 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
             std::string::npos)
       << out;
   EXPECT_FALSE(fs::exists(dir / "n.exr"));
+  // Predicting the held-out time leaves the held-out slot's own lighting out, unless asked.
+  for (const char* flag : {"", " --use-held-out"}) {
+    out.clear();
+    ASSERT_EQ(RunRouen("render" + scene + " --time 2026-08-25T16:00:00-07:00" + flag + " --out " +
+                           (dir / (std::string("held") + (*flag ? "-used" : "") + ".exr")).string(),
+                       &out),
+              0)
+        << out;
+  }
+  EXPECT_NE(rouen::ReadImage((dir / "held.exr").string()).data,
+            rouen::ReadImage((dir / "held-used.exr").string()).data);
   // A sequence: one EXR (and PNG) per time, named by the time, each the image a single --time
   // render of that time gives.
   out.clear();
