@@ -19,6 +19,7 @@
 #include "core/session.h"
 #include "pipeline/capture_session.h"
 #include "pipeline/scene.h"
+#include "pipeline/solve_config.h"
 
 namespace rouen {
 namespace {
@@ -48,10 +49,11 @@ Fixture& Shared() {
     std::printf("capture (quick demo session): %.2f s\n",
                 std::chrono::duration<double>(t1 - t0).count());
     x.options.work_dir = x.dir / "work";
-    x.options.config = DefaultSolveConfig(true);
+    const Session session = Session::Load(x.session);
+    x.options.config = SessionSolveConfig(session.info(), "session.json", true);
     if (rig.heldout_slot >= 0) x.options.exclude_albedo_slots = {rig.heldout_slot};
     x.scene = x.dir / "scene";
-    const SceneSolve solved = SolveToScene(Session::Load(x.session), x.options, x.scene);
+    const SceneSolve solved = SolveToScene(session, x.options, x.scene);
     double total = 0;
     for (const StageTime& t : solved.stages) {
       std::printf("solve stage %-44s %8.2f s\n", t.stage.c_str(), t.seconds);

@@ -88,10 +88,6 @@ CapturePlan PlanFromJson(const nlohmann::json& j) {
   return p;
 }
 
-std::string GroupName(int slot, Target target, int view) {
-  return "slot" + std::to_string(slot) + "/" + TargetName(target) + "/view" + std::to_string(view);
-}
-
 CaptureController::CaptureController(CaptureDevices devices, CapturePlan plan, Site fallback_site,
                                      DeviceLossOptions loss)
     : dev_(std::move(devices)), plan_(std::move(plan)), fallback_site_(fallback_site), loss_(loss) {
@@ -276,7 +272,7 @@ FrameRecord CaptureController::Journal(SessionWriter& writer, const CapturedFram
 
 bool CaptureController::CaptureGroup(SessionWriter& writer, int slot, Target target, int view,
                                      CaptureSummary& summary) {
-  const std::string group = GroupName(slot, target, view);
+  const std::string group = BracketName(slot, target, view);
   Camera& cam = *dev_.camera;
   const BracketOptions& b = plan_.bracket;
   const double step = std::pow(2.0, b.step_stops);
@@ -419,7 +415,7 @@ CaptureSummary CaptureController::Run(SessionWriter& writer,
     for (Target t : plan_.targets) {
       int views = std::max(1, dev_.camera->ViewCount(t));
       for (int v = 0; v < views; ++v) {
-        if (done.count(GroupName(s, t, v))) continue;
+        if (done.count(BracketName(s, t, v))) continue;
         if (stop && stop->load()) {
           summary.stopped = true;
           return summary;
@@ -432,7 +428,7 @@ CaptureSummary CaptureController::Run(SessionWriter& writer,
           } catch (const DeviceError& e) {
             // The frames of this bracket already journalled stay; a resumed or reconnected
             // capture redoes the bracket (its last group is always redone).
-            if (!Recover(e, GroupName(s, t, v), summary)) {
+            if (!Recover(e, BracketName(s, t, v), summary)) {
               summary.stopped = true;
               summary.camera_lost = true;
               return summary;

@@ -126,7 +126,4 @@ class CaptureController {
 nlohmann::json PlanToJson(const CapturePlan& plan);
 CapturePlan PlanFromJson(const nlohmann::json& j);  // throws rouen::Error
 
-// Group name of a bracket: "slot<k>/<target>/view<v>".
-std::string GroupName(int slot, Target target, int view);
-
 }  // namespace rouen

@@ -97,7 +97,7 @@ TEST(ControllerTest, BracketsCoverTheRangeAndJournalEveryFrame) {
   for (int v = 0; v < 2; ++v) {
     double shortest = 1e9, longest = 0;
     for (const FrameRecord& f : w.frames())
-      if (f.group == GroupName(0, Target::kArchitecture, v)) {
+      if (f.group == BracketName(0, Target::kArchitecture, v)) {
         shortest = std::min(shortest, f.exposure_s);
         longest = std::max(longest, f.exposure_s);
       }

@@ -16,7 +16,7 @@ namespace rouen {
 namespace {
 
 struct PlannedGroup {
-  std::string name;  // GroupName(slot, target, view)
+  std::string name;  // BracketName(slot, target, view)
   int slot = 0;
 };
 
@@ -27,7 +27,7 @@ std::vector<PlannedGroup> PlannedGroups(const CapturePlan& plan, const Camera* c
     const int s = plan.first_slot + k;
     for (Target t : plan.targets) {
       const int views = camera ? std::max(1, camera->ViewCount(t)) : 1;
-      for (int v = 0; v < views; ++v) out.push_back({GroupName(s, t, v), s});
+      for (int v = 0; v < views; ++v) out.push_back({BracketName(s, t, v), s});
     }
   }
   return out;

@@ -47,12 +47,6 @@ class StageClock {
   std::chrono::steady_clock::time_point last_;
 };
 
-// Sky and aureole brackets of a slot share the sky camera's view: they merge together.
-std::string MergeKey(const FrameRecord& f) {
-  if (f.target == Target::kAureole) return "slot" + std::to_string(f.slot) + "/sky/view0";
-  return f.group;
-}
-
 // "<session>/frames.jsonl: frame <id> (<file>, bracket <group>)", for messages.
 std::string FrameWhere(const Session& session, const FrameRecord& f) {
   return (session.dir() / "frames.jsonl").string() + ": frame " + std::to_string(f.id) + " (" +
@@ -227,7 +221,7 @@ HdrGroup MergeGroup(const Session& session, const std::string& name,
 // order.
 std::map<std::string, std::vector<const FrameRecord*>> SessionBrackets(const Session& session) {
   std::map<std::string, std::vector<const FrameRecord*>> groups;
-  for (const FrameRecord& f : session.frames()) groups[MergeKey(f)].push_back(&f);
+  for (const FrameRecord& f : session.frames()) groups[MergedBracketName(f)].push_back(&f);
   return groups;
 }
 
@@ -277,6 +271,11 @@ std::optional<CalibResult> ReadCalibration(
 }
 
 }  // namespace
+
+std::string MergedBracketName(const FrameRecord& f) {
+  if (f.target == Target::kAureole) return BracketName(f.slot, Target::kSky, 0);
+  return f.group;
+}
 
 std::string SessionFilesStamp(const Session& session) {
   // Paths in order, so the walk's order does not matter.
@@ -332,8 +331,7 @@ std::vector<SkySample> SlotSkySamples(const Session& session, const CalibResult&
   std::vector<SkySample> samples;
   if (sources) sources->clear();
   for (int v = 0;; ++v) {
-    const auto it =
-        calib.groups.find("slot" + std::to_string(slot) + "/sky/view" + std::to_string(v));
+    const auto it = calib.groups.find(BracketName(slot, Target::kSky, v));
     if (it == calib.groups.end()) break;
     const HdrGroup& g = it->second;
     std::string source;
@@ -531,19 +529,18 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
 
   int nslots = 0;
   for (const auto& [name, g] : calib.groups) nslots = std::max(nslots, g.slot + 1);
-  auto group = [&](int slot, const char* target, int view) -> const HdrGroup* {
-    auto it = calib.groups.find("slot" + std::to_string(slot) + "/" + target + "/view" +
-                                std::to_string(view));
+  auto group = [&](int slot, Target target, int view) -> const HdrGroup* {
+    auto it = calib.groups.find(BracketName(slot, target, view));
     return it == calib.groups.end() ? nullptr : &it->second;
   };
 
   for (int s = 0; s < nslots; ++s) {
     SlotSolve ss;
     ss.slot = s;
-    const HdrGroup* sun_g = group(s, "sun", 0);
-    const HdrGroup* sky_g = group(s, "sky", 0);
+    const HdrGroup* sun_g = group(s, Target::kSun, 0);
+    const HdrGroup* sky_g = group(s, Target::kSky, 0);
     std::vector<EnvPanorama> panoramas;
-    for (int v = 0; const HdrGroup* g = group(s, "landscape", v); ++v) {
+    for (int v = 0; const HdrGroup* g = group(s, Target::kLandscape, v); ++v) {
       panoramas.push_back({&g->radiance, g->intrinsics, g->pose});
     }
     if (!sun_g || !sky_g || panoramas.empty())

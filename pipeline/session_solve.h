@@ -35,6 +35,10 @@ struct PipelineOptions {
   std::function<void(const std::string&)> log;  // progress lines
 };
 
+// The bracket a frame is merged into: its own, except that a slot's aureole frames join its
+// sky view 0 (the sky camera's view; CalibrateSession merges them together).
+std::string MergedBracketName(const FrameRecord& f);
+
 // One bracket merged to radiance.
 struct HdrGroup {
   std::string name;

@@ -16,13 +16,6 @@ namespace rouen {
 namespace fs = std::filesystem;
 namespace {
 
-// The bracket the solve merges a frame into: a slot's aureole frames join its sky view 0
-// (as CalibrateSession merges them).
-std::string MergeKey(const FrameRecord& f) {
-  if (f.target == Target::kAureole) return "slot" + std::to_string(f.slot) + "/sky/view0";
-  return f.group;
-}
-
 double EffectiveExposure(const FrameRecord& f) {
   return f.exposure_s * f.gain * std::pow(10.0, -f.nd_density);
 }
@@ -268,7 +261,7 @@ SessionStatus ReadSessionStatus(const fs::path& dir, const StatusOptions& option
   int nslots = 0;
   for (const FrameRecord& f : frames) {
     groups[f.group].push_back(&f);
-    merged[MergeKey(f)].push_back(&f);
+    merged[MergedBracketName(f)].push_back(&f);
     nslots = std::max(nslots, f.slot + 1);
   }
   s.slots.resize(nslots);
@@ -277,7 +270,7 @@ SessionStatus ReadSessionStatus(const fs::path& dir, const StatusOptions& option
     s.slots[fr.front()->slot].brackets.push_back(Describe(name, fr));
   for (SlotStatus& slot : s.slots) {
     std::vector<UtcTime> times;
-    const auto sky = merged.find("slot" + std::to_string(slot.slot) + "/sky/view0");
+    const auto sky = merged.find(BracketName(slot.slot, Target::kSky, 0));
     if (sky != merged.end()) {
       for (const FrameRecord* f : sky->second) times.push_back(f->utc);
       slot.utc_from_sky = true;

@@ -90,7 +90,7 @@ void ReplayCamera::Aim(Target target, int view) {
 }
 
 CapturedFrame ReplayCamera::Grab() {
-  const std::string group = GroupName(src_->current_slot, target_, view_);
+  const std::string group = BracketName(src_->current_slot, target_, view_);
   const auto* frames = src_->Group(group);
   if (!frames) throw DeviceError("replay: the recorded session has no bracket " + group);
   const FrameRecord* best = nullptr;
