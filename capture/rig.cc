@@ -158,6 +158,17 @@ std::string RigConfig::LensPath(Target target) const {
 
 namespace {
 
+// Throws rouen::Error "<name>:<line>: <problem>".
+toml::table ParseToml(const std::string& text, const std::string& name) {
+  try {
+    return toml::parse(text, name);
+  } catch (const toml::parse_error& e) {
+    std::ostringstream os;
+    os << name << ":" << e.source().begin.line << ": " << e.description();
+    throw Error(os.str());
+  }
+}
+
 // Through toml++'s own JSON writer, then the strict JSON reader.
 nlohmann::json TableAsJson(const toml::table& table, const std::string& name) {
   std::ostringstream json_text;
@@ -172,26 +183,11 @@ nlohmann::json TableAsJson(const toml::table& table, const std::string& name) {
 }  // namespace
 
 nlohmann::json ParseTomlAsJson(const std::string& text, const std::string& name) {
-  toml::table root;
-  try {
-    root = toml::parse(text, name);
-  } catch (const toml::parse_error& e) {
-    std::ostringstream os;
-    os << name << ":" << e.source().begin.line << ": " << e.description();
-    throw Error(os.str());
-  }
-  return TableAsJson(root, name);
+  return TableAsJson(ParseToml(text, name), name);
 }
 
 RigConfig ParseRig(const std::string& text, const std::string& name) {
-  toml::table root;
-  try {
-    root = toml::parse(text, name);
-  } catch (const toml::parse_error& e) {
-    std::ostringstream os;
-    os << name << ":" << e.source().begin.line << ": " << e.description();
-    throw Error(os.str());
-  }
+  const toml::table root = ParseToml(text, name);
   RigReader r(root, name);
   // A misspelt table or key would silently fall back to a default in the field: refuse it.
   static const std::map<std::string, std::vector<std::string>> kSchema = {
