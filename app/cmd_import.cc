@@ -40,11 +40,7 @@ void Run(const ImportArgs& a) {
     }
   }
   if (!a.time.empty()) {
-    try {
-      o.time = ParseIso8601(a.time);
-    } catch (const Error& e) {
-      throw Error(std::string("--time: ") + e.what());
-    }
+    o.time = ParseTimeOption(a.time, "--time");
   }
   o.model = a.model;
   o.sky_mask = a.sky_mask;

@@ -34,18 +34,11 @@ struct RenderArgs {
   double overcast_brightness = 1;
   double exposure = 0;
   bool use_held_out = false;
+  std::string sky_interp = "elevation";
 };
 
 // The longest sequence --from/--to/--step renders (a day at one frame a minute is 1440).
 constexpr int kMaxSequenceFrames = 5000;
-
-UtcTime TimeOption(const std::string& text, const std::string& option) {
-  try {
-    return ParseIso8601(text);
-  } catch (const Error& e) {
-    throw Error(option + ": " + e.what());
-  }
-}
 
 // "WIDTHxHEIGHT" within core/image.h's limits.
 std::pair<int, int> ParseSize(const std::string& text) {
@@ -92,10 +85,10 @@ void Run(const RenderArgs& a) {
     throw Error("--overcast-colour takes three numbers R,G,B");
   RenderRequest request;
   if (a.have_slot) request.slot = a.slot;
-  if (!a.time.empty()) request.time = TimeOption(a.time, "--time");
+  if (!a.time.empty()) request.time = ParseTimeOption(a.time, "--time");
   std::vector<UtcTime> times;
   if (sequence) {
-    const UtcTime from = TimeOption(a.from, "--from"), to = TimeOption(a.to, "--to");
+    const UtcTime from = ParseTimeOption(a.from, "--from"), to = ParseTimeOption(a.to, "--to");
     if (to < from) throw Error("--to " + a.to + " is before --from " + a.from);
     const double step = ParseDurationSeconds(a.step, 86400, "--step");
     const double span = to.UnixSeconds() - from.UnixSeconds();
@@ -110,6 +103,7 @@ void Run(const RenderArgs& a) {
     request.relight.overcast_colour =
         Eigen::Vector3d(a.overcast_colour[0], a.overcast_colour[1], a.overcast_colour[2]);
   request.relight.overcast_brightness = a.overcast_brightness;
+  request.relight.sky.mode = ParseSkyInterp(a.sky_interp);
   request.use_held_out_lighting = a.use_held_out;
   if (!a.look_at.empty()) {
     const std::vector<double> target = ParseNumberList(a.look_at, 3, "--look-at");
@@ -262,6 +256,10 @@ void RegisterRender(CLI::App& app) {
   c->add_option("--size", a->size, "Image size WIDTHxHEIGHT of the --look-at camera")
       ->capture_default_str();
   // The predicted sky's options have no meaning for a captured slot's lighting.
+  c->add_option("--sky-interp", a->sky_interp, kSkyInterpHelp)
+      ->check(CLI::IsMember({"elevation", "angular"}))
+      ->excludes(slot)
+      ->capture_default_str();
   c->add_option("--pbs", a->pbs, "Blocked sunlight fraction 0..1 (0 clear, 1 overcast)")
       ->check(Within(0, 1))
       ->excludes(slot)

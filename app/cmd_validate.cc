@@ -25,6 +25,7 @@ struct ValidateArgs {
   std::vector<std::string> exclude_blocks;
   int erode_px = 1;
   bool no_predicted = false;
+  std::string sky_interp = "elevation";
 };
 
 std::string SafeName(std::string s) {
@@ -43,6 +44,7 @@ void Run(const ValidateArgs& a) {
   vo.exclude_blocks = a.exclude_blocks;
   vo.erode_px = a.erode_px;
   vo.predicted = !a.no_predicted;
+  vo.relight.sky.mode = ParseSkyInterp(a.sky_interp);
   vo.Validate();
   // Outputs before any work: the JSON now, the images' folder now and its files once the
   // scene names the photos.
@@ -147,6 +149,9 @@ void RegisterValidate(CLI::App& app) {
   c->add_flag("--no-predicted", a->no_predicted,
               "Only the slot's measured lighting (no prediction from the other slots)");
   c->add_option("--json", a->json, "Write the figures as JSON");
+  c->add_option("--sky-interp", a->sky_interp, kSkyInterpHelp)
+      ->check(CLI::IsMember({"elevation", "angular"}))
+      ->capture_default_str();
   c->add_option("--images", a->images,
                 "Folder for each photo's radiance, render and relative difference (EXR)");
   c->callback([a] { Run(*a); });

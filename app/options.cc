@@ -72,6 +72,20 @@ std::vector<double> ParseNumberList(const std::string& text, size_t n, const std
   return v;
 }
 
+SkyInterpMode ParseSkyInterp(const std::string& text) {
+  if (text == "elevation") return SkyInterpMode::kElevation;
+  if (text == "angular") return SkyInterpMode::kAngularDistance;
+  throw Error("--sky-interp takes elevation or angular, not '" + text + "'");
+}
+
+UtcTime ParseTimeOption(const std::string& text, const std::string& option) {
+  try {
+    return ParseIso8601(text);
+  } catch (const Error& e) {
+    throw Error(option + ": " + e.what());
+  }
+}
+
 double ParseDurationSeconds(const std::string& text, double max_s, const std::string& option) {
   const std::string where = option + " '" + text + "'";
   size_t used = 0;

@@ -7,6 +7,8 @@
 #include <vector>
 
 #include "core/solar.h"
+#include "core/time.h"
+#include "solve/sky_time.h"
 
 namespace rouen {
 
@@ -24,6 +26,16 @@ std::vector<double> ParseNumberList(const std::string& text, size_t n, const std
 // A duration "15min", "1h", "30s" (units s, min, h; a bare number is seconds), above 0 and at
 // most `max_s`; throws rouen::Error naming `option`.
 double ParseDurationSeconds(const std::string& text, double max_s, const std::string& option);
+
+// --sky-interp: "elevation" (default) or "angular" (solve/sky_time.h SkyInterpMode).
+inline constexpr char kSkyInterpHelp[] =
+    "How the sky at a new time is made from the captured ones: elevation (by the sun's "
+    "elevation, log-linear, extrapolates to lower suns) or angular (the paper's inverse angular "
+    "distance average, §5.1)";
+SkyInterpMode ParseSkyInterp(const std::string& text);
+
+// An ISO 8601 time with its offset (core/time.h); throws rouen::Error naming `option`.
+UtcTime ParseTimeOption(const std::string& text, const std::string& option);
 
 // A site "LAT,LON,H" (degrees north, degrees east, metres) within core/limits.h's ranges;
 // throws rouen::Error naming `option` and the coordinate at fault.

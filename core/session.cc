@@ -497,6 +497,23 @@ void from_json(const json& j, SessionInfo& s) {
   s = std::move(r);
 }
 
+std::vector<JournalLine> SplitJournal(std::string_view text) {
+  std::vector<JournalLine> lines;
+  size_t pos = 0;
+  int number = 0;
+  while (pos < text.size()) {
+    size_t end = text.find('\n', pos);
+    const bool terminated = end != std::string_view::npos;
+    if (!terminated) end = text.size();
+    const std::string_view line = text.substr(pos, end - pos);
+    pos = end + 1;
+    ++number;
+    if (line.find_first_not_of(" \t\r") != std::string_view::npos)
+      lines.push_back({number, line, terminated});
+  }
+  return lines;
+}
+
 FrameRecord ParseJournalLine(std::string_view line) {
   json j;
   try {
@@ -541,17 +558,8 @@ Session Session::Load(const fs::path& dir) {
   const std::string journal = JournalPath(dir);
   const std::string text = ReadFileToString(journal);
   std::set<int64_t> ids;
-  size_t pos = 0;
-  int line_no = 0;
-  while (pos < text.size()) {
-    size_t end = text.find('\n', pos);
-    const bool terminated = end != std::string::npos;
-    if (!terminated) end = text.size();
-    std::string_view line(text.data() + pos, end - pos);
-    pos = end + 1;
-    ++line_no;
-    const std::string where = journal + ":" + std::to_string(line_no) + ": ";
-    if (line.find_first_not_of(" \t\r") == std::string_view::npos) continue;
+  for (const auto& [number, line, terminated] : SplitJournal(text)) {
+    const std::string where = journal + ":" + std::to_string(number) + ": ";
     try {
       FrameRecord f = ParseJournalLine(line);
       fs::path p;

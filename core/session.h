@@ -126,6 +126,15 @@ void from_json(const nlohmann::json& j, FrameRecord& f);
 void to_json(nlohmann::json& j, const SessionInfo& s);
 void from_json(const nlohmann::json& j, SessionInfo& s);
 
+// The non-blank lines of a journal's text: the number of each (from 1), its text without
+// '\n', and whether a newline ended it (a crash can cut the last line short).
+struct JournalLine {
+  int number = 0;
+  std::string_view text;
+  bool terminated = true;
+};
+std::vector<JournalLine> SplitJournal(std::string_view text);
+
 // One line of frames.jsonl (without its newline) as a record; throws rouen::Error saying what
 // is wrong (the caller adds file and line).
 FrameRecord ParseJournalLine(std::string_view line);

@@ -96,6 +96,7 @@ SceneSolve SolveToScene(const Session& session, const PipelineOptions& options, 
   for (const SlotSolve& s : solved.slots)
     scene.slots.push_back(SlotModel::FromLighting(s.lighting));
   scene.albedo = solved.albedo;
+  scene.env_ground_retro = solved.env_ground_retro;
   scene.model_file = "model.obj";
   for (const auto& [name, g] : calib.groups)
     scene.views[name] = SceneView{g.slot, TargetName(g.target), g.utc, g.intrinsics, g.pose};
@@ -201,6 +202,7 @@ LoadedScene LoadScene(const fs::path& dir, const std::function<void(const std::s
   r.solved.caster = std::make_unique<RayCaster>(r.solved.mesh);
   r.solved.hemisphere = BuildHemisphereCache(r.solved.grid, *r.solved.caster, r.scene.hemisphere);
   r.solved.albedo = std::move(r.scene.albedo);
+  r.solved.env_ground_retro = r.scene.env_ground_retro;
   r.scene.albedo = AlbedoResult{};
   for (size_t s = 0; s < r.scene.slots.size(); ++s) {
     SlotSolve ss;
@@ -272,7 +274,9 @@ Lighting RequestedLighting(const LoadedScene& scene, const RenderRequest& reques
                 "out)");
   Log(log, "fitting the sun's extinction, the sky interpolation and the environment's normals (" +
                std::to_string(measured.size()) + " slots)");
-  LightingPredictor predictor(std::move(measured), request.relight);
+  RelightOptions relight = request.relight;
+  relight.env.ground_retro = solved.env_ground_retro;  // as the solve fitted it
+  LightingPredictor predictor(std::move(measured), relight);
   Log(log, predictor.environment().summary.BriefReport());
   RelightSummary rs;
   Lighting lighting = predictor.At(*request.time, scene.scene.site, &rs);

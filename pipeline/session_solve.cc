@@ -5,8 +5,10 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <iomanip>
 #include <optional>
 #include <set>
+#include <sstream>
 
 #include "calib/hdr.h"
 #include "calib/nd.h"
@@ -17,6 +19,8 @@
 #include "core/limits.h"
 #include "core/temporaries.h"
 #include "core/version.h"
+#include "solve/env_stereo.h"
+#include "solve/relight.h"
 #include "solve/sky_segment.h"
 
 namespace rouen {
@@ -36,9 +40,9 @@ class StageClock {
     const double s = std::chrono::duration<double>(now - last_).count();
     stages_->push_back({stage, s});
     last_ = now;
-    char buf[32];
-    std::snprintf(buf, sizeof buf, " (%.2f s)", s);
-    Log(options_, "done: " + stage + buf);
+    std::ostringstream line;
+    line << "done: " << stage << " (" << std::fixed << std::setprecision(2) << s << " s)";
+    Log(options_, line.str());
   }
 
  private:
@@ -543,18 +547,69 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
     for (int v = 0; const HdrGroup* g = group(s, Target::kLandscape, v); ++v) {
       panoramas.push_back({&g->radiance, g->intrinsics, g->pose});
     }
-    if (!sun_g || !sky_g || panoramas.empty())
+    if (!sky_g || panoramas.empty())
       throw Error(session.dir().string() + ": slot " + std::to_string(s) +
-                  " lacks a sun, sky or landscape bracket (rouen status " + session.dir().string() +
+                  " lacks a sky or landscape bracket (rouen status " + session.dir().string() +
                   " lists each slot's brackets and the command that adds a missing one)");
     ss.utc = sky_g->utc;
     ss.sun = ComputeSunPosition(ss.utc, site);
     const Eigen::Vector3d sun_dir = ss.sun.DirectionEnu();
-    // §3.1: sun radiance from the ND frames and the sun's solid angle for the date.
-    SunPosition at_sun_frame = ComputeSunPosition(sun_g->utc, site);
-    ss.sun_measured =
-        MeasureSun(sun_g->radiance, sun_g->intrinsics, sun_g->pose, at_sun_frame.DirectionEnu(),
-                   at_sun_frame.SolidAngleSr(), SunOptions{});
+    // §3.1: sun radiance from the ND frames and the sun's solid angle for the date; without a
+    // sun bracket, from the first sky or landscape photo whose HDR disc is whole.
+    std::vector<const HdrGroup*> sun_sources;
+    if (sun_g) {
+      sun_sources.push_back(sun_g);
+    } else {
+      // Only HDR photos: an LDR bracket's disc is saturated, and its merge a lower bound.
+      auto hdr = [&](const HdrGroup* g) {
+        for (const FrameRecord& f : session.frames()) {
+          if (MergedBracketName(f) == g->name) return f.hdr;
+        }
+        return false;
+      };
+      if (hdr(sky_g)) sun_sources.push_back(sky_g);
+      for (int v = 0; const HdrGroup* g = group(s, Target::kLandscape, v); ++v) {
+        if (hdr(g)) sun_sources.push_back(g);
+      }
+    }
+    std::string sun_problems;
+    const HdrGroup* sun_from = nullptr;
+    for (const HdrGroup* g : sun_sources) {
+      const SunPosition at = ComputeSunPosition(g->utc, site);
+      try {
+        // No validity mask: a sun frame's sky is underexposed through the ND filter (invalid in
+        // the merge's mask, yet a fine zero background); a clipped disc is caught by its value.
+        const SunMeasurement m = MeasureSun(g->radiance, g->intrinsics, g->pose, at.DirectionEnu(),
+                                            at.SolidAngleSr(), SunOptions{});
+        if (m.any_invalid && !sun_g) {
+          sun_problems += "; " + g->name + ": the disc is clipped or saturated";
+          continue;
+        }
+        if (m.any_invalid) {
+          Log(options, "warning: slot " + std::to_string(s) + ": the sun disc in " + g->name +
+                           " is partly saturated or invalid in every frame; its radiance is a "
+                           "lower bound (a denser ND filter or a shorter exposure fixes it)");
+        }
+        ss.sun_measured = m;
+        sun_from = g;
+        break;
+      } catch (const Error& e) {
+        if (sun_g) throw;
+        sun_problems += "; " + g->name + ": " + e.what();
+      }
+    }
+    if (!sun_from) {
+      throw Error(session.dir().string() + ": slot " + std::to_string(s) +
+                  " has no sun bracket and no HDR sky or landscape photo with a whole sun disc" +
+                  sun_problems + " (rouen status " + session.dir().string() +
+                  " names the command that adds a sun bracket)");
+    }
+    {
+      std::ostringstream line;
+      line << "slot " << s << ": sun from " << sun_from->name << ", uncertainty "
+           << std::setprecision(2) << 100 * ss.sun_measured.radiance_uncertainty.maxCoeff() << "%";
+      Log(options, line.str());
+    }
     // §3.2: the seven-parameter sky per channel, from every sky photo of the slot.
     std::string mask_source;
     const std::vector<SkySample> samples = SlotSkySamples(session, calib, s, sun_dir, &mask_source);
@@ -617,7 +672,40 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   r.albedo =
       SolveAlbedo(r.grid, r.hemisphere, *r.caster, lighting, obs, r.albedo_options, &r.irradiance);
   Log(options, "pseudo-albedos: " + r.albedo.summary.BriefReport());
+  if (r.albedo_options.fit_retro) {
+    std::ostringstream line;
+    line << "rough diffuse (retro, 0 = Lambert) per block:" << std::fixed << std::setprecision(3);
+    const auto& cost0 = r.albedo.summary.retro_cost_lambert;
+    const auto& cost1 = r.albedo.summary.retro_cost_fitted;
+    for (size_t b = 0; b < r.mesh.block_names.size(); ++b) {
+      line << " " << r.mesh.block_names[b] << " "
+           << BlockRetro(r.albedo.retro, static_cast<int>(b));
+      if (b < cost0.size() && b < cost1.size()) {
+        line << " (residual " << 100 * cost0[b] << "% -> " << 100 * cost1[b] << "%)";
+      }
+    }
+    Log(options, line.str());
+  }
   clock.Lap("irradiance and pseudo-albedos");
+  // Beyond §5.2: how roughly the ground reflects the sun, from the slots the albedos used, for
+  // the environment at novel times (too few slots: the photometric stereo cannot tell).
+  std::vector<Lighting> env_slots;
+  for (const SlotSolve& ss : r.slots) {
+    if (std::find(options.exclude_albedo_slots.begin(), options.exclude_albedo_slots.end(),
+                  ss.slot) == options.exclude_albedo_slots.end())
+      env_slots.push_back(ss.lighting);
+  }
+  const EnvStereoOptions env_options = RelightOptions{}.env;
+  if (options.config.fit_ground_retro &&
+      static_cast<int>(env_slots.size()) >= env_options.min_times) {
+    const GroundRetroFit g = FitGroundRetro(EnvObservationsOf(env_slots), env_options);
+    r.env_ground_retro = g.retro;
+    std::ostringstream line;
+    line << std::fixed << std::setprecision(3) << "environment: ground retro " << g.retro
+         << " (median region residual " << 100 * g.cost_lambert << "% -> " << 100 * g.cost << "%)";
+    Log(options, line.str());
+  }
+  clock.Lap("environment ground reflection");
   return r;
 }
 

@@ -114,6 +114,7 @@ struct SolveResult {
   std::vector<SlotIrradiance> irradiance;  // per slot, with interreflection
   AlbedoResult albedo;
   AlbedoOptions albedo_options;  // what the albedos were solved with (irradiance, bounces)
+  double env_ground_retro = 0;   // the ground's sun reflection for predictions (FitGroundRetro)
 };
 
 // Sun, sky and environment per slot; irradiance at the surface grid; pseudo-albedos from the

@@ -187,7 +187,8 @@ json SolveConfigJson(const SolveConfig& c) {
             {"pixel_stride", c.environment.pixel_stride},
             {"min_region_pixels", c.environment.min_region_pixels},
             {"sky_fill_samples", c.environment.sky_fill_samples},
-            {"layer_merge_m", c.environment.layer_merge_m}}},
+            {"layer_merge_m", c.environment.layer_merge_m},
+            {"fit_ground_retro", c.fit_ground_retro}}},
           {"albedo",
            {{"loss", NameOf(a.loss, kLosses)},
             {"huber_k", a.huber_k},
@@ -200,6 +201,10 @@ json SolveConfigJson(const SolveConfig& c) {
             {"ratio_prior", a.ratio_prior},
             {"fill_radius_m", a.fill_radius_m},
             {"slot_weighting", a.slot_weighting},
+            {"fit_retro", a.fit_retro},
+            {"retro_min_observations", a.retro_min_observations},
+            {"retro_residual_cap", a.retro_residual_cap},
+            {"retro_min_gain", a.retro_min_gain},
             {"observation",
              {{"margin_px", ob.margin_px},
               {"occlusion_tolerance", ob.occlusion_tolerance},
@@ -267,6 +272,7 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
     f.Int("min_region_pixels", &e.min_region_pixels, 1, 1000000);
     f.Int("sky_fill_samples", &e.sky_fill_samples, 1, 1000);
     f.Number("layer_merge_m", &e.layer_merge_m, 0, 1000);
+    f.Bool("fit_ground_retro", &c.fit_ground_retro);
     f.Finish();
   }
   if (const json* t = root.Table("albedo")) {
@@ -283,6 +289,10 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
     f.Number("ratio_prior", &a.ratio_prior, 0, kInf);
     f.Number("fill_radius_m", &a.fill_radius_m, 0, 1000);
     f.Bool("slot_weighting", &a.slot_weighting);
+    f.Bool("fit_retro", &a.fit_retro);
+    f.Int("retro_min_observations", &a.retro_min_observations, 1, 1 << 30);
+    f.Number("retro_residual_cap", &a.retro_residual_cap, 1e-6, 100);
+    f.Number("retro_min_gain", &a.retro_min_gain, 0, 100);
     if (const json* o = f.Table("observation")) {
       Fields g(*o, where, "albedo.observation");
       ObservationOptions& ob = a.observation;

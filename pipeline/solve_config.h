@@ -26,8 +26,11 @@ struct SolveConfig {
   // cannot follow exactly, from pulling the rest of the fit (bench/sky_bench.cc).
   SkyFitOptions sky_fit;
   EnvOptions environment;  // §3.3
-  AlbedoOptions albedo;    // §4, with the irradiance options
-  void Validate() const;   // throws rouen::Error naming the bad field
+  // Beyond §5.2: fit how roughly the ground below the horizon reflects the sun (the scene's
+  // environment.ground_retro, used when the environment is predicted for a novel time).
+  bool fit_ground_retro = true;
+  AlbedoOptions albedo;   // §4, with the irradiance options
+  void Validate() const;  // throws rouen::Error naming the bad field
 };
 
 // The defaults; `quick` halves the work where it costs least accuracy (6 response brackets,

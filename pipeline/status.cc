@@ -115,17 +115,8 @@ std::vector<FrameRecord> ReadJournal(const fs::path& dir, const Fixes& fixes, bo
   }
   const std::string text = ReadFileToString(journal);
   std::set<int64_t> ids;
-  size_t pos = 0;
-  int line_no = 0;
-  while (pos < text.size()) {
-    size_t end = text.find('\n', pos);
-    const bool terminated = end != std::string::npos;
-    if (!terminated) end = text.size();
-    const std::string_view line(text.data() + pos, end - pos);
-    pos = end + 1;
-    ++line_no;
-    const std::string where = journal.string() + ":" + std::to_string(line_no);
-    if (line.find_first_not_of(" \t\r") == std::string_view::npos) continue;
+  for (const auto& [number, line, terminated] : SplitJournal(text)) {
+    const std::string where = journal.string() + ":" + std::to_string(number);
     FrameRecord f;
     try {
       f = ParseJournalLine(line);
@@ -334,8 +325,26 @@ SessionStatus ReadSessionStatus(const fs::path& dir, const StatusOptions& option
   for (const SlotStatus& slot : s.slots) {
     const std::string prefix = "slot" + std::to_string(slot.slot) + "/";
     std::vector<const char*> lacks;
-    if (!merged.count(prefix + "sun/view0")) lacks.push_back("sun");
-    if (!merged.count(prefix + "sky/view0")) lacks.push_back("sky");
+    const bool has_sky = merged.count(prefix + "sky/view0") > 0;
+    // An HDR sky or landscape photo of the slot may hold the whole sun disc; an LDR one cannot.
+    bool hdr_panorama = false;
+    for (const auto& [name, fr] : merged) {
+      const bool panorama =
+          name.rfind(prefix + "sky/", 0) == 0 || name.rfind(prefix + "landscape/", 0) == 0;
+      hdr_panorama = hdr_panorama || (panorama && fr.front()->hdr);
+    }
+    if (!merged.count(prefix + "sun/view0")) {
+      // §3.1 from an HDR sky or landscape photo instead, if its disc is not clipped.
+      if (has_sky && hdr_panorama)
+        Add(&s, StatusProblemKind::kSlotLacksBracket, false,
+            dir.string() + ": slot " + std::to_string(slot.slot) + " has no sun bracket (" +
+                prefix + "sun/view0): the solve measures the sun in its sky or landscape " +
+                "photos, which needs an HDR disc that is not clipped",
+            fixes.SlotBracket("sun"));
+      else
+        lacks.push_back("sun");
+    }
+    if (!has_sky) lacks.push_back("sky");
     if (!merged.count(prefix + "landscape/view0")) lacks.push_back("landscape");
     for (const char* t : lacks)
       Add(&s, StatusProblemKind::kSlotLacksBracket, true,

@@ -9,6 +9,7 @@
 
 #include "core/angles.h"
 #include "core/error.h"
+#include "solve/retro.h"
 
 namespace rouen {
 
@@ -86,7 +87,12 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
     const Eigen::Vector3d p = pose.position + hit.t * dir + offset * n;
     Eigen::Vector3d e_sun = Eigen::Vector3d::Zero();
     const double cosi = n.dot(s);
-    if (cosi > 0 && !model.Occluded(p, s, 0.0)) e_sun = sun_e * cosi;
+    if (cosi > 0 && !model.Occluded(p, s, 0.0)) {
+      const int block = hit.triangle < static_cast<int>(mesh.triangle_block.size())
+                            ? mesh.triangle_block[hit.triangle]
+                            : -1;
+      e_sun = sun_e * (cosi * RetroFactor(BlockRetro(albedo.retro, block), n, s, -dir));
+    }
     return (rho_sun.cwiseProduct(e_sun) + rho_se.cwiseProduct(e_se)) / kPi;
   };
 

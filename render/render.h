@@ -29,8 +29,9 @@ struct RenderStats {
   double seconds = 0;
 };
 
-// Per pixel: a ray into the model; on a hit L = (rho_sun E_sun + rho_se E_se) / pi with E_sun
-// computed at the hit with its own shadow ray (crisp shadows) and rho, E_se interpolated from
+// Per pixel: a ray into the model; on a hit L = (rho_sun E_sun D + rho_se E_se) / pi with E_sun
+// computed at the hit with its own shadow ray (crisp shadows), D the block's RetroFactor
+// (albedo.retro, solve/retro.h; 1 when Lambertian) and rho, E_se interpolated from
 // the grid; on escape the sun disc (sun_radiance) within the sun's radius, the sky model above
 // the horizon and the environment map below. `irr` is the irradiance of `lighting` on the grid
 // (with the interreflection added). Returns a kRadiance image.

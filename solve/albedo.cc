@@ -257,6 +257,11 @@ void AlbedoOptions::Validate() const {
   if (!(never_shadowed_prior >= 0)) throw Error("AlbedoOptions: never_shadowed_prior must be >= 0");
   if (!(ratio_prior >= 0)) throw Error("AlbedoOptions: ratio_prior must be >= 0");
   if (!(fill_radius_m >= 0)) throw Error("AlbedoOptions: fill_radius_m must be >= 0");
+  if (!(retro_residual_cap > 0)) throw Error("AlbedoOptions: retro_residual_cap must be > 0");
+  if (!(retro_min_gain >= 0)) throw Error("AlbedoOptions: retro_min_gain must be >= 0");
+  if (retro_min_observations < 1) {
+    throw Error("AlbedoOptions: retro_min_observations must be >= 1");
+  }
   observation.Validate();
   irradiance.Validate();
 }
@@ -423,6 +428,7 @@ std::vector<Observation> CollectObservations(const SurfaceGrid& grid, const RayC
         ob.point = i;
         ob.slot = ph.slot;
         ob.photo = static_cast<int>(p);
+        ob.view_dir = (to_cam / dist).cast<float>();
         for (int c = 0; c < 3; ++c) {
           ob.radiance[c] = use_nearest
                                ? ph.image.at(std::clamp(static_cast<int>(std::floor(x)), x0, x1),
@@ -455,32 +461,44 @@ static AlbedoResult SolveWeighted(const SurfaceGrid& grid,
                                   const std::vector<Observation>& observations,
                                   const std::vector<SlotIrradiance>& irradiance,
                                   const AlbedoOptions& options,
-                                  const std::vector<double>& slot_weight);
+                                  const std::vector<double>& slot_weight,
+                                  const SunShading* shading);
 
 // Eqs. 11-12 per grid point with fixed irradiance.
 AlbedoResult SolveAlbedoFixedIrradiance(const SurfaceGrid& grid,
                                         const std::vector<Observation>& observations,
                                         const std::vector<SlotIrradiance>& irradiance,
-                                        const AlbedoOptions& options) {
-  return SolveWeighted(grid, observations, irradiance, options, {});
+                                        const AlbedoOptions& options, const SunShading* shading) {
+  return SolveWeighted(grid, observations, irradiance, options, {}, shading);
 }
 
 namespace {
 
+// The factor on an observation's sun irradiance: its block's RetroFactor (1 without shading).
+double SunFactor(const SurfaceGrid& grid, const Observation& ob, const SunShading* shading) {
+  if (!shading) return 1;
+  const GridPoint& gp = grid.points[ob.point];
+  const double retro = BlockRetro(shading->retro, gp.block);
+  if (retro == 0) return 1;
+  return RetroFactor(retro, gp.normal, shading->sun_dirs[ob.slot], ob.view_dir.cast<double>());
+}
+
 // Per-slot weights from the residuals of a solution: (median over all slots / slot's median
 // |relative residual|)^2, at most 1. A slot whose lighting model fits the photos worse than
 // the others (e.g. a low sun, where the environment is least certain) counts less.
-std::vector<double> SlotWeights(const std::vector<Observation>& observations,
+std::vector<double> SlotWeights(const SurfaceGrid& grid,
+                                const std::vector<Observation>& observations,
                                 const std::vector<SlotIrradiance>& irradiance,
-                                const AlbedoResult& res) {
+                                const AlbedoResult& res, const SunShading* shading) {
   std::vector<std::vector<double>> per(irradiance.size());
   std::vector<double> all;
   for (const Observation& ob : observations) {
     if (res.flags[ob.point] & kAlbedoNoObservations) continue;
     const SlotIrradiance& irr = irradiance[ob.slot];
     const double y = kPi * ob.radiance[1];
-    const double pred = res.rho_se[ob.point][1] * irr.se[ob.point][1] +
-                        res.rho_sun[ob.point][1] * irr.sun[ob.point][1];
+    const double pred =
+        res.rho_se[ob.point][1] * irr.se[ob.point][1] +
+        res.rho_sun[ob.point][1] * irr.sun[ob.point][1] * SunFactor(grid, ob, shading);
     if (!(y > 0)) continue;
     const double r = std::abs(y - pred) / y;
     per[ob.slot].push_back(r);
@@ -502,10 +520,15 @@ static AlbedoResult SolveWeighted(const SurfaceGrid& grid,
                                   const std::vector<Observation>& observations,
                                   const std::vector<SlotIrradiance>& irradiance,
                                   const AlbedoOptions& options,
-                                  const std::vector<double>& slot_weight) {
+                                  const std::vector<double>& slot_weight,
+                                  const SunShading* shading) {
   const auto start = std::chrono::steady_clock::now();
   options.Validate();
   const int n = grid.size();
+  if (shading && shading->sun_dirs.size() < irradiance.size()) {
+    throw Error("albedo: " + std::to_string(shading->sun_dirs.size()) + " sun directions for " +
+                std::to_string(irradiance.size()) + " slots");
+  }
   if (observations.empty()) throw Error("albedo: no observations of the model in any photo");
   for (size_t s = 0; s < irradiance.size(); ++s) {
     const SlotIrradiance& irr = irradiance[s];
@@ -544,13 +567,15 @@ static AlbedoResult SolveWeighted(const SurfaceGrid& grid,
       const SlotIrradiance& irr = irradiance[ob.slot];
       // A point that receives no light in this slot tells nothing about its albedo.
       if (!((irr.se[ob.point] + irr.sun[ob.point]).maxCoeff() > 0)) continue;
-      eqs.push_back({kPi * ob.radiance.cast<double>(), irr.se[ob.point], irr.sun[ob.point],
+      eqs.push_back({kPi * ob.radiance.cast<double>(), irr.se[ob.point],
+                     irr.sun[ob.point] * SunFactor(grid, ob, shading),
                      slot_weight.empty() ? 1.0 : slot_weight[ob.slot]});
     }
     return eqs;
   };
 
   AlbedoResult res;
+  if (shading) res.retro = shading->retro;
   res.rho_sun.assign(n, Eigen::Vector3d::Zero());
   res.rho_se.assign(n, Eigen::Vector3d::Zero());
   res.observations.assign(n, 0);
@@ -705,6 +730,109 @@ static AlbedoResult SolveWeighted(const SurfaceGrid& grid,
   return res;
 }
 
+namespace {
+
+// Per block: the mean over its observed points' observations of the truncated |relative
+// residual| per channel under `res`, and how many of the observations are sunlit.
+struct BlockCosts {
+  std::vector<double> cost;
+  std::vector<int> sunlit;
+};
+
+BlockCosts CostsPerBlock(const SurfaceGrid& grid, const std::vector<Observation>& observations,
+                         const std::vector<SlotIrradiance>& irradiance, const AlbedoResult& res,
+                         const SunShading& shading, const AlbedoOptions& options, int nblocks) {
+  BlockCosts bc;
+  bc.cost.assign(nblocks, 0.0);
+  bc.sunlit.assign(nblocks, 0);
+  std::vector<double> weight(nblocks, 0.0);
+  for (const Observation& ob : observations) {
+    const int b = grid.points[ob.point].block;
+    if (b < 0 || (res.flags[ob.point] & kAlbedoNoObservations)) continue;
+    const SlotIrradiance& irr = irradiance[ob.slot];
+    const Eigen::Vector3d& e_sun = irr.sun[ob.point];
+    const Eigen::Vector3d& e_se = irr.se[ob.point];
+    bc.sunlit[b] += e_sun[1] > options.sunlit_threshold * std::max(e_se[1], 1e-300);
+    const double f = SunFactor(grid, ob, &shading);
+    for (int c = 0; c < 3; ++c) {
+      const double y = kPi * ob.radiance[c];
+      if (!(y > 0)) continue;
+      const double pred =
+          res.rho_se[ob.point][c] * e_se[c] + res.rho_sun[ob.point][c] * e_sun[c] * f;
+      bc.cost[b] += std::min(std::abs(y - pred) / y, options.retro_residual_cap);
+      weight[b] += 1;
+    }
+  }
+  for (int b = 0; b < nblocks; ++b) bc.cost[b] = weight[b] > 0 ? bc.cost[b] / weight[b] : 0;
+  return bc;
+}
+
+// Each block's retro parameter (solve/retro.h): the albedos are solved with every block at each
+// candidate of a regular grid over [kRetroMin, kRetroMax] (0 among them), each block keeps its
+// cheapest candidate, refined by a parabola through its neighbours when that lowers its cost.
+// Blocks with too few sunlit observations stay at 0.
+std::vector<double> FitRetro(const SurfaceGrid& grid, const std::vector<Observation>& observations,
+                             const std::vector<SlotIrradiance>& irradiance,
+                             const AlbedoOptions& options, const std::vector<double>& slot_weight,
+                             const std::vector<Eigen::Vector3d>& sun_dirs, AlbedoSummary* summary) {
+  int nblocks = 0;
+  for (const auto& p : grid.points) nblocks = std::max(nblocks, p.block + 1);
+  constexpr int kSteps = 8;  // candidates kRetroMin + k (kRetroMax - kRetroMin) / kSteps
+  const double step = (kRetroMax - kRetroMin) / kSteps;
+  SunShading shading{sun_dirs, {}};
+  auto costs_at = [&](const std::vector<double>& retro) {
+    shading.retro = retro;
+    const AlbedoResult r =
+        SolveWeighted(grid, observations, irradiance, options, slot_weight, &shading);
+    return CostsPerBlock(grid, observations, irradiance, r, shading, options, nblocks);
+  };
+  std::vector<std::vector<double>> cost(kSteps + 1);
+  std::vector<int> sunlit;
+  for (int k = 0; k <= kSteps; ++k) {
+    const BlockCosts bc = costs_at(std::vector<double>(nblocks, kRetroMin + k * step));
+    cost[k] = bc.cost;
+    sunlit = bc.sunlit;
+  }
+  const int k_zero = static_cast<int>(std::lround(-kRetroMin / step));
+  std::vector<double> best(nblocks, 0.0), best_cost(nblocks), refined(nblocks, 0.0);
+  for (int b = 0; b < nblocks; ++b) {
+    best_cost[b] = cost[k_zero][b];
+    if (sunlit[b] < options.retro_min_observations) continue;
+    int kb = k_zero;
+    for (int k = 0; k <= kSteps; ++k) {
+      if (cost[k][b] < cost[kb][b]) kb = k;
+    }
+    best[b] = refined[b] = kRetroMin + kb * step;
+    best_cost[b] = cost[kb][b];
+    if (kb > 0 && kb < kSteps) {
+      const double c0 = cost[kb - 1][b], c1 = cost[kb][b], c2 = cost[kb + 1][b];
+      const double curvature = c0 - 2 * c1 + c2;
+      if (curvature > 0) {
+        refined[b] = best[b] + std::clamp(0.5 * step * (c0 - c2) / curvature, -step, step);
+      }
+    }
+  }
+  const BlockCosts fine = costs_at(refined);
+  for (int b = 0; b < nblocks; ++b) {
+    if (fine.cost[b] < best_cost[b]) {
+      best[b] = refined[b];
+      best_cost[b] = fine.cost[b];
+    }
+    // Lambert unless the fit explains the photos clearly better.
+    if (cost[k_zero][b] - best_cost[b] < options.retro_min_gain) {
+      best[b] = 0;
+      best_cost[b] = cost[k_zero][b];
+    }
+  }
+  if (summary) {
+    summary->retro_cost_lambert = cost[k_zero];
+    summary->retro_cost_fitted = best_cost;
+  }
+  return best;
+}
+
+}  // namespace
+
 // §4.1: albedos, then the one-bounce interreflection from them, then albedos again.
 AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
                          const RayCaster& model, const std::vector<Lighting>& slots,
@@ -717,15 +845,27 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   tbb::parallel_for(0, static_cast<int>(slots.size()), [&](int s) {
     irr[s] = ComputeIrradiance(grid, cache, model, slots[s], options.irradiance);
   });
-  AlbedoResult res = SolveWeighted(grid, observations, irr, options, {});
+  SunShading shading;
+  for (const Lighting& l : slots) shading.sun_dirs.push_back(l.sun_dir.normalized());
+  AlbedoSummary retro_summary;
+  AlbedoResult res = SolveWeighted(grid, observations, irr, options, {}, &shading);
+  if (options.fit_retro && options.outer_iterations == 1) {
+    shading.retro =
+        FitRetro(grid, observations, irr, options, {}, shading.sun_dirs, &retro_summary);
+    res = SolveWeighted(grid, observations, irr, options, {}, &shading);
+  }
   std::vector<double> changes;
   std::vector<double> slot_weight;
   for (int it = 1; it < options.outer_iterations; ++it) {
     for (auto& slot_irr : irr) {
       AddInterreflection(grid, cache, res.rho_sun, res.rho_se, &slot_irr, options.bounces);
     }
-    if (options.slot_weighting) slot_weight = SlotWeights(observations, irr, res);
-    AlbedoResult next = SolveWeighted(grid, observations, irr, options, slot_weight);
+    if (options.slot_weighting) slot_weight = SlotWeights(grid, observations, irr, res, &shading);
+    if (options.fit_retro) {
+      shading.retro =
+          FitRetro(grid, observations, irr, options, slot_weight, shading.sun_dirs, &retro_summary);
+    }
+    AlbedoResult next = SolveWeighted(grid, observations, irr, options, slot_weight, &shading);
     double change = 0;
     int count = 0;
     for (int i = 0; i < grid.size(); ++i) {
@@ -743,6 +883,8 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
     res = std::move(next);
   }
   res.summary.change_per_iteration = changes;
+  res.summary.retro_cost_lambert = retro_summary.retro_cost_lambert;
+  res.summary.retro_cost_fitted = retro_summary.retro_cost_fitted;
   res.summary.outer_iterations = options.outer_iterations;
   res.summary.slot_weights =
       slot_weight.empty() ? std::vector<double>(slots.size(), 1.0) : slot_weight;

@@ -14,6 +14,7 @@
 #include "solve/grid.h"
 #include "solve/irradiance.h"
 #include "solve/raycast.h"
+#include "solve/retro.h"
 
 namespace rouen {
 
@@ -31,7 +32,8 @@ struct Observation {
   int point = 0;
   int slot = 0;
   int photo = 0;
-  Eigen::Vector3f radiance = Eigen::Vector3f::Zero();  // I, relative radiance
+  Eigen::Vector3f radiance = Eigen::Vector3f::Zero();   // I, relative radiance
+  Eigen::Vector3f view_dir = Eigen::Vector3f::UnitZ();  // unit ENU, from the point to the camera
 };
 
 struct ObservationOptions {
@@ -109,6 +111,17 @@ struct AlbedoOptions {
   // (median relative residual of all slots / its own)^2, at most 1, so a slot whose lighting
   // model fits worse (typically a low sun) pulls the albedos less.
   bool slot_weighting = true;
+  // Beyond the paper: fit each block's retro parameter (solve/retro.h: how much more of a
+  // grazing sun a rough surface sends back than Lambert's law says) from its observations;
+  // false keeps every block Lambertian (retro 0), as the paper's eq. 13 does.
+  bool fit_retro = true;
+  // A block's retro is fitted only from at least this many sunlit observations; else 0.
+  int retro_min_observations = 200;
+  // The fit's cost: |relative residual| per observation and channel, truncated here (robust).
+  double retro_residual_cap = 0.25;
+  // A block keeps a non-zero retro only when it lowers that cost (the block's mean truncated
+  // |relative residual|) by at least this much; below it Lambert explains the photos as well.
+  double retro_min_gain = 0.002;
   ObservationOptions observation;
   IrradianceOptions irradiance;
 
@@ -130,6 +143,9 @@ struct AlbedoSummary {
   double residual_median_rel = 0;    // median |relative residual|
   double downweighted_fraction = 0;  // observations with robust weight < 0.5
   std::vector<double> slot_weights;  // per slot, as used in the last solve (SolveAlbedo)
+  // Per block: the relative residual cost (truncated |relative residual|, mean over the
+  // block's observations) with retro 0 and with the fitted retro (SolveAlbedo, fit_retro).
+  std::vector<double> retro_cost_lambert, retro_cost_fitted;
   double seconds = 0;
   std::string BriefReport() const;
 };
@@ -138,19 +154,26 @@ struct AlbedoResult {
   std::vector<Eigen::Vector3d> rho_sun, rho_se;  // per grid point, RGB
   std::vector<int> observations;                 // per grid point
   std::vector<uint8_t> flags;                    // AlbedoFlag bits per grid point
+  std::vector<double> retro;  // per block (solve/retro.h); empty or 0: Lambertian sun term
   AlbedoSummary summary;
 };
 
 // Eqs. 11-12 per point with fixed irradiance (irradiance[slot] per slot); IRLS, rho >= 0.
-// Never-observed points are filled with their block's median.
+// Never-observed points are filled with their block's median. With `shading`, each
+// observation's sun irradiance is scaled by its block's RetroFactor (the returned `retro`).
 AlbedoResult SolveAlbedoFixedIrradiance(const SurfaceGrid& grid,
                                         const std::vector<Observation>& observations,
                                         const std::vector<SlotIrradiance>& irradiance,
-                                        const AlbedoOptions& options = {});
+                                        const AlbedoOptions& options = {},
+                                        const SunShading* shading = nullptr);
 
 // §4.1 with the outer iteration: irradiance without bounce -> albedos -> irradiance with the
 // one-bounce interreflection from the current albedos -> albedos ... `irradiance` receives
-// the per-slot irradiance with the interreflection from the returned albedos.
+// the per-slot irradiance with the interreflection from the returned albedos. With
+// options.fit_retro, each outer iteration also fits every block's retro parameter: the albedos
+// are solved for candidates over [kRetroMin, kRetroMax] and each block keeps the one with the
+// least truncated relative residual, refined by a parabola (the interreflection stays
+// Lambertian).
 AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
                          const RayCaster& model, const std::vector<Lighting>& slots,
                          const std::vector<Observation>& observations,

@@ -131,6 +131,77 @@ TEST(AlbedoTest, RecoversBothPseudoAlbedosFromConsistentData) {
   }
 }
 
+// Observations of a world whose `rough` block reflects the sun with RetroFactor(retro) (the
+// others Lambertian), seen from four cameras around it at every slot.
+std::vector<Observation> ObserveRetro(const World& w, const std::vector<SlotIrradiance>& irr,
+                                      int rough, double retro) {
+  const Eigen::Vector3d cams[] = {{12, -9, 2}, {-10, -11, 6}, {-12, 8, 3}, {9, 12, 9}};
+  std::vector<Observation> obs;
+  for (int i = 0; i < w.grid.size(); ++i) {
+    if (Buried(w, i)) continue;
+    const GridPoint& gp = w.grid.points[i];
+    for (size_t s = 0; s < irr.size(); ++s) {
+      for (int c = 0; c < 4; ++c) {
+        const Eigen::Vector3d v = (cams[c] - gp.position).normalized();
+        if (gp.normal.dot(v) < 0.05) continue;
+        const double d =
+            RetroFactor(gp.block == rough ? retro : 0.0, gp.normal, w.slots[s].sun_dir, v);
+        Observation o;
+        o.point = i;
+        o.slot = static_cast<int>(s);
+        o.photo = static_cast<int>(s * 4 + c);
+        o.view_dir = v.cast<float>();
+        o.radiance = ((w.rho_se[i].cwiseProduct(irr[s].se[i]) +
+                       d * w.rho_sun[i].cwiseProduct(irr[s].sun[i])) /
+                      kPi)
+                         .cast<float>();
+        obs.push_back(o);
+      }
+    }
+  }
+  return obs;
+}
+
+TEST(AlbedoTest, FitsEachBlocksRetroAndTheAlbedosWithIt) {
+  World w = MakeWorld();
+  // Lower suns too, where a rough surface departs most from Lambert.
+  for (double el : {12.0, 20.0}) {
+    Lighting l = w.slots[0];
+    const double a = (el == 12 ? 250 : 110) * kPi / 180, e = el * kPi / 180;
+    l.sun_dir = Eigen::Vector3d(std::cos(e) * std::sin(a), std::cos(e) * std::cos(a), std::sin(e));
+    w.slots.push_back(l);
+  }
+  const int box = 1, plaza = 0;
+  const double truth = 0.8;  // between the fit's candidates (multiples of 0.25)
+  const auto irr = Irradiance(w);
+  const auto obs = ObserveRetro(w, irr, box, truth);
+  AlbedoOptions opt;
+  opt.outer_iterations = 1;  // the photos carry no interreflection
+  opt.bounces = 1;
+  const AlbedoResult fit = SolveAlbedo(w.grid, w.cache, *w.rc, w.slots, obs, opt);
+  ASSERT_EQ(fit.retro.size(), 2u);
+  // Exact data: the truth is the cost's unique zero. The candidates bracket it within half a
+  // step and the parabola through the three nearest moves towards it.
+  EXPECT_NEAR(fit.retro[box], truth, 0.125);
+  EXPECT_EQ(fit.retro[plaza], 0.0);  // Lambertian and on a candidate: found exactly
+  ASSERT_EQ(fit.summary.retro_cost_fitted.size(), 2u);
+  EXPECT_LT(fit.summary.retro_cost_fitted[box], 0.5 * fit.summary.retro_cost_lambert[box]);
+  opt.fit_retro = false;
+  const AlbedoResult lambert = SolveAlbedo(w.grid, w.cache, *w.rc, w.slots, obs, opt);
+  EXPECT_TRUE(lambert.retro.empty() || lambert.retro[box] == 0.0);
+  // On the rough block's sunlit-and-shadowed points the fitted model recovers rho_sun better.
+  double e_fit = 0, e_lambert = 0;
+  int n = 0;
+  for (int i = 0; i < w.grid.size(); ++i) {
+    if (w.grid.points[i].block != box || fit.flags[i] != 0) continue;
+    e_fit += (fit.rho_sun[i] - w.rho_sun[i]).norm() / w.rho_sun[i].norm();
+    e_lambert += (lambert.rho_sun[i] - w.rho_sun[i]).norm() / w.rho_sun[i].norm();
+    ++n;
+  }
+  ASSERT_GT(n, 10);
+  EXPECT_LT(e_fit, 0.5 * e_lambert) << e_fit / n << " vs " << e_lambert / n;
+}
+
 TEST(AlbedoTest, RobustAgainstAShadowBoundaryOutlier) {
   World w = MakeWorld();
   // More slots so that one wrong observation per point is a minority.

@@ -18,6 +18,7 @@
 #include "core/angles.h"
 #include "core/error.h"
 #include "core/stats.h"
+#include "solve/retro.h"
 
 namespace rouen {
 
@@ -302,6 +303,26 @@ double Cost(const RegionState& s, const EnvStereoOptions& o) {
   return ss;
 }
 
+// The sun term's factor of a ground region (EnvStereoOptions::ground_retro); 1 elsewhere.
+double GroundSunFactor(const EnvRegionFit& fit, const EnvStereoOptions& o,
+                       const Eigen::Vector3d& sun) {
+  if (o.ground_retro == 0 || fit.to_viewer.squaredNorm() == 0) return 1;
+  return RetroFactor(o.ground_retro, Eigen::Vector3d::UnitZ(), sun, fit.to_viewer);
+}
+
+// Pulls a region's unit normal (parameters 5..7 of x, not unit) towards up.
+struct NormalPrior {
+  double weight;
+  template <typename T>
+  bool operator()(const T* x, T* r) const {
+    const T n = ceres::sqrt(x[5] * x[5] + x[6] * x[6] + x[7] * x[7]) + T(1e-12);
+    r[0] = weight * x[5] / n;
+    r[1] = weight * x[6] / n;
+    r[2] = weight * (x[7] / n - T(1));
+    return true;
+  }
+};
+
 Eigen::Vector3d PredictWithQuad(const EnvRegionFit& fit, const EnvStereoOptions& o,
                                 const EnvLighting& l, const SkyQuad& q,
                                 const Eigen::Vector3d& sky_mean) {
@@ -315,7 +336,8 @@ Eigen::Vector3d PredictWithQuad(const EnvRegionFit& fit, const EnvStereoOptions&
     case EnvRegionKind::kLandscape:
     case EnvRegionKind::kSkyOnly: {
       const Eigen::Vector3d esky = SkyIrradiance(q, o, fit.normal, nullptr);
-      const double cos_sun = std::max(0.0, fit.normal.dot(l.sun_dir.normalized()));
+      const Eigen::Vector3d s = l.sun_dir.normalized();
+      const double cos_sun = std::max(0.0, fit.normal.dot(s)) * GroundSunFactor(fit, o, s);
       out = (fit.rho_sky.cwiseProduct(esky) +
              fit.rho_sun.cwiseProduct(l.sun_radiance) * l.sun_solid_angle_sr * cos_sun) /
                 kPi +
@@ -342,6 +364,13 @@ void EnvStereoOptions::Validate() const {
   }
   if (!(fixed_rho_sun > 0) || !std::isfinite(fixed_rho_sun)) {
     throw Error("EnvStereoOptions: fixed_rho_sun must be > 0");
+  }
+  if (!(ground_retro >= kRetroMin && ground_retro <= kRetroMax)) {
+    throw Error("EnvStereoOptions: ground_retro must be in [" + std::to_string(kRetroMin) + ", " +
+                std::to_string(kRetroMax) + "]");
+  }
+  if (!(ground_normal_prior >= 0) || !std::isfinite(ground_normal_prior)) {
+    throw Error("EnvStereoOptions: ground_normal_prior must be >= 0");
   }
   if (!(ground_albedo >= 0 && ground_albedo <= 1)) {
     throw Error("EnvStereoOptions: ground_albedo must be in [0, 1]");
@@ -489,6 +518,7 @@ EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
       return;
     }
     st.with_fraction = above && options.fit_sky_fraction;
+    if (!above && options.ground_retro != 0) fit.to_viewer = -RegionCentre(m0, r).normalized();
     for (int t = 0; t < T; ++t) {
       TimeData d;
       d.quad = &quads[t];
@@ -499,8 +529,8 @@ EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
         d.inv_sigma[c] = sigma > 0 ? 1 / sigma : 0.0;
       }
       const EnvLighting& l = per_time[t].lighting;
-      d.e_sun = l.sun_radiance * l.sun_solid_angle_sr;
       d.l = l.sun_dir.normalized();
+      d.e_sun = l.sun_radiance * l.sun_solid_angle_sr * GroundSunFactor(fit, options, d.l);
       d.sky_mean = st.with_fraction ? sky_means[t].radiance[r] : Eigen::Vector3d::Zero();
       st.data.push_back(d);
     }
@@ -558,6 +588,11 @@ EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
         problem.AddResidualBlock(cost, nullptr, trial.x);
       }
       for (int k = 0; k < 5; ++k) problem.SetParameterLowerBound(trial.x, k, 0.0);
+      if (!above && options.ground_normal_prior > 0) {
+        problem.AddResidualBlock(new ceres::AutoDiffCostFunction<NormalPrior, 3, kNumParams>(
+                                     new NormalPrior{options.ground_normal_prior}),
+                                 nullptr, trial.x);
+      }
       ceres::Solver::Summary sum;
       ceres::Solve(so, &problem, &sum);
       const double c = Cost(trial, options);
@@ -678,6 +713,63 @@ EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
   res.summary.seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return res;
+}
+
+GroundRetroFit FitGroundRetro(const std::vector<EnvObservation>& per_time,
+                              const EnvStereoOptions& options, double min_gain) {
+  if (!(min_gain >= 0 && min_gain < 1)) throw Error("ground retro: min_gain must be in [0, 1)");
+  GroundRetroFit out;
+  auto cost_at = [&](double retro) {
+    EnvStereoOptions o = options;
+    o.ground_retro = retro;
+    const EnvStereoResult r = SolveEnvStereo(per_time, o);
+    const int first_above = r.bands_below * r.sectors;
+    const int nreg = (r.bands_below + r.bands_above) * r.sectors;
+    std::vector<double> rms;
+    for (size_t gi = 0; gi < r.regions.size(); ++gi) {
+      const bool below = static_cast<int>(gi % nreg) < first_above;
+      if (below && r.regions[gi].kind == EnvRegionKind::kLandscape)
+        rms.push_back(r.regions[gi].rel_rms);
+    }
+    const double c = rms.empty() ? 0.0 : Quantile(rms, 0.5);
+    out.candidates.push_back(retro);
+    out.costs.push_back(c);
+    return c;
+  };
+  // Candidates 0, kStep, ..., kRetroMax: rough ground sends light back (retro > 0); a ground
+  // darker than Lambert towards grazing views is not searched for.
+  constexpr double kStep = 0.5;
+  std::vector<double> grid, cost;
+  for (double r = 0; r <= kRetroMax + 1e-9; r += kStep) {
+    grid.push_back(r);
+    cost.push_back(cost_at(r));
+  }
+  size_t zero = 0, best = 0;
+  for (size_t k = 0; k < grid.size(); ++k) {
+    if (std::abs(grid[k]) < 1e-9) zero = k;
+    if (cost[k] < cost[best]) best = k;
+  }
+  out.cost_lambert = cost[zero];
+  out.retro = grid[best];
+  out.cost = cost[best];
+  if (best > 0 && best + 1 < grid.size()) {
+    const double curvature = cost[best - 1] - 2 * cost[best] + cost[best + 1];
+    if (curvature > 0) {
+      const double r =
+          grid[best] +
+          std::clamp(0.5 * kStep * (cost[best - 1] - cost[best + 1]) / curvature, -kStep, kStep);
+      const double c = cost_at(r);
+      if (c < out.cost) {
+        out.retro = r;
+        out.cost = c;
+      }
+    }
+  }
+  if (!(out.cost < (1 - min_gain) * out.cost_lambert)) {
+    out.retro = 0;
+    out.cost = out.cost_lambert;
+  }
+  return out;
 }
 
 Eigen::Vector3d PredictRegionRadiance(const EnvRegionFit& fit, const EnvStereoOptions& options,

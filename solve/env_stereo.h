@@ -88,6 +88,14 @@ struct EnvStereoOptions {
   // On the demo world it does not help (its landscape is mostly real edges); it does on a
   // noisy uniform ground.
   double smoothing_weight = 0;
+  // Beyond the paper: regions below the horizon are mostly ground. `ground_retro` lets their
+  // sunlight follow solve/retro.h's RetroFactor with the normal up and the view towards the
+  // panorama (0: Lambert), so a rough ground seen at grazing angles keeps its brightness
+  // pattern when the sun moves; `ground_normal_prior` pulls their unit normal towards up
+  // (weight in units of the relative data residuals; 0: free), as four or five training suns
+  // barely constrain the normal and a tilted one extrapolates badly to a low sun.
+  double ground_retro = 0;
+  double ground_normal_prior = 1;
   int max_iterations = 100;  // Levenberg-Marquardt, per start
   // 1..3 start normals: towards the viewer, up, level towards the viewer. The lowest cost
   // wins, but a normal facing the viewer beats any facing away (that side cannot be seen).
@@ -113,7 +121,9 @@ struct EnvRegionFit {
   double sky_fraction = 0;                            // f, above-horizon regions only
   double rel_rms = 0;    // RMS of (model - I) / sigma over times and channels
   int sunlit_times = 0;  // training times with normal . sun > 0
-  int iterations = 0;    // of the winning start (plus smoothing refinement)
+  // Below the horizon with ground_retro: unit direction from the region to the panorama.
+  Eigen::Vector3d to_viewer = Eigen::Vector3d::Zero();
+  int iterations = 0;  // of the winning start (plus smoothing refinement)
 };
 
 struct EnvStereoSummary {
@@ -137,6 +147,19 @@ struct EnvStereoResult {
   EnvStereoOptions options;             // as used (prediction uses the same E_sky)
   EnvStereoSummary summary;
 };
+
+// The ground's retro parameter that best explains the training times: SolveEnvStereo with
+// ground_retro at each candidate (0 to kRetroMax in steps of 0.5), the cost the median rel_rms of
+// the landscape regions below the horizon; refined by a parabola through the best candidate's
+// neighbours. The fit keeps 0 (Lambert) unless its cost is below (1 - min_gain) x the Lambertian
+// cost.
+struct GroundRetroFit {
+  double retro = 0;
+  std::vector<double> candidates, costs;  // as evaluated (the refinement last)
+  double cost_lambert = 0, cost = 0;
+};
+GroundRetroFit FitGroundRetro(const std::vector<EnvObservation>& per_time,
+                              const EnvStereoOptions& options, double min_gain = 0.1);
 
 // §5.2: fits every region of every layer. All maps must share the grid and layer count.
 // Throws rouen::Error for no observation, mismatched maps or bad lighting.

@@ -36,12 +36,25 @@ std::string RelightSummary::Describe() const {
   return s;
 }
 
+std::vector<EnvObservation> EnvObservationsOf(const std::vector<Lighting>& measured) {
+  std::vector<EnvObservation> envs;
+  for (const Lighting& l : measured) {
+    EnvObservation eo;
+    eo.env = l.env;
+    eo.lighting.sun_dir = l.sun_dir;
+    eo.lighting.sun_radiance = l.sun_radiance;
+    eo.lighting.sun_solid_angle_sr = l.sun_solid_angle_sr;
+    eo.lighting.sky = l.sky;
+    envs.push_back(std::move(eo));
+  }
+  return envs;
+}
+
 LightingPredictor::LightingPredictor(std::vector<Lighting> measured, const RelightOptions& options)
     : measured_(std::move(measured)), options_(options) {
   options_.Validate();
   if (measured_.empty()) throw Error("relight: no measured time of day to predict from");
   std::vector<SunObservation> suns;
-  std::vector<EnvObservation> envs;
   for (const Lighting& l : measured_) {
     TimedSky ts;
     ts.sky = l.sky;
@@ -50,13 +63,6 @@ LightingPredictor::LightingPredictor(std::vector<Lighting> measured, const Relig
     skies_.push_back(ts);
     if (l.sun_dir.z() > 0 && l.sun_radiance.minCoeff() > 0)
       suns.push_back({l.sun_dir, l.sun_radiance});
-    EnvObservation eo;
-    eo.env = l.env;
-    eo.lighting.sun_dir = l.sun_dir;
-    eo.lighting.sun_radiance = l.sun_radiance;
-    eo.lighting.sun_solid_angle_sr = l.sun_solid_angle_sr;
-    eo.lighting.sky = l.sky;
-    envs.push_back(std::move(eo));
   }
   // §5.1: extinction needs the sun seen through at least two distinct air masses.
   if (suns.size() >= 2) {
@@ -66,7 +72,7 @@ LightingPredictor::LightingPredictor(std::vector<Lighting> measured, const Relig
       extinction_.reset();  // e.g. every time at the same air mass: interpolate instead
     }
   }
-  env_ = SolveEnvStereo(envs, options_.env);
+  env_ = SolveEnvStereo(EnvObservationsOf(measured_), options_.env);
 }
 
 Lighting LightingPredictor::At(UtcTime utc, const Site& site, RelightSummary* summary) const {
@@ -91,12 +97,14 @@ Lighting LightingPredictor::At(UtcTime utc, const Site& site, RelightSummary* su
   if (extinction_) {
     out.sun_radiance = extinction_->SunRadiance(rs.air_mass);
     rs.sun_from_extinction = true;
-    // Sunrise/sunset: a sun lower than every measured one sees the sky through more air; the
-    // aureole reddens with the sun's beta, the background dims with the mean beta. Counted
-    // from the lowest measured sun, so the sky is continuous at the edge of the measured range.
-    if (rs.air_mass > extinction_->air_mass_max) {
-      out.sky = ApplyExtinction(out.sky, *extinction_, extinction_->air_mass_max, rs.air_mass);
-      rs.extinction_from_air_mass = extinction_->air_mass_max;
+    // Sunrise/sunset: a sun lower than the sky interpolation reaches (the lowest measured sun,
+    // or as far below it as the elevation mode follows its line) sees the sky through more air;
+    // the aureole reddens with the sun's beta, the background dims with the mean beta. Counted
+    // from that elevation, so the sky is continuous there.
+    const double reached_air_mass = KastenYoungAirMass(std::max(0.0, is.evaluated_elevation_rad));
+    if (rs.air_mass > reached_air_mass) {
+      out.sky = ApplyExtinction(out.sky, *extinction_, reached_air_mass, rs.air_mass);
+      rs.extinction_from_air_mass = reached_air_mass;
     }
   } else {
     out.sun_radiance = is.sun_radiance;

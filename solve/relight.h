@@ -46,6 +46,10 @@ struct RelightSummary {
   std::string Describe() const;
 };
 
+// The environment maps of measured times with their sun and sky, as §5.2's photometric stereo
+// takes them.
+std::vector<EnvObservation> EnvObservationsOf(const std::vector<Lighting>& measured);
+
 // Fitted once from the measured times, then asked for any number of times.
 class LightingPredictor {
  public:

@@ -1,5 +1,6 @@
 #include "solve/scene.h"
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <nlohmann/json.hpp>
@@ -39,6 +40,8 @@ nlohmann::json SummaryJson(const AlbedoSummary& s) {
           {"downweighted_fraction", s.downweighted_fraction},
           {"slot_weights", s.slot_weights},
           {"points_filled_neighbours", s.points_filled_neighbours},
+          {"retro_cost_lambert", s.retro_cost_lambert},
+          {"retro_cost_fitted", s.retro_cost_fitted},
           {"seconds", s.seconds}};
 }
 
@@ -57,6 +60,8 @@ AlbedoSummary ReadSummary(const nlohmann::json& j) {
   s.downweighted_fraction = j.value("downweighted_fraction", 0.0);
   s.slot_weights = j.value("slot_weights", std::vector<double>{});
   s.points_filled_neighbours = j.value("points_filled_neighbours", 0);
+  s.retro_cost_lambert = j.value("retro_cost_lambert", std::vector<double>{});
+  s.retro_cost_fitted = j.value("retro_cost_fitted", std::vector<double>{});
   s.seconds = j.value("seconds", 0.0);
   return s;
 }
@@ -217,6 +222,7 @@ void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const
   }
   j["views"] = views;
   j["holdout_slots"] = scene.holdout_slots;
+  j["environment"] = {{"ground_retro", scene.env_ground_retro}};
   j["timings"] = scene.timings;
   j["provenance"] = {{"inputs_sha256", scene.inputs_sha256},
                      {"rouen_version", scene.rouen_version},
@@ -231,7 +237,15 @@ void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const
   std::vector<Eigen::Vector3d> info(n);
   for (size_t i = 0; i < n; ++i) info[i] = Eigen::Vector3d(a.observations[i], a.flags[i], 0);
   WriteImage((dir / "albedo_info.exr").string(), PackPointValues(info), StoredType::kFloat);
-  j["atlas"] = WriteAlbedoAtlases(dir, scene, mesh ? *mesh : ReadObj(model_path.string()));
+  const Mesh read_mesh = mesh ? Mesh{} : ReadObj(model_path.string());
+  const Mesh& m = mesh ? *mesh : read_mesh;
+  // Per block by name: the retro parameter of the sun term (solve/retro.h; 0 is Lambert).
+  nlohmann::json retro = nlohmann::json::object();
+  for (int b = 0; b < static_cast<int>(m.block_names.size()); ++b) {
+    retro[m.block_names[b]] = BlockRetro(a.retro, b);
+  }
+  j["albedo"]["retro"] = retro;
+  j["atlas"] = WriteAlbedoAtlases(dir, scene, m);
   WriteFileAtomic(dir / "scene.json", j.dump(1));
 }
 
@@ -246,6 +260,7 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
   }
   size_t points = 0;
   std::string files[3], model_sha256;
+  nlohmann::json retro;
   try {
     scene.format_version = j.at("format_version").get<int>();
     if (scene.format_version != 1) {
@@ -296,6 +311,12 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
       scene.holdout_slots.push_back(slot);
     }
     if (j.contains("timings")) scene.timings = j.at("timings");
+    if (j.contains("environment")) {
+      scene.env_ground_retro = j.at("environment").value("ground_retro", 0.0);
+      if (!(scene.env_ground_retro >= kRetroMin && scene.env_ground_retro <= kRetroMax))
+        throw Error("environment.ground_retro must be in [" + std::to_string(kRetroMin) + ", " +
+                    std::to_string(kRetroMax) + "]");
+    }
     if (j.contains("provenance")) {
       const auto& p = j.at("provenance");
       scene.inputs_sha256 = p.at("inputs_sha256").get<std::string>();
@@ -308,6 +329,8 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
     files[1] = a.at("se").get<std::string>();
     files[2] = a.at("info").get<std::string>();
     scene.albedo.summary = ReadSummary(a.value("summary", nlohmann::json::object()));
+    retro = a.value("retro", nlohmann::json::object());
+    if (!retro.is_object()) throw Error("albedo.retro is not an object");
   } catch (const nlohmann::json::exception& e) {
     throw Error(json_path.string() + ": " + e.what());
   } catch (const Error& e) {
@@ -320,6 +343,21 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
                 " is not the model the scene was solved with (its sha256 differs)");
   }
   Mesh mesh = ReadObj(model_path.string());
+  scene.albedo.retro.assign(mesh.block_names.size(), 0.0);
+  for (const auto& [name, value] : retro.items()) {
+    const auto it = std::find(mesh.block_names.begin(), mesh.block_names.end(), name);
+    if (it == mesh.block_names.end()) {
+      throw Error(json_path.string() + ": albedo.retro names block '" + name + "', which " +
+                  model_path.string() + " does not have");
+    }
+    const double r = value.is_number() ? value.get<double>() : std::nan("");
+    if (!(r >= kRetroMin && r <= kRetroMax)) {
+      throw Error(json_path.string() + ": albedo.retro of block '" + name +
+                  "' must be a number in [" + std::to_string(kRetroMin) + ", " +
+                  std::to_string(kRetroMax) + "]");
+    }
+    scene.albedo.retro[it - mesh.block_names.begin()] = r;
+  }
   SurfaceGrid grid = BuildSurfaceGrid(mesh, scene.grid_options);
   if (static_cast<size_t>(grid.size()) != points) {
     throw Error(json_path.string() + ": says " + std::to_string(points) + " grid points but " +

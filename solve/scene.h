@@ -55,6 +55,9 @@ struct SceneModel {
   HemisphereOptions hemisphere;  // the irradiance's gathering pattern over that grid
   std::vector<SlotModel> slots;
   AlbedoResult albedo;
+  // The environment's ground reflects the sun with RetroFactor(this) when predicted for a novel
+  // time (solve/env_stereo.h EnvStereoOptions::ground_retro; 0: Lambert).
+  double env_ground_retro = 0;
   std::string model_file;  // OBJ, relative to the scene folder
   std::map<std::string, SceneView> views;
   std::vector<int> holdout_slots;  // slots whose architecture photos the albedos did not use

@@ -3,8 +3,12 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <nlohmann/json.hpp>
+#include <utility>
+#include <vector>
 
 #include "core/error.h"
+#include "core/files.h"
 #include "core/image.h"
 #include "solve/test_scenes.h"
 
@@ -55,6 +59,7 @@ SceneModel MakeScene(const Mesh& mesh, SurfaceGrid* grid_out) {
   s.options = {{"quick", true}, {"grid", {{"spacing_m", 0.6}}}};
   s.hemisphere.directions = 64;
   s.hemisphere.seed = 7;
+  s.albedo.retro = {0.0, 0.75};  // plaza Lambertian, shaft rough
   s.albedo.summary.points = grid.size();
   s.albedo.summary.residual_rms_rel = 0.0123;
   if (grid_out) *grid_out = grid;
@@ -99,6 +104,7 @@ TEST(SceneTest, RoundTrip) {
     EXPECT_EQ(r.albedo.flags[i], s.albedo.flags[i]);
   }
   EXPECT_EQ(r.albedo.summary.residual_rms_rel, 0.0123);
+  EXPECT_EQ(r.albedo.retro, s.albedo.retro);
   // Views keep their cameras exactly (JSON doubles round-trip).
   ASSERT_EQ(r.views.size(), 1u);
   const SceneView& v = r.views.at("slot1/architecture/view0");
@@ -116,6 +122,28 @@ TEST(SceneTest, RoundTrip) {
   EXPECT_EQ(r.options, s.options);
   EXPECT_EQ(r.hemisphere.directions, 64);
   EXPECT_EQ(r.hemisphere.seed, 7u);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(SceneTest, BadRetroIsRefusedNamingTheBlock) {
+  const auto dir = TempDir("retro");
+  const Mesh mesh = MakeMesh();
+  WriteScene(dir, MakeScene(mesh, nullptr), &mesh);
+  const std::string text = ReadFileToString(dir / "scene.json");
+  for (const auto& [bad, expect] :
+       std::vector<std::pair<std::string, std::string>>{{"{\"shaft\": 7}", "block 'shaft'"},
+                                                        {"{\"tower\": 0.5}", "block 'tower'"},
+                                                        {"[1, 2]", "albedo.retro"}}) {
+    nlohmann::json j = nlohmann::json::parse(text);
+    j["albedo"]["retro"] = nlohmann::json::parse(bad);
+    WriteFileAtomic(dir / "scene.json", j.dump());
+    try {
+      ReadScene(dir);
+      ADD_FAILURE() << bad << " was accepted";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(expect), std::string::npos) << e.what();
+    }
+  }
   std::filesystem::remove_all(dir);
 }
 

@@ -177,6 +177,9 @@ void SkyInterpOptions::Validate() const {
   if (max_iterations < 1)
     throw Error("sky interpolation: max_iterations must be >= 1, got " +
                 std::to_string(max_iterations));
+  if (!(max_extrapolation_deg >= 0) || !(max_extrapolation_deg <= 90))
+    throw Error("sky interpolation: max_extrapolation_deg must be in [0, 90], got " +
+                Num(max_extrapolation_deg));
   if (!(coincident_rad >= 0) || !(coincident_rad < 0.1))
     throw Error("sky interpolation: coincident_rad must be in [0, 0.1) radians, got " +
                 Num(coincident_rad));
@@ -193,13 +196,14 @@ std::vector<double> SkyInterpWeights(const std::vector<TimedSky>& skies,
   for (size_t j = 0; j < skies.size(); ++j) {
     const Eigen::Vector3d sj = UnitDirection(
         skies[j].sky.sun_dir, "sky interpolation: input " + std::to_string(j) + " sun direction");
-    dist[j] = AngleBetween(s, sj);
+    dist[j] = options.mode == SkyInterpMode::kElevation ? std::abs(ElevationOf(s) - ElevationOf(sj))
+                                                        : AngleBetween(s, sj);
     if (dist[j] <= options.coincident_rad) ++coincident;
   }
   std::vector<double> w(skies.size(), 0.0);
   double total = 0;
   for (size_t j = 0; j < skies.size(); ++j) {
-    // §5.1: weight proportional to the reciprocal of the angular distance between suns.
+    // §5.1: weight proportional to the reciprocal of the distance between suns.
     if (coincident > 0) {
       w[j] = dist[j] <= options.coincident_rad ? 1.0 : 0.0;
     } else {
@@ -211,12 +215,68 @@ std::vector<double> SkyInterpWeights(const std::vector<TimedSky>& skies,
   return w;
 }
 
+namespace {
+
+// The estimate for the new sun of a positive part known at every input: the weighted mean
+// (kAngularDistance), or the weighted least-squares line of log value against log sin of the
+// inputs' sun elevations evaluated at `at_rad` (kElevation; the weighted mean of the logs when
+// the weighted inputs share one elevation).
+class PartEstimate {
+ public:
+  PartEstimate(const std::vector<double>& w, const std::vector<double>& elevation, double at_rad,
+               SkyInterpMode mode)
+      : w_(w), mode_(mode) {
+    if (mode_ != SkyInterpMode::kElevation) return;
+    // A power law in sin(elevation) (from 1 degree up): straight in log-log.
+    auto x = [](double e) { return std::log(std::sin(std::max(e, kDeg))); };
+    double mean = 0;
+    for (size_t j = 0; j < w.size(); ++j) mean += w[j] * x(elevation[j]);
+    dx_.resize(w.size());
+    double sxx = 0;
+    for (size_t j = 0; j < w.size(); ++j) {
+      dx_[j] = x(elevation[j]) - mean;
+      sxx += w[j] * dx_[j] * dx_[j];
+    }
+    sxx_ = sxx;
+    at_ = x(at_rad) - mean;
+  }
+
+  double operator()(const std::vector<double>& v) const {
+    double m = 0;
+    if (mode_ != SkyInterpMode::kElevation) {
+      for (size_t j = 0; j < v.size(); ++j) m += w_[j] * v[j];
+      return m;
+    }
+    for (size_t j = 0; j < v.size(); ++j) m += w_[j] * std::log(v[j]);
+    double sxy = 0;
+    for (size_t j = 0; j < v.size(); ++j) sxy += w_[j] * dx_[j] * (std::log(v[j]) - m);
+    // One elevation (to a thousandth of a degree squared): no slope to follow.
+    const double slope = sxx_ > 1e-10 ? sxy / sxx_ : 0.0;
+    return std::exp(m + slope * at_);
+  }
+
+ private:
+  const std::vector<double>& w_;
+  SkyInterpMode mode_;
+  std::vector<double> dx_;
+  double sxx_ = 0, at_ = 0;
+};
+
+}  // namespace
+
 SkyModel InterpolateSky(const std::vector<TimedSky>& skies, const Eigen::Vector3d& sun_dir,
                         const SkyInterpOptions& options, SkyInterpSummary* summary) {
   const auto t0 = std::chrono::steady_clock::now();
   const std::vector<double> w = SkyInterpWeights(skies, sun_dir, options);
   const Eigen::Vector3d s = sun_dir.normalized();
   const size_t k = skies.size();
+  std::vector<double> elevation(k);
+  for (size_t j = 0; j < k; ++j) elevation[j] = ElevationOf(skies[j].sky.sun_dir);
+  const auto [lowest, highest] = std::minmax_element(elevation.begin(), elevation.end());
+  const double reach =
+      options.mode == SkyInterpMode::kElevation ? options.max_extrapolation_deg * kDeg : 0.0;
+  const double at_elevation = std::clamp(ElevationOf(s), *lowest - reach, *highest + reach);
+  const PartEstimate estimate(w, elevation, at_elevation, options.mode);
   for (size_t j = 0; j < k; ++j) {
     for (int c = 0; c < 3; ++c) {
       const SkyParams& p = skies[j].sky.channel[c];
@@ -243,17 +303,17 @@ SkyModel InterpolateSky(const std::vector<TimedSky>& skies, const Eigen::Vector3
   out.sun_dir = s;
   SkyInterpSummary sum;
   sum.weights = w;
+  sum.evaluated_elevation_rad = at_elevation;
   std::vector<double> rel_errors;
   rel_errors.reserve(grid.size() * 3);
   for (int c = 0; c < 3; ++c) {
-    // Weighted averages of the three parts, and of the parameters as the start.
-    double lz = 0;
+    // The three parts for the new sun (each input's value, then PartEstimate), and the
+    // weighted average parameters as the refit's start.
     double start[6] = {0, 0, 0, 0, 0, 0};  // a, b, c, d, e, h
-    std::vector<double> bg_avg(rings + 1, 0.0), sa_avg(grid.size(), 0.0);
+    std::vector<double> lz_in(k), bg_in((rings + 1) * k), sa_in(grid.size() * k);
     for (size_t j = 0; j < k; ++j) {
-      if (w[j] == 0) continue;
       const SkyParams& p = skies[j].sky.channel[c];
-      lz += w[j] * p.Lz;
+      lz_in[j] = p.Lz;
       const double pv[6] = {p.a, p.b, p.c, p.d, p.e, p.h};
       for (int q = 0; q < 6; ++q) start[q] += w[j] * pv[q];
       for (int i = 0; i <= rings; ++i) {
@@ -262,7 +322,7 @@ SkyModel InterpolateSky(const std::vector<TimedSky>& skies, const Eigen::Vector3
           throw Error("sky interpolation: input " + std::to_string(j) + " channel " +
                       std::to_string(c) + " has a non-positive background part Bg at zenith " +
                       "angle " + Num(ring_xi[i] * 180 / kPi) + " deg");
-        bg_avg[i] += w[j] * bg;
+        bg_in[i * k + j] = bg;
       }
       for (size_t i = 0; i < grid.size(); ++i) {
         const double sa = SkyScattering(p, gamma[i]);
@@ -270,8 +330,22 @@ SkyModel InterpolateSky(const std::vector<TimedSky>& skies, const Eigen::Vector3
           throw Error("sky interpolation: input " + std::to_string(j) + " channel " +
                       std::to_string(c) + " has a non-positive scattering part Sa at " +
                       Num(gamma[i] * 180 / kPi) + " deg from the sun");
-        sa_avg[i] += w[j] * sa;
+        sa_in[i * k + j] = sa;
       }
+    }
+    // An input's Lz may be 0 (a black channel): the log line needs positive values.
+    const bool lz_positive = *std::min_element(lz_in.begin(), lz_in.end()) > 0;
+    const double lz = lz_positive ? estimate(lz_in)
+                                  : PartEstimate(w, elevation, at_elevation,
+                                                 SkyInterpMode::kAngularDistance)(lz_in);
+    std::vector<double> bg_avg(rings + 1), sa_avg(grid.size()), values(k);
+    for (int i = 0; i <= rings; ++i) {
+      std::copy_n(bg_in.begin() + i * k, k, values.begin());
+      bg_avg[i] = estimate(values);
+    }
+    for (size_t i = 0; i < grid.size(); ++i) {
+      std::copy_n(sa_in.begin() + i * k, k, values.begin());
+      sa_avg[i] = estimate(values);
     }
 
     // Refit Bg: {a, b}.

@@ -31,7 +31,23 @@ struct TimedSky {
   Eigen::Vector3d sun_radiance = Eigen::Vector3d::Zero();
 };
 
+// How the inputs are combined for a new sun.
+enum class SkyInterpMode {
+  // §5.1 as written: each part averaged with weights 1 / (angular distance between suns).
+  kAngularDistance,
+  // Beyond the paper: eq. 9 describes the sky relative to the sun (xi, gamma), so its parts
+  // depend on the sun's elevation, not its azimuth. Weights 1 / |elevation difference|, and each
+  // part is a weighted power law in sin(elevation) (a straight line of log value against log
+  // sin e), evaluated at the new elevation (clamped to max_extrapolation_deg beyond the inputs'
+  // range); a power law in every part is one in the radiance, so a sun lower than every
+  // input's gets a darker sky, darkening faster as it nears the horizon.
+  kElevation,
+};
+
 struct SkyInterpOptions {
+  SkyInterpMode mode = SkyInterpMode::kElevation;
+  // kElevation: how far beyond the inputs' elevations the line is followed (degrees).
+  double max_extrapolation_deg = 10;
   // Equal-area grid on the upper hemisphere where the averaged parts are evaluated and
   // refitted: `grid_zenith` rings uniform in cos(xi) times `grid_azimuth` columns.
   int grid_zenith = 40;
@@ -52,6 +68,9 @@ struct SkyPartFitSummary {
 
 struct SkyInterpSummary {
   std::vector<double> weights;  // per input, summing to 1
+  // The sun elevation (radians) the parts were estimated at: the new sun's, clamped to the
+  // inputs' range (kAngularDistance) or to max_extrapolation_deg beyond it (kElevation).
+  double evaluated_elevation_rad = 0;
   std::array<SkyPartFitSummary, 3> channel;
   // |L_fit - L_avg| / L_avg over the grid, L_avg = Lz_avg Bg_avg Sa_avg (all channels).
   double rel_error_median = 0;
@@ -64,7 +83,9 @@ struct SkyInterpSummary {
   double seconds = 0;
 };
 
-// Inverse-angular-distance weights of the inputs for a sun at `sun_dir` (§5.1), summing to 1.
+// The inputs' weights for a sun at `sun_dir` (options.mode), summing to 1: 1 / angular distance
+// between suns (§5.1) or 1 / elevation difference; an input within coincident_rad takes the
+// weight alone (shared with any other such input).
 // Throws rouen::Error for no inputs or a sun direction that is not finite and non-zero.
 std::vector<double> SkyInterpWeights(const std::vector<TimedSky>& skies,
                                      const Eigen::Vector3d& sun_dir,

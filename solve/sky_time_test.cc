@@ -127,6 +127,13 @@ TEST(InterpolateSky, TargetAtAnInputGivesThatSky) {
   EXPECT_NEAR(sum.sun_radiance[0], skies[1].sun_radiance[0], 1e-9);
 }
 
+// The paper's mode (§5.1 as written).
+SkyInterpOptions PaperInterp() {
+  SkyInterpOptions o;
+  o.mode = SkyInterpMode::kAngularDistance;
+  return o;
+}
+
 TEST(InterpolateSky, WeightsAreInverseAngularDistance) {
   const std::vector<TimedSky> skies = {ClearSky(SunAt(90, 25)), HazySky(SunAt(180, 60)),
                                        ClearSky(SunAt(260, 35), 1.3)};
@@ -137,12 +144,12 @@ TEST(InterpolateSky, WeightsAreInverseAngularDistance) {
     expected.push_back(1.0 / std::acos(target.dot(t.sky.sun_dir)));
     total += expected.back();
   }
-  const std::vector<double> w = SkyInterpWeights(skies, target, {});
+  const std::vector<double> w = SkyInterpWeights(skies, target, PaperInterp());
   ASSERT_EQ(w.size(), 3u);
   for (int j = 0; j < 3; ++j) EXPECT_NEAR(w[j], expected[j] / total, 1e-12);
 
   SkyInterpSummary sum;
-  const SkyModel out = InterpolateSky(skies, target, {}, &sum);
+  const SkyModel out = InterpolateSky(skies, target, PaperInterp(), &sum);
   for (int c = 0; c < 3; ++c) {
     double lz = 0;
     for (int j = 0; j < 3; ++j) lz += w[j] * skies[j].sky.channel[c].Lz;
@@ -195,7 +202,7 @@ TEST(InterpolateSky, ExactWhenTheAverageIsOfTheSameForm) {
   }
   const Eigen::Vector3d target = SunAt(140, 42);
   SkyInterpSummary sum;
-  const SkyModel out = InterpolateSky({a, b}, target, {}, &sum);
+  const SkyModel out = InterpolateSky({a, b}, target, PaperInterp(), &sum);
   const double wa = sum.weights[0], wb = sum.weights[1];
   for (int c = 0; c < 3; ++c) {
     const SkyParams &pa = a.sky.channel[c], &pb = b.sky.channel[c], &q = out.channel[c];
@@ -207,6 +214,57 @@ TEST(InterpolateSky, ExactWhenTheAverageIsOfTheSameForm) {
     EXPECT_NEAR(q.b, pa.b, 1e-6);
   }
   EXPECT_LT(sum.rel_error_max, 1e-6);
+}
+
+TEST(InterpolateSky, ElevationModeWeighsByElevationAndIgnoresAzimuth) {
+  const std::vector<TimedSky> skies = {ClearSky(SunAt(90, 25)), HazySky(SunAt(180, 60)),
+                                       ClearSky(SunAt(260, 25), 1.3)};
+  const Eigen::Vector3d target = SunAt(150, 45);
+  const std::vector<double> w = SkyInterpWeights(skies, target, {});
+  // 1 / |elevation difference|: 20, 15, 20 degrees.
+  const double total = 1 / 20.0 + 1 / 15.0 + 1 / 20.0;
+  EXPECT_NEAR(w[0], (1 / 20.0) / total, 1e-12);
+  EXPECT_NEAR(w[1], (1 / 15.0) / total, 1e-12);
+  EXPECT_NEAR(w[2], w[0], 1e-12);
+  // The same elevation at another azimuth gets the same sky, turned with its sun.
+  const SkyModel a = InterpolateSky(skies, SunAt(150, 45), {}, nullptr);
+  const SkyModel b = InterpolateSky(skies, SunAt(300, 45), {}, nullptr);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(a.channel[c].Lz, b.channel[c].Lz, 1e-12 * a.channel[c].Lz);
+    EXPECT_NEAR(a.channel[c].c, b.channel[c].c, 1e-6 * std::abs(a.channel[c].c));
+    EXPECT_NEAR(a.channel[c].d, b.channel[c].d, 1e-6 * std::abs(a.channel[c].d));
+  }
+}
+
+TEST(InterpolateSky, ElevationModeFollowsALogLinearSkyBeyondTheInputs) {
+  // Skies of one shape whose brightness is sin(elevation)^k: the weighted power law is exact
+  // for them, inside the inputs' range and below it, up to max_extrapolation_deg.
+  const double k = 0.6;
+  auto bright = [&](double el) { return std::pow(std::sin(el * kDeg), k); };
+  auto sky_at = [&](double az, double el) {
+    TimedSky t = ClearSky(SunAt(az, el));
+    for (int c = 0; c < 3; ++c) t.sky.channel[c].Lz = 0.5 * (c + 1) * bright(el);
+    return t;
+  };
+  const std::vector<TimedSky> skies = {sky_at(100, 20), sky_at(140, 42), sky_at(200, 50),
+                                       sky_at(240, 34)};
+  for (double el : {27.0, 45.0, 17.0, 12.0}) {
+    SkyInterpSummary sum;
+    const SkyModel out = InterpolateSky(skies, SunAt(260, el), {}, &sum);
+    EXPECT_NEAR(sum.evaluated_elevation_rad, el * kDeg, 1e-12);
+    for (int c = 0; c < 3; ++c) {
+      const double want = 0.5 * (c + 1) * bright(el);
+      EXPECT_NEAR(out.channel[c].Lz, want, 1e-9 * want) << el;
+    }
+  }
+  // 15 degrees below the lowest input: followed for 10, then held.
+  SkyInterpSummary sum;
+  const SkyModel out = InterpolateSky(skies, SunAt(260, 5), {}, &sum);
+  EXPECT_NEAR(sum.evaluated_elevation_rad, 10 * kDeg, 1e-12);
+  EXPECT_NEAR(out.channel[0].Lz, 0.5 * bright(10), 1e-9);
+  // The paper's weighted mean cannot go below the dimmest input.
+  const SkyModel paper = InterpolateSky(skies, SunAt(260, 12), PaperInterp(), nullptr);
+  EXPECT_GT(paper.channel[0].Lz, 0.5 * bright(20));
 }
 
 TEST(InterpolateSky, SymmetricInputsAndOrder) {

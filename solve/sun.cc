@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <limits>
 #include <string>
 
 #include "core/angles.h"
@@ -24,6 +26,12 @@ double TriangleSolidAngle(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
   return 2 * std::atan2(num, den);
 }
 
+std::string Deg(double rad) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3g", rad / kDeg);
+  return buf;
+}
+
 }  // namespace
 
 void SunOptions::Validate() const {
@@ -41,6 +49,22 @@ void SunOptions::Validate() const {
     throw Error(
         "SunOptions: need disc_radius_factor <= annulus_inner_factor < "
         "annulus_outer_factor <= 50");
+  }
+  // A disc smaller than a pixel lies within 0.71 pixel (half a diagonal) of some pixel centre.
+  if (!std::isfinite(disc_min_pixels) || disc_min_pixels < 1 || disc_min_pixels > 100) {
+    throw Error("SunOptions: disc_min_pixels must be in [1, 100], got " +
+                std::to_string(disc_min_pixels));
+  }
+  if (!std::isfinite(annulus_inner_min_pixels) || !std::isfinite(annulus_outer_min_pixels) ||
+      annulus_inner_min_pixels < 0 || annulus_outer_min_pixels < annulus_inner_min_pixels + 1 ||
+      annulus_outer_min_pixels > 200) {
+    throw Error(
+        "SunOptions: need 0 <= annulus_inner_min_pixels and annulus_inner_min_pixels + 1 <= "
+        "annulus_outer_min_pixels <= 200");
+  }
+  if (!std::isfinite(clip_radiance) || clip_radiance < 0) {
+    throw Error("SunOptions: clip_radiance must be 0 (off) or positive, got " +
+                std::to_string(clip_radiance));
   }
   if (centroid_iterations < 1) throw Error("SunOptions: centroid_iterations must be positive");
 }
@@ -79,12 +103,13 @@ SunMeasurement MeasureSun(const Image& hdr, const Intrinsics& k, const Pose& pos
 
   const double r_sun = std::acos(1 - sun_solid_angle_sr / (2 * kPi));  // angular radius, rad
   const double search = options.search_radius_deg * kDeg;
-  const double disc = options.disc_radius_factor * r_sun;
-  const double inner = options.annulus_inner_factor * r_sun;
-  const double outer = options.annulus_outer_factor * r_sun;
+  // Equirect columns wrap around (column -1 is column width - 1); other models have borders.
+  const bool equirect = k.projection == Projection::kEquirect;
+  auto wrap_x = [&](int x) { return equirect ? ((x % k.width) + k.width) % k.width : x; };
   // Work in the camera frame.
   const Eigen::Vector3d pred = (pose.rotation.transpose() * predicted_sun_dir_enu).normalized();
   // Pixel access: radiance (3 channels), validity, centre ray, solid angle.
+  const double clip = options.clip_radiance;
   auto pixel_radiance = [&](int x, int y, bool* good) {
     const size_t p = static_cast<size_t>(y) * k.width + x;
     bool ok = !(valid_mask && !valid_mask->empty() && (*valid_mask)[p] == 0);
@@ -93,7 +118,7 @@ SunMeasurement MeasureSun(const Image& hdr, const Intrinsics& k, const Pose& pos
       const double val = hdr.data[p * hdr.channels + (hdr.channels == 1 ? 0 : ch)];
       const bool finite = std::isfinite(val) && val >= 0;
       v[ch] = finite ? val : 0.0;
-      ok = ok && finite;
+      ok = ok && finite && !(clip > 0 && std::abs(val - clip) <= 1e-4 * clip);
     }
     if (good) *good = ok;
     return v;
@@ -102,56 +127,108 @@ SunMeasurement MeasureSun(const Image& hdr, const Intrinsics& k, const Pose& pos
     return Unproject(k, Eigen::Vector2d(x + 0.5, y + 0.5)).normalized();
   };
   auto pixel_omega = [&](int x, int y) {
+    if (equirect) {  // exact: a band of latitude times a range of azimuth
+      const double el0 = 0.5 * kPi - y * kPi / k.height;
+      const double el1 = 0.5 * kPi - (y + 1) * kPi / k.height;
+      return 2 * kPi / k.width * (std::sin(el0) - std::sin(el1));
+    }
     const Eigen::Vector3d a = Unproject(k, Eigen::Vector2d(x, y)).normalized();
     const Eigen::Vector3d b = Unproject(k, Eigen::Vector2d(x + 1, y)).normalized();
     const Eigen::Vector3d c = Unproject(k, Eigen::Vector2d(x + 1, y + 1)).normalized();
     const Eigen::Vector3d d = Unproject(k, Eigen::Vector2d(x, y + 1)).normalized();
     return TriangleSolidAngle(a, b, c) + TriangleSolidAngle(a, c, d);
   };
-  // Angular size of a pixel near pixel coordinates `at` (the smaller of the two axes).
-  auto pixel_angle = [&](const Eigen::Vector2d& at) {
+  // Angular sizes of a pixel's two sides near pixel coordinates `at` (x: across columns).
+  auto pixel_sides = [&](const Eigen::Vector2d& at) {
     const Eigen::Vector2d c(std::clamp(at.x(), 1.0, k.width - 1.0),
                             std::clamp(at.y(), 1.0, k.height - 1.0));
     const double ax =
         Angle(Unproject(k, c - Eigen::Vector2d(0.5, 0)), Unproject(k, c + Eigen::Vector2d(0.5, 0)));
     const double ay =
         Angle(Unproject(k, c - Eigen::Vector2d(0, 0.5)), Unproject(k, c + Eigen::Vector2d(0, 0.5)));
-    const double a = std::min(ax, ay);
-    if (!(a > 0) || !std::isfinite(a)) throw Error("sun: degenerate camera model near the sun");
-    return a;
+    if (!(std::min(ax, ay) > 0) || !std::isfinite(ax) || !std::isfinite(ay)) {
+      throw Error("sun: degenerate camera model near the sun");
+    }
+    return Eigen::Vector2d(ax, ay);
   };
-  struct Box {
-    int x0, y0, x1, y1;  // [x0, x1) x [y0, y1)
-  };
-  // Pixels within `radius` (rad) of the camera-frame direction `at`, with margin.
-  auto box_around = [&](const Eigen::Vector3d& at, double radius) {
+  // The smaller side (lattice spacing, box sizes) and the larger one (window floors).
+  auto pixel_angle = [&](const Eigen::Vector2d& at) { return pixel_sides(at).minCoeff(); };
+  auto pixel_footprint = [&](const Eigen::Vector2d& at) { return pixel_sides(at).maxCoeff(); };
+  auto project = [&](const Eigen::Vector3d& at, const char* what) {
     const auto px = Project(k, at);
     if (!px || !px->allFinite()) {
-      throw Error("sun: the sun direction is outside the camera's field of view");
+      throw Error(std::string("sun: ") + what + " is outside the camera's field of view");
+    }
+    return *px;
+  };
+
+  // Window radii (rad) around a camera-frame direction: disc, annulus inner and outer.
+  struct Windows {
+    double disc, inner, outer, pixel;
+  };
+  auto windows_at = [&](const Eigen::Vector3d& at) {
+    Windows w;
+    w.pixel = pixel_footprint(project(at, "the sun direction"));
+    w.disc = std::max(options.disc_radius_factor * r_sun, options.disc_min_pixels * w.pixel);
+    w.inner = std::max(options.annulus_inner_factor * r_sun,
+                       w.disc + options.annulus_inner_min_pixels * w.pixel);
+    w.outer = std::max(options.annulus_outer_factor * r_sun,
+                       w.disc + options.annulus_outer_min_pixels * w.pixel);
+    return w;
+  };
+
+  struct Box {
+    int x0, y0, x1, y1;  // [x0, x1) x [y0, y1); equirect x wraps (wrap_x)
+  };
+  // Pixels whose centres may lie within `radius` (rad) of the camera-frame direction `at`.
+  auto box_around = [&](const Eigen::Vector3d& at, double radius) {
+    const Eigen::Vector2d px = project(at, "the sun direction");
+    if (equirect) {
+      // Rows of the elevation band, columns of the widest azimuth span within it (all of them
+      // when the band reaches a pole).
+      const double el = std::asin(std::clamp(-at.y() / at.norm(), -1.0, 1.0));
+      const double top = el + radius, bottom = el - radius;
+      Box b;
+      b.y0 = std::max(0, static_cast<int>(std::floor((0.5 * kPi - top) / kPi * k.height)) - 1);
+      b.y1 = std::min(k.height,
+                      static_cast<int>(std::ceil((0.5 * kPi - bottom) / kPi * k.height)) + 1);
+      const double max_abs_el = std::max(std::abs(top), std::abs(bottom));
+      int half = k.width;
+      if (max_abs_el < 0.5 * kPi) {
+        const double s = std::sin(radius) / std::cos(max_abs_el);
+        if (s < 1) half = static_cast<int>(std::ceil(std::asin(s) / (2 * kPi) * k.width)) + 2;
+      }
+      if (2 * half + 1 >= k.width) {
+        b.x0 = 0;
+        b.x1 = k.width;
+      } else {
+        const int cx = static_cast<int>(std::floor(px.x()));
+        b.x0 = cx - half;
+        b.x1 = cx + half + 1;
+      }
+      if (b.y0 >= b.y1) throw Error("sun: the sun is outside the image");
+      return b;
     }
     const double half = std::min<double>(std::max(k.width, k.height),
-                                         std::ceil(1.3 * radius / pixel_angle(*px)) + 2);
-    Box b{std::max(0, static_cast<int>(std::floor(px->x() - half))),
-          std::max(0, static_cast<int>(std::floor(px->y() - half))),
-          std::min(k.width, static_cast<int>(std::ceil(px->x() + half))),
-          std::min(k.height, static_cast<int>(std::ceil(px->y() + half)))};
+                                         std::ceil(1.3 * radius / pixel_angle(px)) + 2);
+    Box b{std::max(0, static_cast<int>(std::floor(px.x() - half))),
+          std::max(0, static_cast<int>(std::floor(px.y() - half))),
+          std::min(k.width, static_cast<int>(std::ceil(px.x() + half))),
+          std::min(k.height, static_cast<int>(std::ceil(px.y() + half)))};
     if (b.x0 >= b.x1 || b.y0 >= b.y1) throw Error("sun: the sun is outside the image");
     return b;
   };
 
   // Start: the brightest 3x3 neighbourhood of a lattice (spacing at most a third of the
   // disc radius, so some lattice point falls on the disc) within the search radius.
-  const auto pred_px = Project(k, pred);
-  if (!pred_px || !pred_px->allFinite()) {
-    throw Error("sun: the predicted sun direction is outside the camera's field of view");
-  }
-  const int step = std::max(1, static_cast<int>(r_sun / pixel_angle(*pred_px) / 3));
+  const Eigen::Vector2d pred_px = project(pred, "the predicted sun direction");
+  const int step = std::max(1, static_cast<int>(r_sun / pixel_angle(pred_px) / 3));
   const Box sb = box_around(pred, search);
   const int lw = (sb.x1 - sb.x0 + step - 1) / step, lh = (sb.y1 - sb.y0 + step - 1) / step;
   std::vector<double> lum(static_cast<size_t>(lw) * lh, -1.0);  // -1: outside the search
   for (int j = 0; j < lh; ++j) {
     for (int i = 0; i < lw; ++i) {
-      const int x = sb.x0 + i * step, y = sb.y0 + j * step;
+      const int x = wrap_x(sb.x0 + i * step), y = sb.y0 + j * step;
       if (Angle(pixel_dir(x, y), pred) > search) continue;
       lum[static_cast<size_t>(j) * lw + i] = pixel_radiance(x, y, nullptr).mean();
     }
@@ -170,25 +247,27 @@ SunMeasurement MeasureSun(const Image& hdr, const Intrinsics& k, const Pose& pos
       }
       if (sum > best) {
         best = sum;
-        best_x = sb.x0 + i * step;
+        best_x = wrap_x(sb.x0 + i * step);
         best_y = sb.y0 + j * step;
       }
     }
   }
   if (best < 0) throw Error("sun: no pixel of the image lies within the search radius");
 
-  // Background: per-channel median over the annulus, thinned to about 20000 pixels.
-  Eigen::Vector3d bg = Eigen::Vector3d::Zero();
+  // Background: per-channel median over the annulus, thinned to about 20000 pixels, and its
+  // robust spread (1.4826 x median absolute deviation).
+  Eigen::Vector3d bg = Eigen::Vector3d::Zero(), bg_spread = Eigen::Vector3d::Zero();
   int annulus_count = 0;
-  auto background = [&](const Eigen::Vector3d& at) {
-    const Box b = box_around(at, outer);
+  auto background = [&](const Eigen::Vector3d& at, const Windows& w) {
+    const Box b = box_around(at, w.outer);
     const double area = static_cast<double>(b.x1 - b.x0) * (b.y1 - b.y0);
     const int t = std::max(1, static_cast<int>(std::sqrt(area / 40000.0)));
     std::vector<double> ch[3];
     for (int y = b.y0; y < b.y1; y += t) {
-      for (int x = b.x0; x < b.x1; x += t) {
+      for (int xi = b.x0; xi < b.x1; xi += t) {
+        const int x = wrap_x(xi);
         const double a = Angle(pixel_dir(x, y), at);
-        if (a < inner || a > outer) continue;
+        if (a < w.inner || a > w.outer) continue;
         bool good = false;
         const Eigen::Vector3d v = pixel_radiance(x, y, &good);
         if (!good) continue;
@@ -198,23 +277,30 @@ SunMeasurement MeasureSun(const Image& hdr, const Intrinsics& k, const Pose& pos
     annulus_count = static_cast<int>(ch[0].size());
     if (annulus_count < 8) {
       throw Error("sun: only " + std::to_string(annulus_count) +
-                  " background pixels around the disc; is the sun at the image border?");
+                  " valid background pixels in the annulus " + Deg(w.inner) + " to " +
+                  Deg(w.outer) + " deg around the disc; is the sun at the image border?");
     }
-    for (int c3 = 0; c3 < 3; ++c3) bg[c3] = Median(ch[c3]);
+    for (int c3 = 0; c3 < 3; ++c3) {
+      bg[c3] = Median(ch[c3]);
+      for (double& v : ch[c3]) v = std::abs(v - bg[c3]);
+      bg_spread[c3] = 1.4826 * Median(ch[c3]);
+    }
   };
 
-  // Centroid of the background-subtracted brightness within the disc radius, iterated.
+  // Centroid of the background-subtracted brightness within the disc window, iterated.
   Eigen::Vector3d centre = pixel_dir(best_x, best_y);
   for (int it = 0; it < options.centroid_iterations; ++it) {
-    background(centre);
+    const Windows w = windows_at(centre);
+    background(centre, w);
     const double bg_lum = bg.mean();
-    const Box b = box_around(centre, disc);
+    const Box b = box_around(centre, w.disc);
     Eigen::Vector3d sum = Eigen::Vector3d::Zero();
     double total = 0;
     for (int y = b.y0; y < b.y1; ++y) {
-      for (int x = b.x0; x < b.x1; ++x) {
+      for (int xi = b.x0; xi < b.x1; ++xi) {
+        const int x = wrap_x(xi);
         const Eigen::Vector3d d = pixel_dir(x, y);
-        if (Angle(d, centre) > disc) continue;
+        if (Angle(d, centre) > w.disc) continue;
         const double wt = (pixel_radiance(x, y, nullptr).mean() - bg_lum) * pixel_omega(x, y);
         sum += wt * d;
         total += wt;
@@ -233,27 +319,40 @@ SunMeasurement MeasureSun(const Image& hdr, const Intrinsics& k, const Pose& pos
   }
 
   // §3.1: integrate radiance x solid angle over the disc, divide by the sun's solid angle.
-  background(centre);
+  // The window is at least disc_min_pixels wide, so a disc smaller than a pixel, whose pixel
+  // holds disc radiance x sun solid angle / pixel solid angle, adds up to the same energy.
+  const Windows w = windows_at(centre);
+  background(centre, w);
   SunMeasurement m;
   m.background = bg;
   m.annulus_pixels = annulus_count;
+  m.window_radius_deg = w.disc / kDeg;
+  m.pixel_deg = w.pixel / kDeg;
   Eigen::Vector3d integral = Eigen::Vector3d::Zero();
-  const Box b = box_around(centre, disc);
+  double window_omega = 0;
+  const Box b = box_around(centre, w.disc);
   for (int y = b.y0; y < b.y1; ++y) {
-    for (int x = b.x0; x < b.x1; ++x) {
-      if (Angle(pixel_dir(x, y), centre) > disc) continue;
-      if (x == 0 || y == 0 || x == k.width - 1 || y == k.height - 1) {
-        throw Error("sun: the disc touches the image border");
+    for (int xi = b.x0; xi < b.x1; ++xi) {
+      const int x = wrap_x(xi);
+      if (Angle(pixel_dir(x, y), centre) > w.disc) continue;
+      if (!equirect && (x == 0 || y == 0 || x == k.width - 1 || y == k.height - 1)) {
+        throw Error("sun: the disc (window " + Deg(w.disc) + " deg) touches the image border");
       }
       bool good = false;
       const Eigen::Vector3d v = pixel_radiance(x, y, &good);
-      integral += (v - bg) * pixel_omega(x, y);
+      const double omega = pixel_omega(x, y);
+      integral += (v - bg) * omega;
+      window_omega += omega;
       ++m.disc_pixels;
       if (!good) m.any_invalid = true;
     }
   }
   if (m.disc_pixels == 0) throw Error("sun: the disc covers no pixel centre");
   m.radiance = integral / sun_solid_angle_sr;
+  for (int c = 0; c < 3; ++c) {
+    m.radiance_uncertainty[c] = integral[c] > 0 ? bg_spread[c] * window_omega / integral[c]
+                                                : std::numeric_limits<double>::infinity();
+  }
   m.direction_enu = (pose.rotation * centre).normalized();
   m.offset_deg = Angle(m.direction_enu, predicted_sun_dir_enu.normalized()) / kDeg;
   if (!m.radiance.allFinite() || !m.direction_enu.allFinite()) {

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -18,6 +19,7 @@
 #include "core/files.h"
 #include "core/image.h"
 #include "core/mesh.h"
+#include "core/text.h"
 #include "solve/grid.h"
 #include "solve/scene.h"
 #include "tests/cli_util.h"
@@ -106,13 +108,28 @@ TEST(BlenderWorldTest, ImportStatusSolveRenderValidate) {
   // albedos 2x too bright score 1 and 2x too dark 0.5 (held-out photos scaled by 0.5 scored
   // 1.14). Yu & Malik give no figure for it (they compared with photographs by eye); their
   // one stated accuracy is the sky fit's "within 5% at most places". The bound is half the
-  // smallest gross failure, 0.25: it leaves room for what the paper's model does not
-  // represent here and rouen cannot remove, chiefly that Blender's Principled diffuse is not
-  // Lambertian (1.4x brighter for the held-out sun on the south walls of view0): rouen scored
-  // 0.127 predicted and 0.117 measured on this data, and 0.025 / 0.020 on the same world
-  // rendered with Lambertian materials (gen.py --lambert, README.md).
+  // smallest gross failure, 0.25 (the paper's Lambertian model scored 0.127 predicted and
+  // 0.117 measured here: Blender's Principled diffuse is up to 1.4x brighter than Lambert for
+  // the low held-out sun); the figures below hold rouen to what it does now.
   EXPECT_LT(v["predicted"]["rel_rmse"].get<double>(), 0.25) << r.out;
   EXPECT_LT(v["measured"]["rel_rmse"].get<double>(), 0.25) << r.out;
+  // What a user of a relit model expects (the fidelity issue's bar): every view of the
+  // held-out time at 32 dB or better on the building under either lighting, the measured
+  // lighting within 3% median relative error, and the lighting measured at that time not worse
+  // than the lighting predicted from the other times (once it was: 23 against 29 dB). rouen
+  // scored 38-42 dB and 1.7-2.7% measured, 36-42 dB predicted (README.md), the two within 3%
+  // of each other's rel. RMSE; the Lambertian model of the paper scored 23-29 dB. The 5% margin
+  // on "not worse" is the measured lighting's own fit error (its sky fit's p90 is 1.8%), which
+  // can leave it a little behind a prediction that lands closer by chance.
+  for (const nlohmann::json& p : v["photos"]) {
+    const std::string name = p["view"].get<std::string>();
+    EXPECT_GE(p["measured"]["psnr_db"].get<double>(), 32) << name;
+    EXPECT_GE(p["predicted"]["psnr_db"].get<double>(), 32) << name;
+    EXPECT_LE(p["measured"]["median_rel_error"].get<double>(), 0.03) << name;
+    EXPECT_LE(p["measured"]["rel_rmse"].get<double>(),
+              1.05 * p["predicted"]["rel_rmse"].get<double>())
+        << name;
+  }
   // The overall brightness: a 2x albedo error gives 2 or 0.5.
   EXPECT_GT(v["predicted"]["mean_ratio"].get<double>(), 0.8) << r.out;
   EXPECT_LT(v["predicted"]["mean_ratio"].get<double>(), 1.25) << r.out;
@@ -145,11 +162,98 @@ TEST(BlenderWorldTest, ImportStatusSolveRenderValidate) {
                 << Median(vals) << ", median rho_se " << Median(se) << " (" << vals.size()
                 << " observed points)\n";
       // Blender's Principled diffuse is Lambert at normal incidence and brighter at grazing
-      // light, so the sun albedo comes out a little high: rouen's medians were 3-5% above the
-      // base colour on this data. 15% allows for that; a sun measured 2x too bright (sun
-      // frames scaled by 2) gave medians of half the base colour.
-      if (!glossy) EXPECT_NEAR(Median(vals) / want, 1.0, 0.15) << block << " channel " << c;
+      // light; with a Lambertian model the sun albedo came out 3-5% high here. With each
+      // block's retro fitted (solve/retro.h) rho_sun is the albedo seen head-on, as Blender's
+      // base colour is: the medians came within 2%. 5% leaves room for the sun's and sky's
+      // calibration (1% and 2%) and the retro fit; a sun measured 2x too bright (sun frames
+      // scaled by 2) gave medians of half the base colour.
+      if (!glossy) {
+        EXPECT_NEAR(Median(vals) / want, 1.0, 0.05) << block << " channel " << c;
+      }
     }
+  }
+  fs::remove_all(dir);
+}
+
+// A session of the world without its telephoto sun frames, whose sky photos are `sky` (the
+// half-float panoramas, or the float32 ones under the same names).
+fs::path ImportWithoutSunFrames(const fs::path& dir, bool float_sky) {
+  const fs::path photos = dir / "photos";
+  fs::create_directories(photos);
+  std::string list;
+  for (const std::string& line : ReadTextLines((Data() / "list.txt").string(), "list")) {
+    if (line.find("_sun.exr") == std::string::npos) list += line + "\n";
+  }
+  WriteFileAtomic(photos / "list.txt", list);
+  for (const auto& e : fs::directory_iterator(Data())) {
+    const std::string name = e.path().filename().string();
+    if (e.path().extension() != ".exr" || name.find("_sun.exr") != std::string::npos) continue;
+    const bool sky = name.find("_sky_pano.exr") != std::string::npos;
+    const fs::path from = sky && float_sky
+                              ? Data() / "sky_f32" / (name.substr(0, name.size() - 4) + "_f32.exr")
+                              : e.path();
+    fs::copy_file(from, photos / name);
+  }
+  nlohmann::json cameras = nlohmann::json::parse(ReadFileToString(Data() / "cameras.json"));
+  std::function<void(nlohmann::json&)> drop_sun = [&](nlohmann::json& j) {
+    if (!j.is_object()) return;
+    for (auto it = j.begin(); it != j.end();) {
+      if (it.key().find("_sun.exr") != std::string::npos) {
+        it = j.erase(it);
+      } else {
+        drop_sun(it.value());
+        ++it;
+      }
+    }
+  };
+  drop_sun(cameras);
+  WriteFileAtomic(dir / "cameras.json", cameras.dump());
+  const Result r = RunRouen("import --photos " + Q(photos) + " --list " + Q(photos / "list.txt") +
+                            " --cameras " + Q(dir / "cameras.json") + " --site 45,7,300 --model " +
+                            Q(Data() / "building.obj") + " --out " + Q(dir / "s"));
+  EXPECT_EQ(r.code, 0) << r.out;
+  return dir / "s";
+}
+
+// Without the telephoto sun frames the solve looks for the sun in each slot's sky and landscape
+// panoramas (§3.1 from any HDR frame). In half-float EXRs the disc is clipped at 65504, so the
+// solve must refuse them by name rather than take a sun 4-10x too dim.
+TEST(BlenderWorldTest, WithoutSunFramesAClippedPanoramaSunIsRefusedByName) {
+  const fs::path dir = cli_test::TempDir("blender_world_nosun");
+  const fs::path s = ImportWithoutSunFrames(dir, false);
+  Result r = RunRouen("status " + Q(s));
+  EXPECT_EQ(r.code, 0) << r.out;  // a sun bracket is not required of HDR panoramas
+  EXPECT_NE(r.out.find("slot 4 has no sun bracket"), std::string::npos) << r.out;
+  r = RunRouen("solve " + Q(s) + " --out " + Q(dir / "scene") + " --quick");
+  EXPECT_NE(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("slot0/sky/view0: the disc is clipped or saturated"), std::string::npos)
+      << r.out;
+  EXPECT_FALSE(fs::exists(dir / "scene" / "scene.json"));
+  fs::remove_all(dir);
+}
+
+// With float32 sky panoramas (a 360-degree HDR camera, no telephoto sun frame) the sun comes
+// from the panorama, where the disc is smaller than a pixel, and the held-out time is rendered
+// as well as with the sun frames (tests/blender_sun_test.cc: the two suns agree within 1%).
+TEST(BlenderWorldTest, WithoutSunFramesTheSunComesFromAFloatPanorama) {
+  if (!fs::exists(Data() / "sky_f32" / "t0_sky_pano_f32.exr"))
+    GTEST_SKIP() << "no float32 sky panoramas in " << Data() / "sky_f32";
+  const fs::path dir = cli_test::TempDir("blender_world_f32");
+  const fs::path s = ImportWithoutSunFrames(dir, true);
+  Result r = RunRouen("solve " + Q(s) + " --out " + Q(dir / "scene") + " --quick --holdout-slot 4");
+  ASSERT_EQ(r.code, 0) << r.out;
+  for (int k = 0; k < 5; ++k) {
+    const std::string slot =
+        "slot " + std::to_string(k) + ": sun from slot" + std::to_string(k) + "/sky/view0";
+    EXPECT_NE(r.out.find(slot), std::string::npos) << slot << "\n" << r.out;
+  }
+  r = RunRouen("validate " + Q(dir / "scene") + " --session " + Q(s) + " --slot 4 --json " +
+               Q(dir / "v.json"));
+  ASSERT_EQ(r.code, 0) << r.out;
+  const nlohmann::json v = nlohmann::json::parse(ReadFileToString(dir / "v.json"));
+  for (const nlohmann::json& p : v["photos"]) {
+    EXPECT_GE(p["measured"]["psnr_db"].get<double>(), 32) << p["view"];
+    EXPECT_GE(p["predicted"]["psnr_db"].get<double>(), 32) << p["view"];
   }
   fs::remove_all(dir);
 }

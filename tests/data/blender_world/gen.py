@@ -1,6 +1,13 @@
 # An independent validation world for rouen, built from code and rendered by Blender/Cycles.
 #
 #   blender -b --factory-startup --python gen.py -- --out DIR [--rouen PATH] [--scale S]
+#   blender -b --factory-startup --python gen.py -- --out DIR --rouen PATH --sky-pano-float
+#
+# --sky-pano-float renders only the mast sky panorama of each slot again, with the camera,
+# settings and seed of t<k>_sky_pano.exr (samples x --scale), as float32 (PXR24: 24-bit float)
+# in t<k>_sky_pano_f32.exr, where the sun disc (~2e6) is not clipped at half float's 65504. It
+# writes nothing else (no building.obj, list.txt, cameras.json, truth.json or checks.json).
+# sky_f32/ holds them at --scale 16 (README.md says why).
 #
 # A campanile (a 6 x 6 x 24 m tower with a pyramid roof and a 12 x 8 x 7 m annex) on a large
 # ground plane with a wall, two boxes and two trees around it, lit by Cycles' Nishita sky
@@ -535,6 +542,26 @@ def mask_check(ob, kind, k, pose, tris, building, others, world_node_strength, t
 # ---------------------------------------------------------------------------------------------
 
 
+def render_sky_pano_float(out, rouen, slots, sky, cams, samples):
+    """The mast sky panorama of each slot again, as the main loop renders it (same camera,
+    samples and seed: 1000 * slot + its index among the slot's frames) but stored as float32,
+    so the sun disc is not clipped. Nothing else is written."""
+    ob, kind, k = cams["sky_pano"]
+    index = list(cams).index("sky_pano")
+    seconds = 0.0
+    for s in slots:
+        utc = f"{DATE}T{TIMES[s][1]}:00Z"
+        sun = rouen_sun(rouen, utc)
+        sky.sun_elevation = math.radians(sun["elevation_deg"])
+        sky.sun_rotation = math.radians(sun["azimuth_deg"])
+        fname = f"t{s}_sky_pano_f32.exr"
+        secs = render(ob, k, os.path.join(out, fname), samples["sky_pano"], 1000 * s + index,
+                      depth="32", codec="PXR24")
+        seconds += secs
+        print(f"rendered {fname} in {secs:.1f} s", flush=True)
+    return seconds
+
+
 def main():
     argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
     ap = argparse.ArgumentParser(description="Render rouen's Blender validation world")
@@ -549,17 +576,22 @@ def main():
     ap.add_argument("--lambert", action="store_true",
                     help="diagnostic, not the committed data: matte materials as Lambert "
                     "(Diffuse BSDF) instead of Principled BSDF")
+    ap.add_argument("--sky-pano-float", action="store_true",
+                    help="only render each slot's sky panorama again as float32 "
+                    "(t<k>_sky_pano_f32.exr, the sun disc unclipped); writes nothing else")
     a = ap.parse_args(argv)
     out = os.path.abspath(a.out)
     os.makedirs(out, exist_ok=True)
     tmpdir = os.path.join(out, ".tmp")
-    os.makedirs(tmpdir, exist_ok=True)
+    if not a.sky_pano_float:
+        os.makedirs(tmpdir, exist_ok=True)
     t_start = time.time()
 
     blocks = building_blocks()
     check_polygons_outward({"tower": blocks["tower"], "roof": blocks["roof"]}, (0.0, 0.0, 12.0))
     check_polygons_outward({"annex": blocks["annex"]}, None)
-    write_obj(os.path.join(out, "building.obj"), blocks)
+    if not a.sky_pano_float:
+        write_obj(os.path.join(out, "building.obj"), blocks)
     tris = triangles(blocks)
     building, others, sky = build_scene(blocks, a.lambert)
     samples = {n: max(1, int(round(s * a.scale))) for n, s in SAMPLES.items()}
@@ -585,6 +617,10 @@ def main():
     slots = range(len(TIMES))
     if a.times:
         slots = [int(s) for s in a.times.split(",")]
+    if a.sky_pano_float:
+        secs = render_sky_pano_float(out, a.rouen, slots, sky, cams, samples)
+        print(f"done in {time.time() - t_start:.0f} s; render seconds {secs:.0f}", flush=True)
+        return
     list_lines = ["# image  seconds  UTC  group  target   (HDR EXR: seconds = 1)"]
     cameras = {}
     for name, (ob, kind, k) in cams.items():

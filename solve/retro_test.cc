@@ -1,0 +1,58 @@
+#include "solve/retro.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+
+#include "core/angles.h"
+
+namespace rouen {
+namespace {
+
+Eigen::Vector3d InXZ(double angle_from_z_deg) {
+  const double a = angle_from_z_deg * kDeg;
+  return {std::sin(a), 0, std::cos(a)};
+}
+
+TEST(RetroTest, ZeroIsLambertAndHeadOnIsOne) {
+  const Eigen::Vector3d n = Eigen::Vector3d::UnitZ();
+  for (double tl : {0.0, 30.0, 80.0, 89.0}) {
+    for (double tv : {0.0, 45.0, -70.0}) {
+      EXPECT_EQ(RetroFactor(0, n, InXZ(tl), InXZ(tv)), 1.0) << tl << " " << tv;
+    }
+  }
+  // Light and view along the normal: (1 - n.l)^5 = 0, whatever retro is.
+  for (double r : {kRetroMin, 0.5, kRetroMax}) EXPECT_DOUBLE_EQ(RetroFactor(r, n, n, n), 1.0);
+}
+
+TEST(RetroTest, BurleyRoughnessOneAtAGrazingSun) {
+  // retro 1 is Burley's diffuse at roughness 1: F_D90 = 0.5 + 2 cos^2(theta_d). Sun 80 degrees
+  // from the normal, view along it: theta_d = 40 degrees (half the angle between l and v).
+  const Eigen::Vector3d n = Eigen::Vector3d::UnitZ();
+  const double fd90 = 0.5 + 2 * std::pow(std::cos(40 * kDeg), 2);
+  const double expected = 1 + (fd90 - 1) * std::pow(1 - std::cos(80 * kDeg), 5);
+  EXPECT_NEAR(RetroFactor(1.0, n, InXZ(80), n), expected, 1e-12);
+  EXPECT_GT(expected, 1.25);  // the brightening that a Lambertian model misses
+  // Reciprocity: light and view swap.
+  const Eigen::Vector3d l = InXZ(65), v = Eigen::Vector3d(-0.3, 0.5, 0.6).normalized();
+  EXPECT_NEAR(RetroFactor(0.7, n, l, v), RetroFactor(0.7, n, v, l), 1e-12);
+  // Over the whole range the factor stays positive and finite, even below the horizon.
+  for (double r = kRetroMin; r <= kRetroMax; r += 0.25) {
+    for (double tl = 0; tl <= 100; tl += 5) {
+      const double d = RetroFactor(r, n, InXZ(tl), InXZ(-tl / 2));
+      EXPECT_TRUE(std::isfinite(d) && d >= 0.25) << r << " " << tl << " " << d;
+    }
+  }
+}
+
+TEST(RetroTest, BlockRetroDefaultsToLambert) {
+  const std::vector<double> retro = {0.5, 1.25};
+  EXPECT_EQ(BlockRetro(retro, 1), 1.25);
+  EXPECT_EQ(BlockRetro(retro, 2), 0.0);
+  EXPECT_EQ(BlockRetro(retro, -1), 0.0);
+  EXPECT_EQ(BlockRetro({}, 0), 0.0);
+}
+
+}  // namespace
+}  // namespace rouen
