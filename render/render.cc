@@ -96,18 +96,49 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
     return (rho_sun.cwiseProduct(e_sun) + rho_se.cwiseProduct(e_se)) / kPi;
   };
 
+  // What a ray through image point (x, y) sees, coarsely: the triangle it hits and whether the
+  // sun reaches that point (2 t + lit), -1 when it escapes, -2 when it escapes near the sun
+  // disc or cannot be cast. Pixels whose four corners agree are shaded once.
+  const double cos_near_sun = std::cos(3 * lighting.SunAngularRadius());
+  auto corner_key = [&](double x, double y) -> int64_t {
+    Eigen::Vector3d d = pose.rotation * Unproject(intrinsics, Eigen::Vector2d(x, y));
+    if (!d.allFinite() || d.squaredNorm() == 0) return -2;
+    d.normalize();
+    const RayHit hit = model.Intersect(pose.position, d, 0.0);
+    if (!hit.hit) return d.dot(s) >= cos_near_sun ? -2 : -1;
+    Eigen::Vector3d n = mesh.Normal(hit.triangle);
+    if (n.dot(d) > 0) n = -n;
+    const Eigen::Vector3d p = pose.position + hit.t * d + offset * n;
+    const bool lit = n.dot(s) > 0 && !model.Occluded(p, s, 0.0);
+    return 2 * static_cast<int64_t>(hit.triangle) + (lit ? 1 : 0);
+  };
+  std::vector<int64_t> corners;
+  if (options.adaptive && ss > 1) {
+    corners.resize(static_cast<size_t>(w + 1) * (h + 1));
+    tbb::parallel_for(0, h + 1, [&](int y) {
+      for (int x = 0; x <= w; ++x) corners[static_cast<size_t>(y) * (w + 1) + x] = corner_key(x, y);
+    });
+  }
+  auto uniform = [&](int x, int y) {
+    if (corners.empty()) return false;
+    const size_t i = static_cast<size_t>(y) * (w + 1) + x;
+    const int64_t k = corners[i];
+    return k != -2 && corners[i + 1] == k && corners[i + w + 1] == k && corners[i + w + 2] == k;
+  };
+
   tbb::parallel_for(0, h, [&](int y) {
     for (int x = 0; x < w; ++x) {
       Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-      for (int a = 0; a < ss; ++a) {
-        for (int b = 0; b < ss; ++b) {
-          const Eigen::Vector2d px(x + (b + 0.5) / ss, y + (a + 0.5) / ss);
+      const int n_sub = uniform(x, y) ? 1 : ss;
+      for (int a = 0; a < n_sub; ++a) {
+        for (int b = 0; b < n_sub; ++b) {
+          const Eigen::Vector2d px(x + (b + 0.5) / n_sub, y + (a + 0.5) / n_sub);
           const Eigen::Vector3d d = pose.rotation * Unproject(intrinsics, px);
           if (!d.allFinite() || d.squaredNorm() == 0) continue;
           sum += shade(d.normalized());
         }
       }
-      sum /= ss * ss;
+      sum /= n_sub * n_sub;
       if (!sum.allFinite()) {
         throw Error("render: non-finite radiance at pixel (" + std::to_string(x) + ", " +
                     std::to_string(y) + ")");
@@ -116,7 +147,11 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
     }
   });
   if (stats) {
-    stats->rays = static_cast<int64_t>(w) * h * ss * ss * 2;
+    int64_t samples = 0;
+    for (int y = 0; y < h; ++y) {
+      for (int x = 0; x < w; ++x) samples += uniform(x, y) ? 1 : ss * ss;
+    }
+    stats->rays = 2 * (samples + static_cast<int64_t>(corners.size()));
     stats->seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }

@@ -19,6 +19,11 @@ struct RenderOptions {
   // Samples per pixel along each axis (regular grid): a box-filtered pixel like a camera's;
   // 1 aliases shadow edges and silhouettes badly in comparisons with photographs.
   int supersample = 4;
+  // Supersample only where it matters: a pixel whose four corner rays hit the same triangle
+  // in the same sun or shadow (or all escape, away from the sun disc) is shaded once at its
+  // centre, where the smooth albedo and irradiance make the box filter's mean the centre's
+  // value to second order; others get supersample^2 samples. false: every pixel.
+  bool adaptive = true;
   bool interpolate = true;      // smooth albedo / E_se between grid points; false: nearest point
   bool draw_background = true;  // sky, environment and sun where rays escape; false: 0
   void Validate() const;        // throws rouen::Error
