@@ -861,7 +861,8 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
       AddInterreflection(grid, cache, res.rho_sun, res.rho_se, &slot_irr, options.bounces);
     }
     if (options.slot_weighting) slot_weight = SlotWeights(grid, observations, irr, res, &shading);
-    if (options.fit_retro) {
+    // Once, with the first interreflection: later iterations change the bounce little.
+    if (options.fit_retro && it == 1) {
       shading.retro =
           FitRetro(grid, observations, irr, options, slot_weight, shading.sun_dirs, &retro_summary);
     }

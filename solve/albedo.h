@@ -170,7 +170,8 @@ AlbedoResult SolveAlbedoFixedIrradiance(const SurfaceGrid& grid,
 // §4.1 with the outer iteration: irradiance without bounce -> albedos -> irradiance with the
 // one-bounce interreflection from the current albedos -> albedos ... `irradiance` receives
 // the per-slot irradiance with the interreflection from the returned albedos. With
-// options.fit_retro, each outer iteration also fits every block's retro parameter: the albedos
+// options.fit_retro, the first outer iteration with the interreflection (or the only one) also
+// fits every block's retro parameter: the albedos
 // are solved for candidates over [kRetroMin, kRetroMax] and each block keeps the one with the
 // least truncated relative residual, refined by a parabola (the interreflection stays
 // Lambertian).

@@ -743,6 +743,8 @@ GroundRetroFit FitGroundRetro(const std::vector<EnvObservation>& per_time,
   for (double r = 0; r <= kRetroMax + 1e-9; r += kStep) {
     grid.push_back(r);
     cost.push_back(cost_at(r));
+    // A cost that rises from the first step on: Lambert (the cost is taken as unimodal).
+    if (grid.size() == 2 && cost[1] >= cost[0]) break;
   }
   size_t zero = 0, best = 0;
   for (size_t k = 0; k < grid.size(); ++k) {

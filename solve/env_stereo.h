@@ -149,7 +149,8 @@ struct EnvStereoResult {
 };
 
 // The ground's retro parameter that best explains the training times: SolveEnvStereo with
-// ground_retro at each candidate (0 to kRetroMax in steps of 0.5), the cost the median rel_rms of
+// ground_retro at each candidate (0 to kRetroMax in steps of 0.5; the search stops at 0.5
+// when the cost rises there), the cost the median rel_rms of
 // the landscape regions below the horizon; refined by a parabola through the best candidate's
 // neighbours. The fit keeps 0 (Lambert) unless its cost is below (1 - min_gain) x the Lambertian
 // cost.
