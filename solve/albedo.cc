@@ -164,9 +164,12 @@ PointFit FitPoint(const std::vector<Equation>& eqs, Mode mode, const Eigen::Vect
   return fit;
 }
 
-bool IsSunlit(const Equation& q, double threshold) {
-  return q.e_sun[1] > threshold * std::max(q.e_se[1], 1e-300);
+// Sunlit: the sun's irradiance (green) above `threshold` x the sky and environment's.
+bool IsSunlit(const Eigen::Vector3d& e_sun, const Eigen::Vector3d& e_se, double threshold) {
+  return e_sun[1] > threshold * std::max(e_se[1], 1e-300);
 }
+
+bool IsSunlit(const Equation& q, double threshold) { return IsSunlit(q.e_sun, q.e_se, threshold); }
 
 // Fills points of category 0 (never observed) with the inverse-distance mean of up to 6
 // observed points (category 1..3) of the same block within `radius` (and in the same plane
@@ -483,6 +486,14 @@ double SunFactor(const SurfaceGrid& grid, const Observation& ob, const SunShadin
   return RetroFactor(retro, gp.normal, shading->sun_dirs[ob.slot], ob.view_dir.cast<double>());
 }
 
+// pi I of an observation as the solution `res` predicts it in channel c (eqs. 11-12), with the
+// sun irradiance scaled by `sun_factor` (SunFactor).
+double Predicted(const AlbedoResult& res, const SlotIrradiance& irr, const Observation& ob,
+                 double sun_factor, int c) {
+  return res.rho_se[ob.point][c] * irr.se[ob.point][c] +
+         res.rho_sun[ob.point][c] * irr.sun[ob.point][c] * sun_factor;
+}
+
 // Per-slot weights from the residuals of a solution: (median over all slots / slot's median
 // |relative residual|)^2, at most 1. A slot whose lighting model fits the photos worse than
 // the others (e.g. a low sun, where the environment is least certain) counts less.
@@ -496,9 +507,7 @@ std::vector<double> SlotWeights(const SurfaceGrid& grid,
     if (res.flags[ob.point] & kAlbedoNoObservations) continue;
     const SlotIrradiance& irr = irradiance[ob.slot];
     const double y = kPi * ob.radiance[1];
-    const double pred =
-        res.rho_se[ob.point][1] * irr.se[ob.point][1] +
-        res.rho_sun[ob.point][1] * irr.sun[ob.point][1] * SunFactor(grid, ob, shading);
+    const double pred = Predicted(res, irr, ob, SunFactor(grid, ob, shading), 1);
     if (!(y > 0)) continue;
     const double r = std::abs(y - pred) / y;
     per[ob.slot].push_back(r);
@@ -750,16 +759,13 @@ BlockCosts CostsPerBlock(const SurfaceGrid& grid, const std::vector<Observation>
     const int b = grid.points[ob.point].block;
     if (b < 0 || (res.flags[ob.point] & kAlbedoNoObservations)) continue;
     const SlotIrradiance& irr = irradiance[ob.slot];
-    const Eigen::Vector3d& e_sun = irr.sun[ob.point];
-    const Eigen::Vector3d& e_se = irr.se[ob.point];
-    bc.sunlit[b] += e_sun[1] > options.sunlit_threshold * std::max(e_se[1], 1e-300);
+    bc.sunlit[b] += IsSunlit(irr.sun[ob.point], irr.se[ob.point], options.sunlit_threshold);
     const double f = SunFactor(grid, ob, &shading);
     for (int c = 0; c < 3; ++c) {
       const double y = kPi * ob.radiance[c];
       if (!(y > 0)) continue;
-      const double pred =
-          res.rho_se[ob.point][c] * e_se[c] + res.rho_sun[ob.point][c] * e_sun[c] * f;
-      bc.cost[b] += std::min(std::abs(y - pred) / y, options.retro_residual_cap);
+      bc.cost[b] +=
+          std::min(std::abs(y - Predicted(res, irr, ob, f, c)) / y, options.retro_residual_cap);
       weight[b] += 1;
     }
   }
@@ -812,7 +818,8 @@ std::vector<double> FitRetro(const SurfaceGrid& grid, const std::vector<Observat
       }
     }
   }
-  const BlockCosts fine = costs_at(refined);
+  // The refinement's solve only when some block moved off its candidate.
+  const BlockCosts fine = refined != best ? costs_at(refined) : BlockCosts{best_cost, sunlit};
   for (int b = 0; b < nblocks; ++b) {
     if (fine.cost[b] < best_cost[b]) {
       best[b] = refined[b];
