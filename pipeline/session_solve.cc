@@ -686,6 +686,29 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
     }
     Log(options, line.str());
   }
+  if (r.albedo_options.sun_lobe.fit) {
+    std::ostringstream line;
+    line << "sun specular lobe per block (§4.2.2):";
+    const AlbedoSummary& s = r.albedo.summary;
+    for (size_t b = 0; b < r.mesh.block_names.size(); ++b) {
+      const SpecularLobe l = BlockLobe(r.albedo.sun_lobes, static_cast<int>(b));
+      line << " " << r.mesh.block_names[b];
+      if (l.IsZero()) {
+        line << " none";
+      } else {
+        char text[96];
+        std::snprintf(text, sizeof text, " rho_s %.3g,%.3g,%.3g kappa %.2f n %.0f", l.rho_s[0],
+                      l.rho_s[1], l.rho_s[2], l.kappa, l.n);
+        line << text;
+      }
+      if (b < s.lobe_samples.size()) {
+        line << " (" << s.lobe_samples[b] << " samples, eq. 15 cost " << std::fixed
+             << std::setprecision(0) << s.lobe_cost_zero[b] << " -> " << s.lobe_cost_fitted[b]
+             << ")";
+      }
+    }
+    Log(options, line.str());
+  }
   clock.Lap("irradiance and pseudo-albedos");
   // Beyond §5.2: how roughly the ground reflects the sun, from the slots the albedos used, for
   // the environment at novel times (too few slots: the photometric stereo cannot tell).

@@ -205,6 +205,14 @@ json SolveConfigJson(const SolveConfig& c) {
             {"retro_min_observations", a.retro_min_observations},
             {"retro_residual_cap", a.retro_residual_cap},
             {"retro_min_gain", a.retro_min_gain},
+            {"sun_lobe",
+             {{"fit", a.sun_lobe.fit},
+              {"min_samples", a.sun_lobe.min_samples},
+              {"max_samples", a.sun_lobe.max_samples},
+              {"min_gain", a.sun_lobe.min_gain},
+              {"kappa_steps", a.sun_lobe.kappa_steps},
+              {"exponent_steps", a.sun_lobe.exponent_steps},
+              {"simplex_iterations", a.sun_lobe.simplex_iterations}}},
             {"observation",
              {{"margin_px", ob.margin_px},
               {"occlusion_tolerance", ob.occlusion_tolerance},
@@ -293,6 +301,18 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
     f.Int("retro_min_observations", &a.retro_min_observations, 1, 1 << 30);
     f.Number("retro_residual_cap", &a.retro_residual_cap, 1e-6, 100);
     f.Number("retro_min_gain", &a.retro_min_gain, 0, 100);
+    if (const json* o = f.Table("sun_lobe")) {
+      Fields g(*o, where, "albedo.sun_lobe");
+      SunLobeOptions& l = a.sun_lobe;
+      g.Bool("fit", &l.fit);
+      g.Int("min_samples", &l.min_samples, 1, 1 << 30);
+      g.Int("max_samples", &l.max_samples, 1, 1 << 30);
+      g.Number("min_gain", &l.min_gain, 0, 1);
+      g.Int("kappa_steps", &l.kappa_steps, 1, 100);
+      g.Int("exponent_steps", &l.exponent_steps, 2, 200);
+      g.Int("simplex_iterations", &l.simplex_iterations, 0, 10000);
+      g.Finish();
+    }
     if (const json* o = f.Table("observation")) {
       Fields g(*o, where, "albedo.observation");
       ObservationOptions& ob = a.observation;

@@ -85,15 +85,18 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
     Eigen::Vector3d n = mesh.Normal(hit.triangle);
     if (n.dot(dir) > 0) n = -n;  // seen from behind: light the side facing the camera
     const Eigen::Vector3d p = pose.position + hit.t * dir + offset * n;
-    Eigen::Vector3d e_sun = Eigen::Vector3d::Zero();
+    Eigen::Vector3d e_sun = Eigen::Vector3d::Zero(), specular = Eigen::Vector3d::Zero();
     const double cosi = n.dot(s);
     if (cosi > 0 && !model.Occluded(p, s, 0.0)) {
       const int block = hit.triangle < static_cast<int>(mesh.triangle_block.size())
                             ? mesh.triangle_block[hit.triangle]
                             : -1;
       e_sun = sun_e * (cosi * RetroFactor(BlockRetro(albedo.retro, block), n, s, -dir));
+      // §4.2: the block's sun lobe (eq. 13) under the sun's irradiance on the surface.
+      const SpecularLobe lobe = BlockLobe(albedo.sun_lobes, block);
+      if (!lobe.IsZero()) specular = lobe.Eval(n, s, -dir).cwiseProduct(sun_e * cosi);
     }
-    return (rho_sun.cwiseProduct(e_sun) + rho_se.cwiseProduct(e_se)) / kPi;
+    return (rho_sun.cwiseProduct(e_sun) + rho_se.cwiseProduct(e_se)) / kPi + specular;
   };
 
   // What a ray through image point (x, y) sees, coarsely: the triangle it hits and whether the

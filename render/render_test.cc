@@ -158,6 +158,52 @@ TEST(RenderTest, TheSunTermFollowsTheBlocksRetro) {
   EXPECT_GT(rough.at(80, 100, 1), 1.02 * lambert.at(80, 100, 1));  // grazing: brighter (1.04)
 }
 
+TEST(RenderTest, TheSunLobeAddsItsHighlight) {
+  Fixture f = Make();
+  const Intrinsics k = Intrinsics::PinholeFov(160, 120, 60);
+  const Pose pose = Pose::LookAt({0, -15, 3}, {0, 0, 0});
+  RenderOptions o;
+  o.interpolate = false;
+  o.supersample = 1;
+  const Image matte = RenderView(f.mesh, f.grid, *f.rc, f.albedo, f.lighting, f.irr, k, pose, o);
+  SpecularLobe lobe;
+  lobe.rho_s = Eigen::Vector3d(0.05, 0.06, 0.07);
+  lobe.kappa = 1;
+  lobe.n = 3;
+  f.albedo.sun_lobes = {lobe};  // the plaza (block 0); the slab: none
+  const Image glossy = RenderView(f.mesh, f.grid, *f.rc, f.albedo, f.lighting, f.irr, k, pose, o);
+  const Eigen::Vector2d px(80.5, 100.5);
+  const Eigen::Vector3d d = (pose.rotation * Unproject(k, px)).normalized();
+  const RayHit h = f.rc->Intersect(pose.position, d);
+  ASSERT_TRUE(h.hit);
+  ASSERT_EQ(f.mesh.triangle_block[h.triangle], 0);
+  const Eigen::Vector3d n = Eigen::Vector3d::UnitZ(), s = f.lighting.sun_dir.normalized();
+  // Eq. 13's lobe under the sun's irradiance on the surface, added to the diffuse radiance.
+  const Eigen::Vector3d e = f.lighting.sun_radiance * f.lighting.sun_solid_angle_sr * n.dot(s);
+  const Eigen::Vector3d add = lobe.Eval(n, s, -d).cwiseProduct(e);
+  ASSERT_GT(add[1], 0.01 * matte.at(80, 100, 1));
+  for (int c = 0; c < 3; ++c)
+    EXPECT_NEAR(glossy.at(80, 100, c), matte.at(80, 100, c) + add[c], 1e-5 * glossy.at(80, 100, c));
+  // The slab has no lobe: its pixels are unchanged (a view that looks at it).
+  const Pose up = Pose::LookAt({0, -12, 4}, {0, 0, 8});
+  f.albedo.sun_lobes.clear();
+  const Image matte_up = RenderView(f.mesh, f.grid, *f.rc, f.albedo, f.lighting, f.irr, k, up, o);
+  f.albedo.sun_lobes = {lobe};
+  const Image glossy_up = RenderView(f.mesh, f.grid, *f.rc, f.albedo, f.lighting, f.irr, k, up, o);
+  int slab = 0;
+  for (int y = 0; y < k.height; ++y) {
+    for (int x = 0; x < k.width; ++x) {
+      const Eigen::Vector3d dd =
+          (up.rotation * Unproject(k, Eigen::Vector2d(x + 0.5, y + 0.5))).normalized();
+      const RayHit hh = f.rc->Intersect(up.position, dd);
+      if (!hh.hit || f.mesh.triangle_block[hh.triangle] == 0) continue;
+      ++slab;
+      EXPECT_EQ(glossy_up.at(x, y, 1), matte_up.at(x, y, 1));
+    }
+  }
+  EXPECT_GT(slab, 0);
+}
+
 TEST(RenderTest, BadInputThrows) {
   Fixture f = Make();
   const Intrinsics k = Intrinsics::PinholeFov(16, 12, 60);

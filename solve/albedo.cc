@@ -262,6 +262,7 @@ void AlbedoOptions::Validate() const {
   if (!(fill_radius_m >= 0)) throw Error("AlbedoOptions: fill_radius_m must be >= 0");
   if (!(retro_residual_cap > 0)) throw Error("AlbedoOptions: retro_residual_cap must be > 0");
   if (!(retro_min_gain >= 0)) throw Error("AlbedoOptions: retro_min_gain must be >= 0");
+  sun_lobe.Validate();
   if (retro_min_observations < 1) {
     throw Error("AlbedoOptions: retro_min_observations must be >= 1");
   }
@@ -718,8 +719,9 @@ static AlbedoResult SolveWeighted(const SurfaceGrid& grid,
     for (size_t k = 0; k < eqs.size(); ++k) {
       if (k < weights[i].size() && weights[i][k] < 0.5) ++down;
       for (int c = 0; c < 3; ++c) {
+        if (!(eqs[k].y[c] > 0)) continue;  // no relative error of nothing (e.g. all highlight)
         const double pred = res.rho_se[i][c] * eqs[k].e_se[c] + res.rho_sun[i][c] * eqs[k].e_sun[c];
-        const double r = (eqs[k].y[c] - pred) / std::max(eqs[k].y[c], 1e-30);
+        const double r = (eqs[k].y[c] - pred) / eqs[k].y[c];
         rel.push_back(std::abs(r));
         sum2 += r * r;
       }
@@ -838,6 +840,58 @@ std::vector<double> FitRetro(const SurfaceGrid& grid, const std::vector<Observat
   return best;
 }
 
+// §4.2.2: each block's sun lobe from its sunlit observations' residual after the diffuse
+// solution `res`, sigma the block's robust relative residual scale (at least min_scale) times
+// the observed radiance.
+std::vector<SpecularLobe> FitSunLobes(const SurfaceGrid& grid,
+                                      const std::vector<Observation>& observations,
+                                      const std::vector<SlotIrradiance>& irradiance,
+                                      const AlbedoResult& res, const SunShading& shading,
+                                      const AlbedoOptions& options, AlbedoSummary* summary) {
+  int nblocks = 0;
+  for (const auto& p : grid.points) nblocks = std::max(nblocks, p.block + 1);
+  std::vector<std::vector<double>> rel(nblocks);
+  for (const Observation& ob : observations) {
+    const int b = grid.points[ob.point].block;
+    if (b < 0 || (res.flags[ob.point] & kAlbedoNoObservations)) continue;
+    const double y = kPi * ob.radiance[1];
+    if (!(y > 0)) continue;
+    const double pred = Predicted(res, irradiance[ob.slot], ob, SunFactor(grid, ob, &shading), 1);
+    rel[b].push_back(std::abs(y - pred) / y);
+  }
+  std::vector<std::vector<LobeSample>> samples(nblocks);
+  for (const Observation& ob : observations) {
+    const GridPoint& gp = grid.points[ob.point];
+    if (gp.block < 0 || (res.flags[ob.point] & kAlbedoNoObservations)) continue;
+    const SlotIrradiance& irr = irradiance[ob.slot];
+    if (!IsSunlit(irr.sun[ob.point], irr.se[ob.point], options.sunlit_threshold)) continue;
+    const double scale = std::max(options.min_scale, 1.4826 * Median(rel[gp.block]));
+    const double f = SunFactor(grid, ob, &shading);
+    LobeSample s;
+    s.normal = gp.normal;
+    s.to_light = shading.sun_dirs[ob.slot];
+    s.to_viewer = ob.view_dir.cast<double>();
+    s.irradiance = irr.sun[ob.point];
+    for (int c = 0; c < 3; ++c) {
+      s.residual[c] = ob.radiance[c] - Predicted(res, irr, ob, f, c) / kPi;
+      s.sigma[c] = scale * std::max<double>(ob.radiance[c], 1e-12);
+    }
+    samples[gp.block].push_back(s);
+  }
+  std::vector<SpecularLobe> lobes(nblocks);
+  summary->lobe_samples.assign(nblocks, 0);
+  summary->lobe_cost_zero.assign(nblocks, 0.0);
+  summary->lobe_cost_fitted.assign(nblocks, 0.0);
+  for (int b = 0; b < nblocks; ++b) {
+    const LobeFit fit = FitSunLobe(samples[b], options.sun_lobe);
+    lobes[b] = fit.lobe;
+    summary->lobe_samples[b] = fit.samples;
+    summary->lobe_cost_zero[b] = fit.cost_zero;
+    summary->lobe_cost_fitted[b] = fit.cost;
+  }
+  return lobes;
+}
+
 }  // namespace
 
 // §4.1: albedos, then the one-bounce interreflection from them, then albedos again.
@@ -889,6 +943,30 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
     }
     changes.push_back(count ? change / count : 0);
     res = std::move(next);
+  }
+  if (options.sun_lobe.fit) {
+    AlbedoSummary lobe_summary;
+    std::vector<SpecularLobe> lobes =
+        FitSunLobes(grid, observations, irr, res, shading, options, &lobe_summary);
+    if (std::any_of(lobes.begin(), lobes.end(), [](const auto& l) { return !l.IsZero(); })) {
+      // The diffuse albedos again, from what the lobes leave of each sunlit observation.
+      std::vector<Observation> diffuse = observations;
+      for (Observation& ob : diffuse) {
+        const GridPoint& gp = grid.points[ob.point];
+        const SpecularLobe lobe = BlockLobe(lobes, gp.block);
+        if (lobe.IsZero()) continue;
+        const Eigen::Vector3d f =
+            lobe.Eval(gp.normal, shading.sun_dirs[ob.slot], ob.view_dir.cast<double>());
+        // A highlight the lobe over-explains leaves nothing rather than negative light.
+        ob.radiance =
+            (ob.radiance - f.cwiseProduct(irr[ob.slot].sun[ob.point]).cast<float>()).cwiseMax(0.f);
+      }
+      res = SolveWeighted(grid, diffuse, irr, options, slot_weight, &shading);
+    }
+    res.sun_lobes = std::move(lobes);
+    res.summary.lobe_samples = lobe_summary.lobe_samples;
+    res.summary.lobe_cost_zero = lobe_summary.lobe_cost_zero;
+    res.summary.lobe_cost_fitted = lobe_summary.lobe_cost_fitted;
   }
   res.summary.change_per_iteration = changes;
   res.summary.retro_cost_lambert = retro_summary.retro_cost_lambert;

@@ -15,6 +15,7 @@
 #include "solve/irradiance.h"
 #include "solve/raycast.h"
 #include "solve/retro.h"
+#include "solve/specular.h"
 
 namespace rouen {
 
@@ -122,6 +123,9 @@ struct AlbedoOptions {
   // A block keeps a non-zero retro only when it lowers that cost (the block's mean truncated
   // |relative residual|) by at least this much; below it Lambert explains the photos as well.
   double retro_min_gain = 0.002;
+  // §4.2.2: each block's sun specular lobe (eq. 13) fitted to what the diffuse albedos leave
+  // of its sunlit observations, then the albedos solved again without the lobe's light.
+  SunLobeOptions sun_lobe;
   ObservationOptions observation;
   IrradianceOptions irradiance;
 
@@ -146,6 +150,9 @@ struct AlbedoSummary {
   // Per block: the relative residual cost (truncated |relative residual|, mean over the
   // block's observations) with retro 0 and with the fitted retro (SolveAlbedo, fit_retro).
   std::vector<double> retro_cost_lambert, retro_cost_fitted;
+  // Per block: the sun lobe fit's samples and eq. 15's cost without and with the fitted lobe.
+  std::vector<int> lobe_samples;
+  std::vector<double> lobe_cost_zero, lobe_cost_fitted;
   double seconds = 0;
   std::string BriefReport() const;
 };
@@ -155,6 +162,8 @@ struct AlbedoResult {
   std::vector<int> observations;                 // per grid point
   std::vector<uint8_t> flags;                    // AlbedoFlag bits per grid point
   std::vector<double> retro;  // per block (solve/retro.h); empty or 0: Lambertian sun term
+  // Per block (§4.2.2); empty or zero: no specular reflection of the sun.
+  std::vector<SpecularLobe> sun_lobes;
   AlbedoSummary summary;
 };
 
@@ -174,7 +183,8 @@ AlbedoResult SolveAlbedoFixedIrradiance(const SurfaceGrid& grid,
 // fits every block's retro parameter: the albedos
 // are solved for candidates over [kRetroMin, kRetroMax] and each block keeps the one with the
 // least truncated relative residual, refined by a parabola (the interreflection stays
-// Lambertian).
+// Lambertian). Then, with options.sun_lobe.fit, every block's sun lobe (§4.2.2) and, when some
+// block has one, the albedos once more from the observations less the lobes' light.
 AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
                          const RayCaster& model, const std::vector<Lighting>& slots,
                          const std::vector<Observation>& observations,

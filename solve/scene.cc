@@ -42,6 +42,9 @@ nlohmann::json SummaryJson(const AlbedoSummary& s) {
           {"points_filled_neighbours", s.points_filled_neighbours},
           {"retro_cost_lambert", s.retro_cost_lambert},
           {"retro_cost_fitted", s.retro_cost_fitted},
+          {"lobe_samples", s.lobe_samples},
+          {"lobe_cost_zero", s.lobe_cost_zero},
+          {"lobe_cost_fitted", s.lobe_cost_fitted},
           {"seconds", s.seconds}};
 }
 
@@ -62,6 +65,9 @@ AlbedoSummary ReadSummary(const nlohmann::json& j) {
   s.points_filled_neighbours = j.value("points_filled_neighbours", 0);
   s.retro_cost_lambert = j.value("retro_cost_lambert", std::vector<double>{});
   s.retro_cost_fitted = j.value("retro_cost_fitted", std::vector<double>{});
+  s.lobe_samples = j.value("lobe_samples", std::vector<int>{});
+  s.lobe_cost_zero = j.value("lobe_cost_zero", std::vector<double>{});
+  s.lobe_cost_fitted = j.value("lobe_cost_fitted", std::vector<double>{});
   s.seconds = j.value("seconds", 0.0);
   return s;
 }
@@ -245,6 +251,15 @@ void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const
     retro[m.block_names[b]] = BlockRetro(a.retro, b);
   }
   j["albedo"]["retro"] = retro;
+  // Per block by name: the sun's specular lobe (§4.2.2, solve/specular.h), blocks with one only.
+  nlohmann::json lobes = nlohmann::json::object();
+  for (int b = 0; b < static_cast<int>(m.block_names.size()); ++b) {
+    const SpecularLobe l = BlockLobe(a.sun_lobes, b);
+    if (l.IsZero()) continue;
+    lobes[m.block_names[b]] = {
+        {"rho_s", {l.rho_s[0], l.rho_s[1], l.rho_s[2]}}, {"kappa", l.kappa}, {"n", l.n}};
+  }
+  j["albedo"]["sun_lobes"] = lobes;
   j["atlas"] = WriteAlbedoAtlases(dir, scene, m);
   WriteFileAtomic(dir / "scene.json", j.dump(1));
 }
@@ -260,7 +275,7 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
   }
   size_t points = 0;
   std::string files[3], model_sha256;
-  nlohmann::json retro;
+  nlohmann::json retro, lobes;
   try {
     scene.format_version = j.at("format_version").get<int>();
     if (scene.format_version != 1) {
@@ -331,6 +346,8 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
     scene.albedo.summary = ReadSummary(a.value("summary", nlohmann::json::object()));
     retro = a.value("retro", nlohmann::json::object());
     if (!retro.is_object()) throw Error("albedo.retro is not an object");
+    lobes = a.value("sun_lobes", nlohmann::json::object());
+    if (!lobes.is_object()) throw Error("albedo.sun_lobes is not an object");
   } catch (const nlohmann::json::exception& e) {
     throw Error(json_path.string() + ": " + e.what());
   } catch (const Error& e) {
@@ -357,6 +374,28 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
                   std::to_string(kRetroMax) + "]");
     }
     scene.albedo.retro[it - mesh.block_names.begin()] = r;
+  }
+  scene.albedo.sun_lobes.assign(mesh.block_names.size(), SpecularLobe{});
+  for (const auto& [name, value] : lobes.items()) {
+    const auto it = std::find(mesh.block_names.begin(), mesh.block_names.end(), name);
+    const std::string what = json_path.string() + ": albedo.sun_lobes." + name;
+    if (it == mesh.block_names.end()) {
+      throw Error(what + ": " + model_path.string() + " has no block '" + name + "'");
+    }
+    SpecularLobe l;
+    try {
+      const auto& rho = value.at("rho_s");
+      if (!rho.is_array() || rho.size() != 3) throw Error("rho_s must be three numbers");
+      for (int c = 0; c < 3; ++c) l.rho_s[c] = rho[c].get<double>();
+      l.kappa = value.at("kappa").get<double>();
+      l.n = value.at("n").get<double>();
+    } catch (const nlohmann::json::exception& e) {
+      throw Error(what + ": " + e.what());
+    } catch (const Error& e) {
+      throw Error(what + ": " + e.what());
+    }
+    l.Validate(what);
+    scene.albedo.sun_lobes[it - mesh.block_names.begin()] = l;
   }
   SurfaceGrid grid = BuildSurfaceGrid(mesh, scene.grid_options);
   if (static_cast<size_t>(grid.size()) != points) {

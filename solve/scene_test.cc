@@ -60,6 +60,10 @@ SceneModel MakeScene(const Mesh& mesh, SurfaceGrid* grid_out) {
   s.hemisphere.directions = 64;
   s.hemisphere.seed = 7;
   s.albedo.retro = {0.0, 0.75};  // plaza Lambertian, shaft rough
+  s.albedo.sun_lobes.resize(2);  // plaza matte, shaft glossy
+  s.albedo.sun_lobes[1].rho_s = Eigen::Vector3d(0.02, 0.03, 0.04);
+  s.albedo.sun_lobes[1].kappa = 0.9;
+  s.albedo.sun_lobes[1].n = 35.5;
   s.albedo.summary.points = grid.size();
   s.albedo.summary.residual_rms_rel = 0.0123;
   if (grid_out) *grid_out = grid;
@@ -105,6 +109,11 @@ TEST(SceneTest, RoundTrip) {
   }
   EXPECT_EQ(r.albedo.summary.residual_rms_rel, 0.0123);
   EXPECT_EQ(r.albedo.retro, s.albedo.retro);
+  ASSERT_EQ(r.albedo.sun_lobes.size(), 2u);
+  EXPECT_TRUE(r.albedo.sun_lobes[0].IsZero());
+  EXPECT_EQ(r.albedo.sun_lobes[1].rho_s, s.albedo.sun_lobes[1].rho_s);
+  EXPECT_EQ(r.albedo.sun_lobes[1].kappa, 0.9);
+  EXPECT_EQ(r.albedo.sun_lobes[1].n, 35.5);
   // Views keep their cameras exactly (JSON doubles round-trip).
   ASSERT_EQ(r.views.size(), 1u);
   const SceneView& v = r.views.at("slot1/architecture/view0");
@@ -136,6 +145,33 @@ TEST(SceneTest, BadRetroIsRefusedNamingTheBlock) {
                                                         {"[1, 2]", "albedo.retro"}}) {
     nlohmann::json j = nlohmann::json::parse(text);
     j["albedo"]["retro"] = nlohmann::json::parse(bad);
+    WriteFileAtomic(dir / "scene.json", j.dump());
+    try {
+      ReadScene(dir);
+      ADD_FAILURE() << bad << " was accepted";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(expect), std::string::npos) << e.what();
+    }
+  }
+  std::filesystem::remove_all(dir);
+}
+
+TEST(SceneTest, BadSunLobeIsRefusedNamingTheBlock) {
+  const auto dir = TempDir("lobe");
+  const Mesh mesh = MakeMesh();
+  WriteScene(dir, MakeScene(mesh, nullptr), &mesh);
+  const std::string text = ReadFileToString(dir / "scene.json");
+  const std::string ok = R"("rho_s": [0.1, 0.1, 0.1], "kappa": 1, "n": 10)";
+  for (const auto& [bad, expect] : std::vector<std::pair<std::string, std::string>>{
+           {"{\"tower\": {" + ok + "}}", "no block 'tower'"},
+           {R"({"shaft": {"rho_s": [0.1, 0.1], "kappa": 1, "n": 10}})", "sun_lobes.shaft"},
+           {R"({"shaft": {"rho_s": [0.1, 0.1, 0.1], "kappa": 1, "n": 0}})", "exponent"},
+           {R"({"shaft": {"rho_s": [0.1, 0.1, -1], "kappa": 1, "n": 10}})", "rho_s"},
+           {R"({"shaft": {"rho_s": [9, 9, 9], "kappa": 1, "n": 10}})", "more light"},
+           {R"({"shaft": {"rho_s": [0.1, 0.1, 0.1], "n": 10}})", "kappa"},
+           {"[1]", "albedo.sun_lobes"}}) {
+    nlohmann::json j = nlohmann::json::parse(text);
+    j["albedo"]["sun_lobes"] = nlohmann::json::parse(bad);
     WriteFileAtomic(dir / "scene.json", j.dump());
     try {
       ReadScene(dir);

@@ -171,6 +171,9 @@ TEST(BlenderWorldTest, ImportStatusSolveRenderValidate) {
         EXPECT_NEAR(Median(vals) / want, 1.0, 0.05) << block << " channel " << c;
       }
     }
+    // §4.2.2: the glossy block (Principled specular 0.5, roughness 0.35) gets a sun lobe; the
+    // matte ones (specular 0) none.
+    EXPECT_EQ(BlockLobe(model.albedo.sun_lobes, b).IsZero(), !glossy) << block;
   }
   fs::remove_all(dir);
 }

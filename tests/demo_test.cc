@@ -92,6 +92,18 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
                         "normals.exr", "model_textured.obj", "model_textured.mtl",
                         "atlas/1_shaft_sun.exr", "atlas/1_shaft_se.exr"})
     EXPECT_TRUE(fs::is_regular_file(dir / "scene" / f)) << f;
+  // §4.2.2: the simulated world's copper roof is its one glossy block (sim_scene.h
+  // MaterialSpecular): the solve gives it a sun lobe, a grey one, and the matte blocks none.
+  {
+    const nlohmann::json lobes = nlohmann::json::parse(
+        rouen::ReadFileToString(dir / "scene" / "scene.json"))["albedo"]["sun_lobes"];
+    ASSERT_TRUE(lobes.is_object());
+    EXPECT_EQ(lobes.size(), 1u) << lobes.dump();
+    ASSERT_TRUE(lobes.contains("roof")) << lobes.dump();
+    const std::vector<double> rho = lobes["roof"]["rho_s"].get<std::vector<double>>();
+    ASSERT_EQ(rho.size(), 3u);
+    EXPECT_NEAR(rho[0] / rho[2], 1.0, 0.1);
+  }
   const int heldout = 3;  // rigs/sim.toml: heldout = "16:00", the fourth of five times
   const std::string scene_json_before = rouen::ReadFileToString(dir / "scene" / "scene.json");
   out.clear();

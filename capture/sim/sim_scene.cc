@@ -243,6 +243,11 @@ Eigen::Vector3d MaterialAlbedo(int material, const Eigen::Vector3d& p) {
   return out;
 }
 
+MaterialGloss MaterialSpecular(int material) {
+  if (material == kRoofMetal) return {0.07, 20.0};
+  return {};
+}
+
 Eigen::Vector3d Patch::Closest(const Eigen::Vector3d& p) const {
   const Eigen::Vector2d st = Local(p);
   if (!triangle) {

@@ -27,6 +27,16 @@ enum Material : int {
 // Smooth RGB albedo of a material at a point (Lambertian), within [0.05, 0.8].
 Eigen::Vector3d MaterialAlbedo(int material, const Eigen::Vector3d& p);
 
+// A material's specular reflection on top of its diffuse albedo: a grey Phong lobe around the
+// mirror direction, f_s(u, v) = rho_s (m(v) . u)^n with m(v) the view mirrored about the
+// normal (1/sr). rho_s 0: matte. Only the copper roof is mildly glossy (its lobe reflects
+// 2 pi rho_s / (n + 2) of normally incident light, 2%).
+struct MaterialGloss {
+  double rho_s = 0;
+  double n = 1;
+};
+MaterialGloss MaterialSpecular(int material);
+
 // A planar rectangle (origin o, unit axes u, v; extents su, sv) or triangle (vertices
 // (0,0), (su,0), (apex_s, sv) in (u, v) coordinates). Normal n = u x v points outward.
 struct Patch {

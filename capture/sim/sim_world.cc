@@ -231,14 +231,11 @@ struct SimWorld::Impl {
       if (block) *block = p.model_block;
       if (d.dot(p.n) >= 0) return Eigen::Vector3d::Zero();  // inside a solid
       const Eigen::Vector3d x = o + h.t * d;
-      Eigen::Vector3d e = Eigen::Vector3d::Zero();
-      const double c = p.n.dot(s.sun_dir);
-      if (c > 0 && s.sun_irr.maxCoeff() > 0 && !Occluded(x + p.n * kEps, DiscDir(s, x1, x2))) {
-        e += s.sun_irr * c;
-      }
-      const Eigen::Vector2d st = p.Local(x);
-      e += IndirectAt(s, p, st.x(), st.y());
-      return sim::MaterialAlbedo(p.material, x).cwiseProduct(e) / kPi;
+      bool sunlit = false;
+      Eigen::Vector3d out = Diffuse(s, p, x, x1, x2, &sunlit);
+      const sim::MaterialGloss gloss = sim::MaterialSpecular(p.material);
+      if (gloss.rho_s > 0) out += Specular(s, p, x, -d, gloss, sunlit, x1, x2);
+      return out;
     }
     if (d.z() > 0 || o.z() <= 0) {
       if (block) *block = d.z() > 0 ? -2 : -1;
@@ -248,6 +245,63 @@ struct SimWorld::Impl {
     const double t = -o.z() / d.z();
     if (!std::isfinite(t)) return s.sky.Radiance(d);
     return FarGround(s, o + t * d);
+  }
+
+  // The diffuse radiance leaving point x of patch p: albedo / pi x (sun through the disc point
+  // (x1, x2), shadows in, plus the texel's sky, ground and interreflection).
+  Eigen::Vector3d Diffuse(const State& s, const sim::Patch& p, const Eigen::Vector3d& x, double x1,
+                          double x2, bool* sunlit) const {
+    Eigen::Vector3d e = Eigen::Vector3d::Zero();
+    const double c = p.n.dot(s.sun_dir);
+    *sunlit = c > 0 && s.sun_irr.maxCoeff() > 0 && !Occluded(x + p.n * kEps, DiscDir(s, x1, x2));
+    if (*sunlit) e += s.sun_irr * c;
+    const Eigen::Vector2d st = p.Local(x);
+    e += IndirectAt(s, p, st.x(), st.y());
+    return sim::MaterialAlbedo(p.material, x).cwiseProduct(e) / kPi;
+  }
+
+  // The specular radiance towards v (unit, from x) of a glossy patch: the sun's through the
+  // lobe, and the sky's, the ground's and the surfaces' (their diffuse radiance) by sampling
+  // the lobe around the mirror direction (kGlossSamples directions with pdf
+  // (n + 1) / 2 pi cos^n, so each weighs rho_s 2 pi / (n + 1) L cos(theta)). The light the
+  // lobe reflects onto other surfaces is left out (2% of the roof's light).
+  Eigen::Vector3d Specular(const State& s, const sim::Patch& p, const Eigen::Vector3d& x,
+                           const Eigen::Vector3d& v, const sim::MaterialGloss& g, bool sunlit,
+                           double x1, double x2) const {
+    constexpr int kGlossSamples = 4;
+    const Eigen::Vector3d m = 2 * v.dot(p.n) * p.n - v;
+    Eigen::Vector3d out = Eigen::Vector3d::Zero();
+    const double c = p.n.dot(s.sun_dir);
+    if (sunlit) out += g.rho_s * std::pow(std::max(0.0, m.dot(s.sun_dir)), g.n) * c * s.sun_irr;
+    // An orthonormal frame around m.
+    const Eigen::Vector3d a =
+        std::abs(m.z()) < 0.9 ? Eigen::Vector3d::UnitZ() : Eigen::Vector3d::UnitX();
+    const Eigen::Vector3d t1 = a.cross(m).normalized(), t2 = m.cross(t1);
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    for (int q = 0; q < kGlossSamples; ++q) {
+      const uint64_t h = MixHash(MixHash(static_cast<uint64_t>(x1 * 4294967296.0)) ^
+                                 (static_cast<uint64_t>(x2 * 4294967296.0) << 3 | q));
+      const double cos_a = std::pow(HashUniformHigh(h), 1.0 / (g.n + 1));
+      const double sin_a = std::sqrt(std::max(0.0, 1 - cos_a * cos_a));
+      const double phi = 2 * kPi * HashUniformLow(h);
+      const Eigen::Vector3d u = cos_a * m + sin_a * (std::cos(phi) * t1 + std::sin(phi) * t2);
+      const double cu = u.dot(p.n);
+      if (cu <= 0) continue;
+      const Eigen::Vector3d o = x + p.n * kEps;
+      const Hit hit = Trace(o, u);
+      Eigen::Vector3d l;
+      if (hit.patch >= 0) {
+        const sim::Patch& q2 = scene.patches[hit.patch];
+        bool lit = false;
+        l = u.dot(q2.n) < 0 ? Diffuse(s, q2, o + hit.t * u, x2, x1, &lit) : Eigen::Vector3d::Zero();
+      } else if (u.z() > 0 || o.z() <= 0) {
+        l = s.sky.Radiance(u);
+      } else {
+        l = FarGround(s, o + (-o.z() / u.z()) * u);
+      }
+      sum += l * cu;
+    }
+    return out + g.rho_s * (2 * kPi / (g.n + 1)) * sum / kGlossSamples;
   }
 
   int NearestPatch(const Eigen::Vector3d& q, double* dist) const {

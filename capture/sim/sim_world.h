@@ -1,7 +1,8 @@
 // The simulated world behind `rouen demo`, the project's ground truth: a campanile-like tower
 // on a plaza (Berkeley, late August) with surrounding blocks and open ground, lit by a sun
 // from the world's own almanac (capture/sim/almanac.h) through a Rayleigh + Mie atmosphere
-// (capture/sim/atmosphere.h). Surfaces are Lambertian with smoothly varying RGB albedo.
+// (capture/sim/atmosphere.h). Surfaces are Lambertian with smoothly varying RGB albedo; the
+// copper roof adds a mild specular lobe (sim_scene.h MaterialSpecular).
 // Lighting per time: exact direct sun with shadow rays; sky and interreflection (several
 // bounces) gathered by stratified Monte Carlo on surface texels. Frame: ENU metres, origin at
 // the site. Radiance units: W m^-2 sr^-1 per colour band (R, G, B ~ 680, 550, 440 nm).
@@ -94,7 +95,7 @@ class SimWorld {
   // Total irradiance (sun with shadows + sky + interreflections) at a point on the
   // surface nearest to `point`, on that surface's outward side.
   Eigen::Vector3d TrueIrradiance(const Eigen::Vector3d& point) const;
-  // Outgoing radiance there (albedo / pi x irradiance).
+  // Outgoing diffuse radiance there (albedo / pi x irradiance; the roof's lobe not included).
   Eigen::Vector3d TrueRadiance(const Eigen::Vector3d& point) const;
 
   // --- Rendering (the current time) ---

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <set>
@@ -157,6 +158,66 @@ TEST(SimWorldTest, ShadowNorthOfTheTowerAtNoon) {
   for (int c = 0; c < 3; ++c) EXPECT_LT(shade[c], 0.5 * sunlit[c]);
   // Shade is lit by the sky: bluer than sunlit ground.
   EXPECT_GT(shade[2] / shade[0], sunlit[2] / sunlit[0]);
+}
+
+// The copper roof's lobe (MaterialSpecular): seen from the sun's mirror direction a sunlit
+// roof point sends rho_s E_sun cos(i) more than its diffuse radiance (plus a little sky); seen
+// from far off the mirror, only the sky's small share of the lobe.
+TEST(SimWorldTest, RoofReflectsTheSunSpecularly) {
+  SimWorld& w = SimTestWorld();
+  w.SetTime(SimTestNoon());
+  const Mesh& model = w.Model();
+  const int roof =
+      static_cast<int>(std::find(model.block_names.begin(), model.block_names.end(), "roof") -
+                       model.block_names.begin());
+  ASSERT_LT(roof, static_cast<int>(model.block_names.size()));
+  const Eigen::Vector3d sun = w.TrueSunDirection();
+  int best = -1;
+  for (size_t t = 0; t < model.triangles.size(); ++t) {
+    if (model.triangle_block[t] != roof) continue;
+    if (best < 0 || model.Normal(t).dot(sun) > model.Normal(best).dot(sun))
+      best = static_cast<int>(t);
+  }
+  ASSERT_GE(best, 0);
+  const Eigen::Vector3d n = model.Normal(best);
+  const auto& tri = model.triangles[best];
+  const Eigen::Vector3d x =
+      (model.vertices[tri[0]] + model.vertices[tri[1]] + model.vertices[tri[2]]) / 3.0;
+  const double c = n.dot(sun);
+  ASSERT_GT(c, 0.3);
+  const Eigen::Vector3d mirror = 2 * c * n - sun;
+  // The sky's share is at most rho_s 2 pi / (n + 1) times the brightest sky radiance.
+  double sky_max = 0;
+  for (int i = 0; i < 400; ++i) {
+    const double az = 2 * kPi * (i % 40) / 40, el = (0.5 + i / 40) * (kPi / 2) / 10;
+    const Eigen::Vector3d d(std::cos(el) * std::sin(az), std::cos(el) * std::cos(az), std::sin(el));
+    sky_max = std::max(sky_max, w.TrueSkyRadiance(d).maxCoeff());
+  }
+  const double rho_s = 0.07, exponent = 20;  // sim_scene.cc MaterialSpecular(kRoofMetal)
+  const double sky_bound = rho_s * 2 * kPi / (exponent + 1) * sky_max;
+  auto seen_from = [&](const Eigen::Vector3d& dir) {
+    Pose pose;
+    pose.position = x + 20 * dir;
+    pose.rotation = LookAlong(-dir);
+    const Image img = w.RenderRadiance(Intrinsics::PinholeFov(9, 9, 0.5), pose);
+    return Eigen::Vector3d(img.at(4, 4, 0), img.at(4, 4, 1), img.at(4, 4, 2));
+  };
+  const Eigen::Vector3d diffuse = w.TrueRadiance(x);
+  const Eigen::Vector3d at_mirror = seen_from(mirror) - diffuse;
+  const Eigen::Vector3d e_sun = w.TrueSunIrradiance() * c;
+  for (int ch = 0; ch < 3; ++ch) {
+    // Texel lighting noise of the diffuse part (~1%) is the tolerance below the sun's share.
+    EXPECT_GT(at_mirror[ch], rho_s * e_sun[ch] - 0.01 * diffuse[ch]) << ch;
+    EXPECT_LT(at_mirror[ch], rho_s * e_sun[ch] + sky_bound + 0.01 * diffuse[ch]) << ch;
+  }
+  // Off the mirror by ~50 degrees, towards the normal: cos^20 50deg = 1e-4 of the sun's share.
+  const Eigen::Vector3d off = (n + 0.2 * (n - mirror)).normalized();
+  ASSERT_LT(off.dot(mirror), std::cos(40 * kPi / 180));
+  const Eigen::Vector3d away = seen_from(off) - diffuse;
+  for (int ch = 0; ch < 3; ++ch) {
+    EXPECT_GT(away[ch], -0.01 * diffuse[ch]) << ch;
+    EXPECT_LT(away[ch], sky_bound + 1e-3 * rho_s * e_sun[ch] + 0.01 * diffuse[ch]) << ch;
+  }
 }
 
 TEST(SimWorldTest, OpenGroundIrradianceIsSunPlusSky) {

@@ -1,0 +1,276 @@
+#include "solve/specular.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+
+#include "core/error.h"
+
+namespace rouen {
+
+double SpecularLobe::Shape(const Eigen::Vector3d& normal, const Eigen::Vector3d& u,
+                           const Eigen::Vector3d& v) const {
+  const double un = u.dot(normal), vn = v.dot(normal);
+  if (!(un > 0) || !(vn > 0)) return 0;
+  // Cxy (u_x v_x + u_y v_y) + Cz u_z v_z with Cxy = -kappa, Cz = 1 (eq. 13).
+  const double bracket = -kappa * (u.dot(v) - un * vn) + un * vn;
+  return bracket > 0 ? std::pow(bracket, n) : 0;
+}
+
+void SpecularLobe::Validate(const std::string& what) const {
+  if (!rho_s.allFinite() || rho_s.minCoeff() < 0)
+    throw Error(what + ": specular rho_s must be finite and >= 0");
+  if (!(kappa >= kLobeKappaMin && kappa <= kLobeKappaMax))
+    throw Error(what + ": specular kappa " + std::to_string(kappa) + " outside [" +
+                std::to_string(kLobeKappaMin) + ", " + std::to_string(kLobeKappaMax) + "]");
+  if (!(n >= kLobeExponentMin && n <= kLobeExponentMax))
+    throw Error(what + ": specular exponent " + std::to_string(n) + " outside [" +
+                std::to_string(kLobeExponentMin) + ", " + std::to_string(kLobeExponentMax) + "]");
+  if (rho_s.maxCoeff() > MaxLobeRho(n) * (1 + 1e-9))
+    throw Error(what +
+                ": specular rho_s above (n + 2) / 2 pi: the lobe would reflect more light "
+                "than it receives");
+  if (kappa > 1 && n * std::log(kappa) > std::log(kLobeMaxGrazingGain) * (1 + 1e-9))
+    throw Error(what + ": specular kappa^n above " + std::to_string(kLobeMaxGrazingGain));
+}
+
+double MaxLobeRho(double n) { return (n + 2) / (2 * M_PI); }
+
+double PaperRho(double z) { return std::tanh(0.25 * std::abs(z)); }
+
+void SunLobeOptions::Validate() const {
+  if (min_samples < 1) throw Error("sun lobe: min_samples must be >= 1");
+  if (max_samples < min_samples) throw Error("sun lobe: max_samples must be >= min_samples");
+  if (!(min_gain >= 0 && min_gain <= 1)) throw Error("sun lobe: min_gain must be in [0, 1]");
+  if (kappa_steps < 1 || exponent_steps < 2)
+    throw Error("sun lobe: kappa_steps must be >= 1 and exponent_steps >= 2");
+  if (simplex_iterations < 0) throw Error("sun lobe: simplex_iterations must be >= 0");
+}
+
+namespace {
+
+// A sample reduced to what the cost needs: the bracket's parts u.v and (u.n)(v.n) (eq. 13),
+// and per channel E / sigma and residual / sigma.
+struct Term {
+  double uv = 0, unvn = 0;
+  bool above = false;  // u and v above the surface
+  std::array<double, 3> e{}, r{};
+};
+
+std::vector<Term> Terms(const std::vector<LobeSample>& samples) {
+  std::vector<Term> t;
+  t.reserve(samples.size());
+  for (const LobeSample& s : samples) {
+    Term q;
+    const double un = s.to_light.dot(s.normal), vn = s.to_viewer.dot(s.normal);
+    q.above = un > 0 && vn > 0;
+    q.uv = s.to_light.dot(s.to_viewer);
+    q.unvn = un * vn;
+    for (int c = 0; c < 3; ++c) {
+      q.e[c] = s.irradiance[c] / s.sigma[c];
+      q.r[c] = s.residual[c] / s.sigma[c];
+    }
+    t.push_back(q);
+  }
+  return t;
+}
+
+double Bracket(const Term& q, double kappa) { return -kappa * (q.uv - q.unvn) + q.unvn; }
+
+// For a lobe shape (kappa, n): each channel's best rho_s >= 0 and the whole cost. A term
+// rho(r - rho_s g) is concave in rho_s on each side of its zero r / g, so the 1-D cost is
+// concave between consecutive zeros and its minimum lies at a zero or at 0: the candidates are
+// the zeros (a quantile subset of them when there are many, then the zeros next to the best).
+struct ShapeFit {
+  Eigen::Vector3d rho_s = Eigen::Vector3d::Zero();
+  double cost = 0;
+};
+
+ShapeFit FitShape(const std::vector<Term>& terms, const std::array<double, 3>& cost_zero,
+                  double kappa, double n) {
+  constexpr size_t kAllZeros = 128, kQuantiles = 64, kNeighbours = 8;
+  if (kappa > 1 && n * std::log(kappa) > std::log(kLobeMaxGrazingGain)) {
+    return {Eigen::Vector3d::Zero(), std::numeric_limits<double>::infinity()};
+  }
+  const double rho_max = MaxLobeRho(n);
+  std::vector<double> g;
+  std::vector<int> idx;
+  g.reserve(terms.size());
+  idx.reserve(terms.size());
+  for (size_t i = 0; i < terms.size(); ++i) {
+    if (!terms[i].above) continue;
+    const double b = Bracket(terms[i], kappa);
+    if (!(b > 0)) continue;
+    const double shape = std::pow(b, n);
+    if (!(shape > 1e-9)) continue;
+    g.push_back(shape);
+    idx.push_back(static_cast<int>(i));
+  }
+  ShapeFit fit;
+  std::array<double, 3> cost{};
+  tbb::parallel_for(0, 3, [&](int c) {
+    // Terms the lobe leaves at zero cost the same as without it.
+    double base = cost_zero[c];
+    std::vector<double> gi(g.size()), ri(g.size()), zeros;
+    for (size_t k = 0; k < g.size(); ++k) {
+      const Term& q = terms[idx[k]];
+      gi[k] = g[k] * q.e[c];
+      ri[k] = q.r[c];
+      base -= PaperRho(ri[k]);
+      if (gi[k] > 0 && ri[k] > 0) zeros.push_back(std::min(ri[k] / gi[k], rho_max));
+    }
+    auto cost_at = [&](double rho) {
+      double s = base;
+      for (size_t k = 0; k < gi.size(); ++k) s += PaperRho(ri[k] - rho * gi[k]);
+      return s;
+    };
+    std::sort(zeros.begin(), zeros.end());
+    double best_rho = 0, best = cost_at(0);
+    auto consider = [&](double rho) {
+      const double v = cost_at(rho);
+      if (v < best) {
+        best = v;
+        best_rho = rho;
+      }
+    };
+    if (zeros.size() <= kAllZeros) {
+      for (double z : zeros) consider(z);
+    } else {
+      size_t best_k = zeros.size();
+      for (size_t q = 0; q < kQuantiles; ++q) {
+        const size_t k = (q * (zeros.size() - 1)) / (kQuantiles - 1);
+        const double before = best;
+        consider(zeros[k]);
+        if (best < before) best_k = k;
+      }
+      if (best_k < zeros.size()) {
+        const size_t lo = best_k > kNeighbours ? best_k - kNeighbours : 0;
+        const size_t hi = std::min(zeros.size(), best_k + kNeighbours + 1);
+        for (size_t k = lo; k < hi; ++k) consider(zeros[k]);
+      }
+    }
+    fit.rho_s[c] = best_rho;
+    cost[c] = best;
+  });
+  fit.cost = cost[0] + cost[1] + cost[2];
+  return fit;
+}
+
+}  // namespace
+
+double SunLobeCost(const std::vector<LobeSample>& samples, const SpecularLobe& lobe) {
+  double cost = 0;
+  for (const LobeSample& s : samples) {
+    const Eigen::Vector3d f = lobe.Eval(s.normal, s.to_light, s.to_viewer);
+    for (int c = 0; c < 3; ++c)
+      cost += PaperRho((s.residual[c] - f[c] * s.irradiance[c]) / s.sigma[c]);
+  }
+  return cost;
+}
+
+// §4.2.2, eq. 15: robust estimation of the sun lobe by a global search.
+LobeFit FitSunLobe(const std::vector<LobeSample>& all, const SunLobeOptions& options) {
+  options.Validate();
+  LobeFit out;
+  // Only samples that can carry information: finite, lit, sigma > 0.
+  std::vector<LobeSample> usable;
+  for (const LobeSample& s : all) {
+    if (s.irradiance.allFinite() && s.residual.allFinite() && s.sigma.allFinite() &&
+        s.sigma.minCoeff() > 0 && s.irradiance.maxCoeff() > 0 && s.normal.allFinite() &&
+        s.to_light.allFinite() && s.to_viewer.allFinite())
+      usable.push_back(s);
+  }
+  std::vector<LobeSample> samples;
+  if (static_cast<int>(usable.size()) > options.max_samples) {
+    for (int k = 0; k < options.max_samples; ++k)
+      samples.push_back(usable[(static_cast<size_t>(k) * usable.size()) / options.max_samples]);
+  } else {
+    samples = std::move(usable);
+  }
+  out.samples = static_cast<int>(samples.size());
+  const std::vector<Term> terms = Terms(samples);
+  std::array<double, 3> cost_zero{};
+  for (const Term& q : terms)
+    for (int c = 0; c < 3; ++c) cost_zero[c] += PaperRho(q.r[c]);
+  out.cost_zero = out.cost = cost_zero[0] + cost_zero[1] + cost_zero[2];
+  if (out.samples < options.min_samples) return out;
+
+  // The grid over kappa and log n.
+  const double log_min = std::log(kLobeExponentMin), log_max = std::log(kLobeExponentMax);
+  const int nk = options.kappa_steps, nn = options.exponent_steps;
+  auto kappa_at = [&](int k) {
+    return nk == 1 ? 1.0 : kLobeKappaMin + (kLobeKappaMax - kLobeKappaMin) * k / (nk - 1);
+  };
+  std::vector<ShapeFit> grid(static_cast<size_t>(nk) * nn);
+  tbb::parallel_for(0, nk * nn, [&](int i) {
+    const int k = i / nn, j = i % nn;
+    grid[i] = FitShape(terms, cost_zero, kappa_at(k),
+                       std::exp(log_min + (log_max - log_min) * j / (nn - 1)));
+  });
+  int best_i = 0;
+  for (int i = 1; i < nk * nn; ++i) {
+    if (grid[i].cost < grid[best_i].cost) best_i = i;
+  }
+  // Downhill simplex over (kappa, log n) from the best grid point, steps of one grid cell,
+  // the parameters clamped to their ranges.
+  using P = Eigen::Vector2d;
+  auto clamp = [&](P p) {
+    return P(std::clamp(p[0], kLobeKappaMin, kLobeKappaMax), std::clamp(p[1], log_min, log_max));
+  };
+  auto eval = [&](const P& p) { return FitShape(terms, cost_zero, p[0], std::exp(p[1])); };
+  const double dk = nk == 1 ? 0.1 : (kLobeKappaMax - kLobeKappaMin) / (nk - 1);
+  const double dn = (log_max - log_min) / (nn - 1);
+  const P start(kappa_at(best_i / nn), log_min + dn * (best_i % nn));
+  std::array<P, 3> v = {start, clamp(start + P(dk, 0)), clamp(start + P(0, dn))};
+  if (v[1] == start) v[1] = clamp(start - P(dk, 0));
+  if (v[2] == start) v[2] = clamp(start - P(0, dn));
+  std::array<ShapeFit, 3> f = {grid[best_i], eval(v[1]), eval(v[2])};
+  for (int it = 0; it < options.simplex_iterations; ++it) {
+    std::array<int, 3> o = {0, 1, 2};
+    std::sort(o.begin(), o.end(), [&](int a, int b) { return f[a].cost < f[b].cost; });
+    const P centroid = 0.5 * (v[o[0]] + v[o[1]]);
+    const P reflected = clamp(centroid + (centroid - v[o[2]]));
+    const ShapeFit fr = eval(reflected);
+    if (fr.cost < f[o[0]].cost) {
+      const P expanded = clamp(centroid + 2 * (centroid - v[o[2]]));
+      const ShapeFit fe = eval(expanded);
+      const bool take_e = fe.cost < fr.cost;
+      v[o[2]] = take_e ? expanded : reflected;
+      f[o[2]] = take_e ? fe : fr;
+    } else if (fr.cost < f[o[1]].cost) {
+      v[o[2]] = reflected;
+      f[o[2]] = fr;
+    } else {
+      const P contracted = clamp(centroid + 0.5 * (v[o[2]] - centroid));
+      const ShapeFit fc = eval(contracted);
+      if (fc.cost < f[o[2]].cost) {
+        v[o[2]] = contracted;
+        f[o[2]] = fc;
+      } else {  // shrink towards the best
+        for (int k : {o[1], o[2]}) {
+          v[k] = 0.5 * (v[k] + v[o[0]]);
+          f[k] = eval(v[k]);
+        }
+      }
+    }
+    const double spread = (v[o[0]] - v[o[2]]).cwiseAbs().maxCoeff();
+    if (spread < 1e-5) break;
+  }
+  int b = 0;
+  for (int k = 1; k < 3; ++k) {
+    if (f[k].cost < f[b].cost) b = k;
+  }
+  out.cost = f[b].cost;
+  if (out.cost_zero - out.cost >= options.min_gain * out.cost_zero && !f[b].rho_s.isZero()) {
+    out.kept = true;
+    out.lobe.rho_s = f[b].rho_s;
+    out.lobe.kappa = v[b][0];
+    out.lobe.n = std::exp(v[b][1]);
+  }
+  return out;
+}
+
+}  // namespace rouen
