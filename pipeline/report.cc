@@ -377,7 +377,7 @@ void Timeline(Page& p, const ReportRequest& r, const Inputs& in) {
   std::map<int, UtcTime> slot_start;
   const double h0 = (first.ns - day0.ns) * 1e-9 / 3600, h1 = (last.ns - day0.ns) * 1e-9 / 3600;
   for (Target t : order) {
-    const double offset = (static_cast<int>(t) - 2) * std::max(h1 - h0, 1.0) / 150;
+    const double offset = (static_cast<int>(t) - 2) * std::max(h1 - h0, 1.0) / 60;
     PlotSeries ser;
     ser.label = TargetName(t);
     ser.style = SeriesStyle::kPoints;
