@@ -20,6 +20,7 @@
 #include "core/stats.h"
 #include "core/temporaries.h"
 #include "pipeline/capture_session.h"
+#include "pipeline/report.h"
 #include "pipeline/scene.h"
 #include "pipeline/session_solve.h"
 #include "pipeline/validate.h"
@@ -308,6 +309,15 @@ void Run(const DemoArgs& a) {
       throw Error("demo: metric " + k + " is not finite");
   WriteFileAtomic(out / "metrics.json", m.dump(2) + "\n");
 
+  // 6. The report of the demo's world, as `rouen report` writes it, with the held-out photos.
+  ReportRequest report;
+  report.scene = scene_dir;
+  report.session = out / "session";
+  report.work = out / "work";
+  report.metrics = {out / "metrics.json"};
+  report.validation = &validation;
+  const ReportSummary written = WriteReport(report, out / "report.html");
+
   std::printf("rouen demo (%s): %d frames, %.1f s\n", a.quick ? "quick" : "full",
               m["frames_captured"].get<int>(), m["wall_seconds"].get<double>());
   std::printf("  response curve      max relative error  %.4f\n", resp_err);
@@ -335,6 +345,8 @@ void Run(const DemoArgs& a) {
       scene_dir.c_str(), (out / "session").c_str(), heldout);
   std::printf("  wrote %s, %s, %s\n", (out / "metrics.json").c_str(), (out / "heldout.png").c_str(),
               (out / "heldout_truth.png").c_str());
+  std::printf("  report: %s (%.1f MB, %.1f s)\n", (out / "report.html").c_str(),
+              written.bytes / 1e6, written.seconds);
 }
 
 }  // namespace
@@ -355,7 +367,8 @@ void RegisterDemo(CLI::App& app) {
       "DIR/heldout_predicted.png beside DIR/heldout_truth.png, the session (DIR/session), the\n"
       "solved scene (DIR/scene, as `rouen solve` writes it) and intermediate files (DIR/work).\n"
       "The held-out photographs are also compared as `rouen validate` compares them; the demo\n"
-      "prints that command, which reproduces its figures.");
+      "prints that command, which reproduces its figures. DIR/report.html shows it all on one\n"
+      "page (as `rouen report` writes it).");
   c->add_option("--out", a->out, "Output folder")->capture_default_str();
   c->add_flag("--quick", a->quick, "Smaller images and fewer samples (about a minute)");
   c->add_flag("--true-response", a->true_response,

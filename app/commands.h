@@ -27,6 +27,7 @@ void RegisterRender(CLI::App& app);    // rouen render: a scene at any time of d
 void RegisterValidate(CLI::App& app);  // rouen validate: a scene against a slot's photos
 void RegisterSky(CLI::App& app);       // rouen sky fit / rouen sky render
 void RegisterStatus(CLI::App& app);    // rouen status: what a session holds and what it lacks
+void RegisterReport(CLI::App& app);    // rouen report: a scene as one HTML page
 
 }  // namespace rouen
 

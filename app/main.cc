@@ -26,6 +26,7 @@ int main(int argc, char** argv) {
   rouen::RegisterSolve(app);
   rouen::RegisterRender(app);
   rouen::RegisterValidate(app);
+  rouen::RegisterReport(app);
   // Ctrl-C or SIGTERM removes the temporaries of the files being written.
   rouen::RemoveTemporariesOnSignal();
   try {
