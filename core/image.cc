@@ -187,8 +187,8 @@ bool ReadRowBands(OIIO::ImageInput& in, OIIO::TypeDesc type,
 
 }  // namespace internal
 
-Image ReadImage(const std::string& path) {
-  // Colour values as stored: no premultiplication by an alpha channel (alpha is dropped).
+Image ReadImage(const std::string& path, bool keep_alpha) {
+  // Colour values as stored: no premultiplication by an alpha channel (dropped unless kept).
   OIIO::ImageSpec config;
   config.attribute("oiio:UnassociatedAlpha", 1);
   internal::CheckImageFileHeader(path);
@@ -210,8 +210,8 @@ Image ReadImage(const std::string& path) {
                         base == OIIO::TypeDesc::DOUBLE;
   // Drop alpha: RGBA -> RGB, gray+alpha -> gray; other layouts are kept as stored.
   int out_ch = nch;
-  if (nch == 4) out_ch = 3;
-  if (nch == 2 && spec.alpha_channel == 1) out_ch = 1;
+  if (nch == 4 && !keep_alpha) out_ch = 3;
+  if (nch == 2 && spec.alpha_channel == 1 && !keep_alpha) out_ch = 1;
   Image img;
   img.width = w;
   img.height = h;

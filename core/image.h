@@ -49,7 +49,8 @@ void CheckImageSize(const std::string& path, int width, int height, int channels
 // Reads any format OpenImageIO knows. 8/16-bit files come back as digital numbers on a
 // 0..255 scale (kDigital), float/half files as kRadiance. Throws rouen::Error naming the file
 // (also for a file claiming more than kMaxImageSide / kMaxImagePixels / kMaxImageChannels).
-Image ReadImage(const std::string& path);
+// An alpha channel (RGBA, gray + alpha) is dropped unless `keep_alpha`; colours come as stored.
+Image ReadImage(const std::string& path, bool keep_alpha = false);
 // A mask image (any format ReadImage reads): width x height entries, 1 where some channel is
 // nonzero. Throws rouen::Error naming the file when it is unreadable or not width x height
 // (`for_what` names the image it must match).
