@@ -27,6 +27,8 @@ void RegisterRender(CLI::App& app);    // rouen render: a scene at any time of d
 void RegisterValidate(CLI::App& app);  // rouen validate: a scene against a slot's photos
 void RegisterSky(CLI::App& app);       // rouen sky fit / rouen sky render
 void RegisterStatus(CLI::App& app);    // rouen status: what a session holds and what it lacks
+void RegisterExport(CLI::App& app);    // rouen export: the building as glTF with its albedos
+void RegisterEnvmap(CLI::App& app);    // rouen envmap: a time's lighting as a lat-long EXR
 
 }  // namespace rouen
 

@@ -26,6 +26,8 @@ int main(int argc, char** argv) {
   rouen::RegisterSolve(app);
   rouen::RegisterRender(app);
   rouen::RegisterValidate(app);
+  rouen::RegisterExport(app);
+  rouen::RegisterEnvmap(app);
   // Ctrl-C or SIGTERM removes the temporaries of the files being written.
   rouen::RemoveTemporariesOnSignal();
   try {
