@@ -6,6 +6,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <utility>
 
 #include "app/commands.h"
 #include "app/options.h"
@@ -14,6 +15,7 @@
 #include "core/lens.h"
 #include "core/outputs.h"
 #include "core/time.h"
+#include "pipeline/export.h"
 #include "pipeline/scene.h"
 #include "render/tonemap.h"
 
@@ -176,10 +178,11 @@ void Run(const RenderArgs& a) {
     if (sequence)
       std::fprintf(stderr, "render: %zu/%zu %s\n", i + 1, requests.size(),
                    requests[i].time->Iso8601(0).c_str());
-    image = RenderScene(scene, requests[i],
-                        sequence ? std::function<void(const std::string&)>{}
-                                 : std::function<void(const std::string&)>(say));
-    WriteImage(out_files[i], image, StoredType::kFloat);
+    RenderedView view = RenderSceneView(scene, requests[i],
+                                        sequence ? std::function<void(const std::string&)>{}
+                                                 : std::function<void(const std::string&)>(say));
+    WriteImage(out_files[i], view.rgba, StoredType::kFloat, view.attributes);
+    image = std::move(view.rgb);
     if (!a.png.empty()) {
       if (exposure <= 0)
         exposure = response.valid() ? AutoExposure(image, response) : AutoExposureSrgb(image);
@@ -227,6 +230,12 @@ void RegisterRender(CLI::App& app) {
       "file and a pose file (as `rouen calib intrinsics` and `rouen calib pose` write them), or\n"
       "a new pinhole camera at --from-point looking at --look-at (ENU metres, the model's frame)\n"
       "with --fov and --size.\n"
+      "The radiance file is RGBA: alpha is the fraction of each pixel's rays that hit the\n"
+      "building (1 on it, 0 where every ray escapes; the colours keep the sky, environment and\n"
+      "sun there). Its header (EXR) holds rouen:time (ISO 8601 UTC), rouen:lighting and\n"
+      "rouen:slot (the slot or 'predicted'), rouen:sun_azimuth_deg (from north through east) and\n"
+      "rouen:sun_elevation_deg, rouen:camera (JSON: intrinsics and pose as the lens and pose\n"
+      "files hold them) and rouen:site.\n"
       "Example: rouen render s.scene --time 2026-08-25T19:40:00-07:00 --out sunset.exr "
       "--png sunset.png\n"
       "         rouen render s.scene --from 2026-08-25T08:00:00-07:00 --to "

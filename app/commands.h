@@ -28,6 +28,8 @@ void RegisterValidate(CLI::App& app);  // rouen validate: a scene against a slot
 void RegisterSky(CLI::App& app);       // rouen sky fit / rouen sky render
 void RegisterStatus(CLI::App& app);    // rouen status: what a session holds and what it lacks
 void RegisterReport(CLI::App& app);    // rouen report: a scene as one HTML page
+void RegisterExport(CLI::App& app);    // rouen export: the building as glTF with its albedos
+void RegisterEnvmap(CLI::App& app);    // rouen envmap: a time's lighting as a lat-long EXR
 
 }  // namespace rouen
 

@@ -27,6 +27,8 @@ int main(int argc, char** argv) {
   rouen::RegisterRender(app);
   rouen::RegisterValidate(app);
   rouen::RegisterReport(app);
+  rouen::RegisterExport(app);
+  rouen::RegisterEnvmap(app);
   // Ctrl-C or SIGTERM removes the temporaries of the files being written.
   rouen::RemoveTemporariesOnSignal();
   try {

@@ -187,8 +187,8 @@ bool ReadRowBands(OIIO::ImageInput& in, OIIO::TypeDesc type,
 
 }  // namespace internal
 
-Image ReadImage(const std::string& path) {
-  // Colour values as stored: no premultiplication by an alpha channel (alpha is dropped).
+Image ReadImage(const std::string& path, bool keep_alpha) {
+  // Colour values as stored: no premultiplication by an alpha channel (dropped unless kept).
   OIIO::ImageSpec config;
   config.attribute("oiio:UnassociatedAlpha", 1);
   internal::CheckImageFileHeader(path);
@@ -210,8 +210,8 @@ Image ReadImage(const std::string& path) {
                         base == OIIO::TypeDesc::DOUBLE;
   // Drop alpha: RGBA -> RGB, gray+alpha -> gray; other layouts are kept as stored.
   int out_ch = nch;
-  if (nch == 4) out_ch = 3;
-  if (nch == 2 && spec.alpha_channel == 1) out_ch = 1;
+  if (nch == 4 && !keep_alpha) out_ch = 3;
+  if (nch == 2 && spec.alpha_channel == 1 && !keep_alpha) out_ch = 1;
   Image img;
   img.width = w;
   img.height = h;
@@ -269,7 +269,8 @@ std::vector<uint8_t> ReadMask(const std::string& path, int width, int height,
   return mask;
 }
 
-std::string EncodeImage(const std::string& path, const Image& image, StoredType type) {
+std::string EncodeImage(const std::string& path, const Image& image, StoredType type,
+                        const std::vector<ImageAttribute>& attributes) {
   if ((type == StoredType::kHalf || type == StoredType::kFloat) && !IsFloatImageFormat(path)) {
     throw Error(path +
                 ": cannot store floating-point values in this format (it would clip "
@@ -342,6 +343,18 @@ std::string EncodeImage(const std::string& path, const Image& image, StoredType 
     spec.alpha_channel = 3;
     spec.attribute("oiio:UnassociatedAlpha", 1);  // store colours as given
   }
+  for (const ImageAttribute& a : attributes) {
+    if (a.name.empty()) throw Error(path + ": an image attribute needs a name");
+    if (const auto* text = std::get_if<std::string>(&a.value)) {
+      spec.attribute(a.name, *text);
+    } else if (const auto* f = std::get_if<float>(&a.value)) {
+      if (!std::isfinite(*f))
+        throw Error(path + ": refusing to write the non-finite attribute " + a.name);
+      spec.attribute(a.name, *f);
+    } else {
+      spec.attribute(a.name, std::get<int>(a.value));
+    }
+  }
   void* proxy = &sink;
   spec.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy);
   auto fail = [&](const std::string& what) {
@@ -372,8 +385,28 @@ std::string EncodeImage(const std::string& path, const Image& image, StoredType 
   return std::string(bytes.begin(), bytes.end());
 }
 
-void WriteImage(const std::string& path, const Image& image, StoredType type) {
-  WriteFileAtomic(path, EncodeImage(path, image, type));
+void WriteImage(const std::string& path, const Image& image, StoredType type,
+                const std::vector<ImageAttribute>& attributes) {
+  WriteFileAtomic(path, EncodeImage(path, image, type, attributes));
+}
+
+std::vector<ImageAttribute> ReadImageAttributes(const std::string& path) {
+  auto in = OIIO::ImageInput::open(path);
+  if (!in) throw Error(path + ": cannot read the image header: " + OIIO::geterror());
+  std::vector<ImageAttribute> out;
+  for (const OIIO::ParamValue& p : in->spec().extra_attribs) {
+    const OIIO::TypeDesc t = p.type();
+    if (t == OIIO::TypeDesc::STRING) {
+      out.push_back({p.name().string(), std::string(p.get_ustring().string())});
+    } else if (t == OIIO::TypeDesc::INT) {
+      out.push_back({p.name().string(), p.get_int()});
+    } else if (t.basetype == OIIO::TypeDesc::FLOAT || t.basetype == OIIO::TypeDesc::DOUBLE ||
+               t.basetype == OIIO::TypeDesc::HALF) {
+      out.push_back({p.name().string(), p.get_float()});
+    }
+  }
+  in->close();
+  return out;
 }
 
 }  // namespace rouen

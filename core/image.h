@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <variant>
 #include <vector>
 
 namespace rouen {
@@ -48,16 +49,28 @@ void CheckImageSize(const std::string& path, int width, int height, int channels
 // Reads any format OpenImageIO knows. 8/16-bit files come back as digital numbers on a
 // 0..255 scale (kDigital), float/half files as kRadiance. Throws rouen::Error naming the file
 // (also for a file claiming more than kMaxImageSide / kMaxImagePixels / kMaxImageChannels).
-Image ReadImage(const std::string& path);
+// An alpha channel (RGBA, gray + alpha) is dropped unless `keep_alpha`; colours come as stored.
+Image ReadImage(const std::string& path, bool keep_alpha = false);
 // A mask image (any format ReadImage reads): width x height entries, 1 where some channel is
 // nonzero. Throws rouen::Error naming the file when it is unreadable or not width x height
 // (`for_what` names the image it must match).
 std::vector<uint8_t> ReadMask(const std::string& path, int width, int height,
                               const std::string& for_what);
+// One header attribute of an image file (OpenEXR keeps any name; rouen's are "rouen:<name>"):
+// a string, a float or an integer.
+struct ImageAttribute {
+  using Value = std::variant<std::string, float, int>;
+  std::string name;
+  Value value;
+};
+
 // Encodes through OpenImageIO in memory, choosing the format from `path`'s extension, and
 // checks that the bytes decode to the same width, height and channels. Same value rules as
 // WriteImage; throws rouen::Error naming `path`.
-std::string EncodeImage(const std::string& path, const Image& image, StoredType type);
+// `attributes` go into the file's header (formats that cannot hold them drop them). A 4-channel
+// image is written RGBA, its fourth channel the alpha, colours stored as given.
+std::string EncodeImage(const std::string& path, const Image& image, StoredType type,
+                        const std::vector<ImageAttribute>& attributes = {});
 // Writes through OpenImageIO, choosing the format from the extension. Integer types clamp
 // and round the values (0..255 scale for kUint8; for kUint16 values on the same 0..255 scale
 // are stored x257 as 0..65535, so ReadImage gives them back). The encoded bytes are written by
@@ -65,6 +78,11 @@ std::string EncodeImage(const std::string& path, const Image& image, StoredType 
 // disk never leaves a partial file. Non-finite values, values beyond 65504 for kHalf, and
 // kHalf/kFloat to a format that cannot store them (IsFloatImageFormat in core/outputs.h: PNG,
 // JPEG, ...) are refused with rouen::Error.
-void WriteImage(const std::string& path, const Image& image, StoredType type);
+void WriteImage(const std::string& path, const Image& image, StoredType type,
+                const std::vector<ImageAttribute>& attributes = {});
+// The header attributes of an image file as OpenImageIO reads them (the format's own names,
+// e.g. "rouen:time"): strings, integers and floats (of an array, its first value). Throws
+// rouen::Error naming the file when it cannot be opened.
+std::vector<ImageAttribute> ReadImageAttributes(const std::string& path);
 
 }  // namespace rouen

@@ -44,7 +44,7 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
                 " triangles, the mesh has " + std::to_string(mesh.triangles.size()));
   }
   const int w = intrinsics.width, h = intrinsics.height, ss = options.supersample;
-  Image out(w, h, 3, PixelUnits::kRadiance, 0.f);
+  Image out(w, h, options.alpha ? 4 : 3, PixelUnits::kRadiance, 0.f);
   const Eigen::Vector3d s = lighting.sun_dir.normalized();
   const Eigen::Vector3d sun_e = lighting.sun_radiance * lighting.sun_solid_angle_sr;
   const double cos_sun_radius = std::cos(lighting.SunAngularRadius());
@@ -54,8 +54,10 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
       lighting.env.radiance.size() ==
           static_cast<size_t>(lighting.env.num_regions()) * lighting.env.layer_z.size();
 
-  auto shade = [&](const Eigen::Vector3d& dir) -> Eigen::Vector3d {
+  // *hit_model: whether the ray hits the model (the alpha channel's coverage).
+  auto shade = [&](const Eigen::Vector3d& dir, bool* hit_model) -> Eigen::Vector3d {
     const RayHit hit = model.Intersect(pose.position, dir, 0.0);
+    *hit_model = hit.hit;
     if (!hit.hit) {
       if (!options.draw_background) return Eigen::Vector3d::Zero();
       if (dir.dot(s) >= cos_sun_radius) return lighting.sun_radiance;
@@ -132,16 +134,20 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
   tbb::parallel_for(0, h, [&](int y) {
     for (int x = 0; x < w; ++x) {
       Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      int hits = 0;
       const int n_sub = uniform(x, y) ? 1 : ss;
       for (int a = 0; a < n_sub; ++a) {
         for (int b = 0; b < n_sub; ++b) {
           const Eigen::Vector2d px(x + (b + 0.5) / n_sub, y + (a + 0.5) / n_sub);
           const Eigen::Vector3d d = pose.rotation * Unproject(intrinsics, px);
           if (!d.allFinite() || d.squaredNorm() == 0) continue;
-          sum += shade(d.normalized());
+          bool hit = false;
+          sum += shade(d.normalized(), &hit);
+          hits += hit;
         }
       }
       sum /= n_sub * n_sub;
+      if (options.alpha) out.at(x, y, 3) = static_cast<float>(hits) / (n_sub * n_sub);
       if (!sum.allFinite()) {
         throw Error("render: non-finite radiance at pixel (" + std::to_string(x) + ", " +
                     std::to_string(y) + ")");

@@ -26,7 +26,10 @@ struct RenderOptions {
   bool adaptive = true;
   bool interpolate = true;      // smooth albedo / E_se between grid points; false: nearest point
   bool draw_background = true;  // sky, environment and sun where rays escape; false: 0
-  void Validate() const;        // throws rouen::Error
+  // A fourth channel, alpha: the fraction of the pixel's samples whose ray hits the model (1 on
+  // the building, 0 where every ray escapes). The colour channels are unchanged by it.
+  bool alpha = false;
+  void Validate() const;  // throws rouen::Error
 };
 
 struct RenderStats {
@@ -39,7 +42,7 @@ struct RenderStats {
 // (albedo.retro, solve/retro.h; 1 when Lambertian) and rho, E_se interpolated from
 // the grid; on escape the sun disc (sun_radiance) within the sun's radius, the sky model above
 // the horizon and the environment map below. `irr` is the irradiance of `lighting` on the grid
-// (with the interreflection added). Returns a kRadiance image.
+// (with the interreflection added). Returns a kRadiance image (RGB, RGBA with options.alpha).
 Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& model,
                  const AlbedoResult& albedo, const Lighting& lighting, const SlotIrradiance& irr,
                  const Intrinsics& intrinsics, const Pose& pose, const RenderOptions& options = {},
