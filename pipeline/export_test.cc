@@ -116,6 +116,15 @@ TEST_F(ExportTest, TheGlbParsesBackWithTheMeshAndBothAlbedoSets) {
     const nlohmann::json& mat = j["materials"][prim["material"].get<int>()];
     const nlohmann::json& extras = mat["extras"]["rouen"];
     EXPECT_NEAR(extras["retro"].get<double>(), albedo.retro[b], 1e-12);
+    // The sun lobe where the block has one (the tower), none on the matte plaza.
+    const SpecularLobe lobe = BlockLobe(albedo.sun_lobes, b);
+    ASSERT_EQ(extras.contains("sun_lobe"), !lobe.IsZero()) << mesh.block_names[b];
+    if (!lobe.IsZero()) {
+      EXPECT_EQ(extras["sun_lobe"]["rho_s"].get<std::vector<double>>(),
+                (std::vector<double>{lobe.rho_s[0], lobe.rho_s[1], lobe.rho_s[2]}));
+      EXPECT_EQ(extras["sun_lobe"]["n"].get<double>(), lobe.n);
+      EXPECT_EQ(extras["sun_lobe"]["kappa"].get<double>(), lobe.kappa);
+    }
     const int sun_tex = mat["pbrMetallicRoughness"]["baseColorTexture"]["index"];
     EXPECT_EQ(extras["albedo_sun_texture"], sun_tex);
     const int se_tex = extras["albedo_sky_env_texture"];

@@ -41,8 +41,8 @@ inline Eigen::Vector3d ExportTestAlbedo(const GridPoint& p) {
                          base * 0.5 + 0.004 * std::abs(p.position.x()));
 }
 
-// Writes the scene into `dir` (created): blocks "tower" (6 x 6 x 15 m, retro 0.4) and "plaza"
-// (40 x 40 m), grid spacing 1 m (plaza 4 m).
+// Writes the scene into `dir` (created): blocks "tower" (6 x 6 x 15 m, retro 0.4, a sun lobe)
+// and "plaza" (40 x 40 m, matte), grid spacing 1 m (plaza 4 m).
 inline void WriteExportTestScene(const std::filesystem::path& dir) {
   Mesh mesh;
   const int tower = mesh.AddBlock("tower");
@@ -62,6 +62,10 @@ inline void WriteExportTestScene(const std::filesystem::path& dir) {
   a.observations.assign(grid.size(), 3);
   a.flags.assign(grid.size(), 0);
   a.retro = {0.4, 0.0};
+  a.sun_lobes.resize(2);
+  a.sun_lobes[tower].rho_s = Eigen::Vector3d(0.03, 0.04, 0.05);
+  a.sun_lobes[tower].kappa = 0.9;
+  a.sun_lobes[tower].n = 25;
   scene.slots.push_back(ExportTestSlot());
   scene.model_file = "model.obj";
   SceneView view;

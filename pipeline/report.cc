@@ -57,6 +57,23 @@ std::string F(double v, int decimals = 2) {
   std::snprintf(buf, sizeof buf, "%.*f", decimals, v);
   return buf;
 }
+// A block's lobe for the albedo table: "none", or its parameters, with its fit's costs.
+std::string LobeText(const std::vector<SpecularLobe>& lobes, const std::vector<double>& cost0,
+                     const std::vector<double>& cost1, int b) {
+  const SpecularLobe l = BlockLobe(lobes, b);
+  std::string cost;
+  if (b < static_cast<int>(cost0.size()) && b < static_cast<int>(cost1.size()) && cost0[b] > 0) {
+    char text[64];
+    std::snprintf(text, sizeof text, " (cost %.0f -> %.0f)", cost0[b], cost1[b]);
+    cost = text;
+  }
+  if (l.IsZero()) return "none" + cost;
+  char text[128];
+  std::snprintf(text, sizeof text, "%.3g/%.3g/%.3g, kappa %.2f, n %.0f", l.rho_s[0], l.rho_s[1],
+                l.rho_s[2], l.kappa, l.n);
+  return text + cost;
+}
+
 std::string Rgb(const Eigen::Vector3d& v, int digits = 4) {
   return G(v[0], digits) + " / " + G(v[1], digits) + " / " + G(v[2], digits);
 }
@@ -992,20 +1009,50 @@ void Albedo(Page& p, const Inputs& in) {
   std::vector<std::vector<std::string>> rows;
   for (int b = 0; b < nb; ++b) {
     const double n = std::max(1, points[b]);
-    rows.push_back({in.mesh.block_names[b], std::to_string(points[b]),
-                    std::to_string(unobserved[b]), std::to_string(never_shadowed[b]),
-                    Rgb(sum_sun[b] / n, 3), Rgb(sum_se[b] / n, 3),
-                    G(b < static_cast<int>(a.retro.size()) ? a.retro[b] : 0, 3)});
+    rows.push_back(
+        {in.mesh.block_names[b], std::to_string(points[b]), std::to_string(unobserved[b]),
+         std::to_string(never_shadowed[b]), Rgb(sum_sun[b] / n, 3), Rgb(sum_se[b] / n, 3),
+         G(b < static_cast<int>(a.retro.size()) ? a.retro[b] : 0, 3),
+         LobeText(a.sun_lobes, a.summary.lobe_cost_zero, a.summary.lobe_cost_fitted, b),
+         LobeText(a.sky_lobes, a.summary.sky_lobe_cost_zero, a.summary.sky_lobe_cost_fitted, b)});
   }
   p.html().Table(
       {"block", "grid points", "unobserved", "never shadowed", "mean albedo, sun set (R/G/B)",
-       "mean albedo, sky+env set", "sun-term retro"},
+       "mean albedo, sky+env set", "sun-term retro", "sun lobe (eq. 13, 15)",
+       "sky/env lobe (eq. 13, 14)"},
       rows,
       "Per block. Unobserved: never seen while lit, or never sunlit when seen (the sun "
       "albedo is then inferred); never shadowed: eq. 11 is missing and a prior fills "
-      "the sky+env albedo. Retro: the block's sun-term reflection parameter "
-      "(0 = Lambert; rouen's stand-in for the paper's per-block specular lobes, which it "
-      "does not record).");
+      "the sky+env albedo. Retro: the rough diffuse reflection of the sun (0 = Lambert). "
+      "Lobes: rho_s (R/G/B, 1/sr), kappa = -Cxy and n of the block's specular lobe for the "
+      "sun (§4.2.2) and for the sky and environment (§4.2.1, fitted where the sun has one), "
+      "with the fit's cost without and with it; none where the photos show no highlight.");
+  // The lobes as curves: f_s (green) for a sun 45 degrees from the normal, against the angle
+  // of the view from the normal in the plane of incidence (the mirror direction at +45).
+  std::vector<PlotSeries> lobe_curves;
+  for (int b = 0; b < nb; ++b) {
+    const SpecularLobe l = BlockLobe(a.sun_lobes, b);
+    if (l.IsZero()) continue;
+    PlotSeries ps;
+    ps.label = in.mesh.block_names[b];
+    const Eigen::Vector3d nrm = Eigen::Vector3d::UnitZ();
+    const Eigen::Vector3d u(-std::sqrt(0.5), 0, std::sqrt(0.5));
+    for (int k = -88; k <= 88; k += 2) {
+      const double t = k * M_PI / 180;
+      ps.x.push_back(k);
+      ps.y.push_back(l.Eval(nrm, u, Eigen::Vector3d(std::sin(t), 0, std::cos(t)))[1]);
+    }
+    lobe_curves.push_back(ps);
+  }
+  if (!lobe_curves.empty()) {
+    PlotOptions po;
+    po.title = "Sun specular lobes (green)";
+    po.x.label = "view angle from the normal (deg; mirror direction at +45)";
+    po.y.label = "f_s (1/sr)";
+    p.html().Svg(PlotXY(lobe_curves, po).svg,
+                 "Eq. 13's lobe of each glossy block for a sun 45 degrees from the normal, "
+                 "in the plane of incidence.");
+  }
   // The atlases of scene.json (or baked from the grid when they are missing), with the flags.
   const nlohmann::json atlas =
       j.contains("atlas") && j["atlas"].is_object() ? j["atlas"] : nlohmann::json();

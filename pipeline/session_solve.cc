@@ -686,12 +686,14 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
     }
     Log(options, line.str());
   }
-  if (r.albedo_options.sun_lobe.fit) {
+  // Each block's lobe, its samples and its fit's cost without and with it.
+  auto log_lobes = [&](const char* title, const std::vector<SpecularLobe>& lobes,
+                       const std::vector<int>& samples, const std::vector<double>& cost0,
+                       const std::vector<double>& cost1) {
     std::ostringstream line;
-    line << "sun specular lobe per block (§4.2.2):";
-    const AlbedoSummary& s = r.albedo.summary;
+    line << title;
     for (size_t b = 0; b < r.mesh.block_names.size(); ++b) {
-      const SpecularLobe l = BlockLobe(r.albedo.sun_lobes, static_cast<int>(b));
+      const SpecularLobe l = BlockLobe(lobes, static_cast<int>(b));
       line << " " << r.mesh.block_names[b];
       if (l.IsZero()) {
         line << " none";
@@ -701,13 +703,22 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
                       l.rho_s[1], l.rho_s[2], l.kappa, l.n);
         line << text;
       }
-      if (b < s.lobe_samples.size()) {
-        line << " (" << s.lobe_samples[b] << " samples, eq. 15 cost " << std::fixed
-             << std::setprecision(0) << s.lobe_cost_zero[b] << " -> " << s.lobe_cost_fitted[b]
-             << ")";
+      if (b < samples.size() && samples[b] > 0 && b < cost0.size() && b < cost1.size()) {
+        line << " (" << samples[b] << " samples, cost " << std::fixed << std::setprecision(0)
+             << cost0[b] << " -> " << cost1[b] << ")";
       }
     }
     Log(options, line.str());
+  };
+  const AlbedoSummary& as = r.albedo.summary;
+  if (r.albedo_options.sun_lobe.fit) {
+    log_lobes("sun specular lobe per block (§4.2.2, eq. 15):", r.albedo.sun_lobes, as.lobe_samples,
+              as.lobe_cost_zero, as.lobe_cost_fitted);
+  }
+  if (r.albedo_options.sun_lobe.fit && r.albedo_options.sky_lobe.fit) {
+    log_lobes("sky and environment lobe per block (§4.2.1, eq. 14; blocks with a sun lobe):",
+              r.albedo.sky_lobes, as.sky_lobe_samples, as.sky_lobe_cost_zero,
+              as.sky_lobe_cost_fitted);
   }
   clock.Lap("irradiance and pseudo-albedos");
   // Beyond §5.2: how roughly the ground reflects the sun, from the slots the albedos used, for

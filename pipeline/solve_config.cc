@@ -213,6 +213,12 @@ json SolveConfigJson(const SolveConfig& c) {
               {"kappa_steps", a.sun_lobe.kappa_steps},
               {"exponent_steps", a.sun_lobe.exponent_steps},
               {"simplex_iterations", a.sun_lobe.simplex_iterations}}},
+            {"sky_lobe",
+             {{"fit", a.sky_lobe.fit},
+              {"min_samples", a.sky_lobe.min_samples},
+              {"max_samples", a.sky_lobe.max_samples},
+              {"min_gain", a.sky_lobe.min_gain},
+              {"max_iterations", a.sky_lobe.max_iterations}}},
             {"observation",
              {{"margin_px", ob.margin_px},
               {"occlusion_tolerance", ob.occlusion_tolerance},
@@ -311,6 +317,16 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
       g.Int("kappa_steps", &l.kappa_steps, 1, 100);
       g.Int("exponent_steps", &l.exponent_steps, 2, 200);
       g.Int("simplex_iterations", &l.simplex_iterations, 0, 10000);
+      g.Finish();
+    }
+    if (const json* o = f.Table("sky_lobe")) {
+      Fields g(*o, where, "albedo.sky_lobe");
+      SkyLobeOptions& l = a.sky_lobe;
+      g.Bool("fit", &l.fit);
+      g.Int("min_samples", &l.min_samples, 1, 1 << 30);
+      g.Int("max_samples", &l.max_samples, 1, 1 << 30);
+      g.Number("min_gain", &l.min_gain, 0, 1);
+      g.Int("max_iterations", &l.max_iterations, 1, 10000);
       g.Finish();
     }
     if (const json* o = f.Table("observation")) {

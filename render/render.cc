@@ -5,11 +5,14 @@
 #include <Eigen/Geometry>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <string>
 
 #include "core/angles.h"
 #include "core/error.h"
+#include "core/hash_random.h"
 #include "solve/retro.h"
+#include "solve/specular.h"
 
 namespace rouen {
 
@@ -24,10 +27,47 @@ void CheckSizes(const SurfaceGrid& grid, const AlbedoResult& albedo, const SlotI
   }
 }
 
+// §4.2.1: the sky and environment a block's lobe reflects towards v from surface point p:
+// samples x samples stratified directions drawn around v's mirror direction with the density
+// (n + 1) / 2 pi cos^n of the angle to it, each weighing f_s(u, v) L(u) cos(u) / density.
+// Directions the model blocks bring nothing (its light reflected through the lobe is left out).
+Eigen::Vector3d SkyLobeLight(const SpecularLobe& lobe, const Eigen::Vector3d& n,
+                             const Eigen::Vector3d& v, const Eigen::Vector3d& p,
+                             const Lighting& lighting, const RayCaster& model, int samples) {
+  const Eigen::Vector3d m = 2 * v.dot(n) * n - v;
+  const Eigen::Vector3d t1 = m.unitOrthogonal(), t2 = m.cross(t1);
+  uint64_t seed = 0;
+  for (int c = 0; c < 3; ++c) {
+    const float f = static_cast<float>(v[c]);
+    uint32_t bits;
+    std::memcpy(&bits, &f, sizeof bits);
+    seed = MixHash(seed ^ bits);
+  }
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  for (int a = 0; a < samples; ++a) {
+    for (int b = 0; b < samples; ++b) {
+      const uint64_t h = MixHash(seed + static_cast<uint64_t>(a * samples + b));
+      const double u1 = (a + HashUniformHigh(h)) / samples, u2 = (b + HashUniformLow(h)) / samples;
+      const double cos_a = std::pow(u1, 1.0 / (lobe.n + 1));
+      const double sin_a = std::sqrt(std::max(0.0, 1 - cos_a * cos_a));
+      const double phi = 2 * kPi * u2;
+      const Eigen::Vector3d u = cos_a * m + sin_a * (std::cos(phi) * t1 + std::sin(phi) * t2);
+      const double cu = u.dot(n);
+      if (!(cu > 0) || model.Occluded(p, u, 0.0)) continue;
+      const double density = (lobe.n + 1) / (2 * kPi) * std::pow(cos_a, lobe.n);
+      if (!(density > 0)) continue;
+      sum += lobe.Eval(n, u, v).cwiseProduct(lighting.EscapedRadiance(u, p.z())) * (cu / density);
+    }
+  }
+  return sum / (samples * samples);
+}
+
 }  // namespace
 
 void RenderOptions::Validate() const {
   if (supersample < 1 || supersample > 16) throw Error("RenderOptions: supersample must be 1..16");
+  if (sky_lobe_samples < 1 || sky_lobe_samples > 64)
+    throw Error("RenderOptions: sky_lobe_samples must be 1..64");
 }
 
 // §6: re-rendering with the recovered pseudo-albedos.
@@ -89,14 +129,17 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
     const Eigen::Vector3d p = pose.position + hit.t * dir + offset * n;
     Eigen::Vector3d e_sun = Eigen::Vector3d::Zero(), specular = Eigen::Vector3d::Zero();
     const double cosi = n.dot(s);
+    const int block = hit.triangle < static_cast<int>(mesh.triangle_block.size())
+                          ? mesh.triangle_block[hit.triangle]
+                          : -1;
+    const SpecularLobe sky_lobe = BlockLobe(albedo.sky_lobes, block);
+    if (!sky_lobe.IsZero())
+      specular = SkyLobeLight(sky_lobe, n, -dir, p, lighting, model, options.sky_lobe_samples);
     if (cosi > 0 && !model.Occluded(p, s, 0.0)) {
-      const int block = hit.triangle < static_cast<int>(mesh.triangle_block.size())
-                            ? mesh.triangle_block[hit.triangle]
-                            : -1;
       e_sun = sun_e * (cosi * RetroFactor(BlockRetro(albedo.retro, block), n, s, -dir));
       // §4.2: the block's sun lobe (eq. 13) under the sun's irradiance on the surface.
       const SpecularLobe lobe = BlockLobe(albedo.sun_lobes, block);
-      if (!lobe.IsZero()) specular = lobe.Eval(n, s, -dir).cwiseProduct(sun_e * cosi);
+      if (!lobe.IsZero()) specular += lobe.Eval(n, s, -dir).cwiseProduct(sun_e * cosi);
     }
     return (rho_sun.cwiseProduct(e_sun) + rho_se.cwiseProduct(e_se)) / kPi + specular;
   };

@@ -29,6 +29,9 @@ struct RenderOptions {
   // A fourth channel, alpha: the fraction of the pixel's samples whose ray hits the model (1 on
   // the building, 0 where every ray escapes). The colour channels are unchanged by it.
   bool alpha = false;
+  // §4.2.1: directions per axis (squared per shaded point) that sample a block's
+  // sky/environment lobe around the mirror direction.
+  int sky_lobe_samples = 4;
   void Validate() const;  // throws rouen::Error
 };
 

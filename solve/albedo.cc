@@ -263,6 +263,7 @@ void AlbedoOptions::Validate() const {
   if (!(retro_residual_cap > 0)) throw Error("AlbedoOptions: retro_residual_cap must be > 0");
   if (!(retro_min_gain >= 0)) throw Error("AlbedoOptions: retro_min_gain must be >= 0");
   sun_lobe.Validate();
+  sky_lobe.Validate();
   if (retro_min_observations < 1) {
     throw Error("AlbedoOptions: retro_min_observations must be >= 1");
   }
@@ -892,6 +893,95 @@ std::vector<SpecularLobe> FitSunLobes(const SurfaceGrid& grid,
   return lobes;
 }
 
+// The light of the sun lobes in observation `ob` (radiance).
+Eigen::Vector3d SunLobeLight(const SurfaceGrid& grid, const std::vector<SpecularLobe>& lobes,
+                             const SlotIrradiance& irr, const SunShading& shading,
+                             const Observation& ob) {
+  const GridPoint& gp = grid.points[ob.point];
+  const SpecularLobe lobe = BlockLobe(lobes, gp.block);
+  if (lobe.IsZero()) return Eigen::Vector3d::Zero();
+  return lobe.Eval(gp.normal, shading.sun_dirs[ob.slot], ob.view_dir.cast<double>())
+      .cwiseProduct(irr.sun[ob.point]);
+}
+
+// The sky and environment of grid point i at a slot as pieces (§4.2.1): the hemisphere
+// cache's cosine-distributed directions, each bringing pi / K of the radiance it meets (the
+// escaped sky and environment, or the diffuse radiance of the grid point it hits).
+std::vector<LightPiece> Pieces(const SurfaceGrid& grid, const HemisphereCache& cache,
+                               const Lighting& lighting, const SlotIrradiance& irr,
+                               const AlbedoResult& res, int i) {
+  const GridPoint& gp = grid.points[i];
+  std::vector<LightPiece> pieces;
+  const double w = kPi / cache.directions;
+  for (int k = 0; k < cache.directions; ++k) {
+    const int hit = cache.Hit(i, k);
+    if (hit == -2) continue;
+    const Eigen::Vector3d d = cache.Direction(gp, i, k);
+    const Eigen::Vector3d l = hit == -1
+                                  ? lighting.EscapedRadiance(d, gp.position.z())
+                                  : Eigen::Vector3d((res.rho_sun[hit].cwiseProduct(irr.sun[hit]) +
+                                                     res.rho_se[hit].cwiseProduct(irr.se[hit])) /
+                                                    kPi);
+    pieces.push_back({d.cast<float>(), (w * l).cast<float>()});
+  }
+  return pieces;
+}
+
+// §4.2.1: the sky/environment lobe of each block with a sun lobe, from the residual of its
+// observations after the diffuse albedos and the sun lobe.
+std::vector<SpecularLobe> FitSkyLobes(const SurfaceGrid& grid, const HemisphereCache& cache,
+                                      const std::vector<Lighting>& slots,
+                                      const std::vector<Observation>& observations,
+                                      const std::vector<SlotIrradiance>& irradiance,
+                                      const AlbedoResult& res, const SunShading& shading,
+                                      const AlbedoOptions& options, AlbedoSummary* summary) {
+  const int nblocks = static_cast<int>(res.sun_lobes.size());
+  std::vector<SpecularLobe> lobes(nblocks);
+  summary->sky_lobe_samples.assign(nblocks, 0);
+  summary->sky_lobe_cost_zero.assign(nblocks, 0.0);
+  summary->sky_lobe_cost_fitted.assign(nblocks, 0.0);
+  for (int b = 0; b < nblocks; ++b) {
+    if (res.sun_lobes[b].IsZero()) continue;
+    std::vector<const Observation*> of_block;
+    std::vector<double> rel;
+    for (const Observation& ob : observations) {
+      if (grid.points[ob.point].block != b || (res.flags[ob.point] & kAlbedoNoObservations))
+        continue;
+      of_block.push_back(&ob);
+      const double y = kPi * ob.radiance[1];
+      if (y > 0)
+        rel.push_back(std::abs(y - Predicted(res, irradiance[ob.slot], ob,
+                                             SunFactor(grid, ob, &shading), 1)) /
+                      y);
+    }
+    const double scale = std::max(options.min_scale, 1.4826 * Median(rel));
+    const size_t keep =
+        std::min(of_block.size(), static_cast<size_t>(options.sky_lobe.max_samples));
+    std::vector<SkyLobeSample> samples(keep);
+    tbb::parallel_for(size_t{0}, keep, [&](size_t k) {
+      const Observation& ob = *of_block[(k * of_block.size()) / keep];
+      const GridPoint& gp = grid.points[ob.point];
+      const SlotIrradiance& irr = irradiance[ob.slot];
+      SkyLobeSample& s = samples[k];
+      s.normal = gp.normal;
+      s.to_viewer = ob.view_dir.cast<double>();
+      s.pieces = Pieces(grid, cache, slots[ob.slot], irr, res, ob.point);
+      const double f = SunFactor(grid, ob, &shading);
+      const Eigen::Vector3d sun_lobe = SunLobeLight(grid, res.sun_lobes, irr, shading, ob);
+      for (int c = 0; c < 3; ++c) {
+        s.residual[c] = ob.radiance[c] - Predicted(res, irr, ob, f, c) / kPi - sun_lobe[c];
+        s.sigma[c] = scale * std::max<double>(ob.radiance[c], 1e-12);
+      }
+    });
+    const LobeFit fit = FitSkyLobe(samples, options.sky_lobe, res.sun_lobes[b]);
+    lobes[b] = fit.lobe;
+    summary->sky_lobe_samples[b] = fit.samples;
+    summary->sky_lobe_cost_zero[b] = fit.cost_zero;
+    summary->sky_lobe_cost_fitted[b] = fit.cost;
+  }
+  return lobes;
+}
+
 }  // namespace
 
 // §4.1: albedos, then the one-bounce interreflection from them, then albedos again.
@@ -946,27 +1036,47 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   }
   if (options.sun_lobe.fit) {
     AlbedoSummary lobe_summary;
-    std::vector<SpecularLobe> lobes =
+    std::vector<SpecularLobe> sun_lobes =
         FitSunLobes(grid, observations, irr, res, shading, options, &lobe_summary);
-    if (std::any_of(lobes.begin(), lobes.end(), [](const auto& l) { return !l.IsZero(); })) {
-      // The diffuse albedos again, from what the lobes leave of each sunlit observation.
+    std::vector<SpecularLobe> sky_lobes;
+    auto any = [](const std::vector<SpecularLobe>& l) {
+      return std::any_of(l.begin(), l.end(), [](const auto& x) { return !x.IsZero(); });
+    };
+    // The diffuse albedos again, from what the lobes leave of each observation (a highlight
+    // the lobes over-explain leaves nothing rather than negative light).
+    auto resolve = [&] {
       std::vector<Observation> diffuse = observations;
       for (Observation& ob : diffuse) {
+        Eigen::Vector3d lobe_light = SunLobeLight(grid, sun_lobes, irr[ob.slot], shading, ob);
         const GridPoint& gp = grid.points[ob.point];
-        const SpecularLobe lobe = BlockLobe(lobes, gp.block);
-        if (lobe.IsZero()) continue;
-        const Eigen::Vector3d f =
-            lobe.Eval(gp.normal, shading.sun_dirs[ob.slot], ob.view_dir.cast<double>());
-        // A highlight the lobe over-explains leaves nothing rather than negative light.
-        ob.radiance =
-            (ob.radiance - f.cwiseProduct(irr[ob.slot].sun[ob.point]).cast<float>()).cwiseMax(0.f);
+        const SpecularLobe sky = BlockLobe(sky_lobes, gp.block);
+        if (!sky.IsZero()) {
+          for (const LightPiece& p :
+               Pieces(grid, cache, slots[ob.slot], irr[ob.slot], res, ob.point))
+            lobe_light += sky.Eval(gp.normal, p.to_light.cast<double>(), ob.view_dir.cast<double>())
+                              .cwiseProduct(p.irradiance.cast<double>());
+        }
+        ob.radiance = (ob.radiance - lobe_light.cast<float>()).cwiseMax(0.f);
       }
-      res = SolveWeighted(grid, diffuse, irr, options, slot_weight, &shading);
+      return SolveWeighted(grid, diffuse, irr, options, slot_weight, &shading);
+    };
+    if (any(sun_lobes)) {
+      res = resolve();
+      res.sun_lobes = sun_lobes;
+      if (options.sky_lobe.fit) {
+        sky_lobes = FitSkyLobes(grid, cache, slots, observations, irr, res, shading, options,
+                                &lobe_summary);
+        if (any(sky_lobes)) res = resolve();
+      }
     }
-    res.sun_lobes = std::move(lobes);
+    res.sun_lobes = std::move(sun_lobes);
+    res.sky_lobes = std::move(sky_lobes);
     res.summary.lobe_samples = lobe_summary.lobe_samples;
     res.summary.lobe_cost_zero = lobe_summary.lobe_cost_zero;
     res.summary.lobe_cost_fitted = lobe_summary.lobe_cost_fitted;
+    res.summary.sky_lobe_samples = lobe_summary.sky_lobe_samples;
+    res.summary.sky_lobe_cost_zero = lobe_summary.sky_lobe_cost_zero;
+    res.summary.sky_lobe_cost_fitted = lobe_summary.sky_lobe_cost_fitted;
   }
   res.summary.change_per_iteration = changes;
   res.summary.retro_cost_lambert = retro_summary.retro_cost_lambert;

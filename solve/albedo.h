@@ -126,6 +126,10 @@ struct AlbedoOptions {
   // §4.2.2: each block's sun specular lobe (eq. 13) fitted to what the diffuse albedos leave
   // of its sunlit observations, then the albedos solved again without the lobe's light.
   SunLobeOptions sun_lobe;
+  // §4.2.1: the sky/environment lobe (eq. 14) of each block that has a sun lobe (a surface
+  // glossy for the sky is glossy for the sun, whose highlight the photos show far more
+  // clearly), then the albedos once more without either lobe's light.
+  SkyLobeOptions sky_lobe;
   ObservationOptions observation;
   IrradianceOptions irradiance;
 
@@ -153,6 +157,9 @@ struct AlbedoSummary {
   // Per block: the sun lobe fit's samples and eq. 15's cost without and with the fitted lobe.
   std::vector<int> lobe_samples;
   std::vector<double> lobe_cost_zero, lobe_cost_fitted;
+  // The same for the sky/environment lobes (eq. 14's cost); blocks without a sun lobe: 0.
+  std::vector<int> sky_lobe_samples;
+  std::vector<double> sky_lobe_cost_zero, sky_lobe_cost_fitted;
   double seconds = 0;
   std::string BriefReport() const;
 };
@@ -164,6 +171,8 @@ struct AlbedoResult {
   std::vector<double> retro;  // per block (solve/retro.h); empty or 0: Lambertian sun term
   // Per block (§4.2.2); empty or zero: no specular reflection of the sun.
   std::vector<SpecularLobe> sun_lobes;
+  // Per block (§4.2.1): reflection of the sky and environment (empty or zero: none).
+  std::vector<SpecularLobe> sky_lobes;
   AlbedoSummary summary;
 };
 
@@ -184,7 +193,8 @@ AlbedoResult SolveAlbedoFixedIrradiance(const SurfaceGrid& grid,
 // are solved for candidates over [kRetroMin, kRetroMax] and each block keeps the one with the
 // least truncated relative residual, refined by a parabola (the interreflection stays
 // Lambertian). Then, with options.sun_lobe.fit, every block's sun lobe (§4.2.2) and, when some
-// block has one, the albedos once more from the observations less the lobes' light.
+// block has one, its sky/environment lobe (§4.2.1, options.sky_lobe.fit) and the albedos once
+// more from the observations less the lobes' light.
 AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
                          const RayCaster& model, const std::vector<Lighting>& slots,
                          const std::vector<Observation>& observations,

@@ -210,6 +210,12 @@ TEST(AlbedoTest, FitsTheGlossyBlocksSunLobeAndNotTheMatteOnes) {
   ASSERT_EQ(fit.sun_lobes.size(), 2u);
   EXPECT_TRUE(fit.sun_lobes[plaza].IsZero());
   ASSERT_FALSE(fit.sun_lobes[box].IsZero());
+  // The photos reflect no sky: no block gets a sky/environment lobe (§4.2.1), and the one
+  // tried (the box, which has a sun lobe) gained less than the threshold.
+  for (const SpecularLobe& l : fit.sky_lobes) EXPECT_TRUE(l.IsZero());
+  ASSERT_EQ(fit.summary.sky_lobe_samples.size(), 2u);
+  EXPECT_GT(fit.summary.sky_lobe_samples[box], 0);
+  EXPECT_EQ(fit.summary.sky_lobe_samples[plaza], 0);
   ASSERT_EQ(fit.summary.lobe_cost_zero.size(), 2u);
   EXPECT_LT(fit.summary.lobe_cost_fitted[box], 0.5 * fit.summary.lobe_cost_zero[box]);
   // The peak the photos saw (the mirror direction's f_s) within 20%: the diffuse albedos of

@@ -45,7 +45,52 @@ nlohmann::json SummaryJson(const AlbedoSummary& s) {
           {"lobe_samples", s.lobe_samples},
           {"lobe_cost_zero", s.lobe_cost_zero},
           {"lobe_cost_fitted", s.lobe_cost_fitted},
+          {"sky_lobe_samples", s.sky_lobe_samples},
+          {"sky_lobe_cost_zero", s.sky_lobe_cost_zero},
+          {"sky_lobe_cost_fitted", s.sky_lobe_cost_fitted},
           {"seconds", s.seconds}};
+}
+
+// Lobes per block name (blocks with a lobe only).
+nlohmann::json LobesJson(const std::vector<SpecularLobe>& lobes, const Mesh& m) {
+  nlohmann::json out = nlohmann::json::object();
+  for (int b = 0; b < static_cast<int>(m.block_names.size()); ++b) {
+    const SpecularLobe l = BlockLobe(lobes, b);
+    if (l.IsZero()) continue;
+    out[m.block_names[b]] = {
+        {"rho_s", {l.rho_s[0], l.rho_s[1], l.rho_s[2]}}, {"kappa", l.kappa}, {"n", l.n}};
+  }
+  return out;
+}
+
+// LobesJson read back and checked against `mesh`'s blocks; errors start with `key` (the file
+// and the key).
+std::vector<SpecularLobe> ReadLobes(const nlohmann::json& j, const Mesh& mesh,
+                                    const std::string& key,
+                                    const std::filesystem::path& model_path) {
+  std::vector<SpecularLobe> lobes(mesh.block_names.size());
+  for (const auto& [name, value] : j.items()) {
+    const auto it = std::find(mesh.block_names.begin(), mesh.block_names.end(), name);
+    const std::string what = key + "." + name;
+    if (it == mesh.block_names.end()) {
+      throw Error(what + ": " + model_path.string() + " has no block '" + name + "'");
+    }
+    SpecularLobe l;
+    try {
+      const auto& rho = value.at("rho_s");
+      if (!rho.is_array() || rho.size() != 3) throw Error("rho_s must be three numbers");
+      for (int c = 0; c < 3; ++c) l.rho_s[c] = rho[c].get<double>();
+      l.kappa = value.at("kappa").get<double>();
+      l.n = value.at("n").get<double>();
+    } catch (const nlohmann::json::exception& e) {
+      throw Error(what + ": " + e.what());
+    } catch (const Error& e) {
+      throw Error(what + ": " + e.what());
+    }
+    l.Validate(what);
+    lobes[it - mesh.block_names.begin()] = l;
+  }
+  return lobes;
 }
 
 AlbedoSummary ReadSummary(const nlohmann::json& j) {
@@ -68,6 +113,9 @@ AlbedoSummary ReadSummary(const nlohmann::json& j) {
   s.lobe_samples = j.value("lobe_samples", std::vector<int>{});
   s.lobe_cost_zero = j.value("lobe_cost_zero", std::vector<double>{});
   s.lobe_cost_fitted = j.value("lobe_cost_fitted", std::vector<double>{});
+  s.sky_lobe_samples = j.value("sky_lobe_samples", std::vector<int>{});
+  s.sky_lobe_cost_zero = j.value("sky_lobe_cost_zero", std::vector<double>{});
+  s.sky_lobe_cost_fitted = j.value("sky_lobe_cost_fitted", std::vector<double>{});
   s.seconds = j.value("seconds", 0.0);
   return s;
 }
@@ -251,15 +299,10 @@ void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const
     retro[m.block_names[b]] = BlockRetro(a.retro, b);
   }
   j["albedo"]["retro"] = retro;
-  // Per block by name: the sun's specular lobe (§4.2.2, solve/specular.h), blocks with one only.
-  nlohmann::json lobes = nlohmann::json::object();
-  for (int b = 0; b < static_cast<int>(m.block_names.size()); ++b) {
-    const SpecularLobe l = BlockLobe(a.sun_lobes, b);
-    if (l.IsZero()) continue;
-    lobes[m.block_names[b]] = {
-        {"rho_s", {l.rho_s[0], l.rho_s[1], l.rho_s[2]}}, {"kappa", l.kappa}, {"n", l.n}};
-  }
-  j["albedo"]["sun_lobes"] = lobes;
+  // Per block by name: the specular lobes (solve/specular.h) of the sun (§4.2.2) and of the sky
+  // and environment (§4.2.1), blocks with one only.
+  j["albedo"]["sun_lobes"] = LobesJson(a.sun_lobes, m);
+  j["albedo"]["sky_lobes"] = LobesJson(a.sky_lobes, m);
   j["atlas"] = WriteAlbedoAtlases(dir, scene, m);
   WriteFileAtomic(dir / "scene.json", j.dump(1));
 }
@@ -275,7 +318,7 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
   }
   size_t points = 0;
   std::string files[3], model_sha256;
-  nlohmann::json retro, lobes;
+  nlohmann::json retro, sun_lobes, sky_lobes;
   try {
     scene.format_version = j.at("format_version").get<int>();
     if (scene.format_version != 1) {
@@ -346,8 +389,10 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
     scene.albedo.summary = ReadSummary(a.value("summary", nlohmann::json::object()));
     retro = a.value("retro", nlohmann::json::object());
     if (!retro.is_object()) throw Error("albedo.retro is not an object");
-    lobes = a.value("sun_lobes", nlohmann::json::object());
-    if (!lobes.is_object()) throw Error("albedo.sun_lobes is not an object");
+    sun_lobes = a.value("sun_lobes", nlohmann::json::object());
+    if (!sun_lobes.is_object()) throw Error("albedo.sun_lobes is not an object");
+    sky_lobes = a.value("sky_lobes", nlohmann::json::object());
+    if (!sky_lobes.is_object()) throw Error("albedo.sky_lobes is not an object");
   } catch (const nlohmann::json::exception& e) {
     throw Error(json_path.string() + ": " + e.what());
   } catch (const Error& e) {
@@ -375,28 +420,10 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
     }
     scene.albedo.retro[it - mesh.block_names.begin()] = r;
   }
-  scene.albedo.sun_lobes.assign(mesh.block_names.size(), SpecularLobe{});
-  for (const auto& [name, value] : lobes.items()) {
-    const auto it = std::find(mesh.block_names.begin(), mesh.block_names.end(), name);
-    const std::string what = json_path.string() + ": albedo.sun_lobes." + name;
-    if (it == mesh.block_names.end()) {
-      throw Error(what + ": " + model_path.string() + " has no block '" + name + "'");
-    }
-    SpecularLobe l;
-    try {
-      const auto& rho = value.at("rho_s");
-      if (!rho.is_array() || rho.size() != 3) throw Error("rho_s must be three numbers");
-      for (int c = 0; c < 3; ++c) l.rho_s[c] = rho[c].get<double>();
-      l.kappa = value.at("kappa").get<double>();
-      l.n = value.at("n").get<double>();
-    } catch (const nlohmann::json::exception& e) {
-      throw Error(what + ": " + e.what());
-    } catch (const Error& e) {
-      throw Error(what + ": " + e.what());
-    }
-    l.Validate(what);
-    scene.albedo.sun_lobes[it - mesh.block_names.begin()] = l;
-  }
+  scene.albedo.sun_lobes =
+      ReadLobes(sun_lobes, mesh, json_path.string() + ": albedo.sun_lobes", model_path);
+  scene.albedo.sky_lobes =
+      ReadLobes(sky_lobes, mesh, json_path.string() + ": albedo.sky_lobes", model_path);
   SurfaceGrid grid = BuildSurfaceGrid(mesh, scene.grid_options);
   if (static_cast<size_t>(grid.size()) != points) {
     throw Error(json_path.string() + ": says " + std::to_string(points) + " grid points but " +

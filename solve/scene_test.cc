@@ -64,6 +64,8 @@ SceneModel MakeScene(const Mesh& mesh, SurfaceGrid* grid_out) {
   s.albedo.sun_lobes[1].rho_s = Eigen::Vector3d(0.02, 0.03, 0.04);
   s.albedo.sun_lobes[1].kappa = 0.9;
   s.albedo.sun_lobes[1].n = 35.5;
+  s.albedo.sky_lobes = s.albedo.sun_lobes;
+  s.albedo.sky_lobes[1].n = 12;
   s.albedo.summary.points = grid.size();
   s.albedo.summary.residual_rms_rel = 0.0123;
   if (grid_out) *grid_out = grid;
@@ -114,6 +116,10 @@ TEST(SceneTest, RoundTrip) {
   EXPECT_EQ(r.albedo.sun_lobes[1].rho_s, s.albedo.sun_lobes[1].rho_s);
   EXPECT_EQ(r.albedo.sun_lobes[1].kappa, 0.9);
   EXPECT_EQ(r.albedo.sun_lobes[1].n, 35.5);
+  ASSERT_EQ(r.albedo.sky_lobes.size(), 2u);
+  EXPECT_TRUE(r.albedo.sky_lobes[0].IsZero());
+  EXPECT_EQ(r.albedo.sky_lobes[1].n, 12);
+  EXPECT_EQ(r.albedo.sky_lobes[1].rho_s, s.albedo.sky_lobes[1].rho_s);
   // Views keep their cameras exactly (JSON doubles round-trip).
   ASSERT_EQ(r.views.size(), 1u);
   const SceneView& v = r.views.at("slot1/architecture/view0");
@@ -172,6 +178,21 @@ TEST(SceneTest, BadSunLobeIsRefusedNamingTheBlock) {
            {"[1]", "albedo.sun_lobes"}}) {
     nlohmann::json j = nlohmann::json::parse(text);
     j["albedo"]["sun_lobes"] = nlohmann::json::parse(bad);
+    // The sky lobes are read the same way.
+    nlohmann::json k = nlohmann::json::parse(text);
+    k["albedo"]["sky_lobes"] = nlohmann::json::parse(bad);
+    WriteFileAtomic(dir / "scene.json", k.dump());
+    try {
+      ReadScene(dir);
+      ADD_FAILURE() << bad << " was accepted as sky_lobes";
+    } catch (const Error& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find(expect == "albedo.sun_lobes"  ? "albedo.sky_lobes"
+                          : expect == "sun_lobes.shaft" ? "sky_lobes.shaft"
+                                                        : expect),
+                std::string::npos)
+          << what;
+    }
     WriteFileAtomic(dir / "scene.json", j.dump());
     try {
       ReadScene(dir);

@@ -1,5 +1,6 @@
 #include "solve/specular.h"
 
+#include <ceres/ceres.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -269,6 +270,141 @@ LobeFit FitSunLobe(const std::vector<LobeSample>& all, const SunLobeOptions& opt
     out.lobe.rho_s = f[b].rho_s;
     out.lobe.kappa = v[b][0];
     out.lobe.n = std::exp(v[b][1]);
+  }
+  return out;
+}
+
+void SkyLobeOptions::Validate() const {
+  if (min_samples < 1) throw Error("sky lobe: min_samples must be >= 1");
+  if (max_samples < min_samples) throw Error("sky lobe: max_samples must be >= min_samples");
+  if (!(min_gain >= 0 && min_gain <= 1)) throw Error("sky lobe: min_gain must be in [0, 1]");
+  if (max_iterations < 1) throw Error("sky lobe: max_iterations must be >= 1");
+}
+
+namespace {
+
+// Eq. 14's terms of one sample; the pieces reduced to the bracket's parts u.v and
+// (u.n)(v.n) and their irradiance over sigma.
+struct SkyLobeTerm {
+  struct Piece {
+    double uv, unvn;
+    std::array<double, 3> e;
+  };
+  std::vector<Piece> pieces;
+  std::array<double, 3> r{};
+
+  explicit SkyLobeTerm(const SkyLobeSample& s) {
+    const double vn = s.to_viewer.dot(s.normal);
+    for (int c = 0; c < 3; ++c) r[c] = s.residual[c] / s.sigma[c];
+    if (!(vn > 0)) return;
+    for (const LightPiece& p : s.pieces) {
+      const Eigen::Vector3d u = p.to_light.cast<double>();
+      const double un = u.dot(s.normal);
+      if (!(un > 0)) continue;
+      Piece q{u.dot(s.to_viewer), un * vn, {}};
+      for (int c = 0; c < 3; ++c) q.e[c] = p.irradiance[c] / s.sigma[c];
+      pieces.push_back(q);
+    }
+  }
+
+  // rho: rho_s per channel; shape: kappa, log n.
+  template <typename T>
+  bool operator()(const T* rho, const T* shape, T* out) const {
+    const T n = exp(shape[1]);
+    T sum[3] = {T(0), T(0), T(0)};
+    for (const Piece& q : pieces) {
+      const T bracket = -shape[0] * (q.uv - q.unvn) + q.unvn;
+      if (!(bracket > T(0))) continue;
+      const T f = pow(bracket, n);
+      for (int c = 0; c < 3; ++c) sum[c] += q.e[c] * f;
+    }
+    for (int c = 0; c < 3; ++c) out[c] = rho[c] * sum[c] - r[c];
+    return true;
+  }
+};
+
+}  // namespace
+
+ceres::CostFunction* SkyLobeCost(const SkyLobeSample& sample) {
+  return new ceres::AutoDiffCostFunction<SkyLobeTerm, 3, 3, 2>(new SkyLobeTerm(sample));
+}
+
+double SkyLobeCost(const std::vector<SkyLobeSample>& samples, const SpecularLobe& lobe) {
+  const double rho[3] = {lobe.rho_s[0], lobe.rho_s[1], lobe.rho_s[2]};
+  const double shape[2] = {lobe.kappa, std::log(lobe.n)};
+  double cost = 0;
+  for (const SkyLobeSample& s : samples) {
+    double out[3];
+    const SkyLobeTerm term(s);
+    term(rho, shape, out);
+    for (double o : out) cost += o * o;
+  }
+  return cost;
+}
+
+// §4.2.1, eq. 14: Levenberg-Marquardt per block.
+LobeFit FitSkyLobe(const std::vector<SkyLobeSample>& all, const SkyLobeOptions& options,
+                   const SpecularLobe& start) {
+  options.Validate();
+  LobeFit out;
+  std::vector<const SkyLobeSample*> usable;
+  for (const SkyLobeSample& s : all) {
+    bool ok = s.residual.allFinite() && s.sigma.allFinite() && s.sigma.minCoeff() > 0 &&
+              s.normal.allFinite() && s.to_viewer.allFinite() && !s.pieces.empty();
+    for (const LightPiece& p : s.pieces)
+      ok = ok && p.to_light.allFinite() && p.irradiance.allFinite();
+    if (ok) usable.push_back(&s);
+  }
+  std::vector<SkyLobeSample> samples;
+  const size_t keep = std::min(usable.size(), static_cast<size_t>(options.max_samples));
+  for (size_t k = 0; k < keep; ++k) samples.push_back(*usable[(k * usable.size()) / keep]);
+  out.samples = static_cast<int>(samples.size());
+  out.cost_zero = out.cost = SkyLobeCost(samples, SpecularLobe{});
+  if (out.samples < options.min_samples || !(out.cost_zero > 0)) return out;
+
+  const double log_min = std::log(kLobeExponentMin), log_max = std::log(kLobeExponentMax);
+  SpecularLobe best;
+  double best_cost = out.cost_zero;
+  for (const auto& [kappa0, n0] :
+       {std::pair{std::min(start.kappa, 1.0), start.n}, {1.0, 5.0}, {1.0, 80.0}}) {
+    double rho[3] = {0.01, 0.01, 0.01};
+    double shape[2] = {std::max(kappa0, kLobeKappaMin), std::clamp(std::log(n0), log_min, log_max)};
+    ceres::Problem problem;
+    for (const SkyLobeSample& s : samples)
+      problem.AddResidualBlock(SkyLobeCost(s), nullptr, rho, shape);
+    for (int c = 0; c < 3; ++c) {
+      problem.SetParameterLowerBound(rho, c, 0.0);
+      problem.SetParameterUpperBound(rho, c, MaxLobeRho(kLobeExponentMax));
+    }
+    problem.SetParameterLowerBound(shape, 0, kLobeKappaMin);
+    problem.SetParameterUpperBound(shape, 0, 1.0);
+    problem.SetParameterLowerBound(shape, 1, log_min);
+    problem.SetParameterUpperBound(shape, 1, log_max);
+    ceres::Solver::Options so;
+    so.minimizer_type = ceres::TRUST_REGION;
+    so.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+    so.linear_solver_type = ceres::DENSE_QR;
+    so.max_num_iterations = options.max_iterations;
+    so.num_threads = 2;
+    ceres::Solver::Summary summary;
+    ceres::Solve(so, &problem, &summary);
+    SpecularLobe l;
+    l.rho_s = Eigen::Vector3d(rho[0], rho[1], rho[2]);
+    l.kappa = shape[0];
+    l.n = std::exp(shape[1]);
+    // The energy bound depends on n: a lobe above it is scaled down to it.
+    const double cap = MaxLobeRho(l.n);
+    if (l.rho_s.maxCoeff() > cap) l.rho_s *= cap / l.rho_s.maxCoeff();
+    const double cost = SkyLobeCost(samples, l);
+    if (cost < best_cost && l.rho_s.allFinite()) {
+      best = l;
+      best_cost = cost;
+    }
+  }
+  out.cost = best_cost;
+  if (out.cost_zero - best_cost >= options.min_gain * out.cost_zero && !best.IsZero()) {
+    out.kept = true;
+    out.lobe = best;
   }
   return out;
 }

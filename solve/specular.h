@@ -11,6 +11,10 @@
 #include <string>
 #include <vector>
 
+namespace ceres {
+class CostFunction;
+}
+
 namespace rouen {
 
 // The ranges the fit searches.
@@ -93,5 +97,45 @@ LobeFit FitSunLobe(const std::vector<LobeSample>& samples, const SunLobeOptions&
 
 // Eq. 15's cost of `lobe` on `samples` (what FitSunLobe minimises).
 double SunLobeCost(const std::vector<LobeSample>& samples, const SpecularLobe& lobe);
+
+// §4.2.1: the sky and the environment are extended sources, split into pieces: each piece's
+// direction and the irradiance it brings onto the surface (per channel).
+struct LightPiece {
+  Eigen::Vector3f to_light = Eigen::Vector3f::UnitZ();
+  Eigen::Vector3f irradiance = Eigen::Vector3f::Zero();
+};
+
+// One observation of a block for the fit of its sky/environment lobe.
+struct SkyLobeSample {
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
+  Eigen::Vector3d to_viewer = Eigen::Vector3d::UnitZ();
+  std::vector<LightPiece> pieces;                      // the point's sky and environment
+  Eigen::Vector3d residual = Eigen::Vector3d::Zero();  // I less the diffuse and sun-lobe model
+  Eigen::Vector3d sigma = Eigen::Vector3d::Ones();     // > 0
+};
+
+struct SkyLobeOptions {
+  bool fit = true;  // false: no block gets a sky/environment lobe
+  int min_samples = 100;
+  int max_samples = 400;  // an even subsample beyond (each carries all its pieces)
+  // Kept only when it lowers eq. 14's cost by at least this fraction.
+  double min_gain = 0.1;
+  int max_iterations = 50;  // Levenberg-Marquardt iterations per start
+  void Validate() const;    // throws rouen::Error
+};
+
+// Eq. 14's terms for one sample, (sum_j e_j f_s(u_j, v) - I) / sigma per channel, as a Ceres
+// cost of the parameters rho_s (3) and (kappa, log n) (2), with automatic derivatives.
+// Owned by the caller (or a ceres::Problem).
+ceres::CostFunction* SkyLobeCost(const SkyLobeSample& sample);
+
+// Eq. 14: sum over samples and channels of the squared terms.
+double SkyLobeCost(const std::vector<SkyLobeSample>& samples, const SpecularLobe& lobe);
+
+// §4.2.1: a block's sky/environment lobe by Levenberg-Marquardt over eq. 14 from three starts
+// (`start`'s kappa and n, e.g. the block's sun lobe; n 5 and n 80), kappa within
+// [kLobeKappaMin, 1] and rho_s within the energy bound.
+LobeFit FitSkyLobe(const std::vector<SkyLobeSample>& samples, const SkyLobeOptions& options,
+                   const SpecularLobe& start = {Eigen::Vector3d::Zero(), 1, 20});
 
 }  // namespace rouen

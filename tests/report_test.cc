@@ -195,6 +195,9 @@ TEST_F(ReportCli, OpensWholeInHeadlessChromium) {
   const nlohmann::json scene =
       nlohmann::json::parse(ReadFileToString(Demo() / "scene" / "scene.json"));
   const int slots = static_cast<int>(scene["slots"].size());
+  // One plot of the sun lobes, a curve per glossy block, when some block has one.
+  const int lobes = static_cast<int>(scene["albedo"]["sun_lobes"].size());
+  const std::vector<int> albedo_plots = lobes ? std::vector<int>{lobes} : std::vector<int>{};
   const std::map<std::string, std::vector<int>> expected = {
       {"overview", {}},
       {"timeline", {static_cast<int>(targets.size())}},
@@ -202,7 +205,7 @@ TEST_F(ReportCli, OpensWholeInHeadlessChromium) {
       {"response", {3}},
       {"sky", {slots, slots, slots, slots}},  // Bg, Sa; error by elevation, by angle from the sun
       {"environment", {}},
-      {"albedo", {}},
+      {"albedo", albedo_plots},
       {"validation", {}},
       {"timings", {1}}};
   for (const auto& [id, series] : expected)
