@@ -50,6 +50,9 @@ const D = window.ROUEN_VIEWER_DATA;
 const canvas = document.getElementById("view");
 const message = document.getElementById("message");
 const viewer = { ready: false, frames: 0 };
+let readyResolve, readyReject;
+// Resolves once the textures are loaded and drawn (rejects with the reason when they cannot be).
+viewer.whenReady = new Promise((resolve, reject) => { readyResolve = resolve; readyReject = reject; });
 window.rouenViewer = viewer;
 if (!D) { message.textContent = "viewer_data.js is missing or did not load"; console.error(message.textContent); return; }
 const gl = canvas.getContext("webgl2", { antialias: true, preserveDrawingBuffer: true });
@@ -381,9 +384,11 @@ Promise.all([
   draw();
   const err = gl.getError();
   if (err !== gl.NO_ERROR) console.error("WebGL error " + err);
+  readyResolve(viewer.renderer);
 }).catch((e) => {
   message.textContent = String(e);
   console.error(String(e));
+  readyReject(e);
 });
 })();
 </script>
