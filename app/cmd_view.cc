@@ -32,10 +32,11 @@ void Run(const ViewArgs& a) {
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::printf(
-      "%s/index.html: %d times, %lld triangles, atlas %dx%d, %.1f MB (lighting %.1f s, baking "
-      "%.1f s, %.1f s in all)\n",
+      "%s/index.html: %d times, %lld triangles, atlas %dx%d, shadows %dx%d, %.1f MB (lighting "
+      "%.1f s, baking %.1f s, %.1f s in all)\n",
       a.out.c_str(), s.times, static_cast<long long>(s.triangles), s.atlas_width, s.atlas_height,
-      s.bytes / 1e6, s.seconds_lighting, s.seconds_baking, seconds);
+      s.shadow_width, s.shadow_height, s.bytes / 1e6, s.seconds_lighting, s.seconds_baking,
+      seconds);
 }
 
 }  // namespace
@@ -58,9 +59,10 @@ void RegisterView(CLI::App& app) {
       "two nearest times and blends clear and overcast linearly (the irradiance is linear in the\n"
       "blocked fraction but for the refit of the blended sky). Per pixel it computes\n"
       "  L = (rho_sun E_sun D + rho_se E_se) / pi + f_s E_sun\n"
-      "(as rouen render; shadows are as sharp as the grid and the atlas), then exposure and the\n"
-      "sRGB encoding. Textures are 8-bit PNGs (value = scale (stored/255)^2.2) in one atlas of\n"
-      "all blocks; the size grows with --times and --texels-per-cell squared.\n"
+      "(as rouen render) with V, whether the sun reaches the point, ray-cast per texel of a finer\n"
+      "atlas (--shadow-texels-per-cell), E_se from the grid; then exposure and the sRGB\n"
+      "encoding. Textures are 8-bit PNGs (value = scale (stored/255)^2.2) in one atlas of all\n"
+      "blocks; the size grows with --times and the texels per cell squared.\n"
       "page API (for scripts and tests): window.rouenViewer.setBase(i), setTime(unix s),\n"
       "setOvercast(0..1), setExposureEv(ev), setCamera({eye, target, fov_x_deg}) in ENU metres,\n"
       "camera(), state(); .ready once the textures are loaded.\n"
@@ -73,6 +75,10 @@ void RegisterView(CLI::App& app) {
       ->capture_default_str();
   c->add_option("--texels-per-cell", a->options.texels_per_cell,
                 "Atlas texels along a grid cell's edge (solve/atlas.h)")
+      ->check(Within(1, 16))
+      ->capture_default_str();
+  c->add_option("--shadow-texels-per-cell", a->options.shadow_texels_per_cell,
+                "Sun-visibility atlas texels along a grid cell's edge (ray-cast per texel)")
       ->check(Within(1, 16))
       ->capture_default_str();
   c->callback([a] { Run(*a); });

@@ -3,11 +3,13 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstring>
 #include <nlohmann/json.hpp>
 #include <system_error>
+#include <thread>
 
 #include "core/angles.h"
 #include "core/error.h"
@@ -107,6 +109,8 @@ void ViewerOptions::Validate() const {
   if (times < 2 || times > 96) throw Error("--times: must be within 2..96");
   if (texels_per_cell < 1 || texels_per_cell > 16)
     throw Error("--texels-per-cell: must be within 1..16");
+  if (shadow_texels_per_cell < 1 || shadow_texels_per_cell > 16)
+    throw Error("--shadow-texels-per-cell: must be within 1..16");
   if (!(min_elevation_deg >= 0.1 && min_elevation_deg <= 20))
     throw Error("viewer: the sunrise elevation must be within 0.1..20 deg");
   if (max_atlas_side < 16 || max_atlas_side > 16384)
@@ -228,6 +232,48 @@ ViewerAtlas PackViewerAtlas(const Mesh& mesh, const SurfaceGrid& grid, int texel
   return a;
 }
 
+Image SunVisibilityAtlas(const ViewerAtlas& atlas, const Mesh& mesh, const RayCaster& caster,
+                         const Eigen::Vector3d& sun_dir) {
+  Image out(atlas.width, atlas.height, 1, PixelUnits::kOther, 0.f);
+  const Eigen::Vector3d s = sun_dir.normalized();
+  const double offset = caster.surface_offset();
+  const int ntri = static_cast<int>(atlas.layout.tiles.size());
+  // Triangles shared among threads (each writes only its own tile's texels).
+  std::atomic<int> next{0};
+  auto work = [&] {
+    for (int t; (t = next.fetch_add(1)) < ntri;) {
+      const AtlasTile& tile = atlas.layout.tiles[t];
+      if (tile.size == 0) continue;
+      const Eigen::Vector3d n = mesh.Normal(t);
+      if (!n.allFinite() || !(n.dot(s) > 0)) continue;  // the sun is behind the face: 0
+      const Eigen::Vector3d& a = mesh.vertices[mesh.triangles[t][0]];
+      const Eigen::Vector3d& b = mesh.vertices[mesh.triangles[t][1]];
+      const Eigen::Vector3d& c = mesh.vertices[mesh.triangles[t][2]];
+      const int size = tile.size;
+      const int x0 = atlas.block_x[tile.block] + tile.x + 1,
+                y0 = atlas.block_y[tile.block] + tile.y + 1;
+      for (int j = -1; j <= size; ++j)
+        for (int i = -1; i <= size; ++i) {
+          double u = (std::clamp(i, 0, size - 1) + 0.5) / size,
+                 v = (std::clamp(j, 0, size - 1) + 0.5) / size;
+          if (u + v > 1) {  // the upper half mirrors the triangle (solve/atlas.h)
+            const double mu = 1 - v, mv = 1 - u;
+            u = mu;
+            v = mv;
+          }
+          const Eigen::Vector3d p = a + u * (b - a) + v * (c - a) + offset * n;
+          out.at(x0 + i, y0 + j) = caster.Occluded(p, s, 0.0) ? 0.f : 1.f;
+        }
+    }
+  };
+  const int threads = std::max(1u, std::min(8u, std::thread::hardware_concurrency()));
+  std::vector<std::thread> pool;
+  for (int k = 1; k < threads; ++k) pool.emplace_back(work);
+  work();
+  for (std::thread& th : pool) th.join();
+  return out;
+}
+
 uint8_t ViewerEncode(double value, double scale) {
   const double x = std::clamp(value / scale, 0.0, 1.0);
   return static_cast<uint8_t>(std::lround(255 * std::pow(x, 1 / kViewerGamma)));
@@ -340,6 +386,8 @@ ViewerSummary WriteViewer(const LoadedScene& scene, const fs::path& out_arg,
       PackViewerAtlas(solved.mesh, solved.grid, options.texels_per_cell, options.max_atlas_side);
   Log(log, "lighting at " + std::to_string(options.times) + " times (clear and overcast), " +
                std::to_string(solved.grid.size()) + " grid points");
+  const ViewerAtlas shadow = PackViewerAtlas(
+      solved.mesh, solved.grid, options.shadow_texels_per_cell, options.max_atlas_side);
   const ViewerData data = ComputeViewerData(scene, options, progress);
   summary.seconds_lighting = Seconds(start);
   const auto bake_start = std::chrono::steady_clock::now();
@@ -359,6 +407,7 @@ ViewerSummary WriteViewer(const LoadedScene& scene, const fs::path& out_arg,
   j["gamma"] = kViewerGamma;
   j["exposure"] = data.exposure;
   j["atlas"] = {{"width", atlas.width}, {"height", atlas.height}};
+  j["shadow_atlas"] = {{"width", shadow.width}, {"height", shadow.height}};
   j["noon"] = data.day.noon.UnixSeconds();
   j["sunrise"] = data.day.sunrise.UnixSeconds();
   j["sunset"] = data.day.sunset.UnixSeconds();
@@ -370,9 +419,7 @@ ViewerSummary WriteViewer(const LoadedScene& scene, const fs::path& out_arg,
       {"se", {{"scale", MaxValue(rho_se)}, {"png", PngDataUrl(rho_se, MaxValue(rho_se))}}}};
   j["bases"] = nlohmann::json::array();
   for (const ViewerBasis& b : data.bases) {
-    std::vector<Eigen::Vector3d> vis(b.sun_visibility.size());
-    for (size_t k = 0; k < vis.size(); ++k) vis[k].setConstant(b.sun_visibility[k]);
-    const Image v = OneChannel(atlas.Bake(solved.grid, vis));
+    const Image v = SunVisibilityAtlas(shadow, solved.mesh, *solved.caster, b.sun_dir);
     const Image se = atlas.Bake(solved.grid, b.se);
     const Image so = atlas.Bake(solved.grid, b.se_overcast);
     double az = 0, el = 0;
@@ -389,9 +436,9 @@ ViewerSummary WriteViewer(const LoadedScene& scene, const fs::path& out_arg,
                           {"se_overcast_scale", MaxValue(so)},
                           {"se_overcast", PngDataUrl(so, MaxValue(so))}});
   }
-  // The mesh: three vertices per triangle, 15 floats each: position (3), normal (3), texture
+  // The mesh: three vertices per triangle, 17 floats each: position (3), normal (3), texture
   // coordinates (2, 0..1 from the atlas's top-left; -1 without albedo), retro, the sun lobe's
-  // rho_s (3), kappa and exponent, and the block.
+  // rho_s (3), kappa and exponent, the block, and the shadow atlas's texture coordinates (2).
   const Mesh& mesh = solved.mesh;
   std::vector<float> verts;
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY), hi = -lo;
@@ -408,8 +455,9 @@ ViewerSummary WriteViewer(const LoadedScene& scene, const fs::path& out_arg,
       hi = hi.cwiseMax(p_enu);
       const Eigen::Vector3d p = EnuToGltf(p_enu);
       const Eigen::Vector2d tx = atlas.Texel(t, corners[k][0], corners[k][1]);
+      const Eigen::Vector2d sx = shadow.Texel(t, corners[k][0], corners[k][1]);
       const bool textured = tx.x() >= 0;
-      const float vals[15] = {static_cast<float>(p.x()),
+      const float vals[17] = {static_cast<float>(p.x()),
                               static_cast<float>(p.y()),
                               static_cast<float>(p.z()),
                               static_cast<float>(nrm.x()),
@@ -423,7 +471,9 @@ ViewerSummary WriteViewer(const LoadedScene& scene, const fs::path& out_arg,
                               static_cast<float>(lobe.rho_s.z()),
                               static_cast<float>(lobe.kappa),
                               static_cast<float>(lobe.n),
-                              static_cast<float>(block)};
+                              static_cast<float>(block),
+                              textured ? static_cast<float>(sx.x() / shadow.width) : -1.f,
+                              textured ? static_cast<float>(sx.y() / shadow.height) : -1.f};
       for (float f : vals) {
         if (!std::isfinite(f)) throw Error("viewer: a vertex value is not finite");
         verts.push_back(f);
@@ -432,8 +482,8 @@ ViewerSummary WriteViewer(const LoadedScene& scene, const fs::path& out_arg,
     summary.triangles += 1;
   }
   static_assert(sizeof(float) == 4);
-  j["mesh"] = {{"floats_per_vertex", 15},
-               {"vertices", verts.size() / 15},
+  j["mesh"] = {{"floats_per_vertex", 17},
+               {"vertices", verts.size() / 17},
                {"blocks", mesh.block_names},
                {"data", Base64(std::string(reinterpret_cast<const char*>(verts.data()),
                                            verts.size() * sizeof(float)))}};
@@ -493,6 +543,8 @@ ViewerSummary WriteViewer(const LoadedScene& scene, const fs::path& out_arg,
   summary.times = static_cast<int>(data.bases.size());
   summary.atlas_width = atlas.width;
   summary.atlas_height = atlas.height;
+  summary.shadow_width = shadow.width;
+  summary.shadow_height = shadow.height;
   summary.bytes = js.size() + html.size();
   Log(log, "wrote " + out.string());
   return summary;

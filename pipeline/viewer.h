@@ -2,7 +2,8 @@
 // scene's building in the browser at any time of its day and under any degree of overcast.
 // rouen bakes, once, what the page needs: the building's triangles with texture coordinates
 // into one atlas of all blocks, the two pseudo-albedos (Yu & Malik 1998 eqs. 11-12) in it, and
-// per time of a day from sunrise to sunset an irradiance "basis" (the sun's visibility, E_se
+// per time of a day from sunrise to sunset an irradiance "basis" (the sun's visibility, ray-cast
+// per texel of a finer atlas, E_se
 // under the predicted clear sky and E_se under the same time's fully overcast sky, §6.3); the
 // page's shader computes L = (rho_sun E_sun D + rho_se E_se) / pi + f_s E_sun (render/render.h
 // RenderView) between the two nearest times.
@@ -22,15 +23,17 @@
 #include "pipeline/scene.h"
 #include "solve/atlas.h"
 #include "solve/grid.h"
+#include "solve/raycast.h"
 
 namespace rouen {
 
 struct ViewerOptions {
-  int times = 24;                // irradiance bases from sunrise to sunset, 2..96
-  int texels_per_cell = 1;       // atlas texels along a grid cell's edge (solve/atlas.h), 1..16
-  double min_elevation_deg = 1;  // "sunrise" and "sunset": the sun this high (deg), 0.1..20
-  int max_atlas_side = 8192;     // the one atlas of all blocks, texels
-  void Validate() const;         // throws rouen::Error naming the option
+  int times = 24;                  // irradiance bases from sunrise to sunset, 2..96
+  int texels_per_cell = 1;         // atlas texels along a grid cell's edge (solve/atlas.h), 1..16
+  int shadow_texels_per_cell = 4;  // the sun-visibility atlas's (ray-cast per texel), 1..16
+  double min_elevation_deg = 1;    // "sunrise" and "sunset": the sun this high (deg), 0.1..20
+  int max_atlas_side = 8192;       // the one atlas of all blocks, texels
+  void Validate() const;           // throws rouen::Error naming the option
 };
 
 // The day the page shows: the solar noon nearest to `day` (the highest sun within 12 h) and the
@@ -61,13 +64,21 @@ struct ViewerAtlas {
 ViewerAtlas PackViewerAtlas(const Mesh& mesh, const SurfaceGrid& grid, int texels_per_cell,
                             int max_side);
 
+// Whether the sun (direction `sun_dir`, unit ENU) reaches each texel centre of each tile of
+// `atlas` on the model: 1 when the face turns towards it and a shadow ray from the point (lifted
+// by the caster's surface offset) escapes, as render/render.h RenderView decides per pixel;
+// border texels repeat the tile's edge as BakeAtlas does. One channel, texels outside tiles 0.
+Image SunVisibilityAtlas(const ViewerAtlas& atlas, const Mesh& mesh, const RayCaster& caster,
+                         const Eigen::Vector3d& sun_dir);
+
 // The lighting of one time on the grid, as the page uses it.
 struct ViewerBasis {
   UtcTime utc;
   Eigen::Vector3d sun_dir = Eigen::Vector3d::UnitZ();  // unit ENU, towards the sun
   Eigen::Vector3d sun_e = Eigen::Vector3d::Zero();     // L_sun Omega: irradiance normal to it
   // Per grid point: the fraction of the sun disc seen (ComputeIrradiance's sun_visibility; 0
-  // where the sun is behind the face), so E_sun = sun_e max(0, n.s) V as ComputeIrradiance's;
+  // where the sun is behind the face), so E_sun = sun_e max(0, n.s) V as ComputeIrradiance's
+  // (the page takes V from the finer SunVisibilityAtlas instead, for sharper shadows);
   // E_se with the interreflection (IrradianceFor) under the clear predicted lighting (pbs 0),
   // and under the same time's fully overcast lighting (pbs 1: no sun, a CIE overcast sky).
   std::vector<float> sun_visibility;
@@ -96,6 +107,7 @@ double ViewerDecode(uint8_t stored, double scale);
 struct ViewerSummary {
   int times = 0;
   int atlas_width = 0, atlas_height = 0;
+  int shadow_width = 0, shadow_height = 0;
   int64_t triangles = 0;
   size_t bytes = 0;  // index.html and viewer_data.js
   double seconds_lighting = 0, seconds_baking = 0;

@@ -68,16 +68,20 @@ document.getElementById("nbases").textContent = D.bases.length;
 // ---- shaders --------------------------------------------------------------------------------
 const VS = `#version 300 es
 in vec3 aPos; in vec3 aNormal; in vec2 aUv; in float aRetro; in vec3 aLobe; in vec2 aLobeKN;
+in vec2 aShadowUv;
 uniform mat4 uViewProj;
 out vec3 vPos; out vec3 vNormal; out vec2 vUv; out float vRetro; out vec3 vLobe; out vec2 vKN;
+out vec2 vShadowUv;
 void main() {
   vPos = aPos; vNormal = aNormal; vUv = aUv; vRetro = aRetro; vLobe = aLobe; vKN = aLobeKN;
+  vShadowUv = aShadowUv;
   gl_Position = uViewProj * vec4(aPos, 1.0);
 }`;
 const FS = `#version 300 es
 precision highp float;
 precision highp sampler2DArray;
 in vec3 vPos; in vec3 vNormal; in vec2 vUv; in float vRetro; in vec3 vLobe; in vec2 vKN;
+in vec2 vShadowUv;
 uniform sampler2DArray uAlbedo, uVis, uSe, uSeo;
 uniform vec2 uAlbScale, uSeScale, uSeoScale;
 uniform float uLayer0, uLayer1, uW, uPbs, uExposure, uGamma;
@@ -117,7 +121,8 @@ void main() {
     if (dot(n, v) < 0.0) n = -n;  // seen from behind: as render, light the side facing us
     vec3 rhoSun = dec(texture(uAlbedo, vec3(vUv, 0.0)).rgb, uAlbScale.x);
     vec3 rhoSe = dec(texture(uAlbedo, vec3(vUv, 1.0)).rgb, uAlbScale.y);
-    float vis0 = texture(uVis, vec3(vUv, uLayer0)).r, vis1 = texture(uVis, vec3(vUv, uLayer1)).r;
+    float vis0 = texture(uVis, vec3(vShadowUv, uLayer0)).r;
+    float vis1 = texture(uVis, vec3(vShadowUv, uLayer1)).r;
     vec3 se = mix(dec(texture(uSe, vec3(vUv, uLayer0)).rgb, uSeScale.x),
                   dec(texture(uSe, vec3(vUv, uLayer1)).rgb, uSeScale.y), uW);
     vec3 seo = mix(dec(texture(uSeo, vec3(vUv, uLayer0)).rgb, uSeoScale.x),
@@ -164,7 +169,8 @@ gl.bufferData(gl.ARRAY_BUFFER, verts, gl.STATIC_DRAW);
 const vao = gl.createVertexArray();
 gl.bindVertexArray(vao);
 for (const [name, size, offset] of [["aPos", 3, 0], ["aNormal", 3, 3], ["aUv", 2, 6],
-                                    ["aRetro", 1, 8], ["aLobe", 3, 9], ["aLobeKN", 2, 12]]) {
+                                    ["aRetro", 1, 8], ["aLobe", 3, 9], ["aLobeKN", 2, 12],
+                                    ["aShadowUv", 2, 15]]) {
   const loc = gl.getAttribLocation(prog, name);
   if (loc < 0) continue;
   gl.enableVertexAttribArray(loc);
@@ -184,17 +190,19 @@ function loadImage(url) {
 gl.pixelStorei(gl.UNPACK_COLORSPACE_CONVERSION_WEBGL, gl.NONE);
 gl.pixelStorei(gl.UNPACK_PREMULTIPLY_ALPHA_WEBGL, false);
 gl.pixelStorei(gl.UNPACK_FLIP_Y_WEBGL, false);
-async function textureArray(unit, urls) {
+// size: {width, height}; one channel (R8, the red of the image) or RGBA8.
+async function textureArray(unit, urls, size, oneChannel) {
   const imgs = await Promise.all(urls.map(loadImage));
   const tex = gl.createTexture();
   gl.activeTexture(gl.TEXTURE0 + unit);
   gl.bindTexture(gl.TEXTURE_2D_ARRAY, tex);
-  gl.texStorage3D(gl.TEXTURE_2D_ARRAY, 1, gl.RGBA8, D.atlas.width, D.atlas.height, urls.length);
+  gl.texStorage3D(gl.TEXTURE_2D_ARRAY, 1, oneChannel ? gl.R8 : gl.RGBA8, size.width, size.height,
+                  urls.length);
   imgs.forEach((img, layer) => {
-    if (img.naturalWidth !== D.atlas.width || img.naturalHeight !== D.atlas.height)
-      throw new Error("a texture is " + img.naturalWidth + "x" + img.naturalHeight + ", not the atlas's size");
-    gl.texSubImage3D(gl.TEXTURE_2D_ARRAY, 0, 0, 0, layer, D.atlas.width, D.atlas.height, 1,
-                     gl.RGBA, gl.UNSIGNED_BYTE, img);
+    if (img.naturalWidth !== size.width || img.naturalHeight !== size.height)
+      throw new Error("a texture is " + img.naturalWidth + "x" + img.naturalHeight + ", not its atlas's size");
+    gl.texSubImage3D(gl.TEXTURE_2D_ARRAY, 0, 0, 0, layer, size.width, size.height, 1,
+                     oneChannel ? gl.RED : gl.RGBA, gl.UNSIGNED_BYTE, img);
   });
   gl.texParameteri(gl.TEXTURE_2D_ARRAY, gl.TEXTURE_MIN_FILTER, gl.LINEAR);
   gl.texParameteri(gl.TEXTURE_2D_ARRAY, gl.TEXTURE_MAG_FILTER, gl.LINEAR);
@@ -374,10 +382,10 @@ timeInput.value = Math.round(state.f * 1000);
 draw();
 message.textContent = "loading textures...";
 Promise.all([
-  textureArray(0, [D.albedo.sun.png, D.albedo.se.png]),
-  textureArray(1, D.bases.map((b) => b.vis)),
-  textureArray(2, D.bases.map((b) => b.se)),
-  textureArray(3, D.bases.map((b) => b.se_overcast)),
+  textureArray(0, [D.albedo.sun.png, D.albedo.se.png], D.atlas, false),
+  textureArray(1, D.bases.map((b) => b.vis), D.shadow_atlas, true),
+  textureArray(2, D.bases.map((b) => b.se), D.atlas, false),
+  textureArray(3, D.bases.map((b) => b.se_overcast), D.atlas, false),
 ]).then(() => {
   message.textContent = "";
   viewer.ready = true;

@@ -133,6 +133,41 @@ TEST_F(ViewerScene, TheAtlasHoldsTheGridsValuesAtEachTexel) {
   }
 }
 
+// The page's sun visibility, ray-cast per texel of the finer atlas, agrees with the grid's
+// (ComputeIrradiance's) at the texels holding the grid points, but for shadow edges.
+TEST_F(ViewerScene, TexelVisibilityAgreesWithTheGrids) {
+  const SolveResult& s = scene_->solved;
+  const ViewerAtlas shadow = PackViewerAtlas(s.mesh, s.grid, 4, 4096);
+  for (const Eigen::Vector3d& sun : {EnuFromAzEl(100, 30), EnuFromAzEl(250, 15)}) {
+    Lighting l = s.slots[0].lighting;
+    l.sun_dir = sun;
+    const SlotIrradiance irr = ComputeIrradiance(s.grid, s.hemisphere, *s.caster, l);
+    const Image vis = SunVisibilityAtlas(shadow, s.mesh, *s.caster, sun);
+    // Each grid point's texel: the grid point is the centroid of its sub-triangle, found as
+    // the texel of the triangle's barycentric coordinates of the point.
+    int agree = 0, total = 0, lit = 0, dark = 0;
+    for (int j = 0; j < s.grid.size(); ++j) {
+      const GridPoint& p = s.grid.points[j];
+      const Eigen::Vector3i& tri = s.mesh.triangles[p.triangle];
+      const Eigen::Vector3d a = s.mesh.vertices[tri[0]], e1 = s.mesh.vertices[tri[1]] - a,
+                            e2 = s.mesh.vertices[tri[2]] - a, d = p.position - a;
+      // Barycentric (u, v) of the point: least squares on the triangle's plane.
+      Eigen::Matrix<double, 3, 2> m;
+      m << e1, e2;
+      const Eigen::Vector2d uv = m.colPivHouseholderQr().solve(d);
+      const Eigen::Vector2d t = shadow.Texel(p.triangle, uv.x(), uv.y());
+      const float v = vis.at(static_cast<int>(t.x()), static_cast<int>(t.y()));
+      agree += (v > 0.5f) == (irr.sun_visibility[j] > 0.5f);
+      lit += v > 0.5f;
+      dark += p.normal.dot(sun) > 0 && v < 0.5f;
+      ++total;
+    }
+    EXPECT_GT(agree, 0.97 * total) << agree << " of " << total;
+    EXPECT_GT(lit, 0);
+    EXPECT_GT(dark, 0) << "no shadow";
+  }
+}
+
 // The bases are rouen's own irradiance: the lighting RequestedLighting predicts for the time
 // (clear, and with pbs 1) and IrradianceFor's E_sun and E_se with the interreflection.
 TEST_F(ViewerScene, TheBasesAreRouensIrradianceAtTheirTimes) {
