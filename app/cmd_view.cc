@@ -63,6 +63,8 @@ void RegisterView(CLI::App& app) {
       "atlas (--shadow-texels-per-cell), E_se from the grid; then exposure and the sRGB\n"
       "encoding. Textures are 8-bit PNGs (value = scale (stored/255)^2.2) in one atlas of all\n"
       "blocks; the size grows with --times and the texels per cell squared.\n"
+      "The address can set the sliders: index.html#t=0.25&overcast=0.5&ev=1&controls=0 (t the\n"
+      "fraction of the day from sunrise to sunset, overcast 0..1, ev in stops, no panel).\n"
       "page API (for scripts and tests): window.rouenViewer.setBase(i), setTime(unix s),\n"
       "setOvercast(0..1), setExposureEv(ev), setCamera({eye, target, fov_x_deg}) in ENU metres,\n"
       "camera(), state(); .ready once the textures are loaded.\n"

@@ -376,9 +376,21 @@ viewer.state = () => { const b = bracket(state.f); return { time: new Date(timeA
 viewer.draw = draw;
 
 setCameraEnu(D.camera.eye, D.camera.target, D.camera.fov_x_deg);
-// The time of day nearest the middle of the captured times: noon.
+// Noon first, unless the address says otherwise: index.html#t=0.25&overcast=0.5&ev=1 (t the
+// fraction of the day from sunrise to sunset, overcast the blocked fraction 0..1, ev in stops).
 state.f = Math.max(0, Math.min(1, (D.noon - D.sunrise) / (D.sunset - D.sunrise)));
+const hash = new URLSearchParams(location.hash.slice(1));
+const number = (key, lo, hi) => {
+  const v = Number(hash.get(key));
+  return hash.has(key) && Number.isFinite(v) ? Math.max(lo, Math.min(hi, v)) : null;
+};
+if (number("t", 0, 1) !== null) state.f = number("t", 0, 1);
+if (number("overcast", 0, 1) !== null) state.pbs = number("overcast", 0, 1);
+if (number("ev", -6, 6) !== null) state.ev = number("ev", -6, 6);
+if (hash.get("controls") === "0") viewer.setControlsVisible(false);
 timeInput.value = Math.round(state.f * 1000);
+overcastInput.value = Math.round(state.pbs * 100);
+exposureInput.value = state.ev;
 draw();
 message.textContent = "loading textures...";
 Promise.all([
