@@ -63,11 +63,15 @@ void RegisterView(CLI::App& app) {
       "atlas (--shadow-texels-per-cell), E_se from the grid; then exposure and the sRGB\n"
       "encoding. Textures are 8-bit PNGs (value = scale (stored/255)^2.2) in one atlas of all\n"
       "blocks; the size grows with --times and the texels per cell squared.\n"
-      "The address can set the sliders: index.html#t=0.25&overcast=0.5&ev=1&controls=0 (t the\n"
-      "fraction of the day from sunrise to sunset, overcast 0..1, ev in stops, no panel).\n"
+      "The exposure is noon's for the whole day (so that sunset darkens), or each time's own\n"
+      "(the checkbox): the 99th percentile of the building's radiance to 0.9 of white.\n"
+      "The address can set the sliders: index.html#t=0.25&overcast=0.5&ev=1&auto=1&controls=0\n"
+      "(t the fraction of the day from sunrise to sunset, overcast 0..1, ev in stops, auto the\n"
+      "exposure of each time, no panel).\n"
       "page API (for scripts and tests): window.rouenViewer.setBase(i), setTime(unix s),\n"
-      "setOvercast(0..1), setExposureEv(ev), setCamera({eye, target, fov_x_deg}) in ENU metres,\n"
-      "camera(), state(); .ready once the textures are loaded.\n"
+      "setOvercast(0..1), setExposureEv(ev), setAutoExposure(bool), setCamera({eye, target,\n"
+      "fov_x_deg}) in ENU metres, camera(), state(); .whenReady resolves once the textures are\n"
+      "loaded.\n"
       "Example: rouen view s.scene --out s.view && xdg-open s.view/index.html");
   c->add_option("scene", a->scene, "Scene folder (from rouen solve)")->required();
   c->add_option("--out", a->out, "Folder to write (new, or an earlier rouen view folder)")

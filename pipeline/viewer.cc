@@ -333,24 +333,33 @@ ViewerData ComputeViewerData(const LoadedScene& scene, const ViewerOptions& opti
     out.bases.push_back(std::move(b));
     if (progress) progress(i + 1, n);
   }
-  // Exposure: the 99th percentile of the diffuse radiance at the basis nearest noon -> 0.9.
+  // Exposure: the 99th percentile of the diffuse radiance at the basis nearest noon -> 0.9;
+  // and each basis's own, clear and overcast.
+  const AlbedoResult& al = solved.albedo;
+  auto auto_exposure = [&](const ViewerBasis& b, bool overcast) {
+    std::vector<double> l;
+    for (size_t j = 0; j < b.se.size(); ++j) {
+      const Eigen::Vector3d r =
+          overcast ? Eigen::Vector3d(al.rho_se[j].cwiseProduct(b.se_overcast[j]) / kPi)
+                   : Eigen::Vector3d((al.rho_sun[j].cwiseProduct(b.sun[j]) +
+                                      al.rho_se[j].cwiseProduct(b.se[j])) /
+                                     kPi);
+      for (int c = 0; c < 3; ++c) l.push_back(r[c]);
+    }
+    if (l.empty()) return 1.0;
+    const size_t k = std::min(l.size() - 1, static_cast<size_t>(0.99 * l.size()));
+    std::nth_element(l.begin(), l.begin() + k, l.end());
+    return l[k] > 0 && std::isfinite(l[k]) ? 0.9 / l[k] : 1.0;
+  };
   int noon = 0;
   for (int i = 1; i < n; ++i)
     if (std::abs(out.day.times[i].UnixSeconds() - out.day.noon.UnixSeconds()) <
         std::abs(out.day.times[noon].UnixSeconds() - out.day.noon.UnixSeconds()))
       noon = i;
-  std::vector<double> l;
-  const AlbedoResult& al = solved.albedo;
-  for (size_t j = 0; j < out.bases[noon].se.size(); ++j) {
-    const Eigen::Vector3d r = (al.rho_sun[j].cwiseProduct(out.bases[noon].sun[j]) +
-                               al.rho_se[j].cwiseProduct(out.bases[noon].se[j])) /
-                              kPi;
-    for (int c = 0; c < 3; ++c) l.push_back(r[c]);
-  }
-  if (!l.empty()) {
-    const size_t k = std::min(l.size() - 1, static_cast<size_t>(0.99 * l.size()));
-    std::nth_element(l.begin(), l.begin() + k, l.end());
-    if (l[k] > 0 && std::isfinite(l[k])) out.exposure = 0.9 / l[k];
+  out.exposure = auto_exposure(out.bases[noon], false);
+  for (ViewerBasis& b : out.bases) {
+    b.exposure = auto_exposure(b, false);
+    b.exposure_overcast = auto_exposure(b, true);
   }
   return out;
 }
@@ -434,7 +443,9 @@ ViewerSummary WriteViewer(const LoadedScene& scene, const fs::path& out_arg,
                           {"se_scale", MaxValue(se)},
                           {"se", PngDataUrl(se, MaxValue(se))},
                           {"se_overcast_scale", MaxValue(so)},
-                          {"se_overcast", PngDataUrl(so, MaxValue(so))}});
+                          {"se_overcast", PngDataUrl(so, MaxValue(so))},
+                          {"exposure", b.exposure},
+                          {"exposure_overcast", b.exposure_overcast}});
   }
   // The mesh: three vertices per triangle, 17 floats each: position (3), normal (3), texture
   // coordinates (2, 0..1 from the atlas's top-left; -1 without albedo), retro, the sun lobe's

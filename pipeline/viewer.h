@@ -84,6 +84,7 @@ struct ViewerBasis {
   std::vector<float> sun_visibility;
   std::vector<Eigen::Vector3d> sun;  // E_sun (clear), for checks and the exposure
   std::vector<Eigen::Vector3d> se, se_overcast;
+  double exposure = 1, exposure_overcast = 1;  // as ViewerData::exposure, at this time
 };
 
 // Everything the page shows, in rouen's units (relative radiance x sr for irradiance).

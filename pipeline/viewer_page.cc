@@ -36,6 +36,7 @@ const char* ViewerPageHtml() {
     <input id="overcast" type="range" min="0" max="100" step="1" value="0"></label>
   <label>Exposure (EV) <span class="value" id="exposure-value"></span>
     <input id="exposure" type="range" min="-6" max="6" step="0.1" value="0"></label>
+  <label><input id="auto" type="checkbox"> Exposure set for each time and overcast</label>
   <p id="sun"></p>
   <p>Drag to orbit, wheel to zoom, shift-drag to pan. Lighting from rouen's recovered sun,
      sky and environment (Yu &amp; Malik 1998), interpolated between <span id="nbases"></span>
@@ -259,7 +260,19 @@ function viewProj(width, height) {
 
 // ---- state and drawing ----------------------------------------------------------------------
 const N = D.bases.length;
-const state = { f: 0.5, pbs: 0, ev: 0 };
+const state = { f: 0.5, pbs: 0, ev: 0, auto: false };
+// One exposure for the whole day (noon's), or each time's own (log-interpolated between the
+// bases, and between clear and overcast), times the slider's stops.
+function exposure() {
+  let e = D.exposure;
+  if (state.auto) {
+    const b = bracket(state.f), B0 = D.bases[b.i0], B1 = D.bases[b.i1];
+    const lerp = (p, q, w) => Math.exp(Math.log(p) + w * (Math.log(q) - Math.log(p)));
+    e = lerp(lerp(B0.exposure, B1.exposure, b.w), lerp(B0.exposure_overcast, B1.exposure_overcast, b.w),
+             state.pbs);
+  }
+  return e * Math.pow(2, state.ev);
+}
 const timeInput = document.getElementById("time");
 const overcastInput = document.getElementById("overcast");
 const exposureInput = document.getElementById("exposure");
@@ -291,7 +304,7 @@ function draw() {
   gl.uniform1f(U.uLayer1, b.i1);
   gl.uniform1f(U.uW, b.w);
   gl.uniform1f(U.uPbs, state.pbs);
-  gl.uniform1f(U.uExposure, D.exposure * Math.pow(2, state.ev));
+  gl.uniform1f(U.uExposure, exposure());
   gl.uniform1f(U.uGamma, D.gamma);
   gl.uniform2f(U.uAlbScale, D.albedo.sun.scale, D.albedo.se.scale);
   gl.uniform2f(U.uSeScale, B0.se_scale, B1.se_scale);
@@ -327,6 +340,8 @@ function redraw() {
 timeInput.addEventListener("input", () => { state.f = timeInput.value / 1000; redraw(); });
 overcastInput.addEventListener("input", () => { state.pbs = overcastInput.value / 100; redraw(); });
 exposureInput.addEventListener("input", () => { state.ev = Number(exposureInput.value); redraw(); });
+const autoInput = document.getElementById("auto");
+autoInput.addEventListener("change", () => { state.auto = autoInput.checked; redraw(); });
 window.addEventListener("resize", redraw);
 
 // Mouse and touch: drag orbits, shift-drag pans, the wheel zooms.
@@ -372,7 +387,8 @@ viewer.camera = () => ({ eye: eyeEnu(), target: cam.target.slice(), fov_x_deg: c
                          width: canvas.width, height: canvas.height });
 viewer.state = () => { const b = bracket(state.f); return { time: new Date(timeAt(state.f) * 1000).toISOString(),
                        i0: b.i0, i1: b.i1, w: b.w, pbs: state.pbs,
-                       exposure: D.exposure * Math.pow(2, state.ev) }; };
+                       exposure: exposure(), auto_exposure: state.auto }; };
+viewer.setAutoExposure = (on) => { state.auto = !!on; autoInput.checked = state.auto; draw(); };
 viewer.draw = draw;
 
 setCameraEnu(D.camera.eye, D.camera.target, D.camera.fov_x_deg);
@@ -388,6 +404,7 @@ if (number("t", 0, 1) !== null) state.f = number("t", 0, 1);
 if (number("overcast", 0, 1) !== null) state.pbs = number("overcast", 0, 1);
 if (number("ev", -6, 6) !== null) state.ev = number("ev", -6, 6);
 if (hash.get("controls") === "0") viewer.setControlsVisible(false);
+if (hash.get("auto") === "1") { state.auto = true; autoInput.checked = true; }
 timeInput.value = Math.round(state.f * 1000);
 overcastInput.value = Math.round(state.pbs * 100);
 exposureInput.value = state.ev;

@@ -128,6 +128,13 @@ double Linear(const Image& img, int x, int y) {
          3;
 }
 
+Image RgbOf(const Image& rgba) {
+  Image rgb(rgba.width, rgba.height, 3, PixelUnits::kRadiance);
+  for (size_t p = 0; p < static_cast<size_t>(rgb.width) * rgb.height; ++p)
+    for (int c = 0; c < 3; ++c) rgb.data[p * 3 + c] = rgba.data[p * 4 + c];
+  return rgb;
+}
+
 struct Render {
   Image rgba;     // radiance and coverage
   Image digital;  // through the page's tone mapping (exposure, sRGB)
@@ -209,6 +216,9 @@ TEST_F(ViewCli, RelightsLikeRouenRenderInHeadlessChromium) {
     shoot("evening", "rouenViewer.setBase(" + std::to_string(kTimes - 2) + ")");
     shoot("noon", "rouenViewer.setBase(" + std::to_string(kTimes / 2) + ")");
     shoot("overcast", "rouenViewer.setOvercast(1)");
+    shoot("sunrise_auto",
+          "rouenViewer.setOvercast(0); rouenViewer.setAutoExposure(true); "
+          "rouenViewer.setBase(0)");
     for (const nlohmann::json& e : browser.events()) {
       const std::string m = e.value("method", "");
       const nlohmann::json& p = e.value("params", nlohmann::json::object());
@@ -248,10 +258,7 @@ TEST_F(ViewCli, RelightsLikeRouenRenderInHeadlessChromium) {
     EXPECT_EQ(r.code, 0) << r.out;
     Render out;
     out.rgba = ReadImage(exr.string(), true);
-    Image rgb(out.rgba.width, out.rgba.height, 3, PixelUnits::kRadiance);
-    for (size_t p = 0; p < static_cast<size_t>(rgb.width) * rgb.height; ++p)
-      for (int c = 0; c < 3; ++c) rgb.data[p * 3 + c] = out.rgba.data[p * 4 + c];
-    out.digital = ToSrgbDigital(rgb, st["exposure"].get<double>());
+    out.digital = ToSrgbDigital(RgbOf(out.rgba), st["exposure"].get<double>());
     WriteImage((build / ("view_render_" + name + ".png")).string(), out.digital,
                StoredType::kUint8);
     return out;
@@ -322,6 +329,14 @@ TEST_F(ViewCli, RelightsLikeRouenRenderInHeadlessChromium) {
   const double contrast_overcast = mean(shots["overcast"], most) / mean(shots["overcast"], least);
   std::printf("sunlit / shaded brightness: clear %.3f, overcast %.3f\n", contrast_clear,
               contrast_overcast);
+  // Each time's own exposure: at sunrise (the sun 1 degree high; this scene's one slot gives no
+  // extinction, so the low sun is as strong and lights the east face head-on) another than
+  // noon's, and the page still as rouen render at that exposure.
+  const Render sunrise = render("sunrise_auto", 0);
+  EXPECT_GT(std::abs(std::log(states["sunrise_auto"]["exposure"].get<double>() /
+                              states["noon"]["exposure"].get<double>())),
+            0.05);
+  EXPECT_LT(MeanAbsDiff(shots["sunrise_auto"], sunrise.digital, inside), 4);
   EXPECT_GT(contrast_clear, 1.2);
   EXPECT_LT(std::abs(contrast_overcast - 1), 0.5 * (contrast_clear - 1));
 }
