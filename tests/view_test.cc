@@ -168,7 +168,7 @@ TEST_F(ViewCli, RelightsLikeRouenRenderInHeadlessChromium) {
   const fs::path build = fs::path(ROUEN_BINARY).parent_path().parent_path();
   const std::string url = "file://" + fs::absolute(*root_ / "view" / "index.html").string();
   std::vector<std::string> errors;
-  nlohmann::json info, camera;
+  nlohmann::json info, camera, orbited, zoomed;
   std::map<std::string, Image> shots;
   std::map<std::string, nlohmann::json> states;
   {
@@ -219,6 +219,23 @@ TEST_F(ViewCli, RelightsLikeRouenRenderInHeadlessChromium) {
     shoot("sunrise_auto",
           "rouenViewer.setOvercast(0); rouenViewer.setAutoExposure(true); "
           "rouenViewer.setBase(0)");
+    // The mouse orbits: a drag across the canvas turns the camera about its target, keeping
+    // the distance; the wheel zooms.
+    for (const auto& [type, x] : std::vector<std::pair<std::string, int>>{{"mousePressed", 300},
+                                                                          {"mouseMoved", 340},
+                                                                          {"mouseMoved", 380},
+                                                                          {"mouseReleased", 380}})
+      browser.Call("Input.dispatchMouseEvent", {{"type", type},
+                                                {"x", x},
+                                                {"y", 200},
+                                                {"button", "left"},
+                                                {"buttons", type == "mouseReleased" ? 0 : 1},
+                                                {"clickCount", 1}});
+    orbited =
+        nlohmann::json::parse(eval("JSON.stringify(rouenViewer.camera())").get<std::string>());
+    browser.Call("Input.dispatchMouseEvent",
+                 {{"type", "mouseWheel"}, {"x", 300}, {"y", 200}, {"deltaX", 0}, {"deltaY", 200}});
+    zoomed = nlohmann::json::parse(eval("JSON.stringify(rouenViewer.camera())").get<std::string>());
     for (const nlohmann::json& e : browser.events()) {
       const std::string m = e.value("method", "");
       const nlohmann::json& p = e.value("params", nlohmann::json::object());
@@ -235,6 +252,21 @@ TEST_F(ViewCli, RelightsLikeRouenRenderInHeadlessChromium) {
   ASSERT_EQ(info["times"].size(), static_cast<size_t>(kTimes));
   ASSERT_EQ(camera["width"], kWidth);
   ASSERT_EQ(camera["height"], kHeight);
+  auto distance = [](const nlohmann::json& c) {
+    double d = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double e = c["eye"][k].get<double>() - c["target"][k].get<double>();
+      d += e * e;
+    }
+    return std::sqrt(d);
+  };
+  EXPECT_EQ(orbited["target"], camera["target"]);
+  EXPECT_NEAR(distance(orbited), distance(camera), 1e-6);
+  EXPECT_GT(std::hypot(orbited["eye"][0].get<double>() - camera["eye"][0].get<double>(),
+                       orbited["eye"][1].get<double>() - camera["eye"][1].get<double>()),
+            1)
+      << "the drag did not turn the camera: " << orbited.dump();
+  EXPECT_GT(distance(zoomed), 1.1 * distance(orbited)) << "the wheel did not zoom out";
   for (const auto& [name, img] : shots) {
     ASSERT_EQ(img.width, kWidth) << name;
     ASSERT_EQ(img.height, kHeight) << name;
