@@ -426,6 +426,32 @@ ViewerSummary WriteViewer(const LoadedScene& scene, const fs::path& out_arg,
   j["albedo"] = {
       {"sun", {{"scale", MaxValue(rho_sun)}, {"png", PngDataUrl(rho_sun, MaxValue(rho_sun))}}},
       {"se", {{"scale", MaxValue(rho_se)}, {"png", PngDataUrl(rho_se, MaxValue(rho_se))}}}};
+  // The camera's recovered response, for the page to tone map as rouen render --png does: a
+  // table of digital numbers over ln exposure, and the factor that takes the sRGB exposure
+  // (the 99th percentile to 0.9 of white) to the response's (to digital number 230).
+  const ResponseCurve& response = scene.scene.response;
+  if (response.valid()) {
+    double lo = INFINITY, hi = -INFINITY, k = 0;
+    for (int c = 0; c < 3; ++c) {
+      lo = std::min(lo, response.g[c].front());
+      hi = std::max(hi, response.g[c].back());
+      k += response.LogExposure(c, 230) / 3;
+    }
+    if (hi > lo) {
+      constexpr int kLut = 1024;
+      Image lut(kLut, 1, 3, PixelUnits::kDigital, 0.f);
+      for (int i = 0; i < kLut; ++i)
+        for (int c = 0; c < 3; ++c)
+          lut.at(i, 0, c) = static_cast<float>(std::clamp(
+              std::round(response.DigitalValue(c, std::exp(lo + (hi - lo) * i / (kLut - 1)))), 0.0,
+              255.0));
+      j["response"] = {{"log_lo", lo},
+                       {"log_hi", hi},
+                       {"exposure_scale", std::exp(k) / 0.9},
+                       {"lut", "data:image/png;base64," +
+                                   Base64(EncodeImage("lut.png", lut, StoredType::kUint8))}};
+    }
+  }
   j["bases"] = nlohmann::json::array();
   for (const ViewerBasis& b : data.bases) {
     const Image v = SunVisibilityAtlas(shadow, solved.mesh, *solved.caster, b.sun_dir);

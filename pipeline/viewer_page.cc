@@ -37,6 +37,8 @@ const char* ViewerPageHtml() {
   <label>Exposure (EV) <span class="value" id="exposure-value"></span>
     <input id="exposure" type="range" min="-6" max="6" step="0.1" value="0"></label>
   <label><input id="auto" type="checkbox"> Exposure set for each time and overcast</label>
+  <label id="response-label"><input id="response" type="checkbox" checked> Through the camera's
+    recovered response (else sRGB)</label>
   <p id="sun"></p>
   <p>Drag to orbit, wheel to zoom, shift-drag to pan. Lighting from rouen's recovered sun,
      sky and environment (Yu &amp; Malik 1998), interpolated between <span id="nbases"></span>
@@ -87,6 +89,9 @@ uniform sampler2DArray uAlbedo, uVis, uSe, uSeo;
 uniform vec2 uAlbScale, uSeScale, uSeoScale;
 uniform float uLayer0, uLayer1, uW, uPbs, uExposure, uGamma;
 uniform vec3 uSunDir0, uSunDir1, uSunE0, uSunE1, uEye;
+uniform sampler2D uLut;
+uniform bool uResponse;
+uniform float uLogLo, uLogHi;
 out vec4 outColor;
 const float PI = 3.14159265358979;
 vec3 dec(vec3 s, float scale) { return scale * pow(s, vec3(uGamma)); }
@@ -133,8 +138,16 @@ void main() {
     // Overcast (§6.3): pbs of the sunlight blocked; E_se between the clear and overcast bases.
     L = (1.0 - uPbs) * sun + rhoSe * mix(se, seo, uPbs) / PI;
   }
-  vec3 c = clamp(L * uExposure, 0.0, 1.0);
-  outColor = vec4(srgb(c.r), srgb(c.g), srgb(c.b), 1.0);
+  if (uResponse) {
+    // The camera's digital number for the exposure, from the table over ln exposure.
+    vec3 t = clamp((log(max(L * uExposure, vec3(1e-30))) - uLogLo) / (uLogHi - uLogLo), 0.0, 1.0);
+    t = t * (1023.0 / 1024.0) + 0.5 / 1024.0;
+    outColor = vec4(texture(uLut, vec2(t.r, 0.5)).r, texture(uLut, vec2(t.g, 0.5)).g,
+                    texture(uLut, vec2(t.b, 0.5)).b, 1.0);
+  } else {
+    vec3 c = clamp(L * uExposure, 0.0, 1.0);
+    outColor = vec4(srgb(c.r), srgb(c.g), srgb(c.b), 1.0);
+  }
 }`;
 function compile(type, src) {
   const s = gl.createShader(type);
@@ -152,7 +165,8 @@ gl.useProgram(prog);
 const U = {};
 for (const name of ["uViewProj", "uAlbedo", "uVis", "uSe", "uSeo", "uAlbScale", "uSeScale",
                     "uSeoScale", "uLayer0", "uLayer1", "uW", "uPbs", "uExposure", "uGamma",
-                    "uSunDir0", "uSunDir1", "uSunE0", "uSunE1", "uEye"])
+                    "uSunDir0", "uSunDir1", "uSunE0", "uSunE1", "uEye", "uLut", "uResponse",
+                    "uLogLo", "uLogHi"])
   U[name] = gl.getUniformLocation(prog, name);
 
 // ---- mesh -----------------------------------------------------------------------------------
@@ -260,7 +274,7 @@ function viewProj(width, height) {
 
 // ---- state and drawing ----------------------------------------------------------------------
 const N = D.bases.length;
-const state = { f: 0.5, pbs: 0, ev: 0, auto: false };
+const state = { f: 0.5, pbs: 0, ev: 0, auto: false, response: !!D.response };
 // One exposure for the whole day (noon's), or each time's own (log-interpolated between the
 // bases, and between clear and overcast), times the slider's stops.
 function exposure() {
@@ -271,7 +285,7 @@ function exposure() {
     e = lerp(lerp(B0.exposure, B1.exposure, b.w), lerp(B0.exposure_overcast, B1.exposure_overcast, b.w),
              state.pbs);
   }
-  return e * Math.pow(2, state.ev);
+  return e * Math.pow(2, state.ev) * (state.response ? D.response.exposure_scale : 1);
 }
 const timeInput = document.getElementById("time");
 const overcastInput = document.getElementById("overcast");
@@ -317,6 +331,10 @@ function draw() {
   gl.uniform1i(U.uVis, 1);
   gl.uniform1i(U.uSe, 2);
   gl.uniform1i(U.uSeo, 3);
+  gl.uniform1i(U.uLut, 4);
+  gl.uniform1i(U.uResponse, state.response ? 1 : 0);
+  gl.uniform1f(U.uLogLo, D.response ? D.response.log_lo : 0);
+  gl.uniform1f(U.uLogHi, D.response ? D.response.log_hi : 1);
   gl.enable(gl.DEPTH_TEST);
   gl.bindVertexArray(vao);
   gl.drawArrays(gl.TRIANGLES, 0, vertexCount);
@@ -340,6 +358,10 @@ function redraw() {
 timeInput.addEventListener("input", () => { state.f = timeInput.value / 1000; redraw(); });
 overcastInput.addEventListener("input", () => { state.pbs = overcastInput.value / 100; redraw(); });
 exposureInput.addEventListener("input", () => { state.ev = Number(exposureInput.value); redraw(); });
+const responseInput = document.getElementById("response");
+if (!D.response) document.getElementById("response-label").style.display = "none";
+responseInput.checked = state.response;
+responseInput.addEventListener("change", () => { state.response = responseInput.checked && !!D.response; redraw(); });
 const autoInput = document.getElementById("auto");
 autoInput.addEventListener("change", () => { state.auto = autoInput.checked; redraw(); });
 window.addEventListener("resize", redraw);
@@ -387,7 +409,9 @@ viewer.camera = () => ({ eye: eyeEnu(), target: cam.target.slice(), fov_x_deg: c
                          width: canvas.width, height: canvas.height });
 viewer.state = () => { const b = bracket(state.f); return { time: new Date(timeAt(state.f) * 1000).toISOString(),
                        i0: b.i0, i1: b.i1, w: b.w, pbs: state.pbs,
-                       exposure: exposure(), auto_exposure: state.auto }; };
+                       exposure: exposure(), auto_exposure: state.auto,
+                       tone: state.response ? "response" : "srgb" }; };
+viewer.setResponse = (on) => { state.response = !!on && !!D.response; responseInput.checked = state.response; draw(); };
 viewer.setAutoExposure = (on) => { state.auto = !!on; autoInput.checked = state.auto; draw(); };
 viewer.draw = draw;
 
@@ -405,6 +429,7 @@ if (number("overcast", 0, 1) !== null) state.pbs = number("overcast", 0, 1);
 if (number("ev", -6, 6) !== null) state.ev = number("ev", -6, 6);
 if (hash.get("controls") === "0") viewer.setControlsVisible(false);
 if (hash.get("auto") === "1") { state.auto = true; autoInput.checked = true; }
+if (hash.get("response") === "0") { state.response = false; responseInput.checked = false; }
 timeInput.value = Math.round(state.f * 1000);
 overcastInput.value = Math.round(state.pbs * 100);
 exposureInput.value = state.ev;
@@ -415,6 +440,21 @@ Promise.all([
   textureArray(1, D.bases.map((b) => b.vis), D.shadow_atlas, true),
   textureArray(2, D.bases.map((b) => b.se), D.atlas, false),
   textureArray(3, D.bases.map((b) => b.se_overcast), D.atlas, false),
+  D.response ? loadImage(D.response.lut).then((img) => {
+    const tex = gl.createTexture();
+    gl.activeTexture(gl.TEXTURE4);
+    gl.bindTexture(gl.TEXTURE_2D, tex);
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA8, gl.RGBA, gl.UNSIGNED_BYTE, img);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.LINEAR);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.LINEAR);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
+  }) : Promise.resolve().then(() => {
+    // No response: a 1x1 table, so that the sampler is never unbound.
+    gl.activeTexture(gl.TEXTURE4);
+    gl.bindTexture(gl.TEXTURE_2D, gl.createTexture());
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA8, 1, 1, 0, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));
+  }),
 ]).then(() => {
   message.textContent = "";
   viewer.ready = true;

@@ -19,6 +19,7 @@
 #include "core/files.h"
 #include "core/image.h"
 #include "core/limits.h"
+#include "core/response_curve.h"
 #include "pipeline/export_test_util.h"
 #include "render/tonemap.h"
 #include "tests/cli_util.h"
@@ -371,6 +372,97 @@ TEST_F(ViewCli, RelightsLikeRouenRenderInHeadlessChromium) {
   EXPECT_LT(MeanAbsDiff(shots["sunrise_auto"], sunrise.digital, inside), 4);
   EXPECT_GT(contrast_clear, 1.2);
   EXPECT_LT(std::abs(contrast_overcast - 1), 0.5 * (contrast_clear - 1));
+}
+
+// A scene with a camera response: the page tone maps through it by default, as rouen render
+// --png does (ToDigital at the page's exposure factor).
+TEST_F(ViewCli, TonemapsThroughTheScenesResponse) {
+  const std::optional<std::string> chromium = devtools::FindChromium();
+  if (!chromium)
+    GTEST_SKIP() << "chromium is not installed (Debian: apt-get install chromium): the viewer "
+                    "was not opened in a browser";
+  const fs::path scene = *root_ / "response.scene";
+  fs::remove_all(scene);
+  fs::copy(*root_ / "scene", scene, fs::copy_options::recursive);
+  ResponseCurve response;
+  for (int c = 0; c < 3; ++c)
+    for (int z = 0; z < 256; ++z)  // a gamma-like camera, each channel its own
+      response.g[c].push_back((2.0 + 0.2 * c) * std::log((z + 1.0) / 256));
+  nlohmann::json j = nlohmann::json::parse(ReadFileToString(scene / "scene.json"));
+  j["response"] = response;
+  WriteFileAtomic(scene / "scene.json", j.dump(1));
+  const fs::path view = *root_ / "response.view";
+  const cli_test::Result r =
+      RunRouen("view " + Q(scene) + " --out " + Q(view) + " --times " + std::to_string(kTimes));
+  ASSERT_EQ(r.code, 0) << r.out;
+  std::vector<std::string> errors;
+  nlohmann::json camera, state;
+  Image shot;
+  const fs::path build = fs::path(ROUEN_BINARY).parent_path().parent_path();
+  {
+    devtools::Browser browser(*chromium, *root_ / "chromium-profile-2", *root_ / "chromium-2.log",
+                              120, {"--use-angle=swiftshader", "--enable-unsafe-swiftshader"});
+    browser.OpenPage();
+    for (const char* domain : {"Page", "Runtime", "Log"})
+      browser.Call(std::string(domain) + ".enable");
+    browser.Call(
+        "Emulation.setDeviceMetricsOverride",
+        {{"width", kWidth}, {"height", kHeight}, {"deviceScaleFactor", 1}, {"mobile", false}});
+    browser.Call("Page.navigate",
+                 {{"url", "file://" + fs::absolute(view / "index.html").string() + "#controls=0"}});
+    browser.WaitEvent("Page.loadEventFired");
+    const nlohmann::json e =
+        browser.Call("Runtime.evaluate", {{"expression", R"(rouenViewer.whenReady.then(() => {
+            rouenViewer.setCamera({eye: [22, 30, 36], target: [-3, -2, 3], fov_x_deg: 60});
+            rouenViewer.setBase(1);
+            return JSON.stringify({camera: rouenViewer.camera(), state: rouenViewer.state()}); }))"},
+                                          {"returnByValue", true},
+                                          {"awaitPromise", true}});
+    ASSERT_FALSE(e.contains("exceptionDetails")) << e.dump();
+    const nlohmann::json v = nlohmann::json::parse(e["result"]["value"].get<std::string>());
+    camera = v["camera"];
+    state = v["state"];
+    const nlohmann::json png = browser.Call("Page.captureScreenshot", {{"format", "png"}});
+    WriteFileAtomic(build / "view_screenshot_response.png",
+                    devtools::DecodeBase64(png.at("data").get<std::string>()));
+    shot = ReadImage((build / "view_screenshot_response.png").string());
+    for (const nlohmann::json& ev : browser.events()) {
+      const std::string m = ev.value("method", "");
+      const nlohmann::json& p = ev.value("params", nlohmann::json::object());
+      if (m == "Runtime.exceptionThrown" ||
+          (m == "Runtime.consoleAPICalled" && p.value("type", "") == "error") ||
+          (m == "Log.entryAdded" && p["entry"].value("level", "") == "error"))
+        errors.push_back(p.dump());
+    }
+  }
+  ASSERT_TRUE(errors.empty()) << nlohmann::json(errors).dump(1);
+  EXPECT_EQ(state["tone"], "response");
+  auto list = [](const nlohmann::json& v) {
+    return FormatNumber(v[0].get<double>()) + "," + FormatNumber(v[1].get<double>()) + "," +
+           FormatNumber(v[2].get<double>());
+  };
+  const std::string js = ReadFileToString(view / "viewer_data.js");
+  const nlohmann::json data =
+      nlohmann::json::parse(js.substr(js.find('=') + 1, js.rfind(';') - js.find('=') - 1));
+  const fs::path exr = *root_ / "render_response.exr";
+  const cli_test::Result rr =
+      RunRouen("render " + Q(scene) + " --time " + data["bases"][1]["utc"].get<std::string>() +
+               " --look-at " + list(camera["target"]) + " --from-point " + list(camera["eye"]) +
+               " --fov " + FormatNumber(camera["fov_x_deg"].get<double>()) + " --size " +
+               std::to_string(kWidth) + "x" + std::to_string(kHeight) + " --out " + Q(exr));
+  ASSERT_EQ(rr.code, 0) << rr.out;
+  const Image rgba = ReadImage(exr.string(), true);
+  const Image expect = ToDigital(RgbOf(rgba), response, state["exposure"].get<double>());
+  WriteImage((build / "view_render_response.png").string(), expect, StoredType::kUint8);
+  const std::vector<std::pair<int, int>> inside = Inside(rgba);
+  ASSERT_GT(inside.size(), static_cast<size_t>(kWidth * kHeight / 20));
+  const double through = MeanAbsDiff(shot, expect, inside);
+  const double srgb =
+      MeanAbsDiff(shot, ToSrgbDigital(RgbOf(rgba), state["exposure"].get<double>()), inside);
+  std::printf("mean |page - render| through the response: %.2f DN (sRGB instead: %.2f DN)\n",
+              through, srgb);
+  EXPECT_LT(through, 4);
+  EXPECT_LT(through, 0.5 * srgb);
 }
 
 }  // namespace
