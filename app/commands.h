@@ -30,6 +30,7 @@ void RegisterStatus(CLI::App& app);    // rouen status: what a session holds and
 void RegisterReport(CLI::App& app);    // rouen report: a scene as one HTML page
 void RegisterExport(CLI::App& app);    // rouen export: the building as glTF with its albedos
 void RegisterEnvmap(CLI::App& app);    // rouen envmap: a time's lighting as a lat-long EXR
+void RegisterView(CLI::App& app);      // rouen view: a web page relighting the building
 
 }  // namespace rouen
 

@@ -76,24 +76,27 @@ inline std::string DecodeBase64(const std::string& in) {
 // a flattened target session. Every wait has a deadline; nothing sleeps.
 class Browser {
  public:
-  // Starts `chromium` with a fresh profile in `profile_dir`, its stderr into `log`.
+  // Starts `chromium` with a fresh profile in `profile_dir`, its stderr into `log`, and
+  // `extra_args` after the usual ones (e.g. the software WebGL flags).
   Browser(const std::string& chromium, const std::filesystem::path& profile_dir,
-          const std::filesystem::path& log, double timeout_s = 60)
+          const std::filesystem::path& log, double timeout_s = 60,
+          const std::vector<std::string>& extra_args = {})
       : timeout_s_(timeout_s) {
     int to_child[2], from_child[2];
     if (::pipe2(to_child, O_CLOEXEC) != 0 || ::pipe2(from_child, O_CLOEXEC) != 0)
       throw Error("pipe: " + std::string(std::strerror(errno)));
-    const std::vector<std::string> args = {chromium,
-                                           "--headless",
-                                           "--no-sandbox",
-                                           "--disable-gpu",
-                                           "--no-first-run",
-                                           "--no-default-browser-check",
-                                           "--disable-extensions",
-                                           "--hide-scrollbars",
-                                           "--remote-debugging-pipe",
-                                           "--user-data-dir=" + profile_dir.string(),
-                                           "about:blank"};
+    std::vector<std::string> args = {chromium,
+                                     "--headless",
+                                     "--no-sandbox",
+                                     "--disable-gpu",
+                                     "--no-first-run",
+                                     "--no-default-browser-check",
+                                     "--disable-extensions",
+                                     "--hide-scrollbars",
+                                     "--remote-debugging-pipe",
+                                     "--user-data-dir=" + profile_dir.string()};
+    args.insert(args.end(), extra_args.begin(), extra_args.end());
+    args.push_back("about:blank");
     std::vector<char*> argv;
     for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
     argv.push_back(nullptr);
