@@ -29,6 +29,8 @@ int main(int argc, char** argv) {
   rouen::RegisterReport(app);
   rouen::RegisterExport(app);
   rouen::RegisterEnvmap(app);
+  rouen::RegisterTimelapse(app);
+  rouen::RegisterPlan(app);
   // Ctrl-C or SIGTERM removes the temporaries of the files being written.
   rouen::RemoveTemporariesOnSignal();
   try {
