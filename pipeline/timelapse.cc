@@ -264,6 +264,9 @@ TimelapseSummary RenderTimelapse(const LoadedScene& scene, const RenderRequest& 
   for (size_t i = 0; i < times.size(); ++i)
     if (i != top) order.push_back(i);
 
+  // The predictor is fitted once (§5: sun extinction, sky interpolation, environment normals);
+  // each frame asks it for its time.
+  const LightingPredictor predictor = PredictorFor(scene, base);
   const ResponseCurve& response = scene.scene.response;
   TimelapseSummary summary;
   summary.exposure = options.exposure;
@@ -278,7 +281,8 @@ TimelapseSummary RenderTimelapse(const LoadedScene& scene, const RenderRequest& 
     const std::string png =
         options.png ? outputs.Add("--out", (out / (name + ".png")).string(), OutputKind::kImage)
                     : std::string();
-    RenderedView view = RenderSceneView(scene, requests[i]);
+    RenderedView view =
+        RenderSceneViewUnder(scene, requests[i], predictor.At(times[i], scene.scene.site));
     WriteImage(exr, view.rgba, StoredType::kFloat, view.attributes);
     if (options.png) {
       if (summary.exposure <= 0)
