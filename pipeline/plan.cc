@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <sstream>
 
 #include "core/error.h"
@@ -28,6 +29,15 @@ std::string Facing(const Eigen::Vector3d& n) {
   if (az < 0) az += 360;
   static const char* kNames[8] = {"N", "NE", "E", "SE", "S", "SW", "W", "NW"};
   return kNames[static_cast<int>(std::floor((az + 22.5) / 45)) % 8];
+}
+
+// A grid point's sun state for the sun direction `s` (§4.1: shadowed means no direct sun).
+uint8_t SunState(const GridPoint& p, const Eigen::Vector3d& s, const RayCaster& caster,
+                 double min_sun_cosine) {
+  const double c = p.normal.dot(s);
+  if (c <= 0) return kShadowed;
+  if (caster.Occluded(p.position + caster.surface_offset() * p.normal, s)) return kShadowed;
+  return c >= min_sun_cosine ? kSunlit : kGrazing;
 }
 
 void Log(const std::function<void(const std::string&)>& log, const std::string& s) {
@@ -161,16 +171,8 @@ PlanResult PlanCapture(const Mesh& mesh, const PlanOptions& options,
     pt.sun_azimuth_deg = sun.azimuth_deg;
     pt.sun_elevation_deg = sun.elevation_deg;
     tbb::parallel_for(0, np, [&](int i) {
-      const GridPoint& p = grid.points[i];
-      const double c = p.normal.dot(s);
-      uint8_t st = kGrazing;
-      if (c <= 0)
-        st = kShadowed;
-      else if (caster.Occluded(p.position + eps * p.normal, s))
-        st = kShadowed;
-      else if (c >= options.min_sun_cosine)
-        st = kSunlit;
-      state[static_cast<size_t>(i) * nt + k] = st;
+      state[static_cast<size_t>(i) * nt + k] =
+          SunState(grid.points[i], s, caster, options.min_sun_cosine);
     });
     for (int i = 0; i < np; ++i) {
       if (!seen[i]) continue;
@@ -249,6 +251,45 @@ PlanResult PlanCapture(const Mesh& mesh, const PlanOptions& options,
     }
   plan.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return plan;
+}
+
+std::vector<SlotCoverage> SessionCoverage(const Session& session, double spacing_m,
+                                          double min_sun_cosine) {
+  const SessionInfo& info = session.info();
+  if (info.model.empty())
+    throw Error(session.dir().string() +
+                ": the session has no building model (session.json "
+                "\"model\")");
+  const Mesh mesh = ReadObj(ResolveInside(session.dir(), info.model).string());
+  GridOptions grid_options;
+  grid_options.spacing_m = spacing_m;
+  const SurfaceGrid grid = BuildSurfaceGrid(mesh, grid_options);
+  if (grid.size() == 0) throw Error(info.model + ": the model has no surface (degenerate)");
+  const RayCaster caster(mesh);
+  std::map<int, UtcTime> slot_time;
+  for (const FrameRecord& f : session.frames())
+    if (f.target == Target::kArchitecture &&
+        (!slot_time.count(f.slot) || f.utc < slot_time[f.slot]))
+      slot_time[f.slot] = f.utc;
+  std::vector<SlotCoverage> out;
+  std::vector<uint8_t> have(grid.size(), 0);
+  for (const auto& [slot, utc] : slot_time) {
+    const Eigen::Vector3d s = ComputeSunPosition(utc, info.site).DirectionEnu();
+    SlotCoverage c;
+    c.slot = slot;
+    c.time = utc;
+    c.points = grid.size();
+    std::vector<uint8_t> st(grid.size());
+    tbb::parallel_for(0, grid.size(),
+                      [&](int i) { st[i] = SunState(grid.points[i], s, caster, min_sun_cosine); });
+    for (int i = 0; i < grid.size(); ++i) {
+      have[i] |= st[i];
+      c.sunlit += st[i] == kSunlit;
+      c.covered += have[i] == (kSunlit | kShadowed);
+    }
+    out.push_back(c);
+  }
+  return out;
 }
 
 nlohmann::json PlanToJson(const PlanResult& plan, const PlanOptions& options) {

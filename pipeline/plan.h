@@ -12,6 +12,7 @@
 
 #include "core/camera.h"
 #include "core/mesh.h"
+#include "core/session.h"
 #include "core/solar.h"
 #include "pipeline/timelapse.h"
 
@@ -91,6 +92,22 @@ struct PlanResult {
 // (degenerate geometry) or the options are wrong.
 PlanResult PlanCapture(const Mesh& mesh, const PlanOptions& options,
                        const std::function<void(const std::string&)>& log = {});
+
+// The coverage a session's captures achieve so far (rouen capture prints it): each slot's time
+// (its first architecture frame), and after it the percent of the model's grid points seen both
+// sunlit and in shadow at that slot's time and the earlier ones (every point assumed seen).
+struct SlotCoverage {
+  int slot = 0;
+  UtcTime time;
+  int points = 0;
+  int covered = 0;  // after this slot, cumulatively
+  int sunlit = 0;   // at this slot's time
+  double CoveredPercent() const { return points ? 100.0 * covered / points : 0; }
+};
+// Throws rouen::Error when the session has no model (session.json "model"), the model cannot
+// be read, or it has no surface.
+std::vector<SlotCoverage> SessionCoverage(const Session& session, double spacing_m = 1.0,
+                                          double min_sun_cosine = 0.1);
 
 // The plan as JSON (times in UTC and local, the faces' coverage and what they lack).
 nlohmann::json PlanToJson(const PlanResult& plan, const PlanOptions& options);
