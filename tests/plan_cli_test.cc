@@ -99,3 +99,31 @@ TEST_F(PlanCli, RefusesBadInputsWithClearErrors) {
 
 }  // namespace
 }  // namespace rouen
+
+namespace rouen {
+namespace {
+
+// rouen capture on the simulated rig prints the coverage after each slot, never decreasing.
+TEST(CaptureCoverage, GrowsSlotBySlot) {
+  const fs::path dir = cli_test::TempDir("capture_coverage");
+  const Result r = RunRouen("capture --rig " + Q(fs::path(ROUEN_SOURCE_DIR) / "rigs" / "sim.toml") +
+                            " --out " + Q(dir / "session") + " --quick");
+  ASSERT_EQ(r.code, 0) << r.out;
+  const std::regex line("coverage: after slot (\\d+) \\([^)]*\\): ([0-9.]+)% of the model");
+  double previous = -1;
+  int slots = 0;
+  for (auto it = std::sregex_iterator(r.out.begin(), r.out.end(), line);
+       it != std::sregex_iterator(); ++it) {
+    EXPECT_EQ(std::stoi((*it)[1]), slots);
+    const double percent = std::stod((*it)[2]);
+    EXPECT_GE(percent, previous);
+    previous = percent;
+    ++slots;
+  }
+  EXPECT_EQ(slots, 5) << r.out;
+  EXPECT_GT(previous, 0) << r.out;
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace rouen
