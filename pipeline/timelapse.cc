@@ -250,6 +250,9 @@ TimelapseSummary RenderTimelapse(const LoadedScene& scene, const RenderRequest& 
     }
     requests.push_back(r);
   }
+  // The predictor is fitted once (§5: sun extinction, sky interpolation, environment normals);
+  // each frame asks it for its time.
+  const LightingPredictor predictor = PredictorFor(scene, base);
   CheckWritableFolder("--out", out.string());
   fs::create_directories(out);
 
@@ -264,9 +267,6 @@ TimelapseSummary RenderTimelapse(const LoadedScene& scene, const RenderRequest& 
   for (size_t i = 0; i < times.size(); ++i)
     if (i != top) order.push_back(i);
 
-  // The predictor is fitted once (§5: sun extinction, sky interpolation, environment normals);
-  // each frame asks it for its time.
-  const LightingPredictor predictor = PredictorFor(scene, base);
   const ResponseCurve& response = scene.scene.response;
   TimelapseSummary summary;
   summary.exposure = options.exposure;
