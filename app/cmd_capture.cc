@@ -60,16 +60,17 @@ std::string ResumeCommand(const CaptureArgs& a) {
 }
 
 // The coverage the session's slots achieve so far (rouen plan's measure: each grid point of the
-// model seen both sunlit and in shadow, every point assumed seen), when the session has a model.
+// model seen both sunlit and in shadow), when the session has a model.
 void PrintCoverage(const std::string& out) {
   try {
     const Session session = Session::Load(out);
     if (session.info().model.empty()) return;
     for (const SlotCoverage& c : SessionCoverage(session))
-      std::fprintf(stderr,
-                   "coverage: after slot %d (%s): %.1f%% of the model's grid points both sunlit "
-                   "and in shadow (%d of %d sunlit at this time)\n",
-                   c.slot, c.time.Iso8601(0).c_str(), c.CoveredPercent(), c.sunlit, c.points);
+      std::fprintf(
+          stderr,
+          "coverage: after slot %d (%s): %.1f%% of the model's grid points both sunlit "
+          "and in shadow (%d of %d seen by the architecture views, %d sunlit at this time)\n",
+          c.slot, c.time.Iso8601(0).c_str(), c.CoveredPercent(), c.seen, c.points, c.sunlit);
   } catch (const Error& e) {
     std::fprintf(stderr, "coverage: not computed: %s\n", e.what());
   }

@@ -40,6 +40,33 @@ uint8_t SunState(const GridPoint& p, const Eigen::Vector3d& s, const RayCaster& 
   return c >= min_sun_cosine ? kSunlit : kGrazing;
 }
 
+// Which grid points some view sees (in its image, facing it, nothing in between); all of them
+// without views.
+std::vector<uint8_t> SeenBy(const SurfaceGrid& grid, const RayCaster& caster,
+                            const std::vector<PlanView>& views) {
+  const int np = grid.size();
+  std::vector<uint8_t> seen(np, views.empty() ? 1 : 0);
+  const double eps = caster.surface_offset();
+  if (views.empty()) return seen;
+  tbb::parallel_for(0, np, [&](int i) {
+    const GridPoint& p = grid.points[i];
+    const Eigen::Vector3d origin = p.position + eps * p.normal;
+    for (const PlanView& v : views) {
+      const Eigen::Vector3d to_cam = v.pose.position - origin;
+      const double dist = to_cam.norm();
+      if (!(dist > eps) || p.normal.dot(to_cam) <= 0) continue;
+      const auto px = Project(v.intrinsics, v.pose.WorldToCamera(p.position));
+      if (!px || px->x() < 0 || px->y() < 0 || px->x() >= v.intrinsics.width ||
+          px->y() >= v.intrinsics.height)
+        continue;
+      if (caster.Occluded(origin, to_cam / dist, 0, dist)) continue;
+      seen[i] = 1;
+      break;
+    }
+  });
+  return seen;
+}
+
 void Log(const std::function<void(const std::string&)>& log, const std::string& s) {
   if (log) log(s);
 }
@@ -139,27 +166,7 @@ PlanResult PlanCapture(const Mesh& mesh, const PlanOptions& options,
     plan.faces[found].area_m2 += mesh.Area(static_cast<int>(t));
   }
 
-  // Which points a view sees (in its image, facing it, nothing in between); all without views.
-  std::vector<uint8_t> seen(np, options.views.empty() ? 1 : 0);
-  const double eps = caster.surface_offset();
-  if (!options.views.empty()) {
-    tbb::parallel_for(0, np, [&](int i) {
-      const GridPoint& p = grid.points[i];
-      const Eigen::Vector3d origin = p.position + eps * p.normal;
-      for (const PlanView& v : options.views) {
-        const Eigen::Vector3d to_cam = v.pose.position - origin;
-        const double dist = to_cam.norm();
-        if (!(dist > eps) || p.normal.dot(to_cam) <= 0) continue;
-        const auto px = Project(v.intrinsics, v.pose.WorldToCamera(p.position));
-        if (!px || px->x() < 0 || px->y() < 0 || px->x() >= v.intrinsics.width ||
-            px->y() >= v.intrinsics.height)
-          continue;
-        if (caster.Occluded(origin, to_cam / dist, 0, dist)) continue;
-        seen[i] = 1;
-        break;
-      }
-    });
-  }
+  const std::vector<uint8_t> seen = SeenBy(grid, caster, options.views);
 
   // Each point's sun state at each candidate time (§4.1: shadowed means no direct sun).
   std::vector<uint8_t> state(static_cast<size_t>(np) * nt, kGrazing);
@@ -267,10 +274,20 @@ std::vector<SlotCoverage> SessionCoverage(const Session& session, double spacing
   if (grid.size() == 0) throw Error(info.model + ": the model has no surface (degenerate)");
   const RayCaster caster(mesh);
   std::map<int, UtcTime> slot_time;
-  for (const FrameRecord& f : session.frames())
-    if (f.target == Target::kArchitecture &&
-        (!slot_time.count(f.slot) || f.utc < slot_time[f.slot]))
-      slot_time[f.slot] = f.utc;
+  std::map<std::string, PlanView> views;  // the architecture frames' cameras, one per bracket
+  bool every_frame_posed = true;
+  for (const FrameRecord& f : session.frames()) {
+    if (f.target != Target::kArchitecture) continue;
+    if (!slot_time.count(f.slot) || f.utc < slot_time[f.slot]) slot_time[f.slot] = f.utc;
+    if (f.intrinsics && f.pose)
+      views[f.group] = {f.group, *f.intrinsics, *f.pose};
+    else
+      every_frame_posed = false;
+  }
+  std::vector<PlanView> cameras;
+  if (every_frame_posed)
+    for (const auto& [name, v] : views) cameras.push_back(v);
+  const std::vector<uint8_t> seen = SeenBy(grid, caster, cameras);
   std::vector<SlotCoverage> out;
   std::vector<uint8_t> have(grid.size(), 0);
   for (const auto& [slot, utc] : slot_time) {
@@ -279,10 +296,12 @@ std::vector<SlotCoverage> SessionCoverage(const Session& session, double spacing
     c.slot = slot;
     c.time = utc;
     c.points = grid.size();
+    c.seen = static_cast<int>(std::count(seen.begin(), seen.end(), 1));
     std::vector<uint8_t> st(grid.size());
     tbb::parallel_for(0, grid.size(),
                       [&](int i) { st[i] = SunState(grid.points[i], s, caster, min_sun_cosine); });
     for (int i = 0; i < grid.size(); ++i) {
+      if (!seen[i]) continue;
       have[i] |= st[i];
       c.sunlit += st[i] == kSunlit;
       c.covered += have[i] == (kSunlit | kShadowed);

@@ -95,11 +95,13 @@ PlanResult PlanCapture(const Mesh& mesh, const PlanOptions& options,
 
 // The coverage a session's captures achieve so far (rouen capture prints it): each slot's time
 // (its first architecture frame), and after it the percent of the model's grid points seen both
-// sunlit and in shadow at that slot's time and the earlier ones (every point assumed seen).
+// sunlit and in shadow at that slot's time and the earlier ones. Seen: by the cameras of the
+// architecture frames when every one carries its intrinsics and pose, else every point.
 struct SlotCoverage {
   int slot = 0;
   UtcTime time;
   int points = 0;
+  int seen = 0;     // by the session's architecture cameras (all points without them)
   int covered = 0;  // after this slot, cumulatively
   int sunlit = 0;   // at this slot's time
   double CoveredPercent() const { return points ? 100.0 * covered / points : 0; }

@@ -231,6 +231,7 @@ TEST(Plan, SessionCoverageGrowsWithItsSlots) {
   // The box's east and west walls: 2 x 72 points at 2 m (PlanCapture's faces above).
   EXPECT_EQ(c[1].covered, 144);
   EXPECT_NEAR(c[1].CoveredPercent(), 100.0 * 144 / c[1].points, 1e-9);
+  EXPECT_EQ(c[1].seen, c[1].points);  // no cameras in the journal: every point counts
   fs::remove(dir / "model.obj");
   try {
     SessionCoverage(Session::Load(dir), 2.0);
@@ -238,6 +239,40 @@ TEST(Plan, SessionCoverageGrowsWithItsSlots) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("model.obj"), std::string::npos) << e.what();
   }
+  fs::remove_all(dir);
+}
+
+// With cameras in the journal only what they see counts: one east of the box sees its east wall
+// (and its roof at a grazing angle from 5 m up: not at all), so the coverage is the east wall's.
+TEST(Plan, SessionCoverageCountsWhatTheCamerasSee) {
+  const fs::path dir =
+      fs::temp_directory_path() / ("rouen_plan_posed_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  SessionInfo info;
+  info.site = Site{37.8722, -122.2578, 60};
+  info.model = "model.obj";
+  {
+    SessionWriter w = SessionWriter::Create(dir, info);
+    for (int slot = 0; slot < 2; ++slot) {
+      FrameRecord f;
+      f.device = "sim";
+      f.target = Target::kArchitecture;
+      f.slot = slot;
+      f.group = BracketName(slot, Target::kArchitecture, 0);
+      f.utc = ParseIso8601(slot == 0 ? "2026-12-21T09:00:00-08:00" : "2026-12-21T15:00:00-08:00");
+      f.exposure_s = 0.01;
+      f.intrinsics = Intrinsics::PinholeFov(640, 480, 90);
+      f.pose = Pose::LookAt({25, 0, 5}, {0, 0, 5});
+      w.Append(f, Image(4, 4, 3, PixelUnits::kOther, 0.5f));
+    }
+  }
+  Mesh m;
+  testing::AddBox(&m, {-5, -5, 0}, {5, 5, 10}, m.AddBlock("box"));
+  WriteObj((dir / "model.obj").string(), m);
+  const std::vector<SlotCoverage> c = SessionCoverage(Session::Load(dir), 2.0);
+  ASSERT_EQ(c.size(), 2u);
+  EXPECT_EQ(c[1].seen, 72);
+  EXPECT_EQ(c[1].covered, 72);
   fs::remove_all(dir);
 }
 
