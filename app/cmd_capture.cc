@@ -12,6 +12,7 @@
 #include "capture/rig.h"
 #include "core/error.h"
 #include "pipeline/capture_session.h"
+#include "pipeline/plan.h"
 
 namespace rouen {
 namespace {
@@ -58,6 +59,23 @@ std::string ResumeCommand(const CaptureArgs& a) {
   return c + " --resume";
 }
 
+// The coverage the session's slots achieve so far (rouen plan's measure: each grid point of the
+// model seen both sunlit and in shadow), when the session has a model.
+void PrintCoverage(const std::string& out) {
+  try {
+    const Session session = Session::Load(out);
+    if (session.info().model.empty()) return;
+    for (const SlotCoverage& c : SessionCoverage(session))
+      std::fprintf(
+          stderr,
+          "coverage: after slot %d (%s): %.1f%% of the model's grid points both sunlit "
+          "and in shadow (%d of %d seen by the architecture views, %d sunlit at this time)\n",
+          c.slot, c.time.Iso8601(0).c_str(), c.CoveredPercent(), c.seen, c.points, c.sunlit);
+  } catch (const Error& e) {
+    std::fprintf(stderr, "coverage: not computed: %s\n", e.what());
+  }
+}
+
 void Run(const CaptureArgs& a) {
   RigConfig rig = LoadRig(a.rig);
   if (a.quick) rig.quick = true;
@@ -94,6 +112,7 @@ void Run(const CaptureArgs& a) {
   const CaptureSummary& c = s.capture;
   std::fprintf(stderr, "\n%s: %d frames in %d slot(s)\n", a.out.c_str(), c.frames, c.slots_done);
   for (const std::string& w : c.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  PrintCoverage(a.out);
   if (!c.stopped) return;
   // Stopped: what of the plan is left, and the command that captures it.
   const int sig = stop.signal();

@@ -17,6 +17,7 @@
 #include "core/time.h"
 #include "pipeline/export.h"
 #include "pipeline/scene.h"
+#include "pipeline/timelapse.h"
 #include "render/tonemap.h"
 
 namespace rouen {
@@ -27,10 +28,7 @@ struct RenderArgs {
   int slot = 0;
   bool have_slot = false;
   std::string time, from, to, step;
-  std::string view;
-  std::string lens, pose;
-  std::string look_at, from_point, size = "640x480";
-  double fov_deg = 50;
+  CameraArgs camera;
   double pbs = 0;
   std::vector<double> overcast_colour;
   double overcast_brightness = 1;
@@ -41,26 +39,6 @@ struct RenderArgs {
 
 // The longest sequence --from/--to/--step renders (a day at one frame a minute is 1440).
 constexpr int kMaxSequenceFrames = 5000;
-
-// "WIDTHxHEIGHT" within core/image.h's limits.
-std::pair<int, int> ParseSize(const std::string& text) {
-  int w = 0, h = 0;
-  char x = 0, rest = 0;
-  if (std::sscanf(text.c_str(), "%d%c%d%c", &w, &x, &h, &rest) != 3 || x != 'x' || w < 1 || h < 1 ||
-      w > kMaxImageSide || h > kMaxImageSide || static_cast<int64_t>(w) * h > kMaxImagePixels)
-    throw Error("--size '" + text + "': expected WIDTHxHEIGHT, each 1.." +
-                std::to_string(kMaxImageSide));
-  return {w, h};
-}
-
-// A frame of a sequence is named by its time: DIR/20260825T194000Z.exr.
-std::string FrameName(UtcTime t) {
-  const CivilTime c = ToCivil(t);
-  char name[32];
-  std::snprintf(name, sizeof name, "%04d%02d%02dT%02d%02d%02dZ", c.year, c.month, c.day, c.hour,
-                c.minute, static_cast<int>(c.second));
-  return name;
-}
 
 void Run(const RenderArgs& a) {
   namespace fs = std::filesystem;
@@ -76,13 +54,6 @@ void Run(const RenderArgs& a) {
     throw Error(
         "give exactly one of --slot (a captured time of day), --time (any other) or "
         "--from/--to/--step (a sequence)");
-  if (!a.lens.empty() != !a.pose.empty()) throw Error("--lens and --pose go together");
-  if (a.look_at.empty() != a.from_point.empty())
-    throw Error("--look-at and --from-point go together");
-  if (static_cast<int>(!a.view.empty()) + static_cast<int>(!a.lens.empty()) +
-          static_cast<int>(!a.look_at.empty()) >
-      1)
-    throw Error("give one camera: --view, --lens/--pose or --look-at/--from-point");
   if (!a.overcast_colour.empty() && a.overcast_colour.size() != 3)
     throw Error("--overcast-colour takes three numbers R,G,B");
   RenderRequest request;
@@ -107,16 +78,7 @@ void Run(const RenderArgs& a) {
   request.relight.overcast_brightness = a.overcast_brightness;
   request.relight.sky.mode = ParseSkyInterp(a.sky_interp);
   request.use_held_out_lighting = a.use_held_out;
-  if (!a.look_at.empty()) {
-    const std::vector<double> target = ParseNumberList(a.look_at, 3, "--look-at");
-    const std::vector<double> eye = ParseNumberList(a.from_point, 3, "--from-point");
-    const Eigen::Vector3d t(target[0], target[1], target[2]), e(eye[0], eye[1], eye[2]);
-    if ((t - e).norm() < 1e-6)
-      throw Error("--look-at and --from-point are the same point: no direction to look in");
-    const auto [w, h] = ParseSize(a.size);
-    request.intrinsics = Intrinsics::PinholeFov(w, h, a.fov_deg);
-    request.pose = Pose::LookAt(e, t);
-  }
+  const bool own_camera = CameraFromArgs(a.camera, &request.intrinsics, &request.pose);
 
   // Outputs: one image (and PNG), or folders of frames named by their times (declared once
   // the scene has accepted every time, so a refused sequence creates no folder).
@@ -129,15 +91,11 @@ void Run(const RenderArgs& a) {
     CheckWritableFolder("--out", a.out);
     if (!a.png.empty()) CheckWritableFolder("--png", a.png);
   }
-  if (!a.lens.empty()) {
-    request.intrinsics = ReadLensFile(a.lens).intrinsics;
-    request.pose = ReadPoseFile(a.pose);
-  }
   auto say = [](const std::string& s) { std::fprintf(stderr, "render: %s\n", s.c_str()); };
 
   const LoadedScene scene = LoadScene(a.scene, say);
-  if (a.lens.empty() && a.look_at.empty()) {
-    const SceneView& view = FindView(scene, a.view);
+  if (!own_camera) {
+    const SceneView& view = FindView(scene, a.camera.view);
     request.intrinsics = view.intrinsics;
     request.pose = view.pose;
   }
@@ -163,11 +121,13 @@ void Run(const RenderArgs& a) {
     fs::create_directories(a.out);
     if (!a.png.empty()) fs::create_directories(a.png);
     for (UtcTime t : times) {
-      out_files.push_back(outputs.Add("--out", (fs::path(a.out) / (FrameName(t) + ".exr")).string(),
+      out_files.push_back(outputs.Add("--out",
+                                      (fs::path(a.out) / (SequenceFrameName(t) + ".exr")).string(),
                                       OutputKind::kRadiance));
       if (!a.png.empty())
-        png_files.push_back(outputs.Add(
-            "--png", (fs::path(a.png) / (FrameName(t) + ".png")).string(), OutputKind::kImage));
+        png_files.push_back(
+            outputs.Add("--png", (fs::path(a.png) / (SequenceFrameName(t) + ".png")).string(),
+                        OutputKind::kImage));
     }
   }
   // One exposure for every frame of a sequence (so that it darkens towards sunset): --exposure,
@@ -250,20 +210,10 @@ void RegisterRender(CLI::App& app) {
   c->add_option("--from", a->from, "Render a sequence from this time (with --to and --step)");
   c->add_option("--to", a->to, "Last time of the sequence (ISO 8601)");
   c->add_option("--step", a->step, "Time between frames of the sequence (e.g. 15min, 1h, 30s)");
-  c->add_option("--view", a->view,
-                "Camera of this bracket (e.g. slot0/architecture/view1; default: the first)");
-  c->add_option("--lens", a->lens, "Camera intrinsics JSON (with --pose)");
-  c->add_option("--pose", a->pose, "Camera pose JSON (with --lens)");
+  AddCameraOptions(c, &a->camera);
   c->add_flag("--use-held-out", a->use_held_out,
               "With --time/--from: predict also from the lighting of held-out slots")
       ->excludes(slot);
-  c->add_option("--look-at", a->look_at, "A new camera looking at this point X,Y,Z (metres, ENU)");
-  c->add_option("--from-point", a->from_point, "... from this point X,Y,Z (with --look-at)");
-  c->add_option("--fov", a->fov_deg, "Horizontal field of view of the --look-at camera (deg)")
-      ->check(Within(1, 170, "deg"))
-      ->capture_default_str();
-  c->add_option("--size", a->size, "Image size WIDTHxHEIGHT of the --look-at camera")
-      ->capture_default_str();
   // The predicted sky's options have no meaning for a captured slot's lighting.
   c->add_option("--sky-interp", a->sky_interp, kSkyInterpHelp)
       ->check(CLI::IsMember({"elevation", "angular"}))

@@ -31,6 +31,10 @@ void RegisterReport(CLI::App& app);    // rouen report: a scene as one HTML page
 void RegisterExport(CLI::App& app);    // rouen export: the building as glTF with its albedos
 void RegisterEnvmap(CLI::App& app);    // rouen envmap: a time's lighting as a lat-long EXR
 void RegisterView(CLI::App& app);      // rouen view: a web page relighting the building
+// rouen timelapse: one local day of a scene, sunrise to sunset, as frames and an MP4
+void RegisterTimelapse(CLI::App& app);
+// rouen plan: capture times that show every face both sunlit and in shadow
+void RegisterPlan(CLI::App& app);
 
 }  // namespace rouen
 

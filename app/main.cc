@@ -30,6 +30,8 @@ int main(int argc, char** argv) {
   rouen::RegisterExport(app);
   rouen::RegisterEnvmap(app);
   rouen::RegisterView(app);
+  rouen::RegisterTimelapse(app);
+  rouen::RegisterPlan(app);
   // Ctrl-C or SIGTERM removes the temporaries of the files being written.
   rouen::RemoveTemporariesOnSignal();
   try {

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "core/camera.h"
 #include "core/solar.h"
 #include "core/time.h"
 #include "solve/sky_time.h"
@@ -40,5 +41,21 @@ UtcTime ParseTimeOption(const std::string& text, const std::string& option);
 // A site "LAT,LON,H" (degrees north, degrees east, metres) within core/limits.h's ranges;
 // throws rouen::Error naming `option` and the coordinate at fault.
 Site ParseSiteOption(const std::string& text, const std::string& option);
+
+// The camera of a rendered image (rouen render, rouen timelapse): one of the scene's views
+// (--view), a lens and a pose file (--lens/--pose), or a pinhole camera at --from-point looking
+// at --look-at (ENU metres) with --fov and --size.
+struct CameraArgs {
+  std::string view, lens, pose, look_at, from_point, size = "640x480";
+  double fov_deg = 50;
+};
+void AddCameraOptions(CLI::App* command, CameraArgs* args);
+// "WIDTHxHEIGHT" within core/image.h's limits; throws rouen::Error naming `option`.
+std::pair<int, int> ParseImageSize(const std::string& text, const std::string& option);
+// Checks that the camera options go together and sets `intrinsics` and `pose` from the lens and
+// pose files or the look-at camera: returns false when the camera is the scene's view
+// args.view (pipeline/scene.h FindView, once the scene is loaded). Throws rouen::Error naming
+// the option at fault.
+bool CameraFromArgs(const CameraArgs& args, Intrinsics* intrinsics, Pose* pose);
 
 }  // namespace rouen

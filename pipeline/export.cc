@@ -331,8 +331,14 @@ SceneEnvmap SceneEnvmapFor(const LoadedScene& scene, const RenderRequest& reques
 
 RenderedView RenderSceneView(const LoadedScene& scene, const RenderRequest& request,
                              const std::function<void(const std::string&)>& log) {
+  return RenderSceneViewUnder(scene, request, RequestedLighting(scene, request, log), log);
+}
+
+RenderedView RenderSceneViewUnder(const LoadedScene& scene, const RenderRequest& request,
+                                  Lighting lighting,
+                                  const std::function<void(const std::string&)>& log) {
   RenderedView out;
-  out.lighting = RequestedLighting(scene, request, log);
+  out.lighting = std::move(lighting);
   const SolveResult& solved = scene.solved;
   Log(log, "irradiance at " + std::to_string(solved.grid.size()) + " grid points");
   const SlotIrradiance irr = IrradianceFor(solved, out.lighting);

@@ -86,5 +86,9 @@ struct RenderedView {
 // RenderScene with the alpha channel and the header attributes.
 RenderedView RenderSceneView(const LoadedScene& scene, const RenderRequest& request,
                              const std::function<void(const std::string&)>& log = {});
+// The same under `lighting` (the request's, already made: e.g. PredictorFor(...).At(time)).
+RenderedView RenderSceneViewUnder(const LoadedScene& scene, const RenderRequest& request,
+                                  Lighting lighting,
+                                  const std::function<void(const std::string&)>& log = {});
 
 }  // namespace rouen

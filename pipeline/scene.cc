@@ -255,11 +255,9 @@ void CheckRenderRequest(const LoadedScene& scene, const RenderRequest& request) 
   request.intrinsics.Validate();
 }
 
-Lighting RequestedLighting(const LoadedScene& scene, const RenderRequest& request,
-                           const std::function<void(const std::string&)>& log) {
-  CheckRenderRequest(scene, request);
+LightingPredictor PredictorFor(const LoadedScene& scene, const RenderRequest& request,
+                               const std::function<void(const std::string&)>& log) {
   const SolveResult& solved = scene.solved;
-  if (request.slot) return solved.slots[*request.slot].lighting;
   std::vector<int> without = request.predict_without_slots;
   if (!request.use_held_out_lighting)
     without.insert(without.end(), scene.scene.holdout_slots.begin(),
@@ -278,6 +276,14 @@ Lighting RequestedLighting(const LoadedScene& scene, const RenderRequest& reques
   relight.env.ground_retro = solved.env_ground_retro;  // as the solve fitted it
   LightingPredictor predictor(std::move(measured), relight);
   Log(log, predictor.environment().summary.BriefReport());
+  return predictor;
+}
+
+Lighting RequestedLighting(const LoadedScene& scene, const RenderRequest& request,
+                           const std::function<void(const std::string&)>& log) {
+  CheckRenderRequest(scene, request);
+  if (request.slot) return scene.solved.slots[*request.slot].lighting;
+  const LightingPredictor predictor = PredictorFor(scene, request, log);
   RelightSummary rs;
   Lighting lighting = predictor.At(*request.time, scene.scene.site, &rs);
   Log(log, rs.Describe());

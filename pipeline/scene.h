@@ -113,6 +113,12 @@ const SceneView& FindView(const LoadedScene& scene, const std::string& name);
 // rouen::Error saying what is wrong.
 void CheckRenderRequest(const LoadedScene& scene, const RenderRequest& request);
 
+// The predictor of lighting at other times from the scene's slots (less the request's
+// predict_without_slots, and the held-out slots unless use_held_out_lighting), with the
+// request's relighting options: fitted once, asked for many times (rouen timelapse).
+LightingPredictor PredictorFor(const LoadedScene& scene, const RenderRequest& request,
+                               const std::function<void(const std::string&)>& log = {});
+
 // The lighting a request asks for: the slot's measured lighting, or the lighting predicted for
 // the time from the scene's slots (less `predict_without_slots`).
 Lighting RequestedLighting(const LoadedScene& scene, const RenderRequest& request,
