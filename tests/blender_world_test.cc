@@ -20,6 +20,7 @@
 #include "core/image.h"
 #include "core/mesh.h"
 #include "core/text.h"
+#include "pipeline/export_test_util.h"
 #include "solve/grid.h"
 #include "solve/scene.h"
 #include "tests/cli_util.h"
@@ -175,6 +176,81 @@ TEST(BlenderWorldTest, ImportStatusSolveRenderValidate) {
     // matte ones (specular 0) none.
     EXPECT_EQ(BlockLobe(model.albedo.sun_lobes, b).IsZero(), !glossy) << block;
   }
+  fs::remove_all(dir);
+}
+
+// Issue 13's outputs on a session imported from another renderer's photos (not simulated by
+// rouen): the report, the glTF, an environment map, the viewer and a short time-lapse, each
+// from the one solved scene.
+TEST(BlenderWorldTest, ReportExportEnvmapViewAndTimelapseOfTheImportedSession) {
+  const nlohmann::json truth = nlohmann::json::parse(ReadFileToString(Data() / "truth.json"));
+  const nlohmann::json& site = truth["site"];
+  const std::string site_arg = std::to_string(site["lat_deg"].get<double>()) + "," +
+                               std::to_string(site["lon_deg"].get<double>()) + "," +
+                               std::to_string(site["height_m"].get<double>());
+  const fs::path dir = cli_test::TempDir("blender_share");
+  const fs::path session = dir / "session", scene = dir / "scene";
+  Result r = RunRouen("import --photos " + Q(Data()) + " --list " + Q(Data() / "list.txt") +
+                      " --cameras " + Q(Data() / "cameras.json") + " --site " + site_arg +
+                      " --model " + Q(Data() / "building.obj") + " --out " + Q(session));
+  ASSERT_EQ(r.code, 0) << r.out;
+  r = RunRouen("solve " + Q(session) + " --out " + Q(scene) + " --holdout-slot 4 --quick");
+  ASSERT_EQ(r.code, 0) << r.out;
+
+  // The report: every section, the glossy roof's sun lobe in the albedo table.
+  r = RunRouen("report " + Q(scene) + " --session " + Q(session) + " --out " +
+               Q(dir / "report.html"));
+  ASSERT_EQ(r.code, 0) << r.out;
+  const std::string html = ReadFileToString(dir / "report.html");
+  for (const char* id : {"timeline", "sunpath", "sky", "environment", "albedo", "timings"})
+    EXPECT_NE(html.find(std::string("id=\"") + id + "\""), std::string::npos) << id;
+  EXPECT_NE(html.find("Sun specular lobes"), std::string::npos);
+  // Nothing loaded from the network (SVG's xmlns is a name, not a load).
+  for (const char* load : {"src=\"http", "href=\"http", "url(http"})
+    EXPECT_EQ(html.find(load), std::string::npos) << load;
+
+  // The glTF: one mesh per block, the roof's lobe among its material's extras.
+  r = RunRouen("export " + Q(scene) + " --gltf " + Q(dir / "tower.glb"));
+  ASSERT_EQ(r.code, 0) << r.out;
+  const testing::ParsedGlb glb = testing::ReadGlb(ReadFileToString(dir / "tower.glb"));
+  ASSERT_TRUE(glb.error.empty()) << glb.error;
+  EXPECT_EQ(glb.json["meshes"].size(), 3u);
+  int with_lobe = 0;
+  for (const nlohmann::json& m : glb.json["materials"]) {
+    const nlohmann::json& x = m["extras"]["rouen"];
+    if (x.contains("sun_lobe")) {
+      ++with_lobe;
+      EXPECT_EQ(x["block"], "roof");
+    }
+  }
+  EXPECT_EQ(with_lobe, 1);
+
+  // The environment map at the held-out time: a lat-long float EXR with its time in the header.
+  const std::string local = truth["times"][4]["local"].get<std::string>();
+  r = RunRouen("envmap " + Q(scene) + " --time " + local + " --width 256 --out " +
+               Q(dir / "sky.exr"));
+  ASSERT_EQ(r.code, 0) << r.out;
+  const Image env = ReadImage((dir / "sky.exr").string());
+  EXPECT_EQ(env.width, 256);
+  EXPECT_EQ(env.height, 128);
+  for (float v : env.data) ASSERT_TRUE(std::isfinite(v) && v >= 0);
+
+  // The viewer: its page and data.
+  r = RunRouen("view " + Q(scene) + " --out " + Q(dir / "view") + " --times 4");
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_TRUE(fs::is_regular_file(dir / "view" / "index.html"));
+  EXPECT_GT(fs::file_size(dir / "view" / "viewer_data.js"), 10000u);
+
+  // A short time-lapse, 17:15 to 18:15 local every 30 minutes: three frames, named by time.
+  const std::string date = local.substr(0, 10), tz = local.substr(19);
+  r = RunRouen("timelapse " + Q(scene) + " --date " + date + " --tz " + tz +
+               " --from 17:15 --to 18:15 --step 30min --no-video --view slot4/architecture/view0 "
+               "--out " +
+               Q(dir / "day"));
+  ASSERT_EQ(r.code, 0) << r.out;
+  int exr = 0;
+  for (const auto& e : fs::directory_iterator(dir / "day")) exr += e.path().extension() == ".exr";
+  EXPECT_EQ(exr, 3) << r.out;
   fs::remove_all(dir);
 }
 
