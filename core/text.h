@@ -16,4 +16,7 @@ std::string_view WithoutUtf8Bom(std::string_view text);
 // folder, not <what>").
 std::vector<std::string> ReadTextLines(const std::string& path, const std::string& what);
 
+// printf-style formatting into a string (numbers in messages, names and tables).
+std::string Formatted(const char* format, ...) __attribute__((format(printf, 1, 2)));
+
 }  // namespace rouen

@@ -36,5 +36,12 @@ TEST(TextTest, ByteOrderMarkAndCrlfAreNotPartOfTheLines) {
   }
 }
 
+TEST(TextTest, FormattedIsPrintfIntoAStringOfAnyLength) {
+  EXPECT_EQ(Formatted("%05.1f|%s|%d|%c", 3.14159, "ab", 42, 'x'), "003.1|ab|42|x");
+  EXPECT_EQ(Formatted("%s", ""), "");
+  const std::string long_text(1000, 'q');
+  EXPECT_EQ(Formatted("<%s>", long_text.c_str()), "<" + long_text + ">");
+}
+
 }  // namespace
 }  // namespace rouen

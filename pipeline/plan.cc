@@ -12,6 +12,7 @@
 #include "core/error.h"
 #include "core/files.h"
 #include "core/limits.h"
+#include "core/text.h"
 #include "solve/grid.h"
 #include "solve/raycast.h"
 
@@ -326,9 +327,8 @@ nlohmann::json PlanToJson(const PlanResult& plan, const PlanOptions& options) {
   };
   nlohmann::json j;
   j["site"] = {options.site.lat_deg, options.site.lon_deg, options.site.height_m};
-  char date[16];
-  std::snprintf(date, sizeof date, "%04d-%02d-%02d", options.schedule.date.year,
-                options.schedule.date.month, options.schedule.date.day);
+  const std::string date = Formatted("%04d-%02d-%02d", options.schedule.date.year,
+                                     options.schedule.date.month, options.schedule.date.day);
   j["date"] = date;
   j["utc_offset"] = FormatUtcOffset(tz);
   j["step_s"] = options.schedule.step_s;

@@ -21,6 +21,7 @@
 #include "core/session.h"
 #include "core/solar.h"
 #include "core/stats.h"
+#include "core/text.h"
 #include "core/time.h"
 #include "pipeline/session_solve.h"
 #include "render/html_report.h"
@@ -46,15 +47,13 @@ using Log = std::function<void(const std::string&)>;
 // A number with `digits` significant digits.
 std::string G(double v, int digits = 4) {
   if (!std::isfinite(v)) return "n/a";
-  char buf[48];
-  std::snprintf(buf, sizeof buf, "%.*g", digits, v);
+  const std::string buf = Formatted("%.*g", digits, v);
   return buf;
 }
 // A number with `decimals` decimals.
 std::string F(double v, int decimals = 2) {
   if (!std::isfinite(v)) return "n/a";
-  char buf[48];
-  std::snprintf(buf, sizeof buf, "%.*f", decimals, v);
+  const std::string buf = Formatted("%.*f", decimals, v);
   return buf;
 }
 // A block's lobe for the albedo table: "none", or its parameters, with its fit's costs.
@@ -63,14 +62,12 @@ std::string LobeText(const std::vector<SpecularLobe>& lobes, const std::vector<d
   const SpecularLobe l = BlockLobe(lobes, b);
   std::string cost;
   if (b < static_cast<int>(cost0.size()) && b < static_cast<int>(cost1.size()) && cost0[b] > 0) {
-    char text[64];
-    std::snprintf(text, sizeof text, " (cost %.0f -> %.0f)", cost0[b], cost1[b]);
+    const std::string text = Formatted(" (cost %.0f -> %.0f)", cost0[b], cost1[b]);
     cost = text;
   }
   if (l.IsZero()) return "none" + cost;
-  char text[128];
-  std::snprintf(text, sizeof text, "%.3g/%.3g/%.3g, kappa %.2f, n %.0f", l.rho_s[0], l.rho_s[1],
-                l.rho_s[2], l.kappa, l.n);
+  const std::string text = Formatted("%.3g/%.3g/%.3g, kappa %.2f, n %.0f", l.rho_s[0], l.rho_s[1],
+                                     l.rho_s[2], l.kappa, l.n);
   return text + cost;
 }
 
@@ -80,8 +77,7 @@ std::string Rgb(const Eigen::Vector3d& v, int digits = 4) {
 // HH:MM of an instant (UTC).
 std::string Hhmm(UtcTime t) {
   const CivilTime c = ToCivil(t);
-  char buf[16];
-  std::snprintf(buf, sizeof buf, "%02d:%02d", c.hour, c.minute);
+  const std::string buf = Formatted("%02d:%02d", c.hour, c.minute);
   return buf;
 }
 // Hours since `day0` as "HH:MM" of the day (wrapping at 24 h).
@@ -89,8 +85,7 @@ std::string HourOfDay(double hours) {
   double h = std::fmod(hours, 24.0);
   if (h < 0) h += 24;
   int minutes = static_cast<int>(std::lround(h * 60)) % (24 * 60);
-  char buf[16];
-  std::snprintf(buf, sizeof buf, "%02d:%02d", minutes / 60, minutes % 60);
+  const std::string buf = Formatted("%02d:%02d", minutes / 60, minutes % 60);
   return buf;
 }
 

@@ -18,6 +18,7 @@
 #include "core/files.h"
 #include "core/limits.h"
 #include "core/temporaries.h"
+#include "core/text.h"
 #include "core/version.h"
 #include "solve/env_stereo.h"
 #include "solve/relight.h"
@@ -698,9 +699,8 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
       if (l.IsZero()) {
         line << " none";
       } else {
-        char text[96];
-        std::snprintf(text, sizeof text, " rho_s %.3g,%.3g,%.3g kappa %.2f n %.0f", l.rho_s[0],
-                      l.rho_s[1], l.rho_s[2], l.kappa, l.n);
+        const std::string text = Formatted(" rho_s %.3g,%.3g,%.3g kappa %.2f n %.0f", l.rho_s[0],
+                                           l.rho_s[1], l.rho_s[2], l.kappa, l.n);
         line << text;
       }
       if (b < samples.size() && samples[b] > 0 && b < cost0.size() && b < cost1.size()) {

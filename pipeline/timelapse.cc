@@ -18,6 +18,7 @@
 #include "core/image.h"
 #include "core/limits.h"
 #include "core/outputs.h"
+#include "core/text.h"
 #include "pipeline/export.h"
 #include "render/tonemap.h"
 
@@ -71,9 +72,8 @@ std::string LocalClockMessage(UtcTime t, int offset) {
 
 std::string SequenceFrameName(UtcTime t) {
   const CivilTime c = ToCivil(t);
-  char name[32];
-  std::snprintf(name, sizeof name, "%04d%02d%02dT%02d%02d%02dZ", c.year, c.month, c.day, c.hour,
-                c.minute, static_cast<int>(c.second));
+  const std::string name = Formatted("%04d%02d%02dT%02d%02d%02dZ", c.year, c.month, c.day, c.hour,
+                                     c.minute, static_cast<int>(c.second));
   return name;
 }
 
@@ -122,10 +122,8 @@ int ParseUtcOffsetMinutes(const std::string& text, const std::string& option) {
 }
 
 std::string FormatUtcOffset(int minutes) {
-  char s[16];
   const int a = std::abs(minutes);
-  std::snprintf(s, sizeof s, "%c%02d:%02d", minutes < 0 ? '-' : '+', a / 60, a % 60);
-  return s;
+  return Formatted("%c%02d:%02d", minutes < 0 ? '-' : '+', a / 60, a % 60);
 }
 
 int LongitudeUtcOffsetMinutes(const Site& site) {
@@ -134,8 +132,7 @@ int LongitudeUtcOffsetMinutes(const Site& site) {
 
 std::string FormatLocalClock(UtcTime t, int offset_minutes) {
   const CivilTime c = ToCivil(t.PlusSeconds(offset_minutes * 60.0));
-  char s[16];
-  std::snprintf(s, sizeof s, "%02d:%02d:%02d", c.hour, c.minute, static_cast<int>(c.second));
+  const std::string s = Formatted("%02d:%02d:%02d", c.hour, c.minute, static_cast<int>(c.second));
   return s;
 }
 
@@ -157,8 +154,7 @@ Daylight DaylightOf(const Site& site, const LocalDate& date, int utc_offset_minu
   d.highest = d.midnight.PlusSeconds(kSample * top);
   d.highest_elevation_deg = el[top];
   if (!(el[top] >= threshold_deg)) {
-    char date_text[16];
-    std::snprintf(date_text, sizeof date_text, "%04d-%02d-%02d", date.year, date.month, date.day);
+    const std::string date_text = Formatted("%04d-%02d-%02d", date.year, date.month, date.day);
     throw Error(std::string("the sun stays below ") + FormatNumber(threshold_deg) +
                 " deg elevation all day on " + date_text + " at latitude " +
                 FormatNumber(site.lat_deg) + " (highest " + FormatNumber(el[top]) +
@@ -360,8 +356,7 @@ uintmax_t EncodeMp4(const std::vector<std::string>& pngs, const fs::path& out,
   } remove_links{links};
   fs::create_directories(links);
   for (size_t i = 0; i < pngs.size(); ++i) {
-    char name[32];
-    std::snprintf(name, sizeof name, "%06zu.png", i);
+    const std::string name = Formatted("%06zu.png", i);
     fs::create_symlink(fs::absolute(pngs[i]), links / name);
   }
   // '%' is ffmpeg's pattern character: a literal one in the folder's path is written "%%".
@@ -372,8 +367,7 @@ uintmax_t EncodeMp4(const std::vector<std::string>& pngs, const fs::path& out,
   }
   pattern += "/%06d.png";
   const fs::path log = links / "ffmpeg.log";
-  char fps[32];
-  std::snprintf(fps, sizeof fps, "%.6g", options.fps);
+  const std::string fps = Formatted("%.6g", options.fps);
   std::vector<std::string> args = {ffmpeg,       "-nostdin",   "-hide_banner",
                                    "-loglevel",  "error",      "-y",
                                    "-framerate", fps,          "-i",
