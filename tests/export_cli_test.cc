@@ -243,7 +243,9 @@ TEST_F(ExportCli, RenderWritesAlphaAndItsTimeSunAndCameraInTheHeader) {
       else
         EXPECT_LT(a, 1.f) << x << "," << y;
       // Where every ray escapes, the colour is still the sky's (not premultiplied away).
-      if (a == 0) EXPECT_GT(image.at(x, y, 2), 0.f);
+      if (a == 0) {
+        EXPECT_GT(image.at(x, y, 2), 0.f);
+      }
     }
   EXPECT_GT(building, 1000);
   EXPECT_LT(partial, building / 10);
