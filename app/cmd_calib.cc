@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "app/command_list.h"
 #include "app/commands.h"
 #include "app/options.h"
 #include "calib/hdr.h"
@@ -132,7 +133,7 @@ void RunHdr(const HdrArgs& a) {
 // `rouen hdr` and `rouen calib hdr` are the same command.
 void AddHdrCommand(CLI::App& parent, const std::string& example_prefix) {
   auto a = std::make_shared<HdrArgs>();
-  CLI::App* c = parent.add_subcommand("hdr", "Merge a bracket into a scene-linear radiance EXR");
+  CLI::App* c = parent.add_subcommand("hdr", CommandSummary("hdr"));
   c->footer("Example: " + example_prefix +
             " hdr --list exposures.txt --response response.json --out radiance.exr");
   c->add_option("--list", a->list, "Exposure list file ('image seconds' per line)")->required();
@@ -145,8 +146,7 @@ void AddHdrCommand(CLI::App& parent, const std::string& example_prefix) {
 }  // namespace
 
 void RegisterCalib(CLI::App& app) {
-  CLI::App* calib = app.add_subcommand(
-      "calib", "Calibration: response curve, HDR merge, ND filters, vignetting, lenses, poses");
+  CLI::App* calib = app.add_subcommand("calib", CommandSummary("calib"));
   calib->require_subcommand(1);
   auto r = std::make_shared<ResponseArgs>();
   CLI::App* c =

@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <iostream>
 
+#include "app/command_list.h"
 #include "app/commands.h"
 #include "app/progress.h"
 #include "app/stop_signal.h"
@@ -152,10 +153,7 @@ std::function<void(const CaptureProgress&)> CaptureProgressPrinter(ProgressLine*
 
 void RegisterCapture(CLI::App& app) {
   auto a = std::make_shared<CaptureArgs>();
-  CLI::App* c = app.add_subcommand(
-      "capture",
-      "Run a rig's capture plan (sun, aureole, sky, landscape, architecture) into a "
-      "session folder");
+  CLI::App* c = app.add_subcommand("capture", CommandSummary("capture"));
   c->footer(
       "Each view is bracketed until its brightest pixels of interest are unsaturated and its\n"
       "darkest are above the noise floor; the sun is shot through the rig's ND filter until the\n"

@@ -9,6 +9,7 @@
 #include <map>
 #include <nlohmann/json.hpp>
 
+#include "app/command_list.h"
 #include "app/commands.h"
 #include "app/progress.h"
 #include "app/stop_signal.h"
@@ -353,10 +354,7 @@ void Run(const DemoArgs& a) {
 
 void RegisterDemo(CLI::App& app) {
   auto a = std::make_shared<DemoArgs>();
-  CLI::App* c = app.add_subcommand(
-      "demo",
-      "The whole pipeline on a built-in simulated world: capture, calibrate, solve, "
-      "render a held-out time, score against ground truth");
+  CLI::App* c = app.add_subcommand("demo", CommandSummary("demo"));
   c->footer(
       "No camera and no download needed. A campanile on a plaza in Berkeley is captured at five\n"
       "times of day by simulated devices through the real capture controller; the architecture\n"

@@ -2,6 +2,7 @@
 #include <cstdio>
 #include <nlohmann/json.hpp>
 
+#include "app/command_list.h"
 #include "app/commands.h"
 #include "capture/devices/devices.h"
 
@@ -60,10 +61,7 @@ void Run(const DevicesArgs& a) {
 
 void RegisterDevices(CLI::App& app) {
   auto a = std::make_shared<DevicesArgs>();
-  CLI::App* c = app.add_subcommand(
-      "devices",
-      "List the cameras, GPS receivers and USB devices connected, and the rig kind "
-      "that drives each");
+  CLI::App* c = app.add_subcommand("devices", CommandSummary("devices"));
   c->footer(
       "Cameras: V4L2 nodes that can stream (UVC webcams, rig kind uvc-webcam), libcamera\n"
       "cameras (rpi-libcamera), GigE Vision / USB3 Vision cameras seen by Aravis (gige-aravis).\n"

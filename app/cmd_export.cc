@@ -6,8 +6,10 @@
 #include <memory>
 #include <string>
 
+#include "app/command_list.h"
 #include "app/commands.h"
 #include "app/options.h"
+#include "app/render_options.h"
 #include "core/error.h"
 #include "core/outputs.h"
 #include "pipeline/export.h"
@@ -49,12 +51,12 @@ void RunExport(const ExportArgs& a) {
 }
 
 struct EnvmapArgs {
-  std::string scene, out, time, sky_interp = "elevation";
+  std::string scene, out, time;
   int slot = 0;
-  bool have_slot = false, use_held_out = false, sky_model = false;
+  bool have_slot = false, sky_model = false;
   int width = 1024;
   double height = NAN;
-  double pbs = 0;
+  PredictionArgs prediction;
 };
 
 void RunEnvmap(const EnvmapArgs& a) {
@@ -65,9 +67,8 @@ void RunEnvmap(const EnvmapArgs& a) {
   RenderRequest request;
   if (a.have_slot) request.slot = a.slot;
   if (!a.time.empty()) request.time = ParseTimeOption(a.time, "--time");
-  request.relight.pbs = a.pbs;
-  request.relight.sky.mode = ParseSkyInterp(a.sky_interp);
-  request.use_held_out_lighting = a.use_held_out;
+  ApplyPrediction(a.prediction, &request.relight);
+  request.use_held_out_lighting = a.prediction.use_held_out;
   LatLongOptions options;
   options.width = a.width;
   options.sky_model = a.sky_model;
@@ -92,8 +93,7 @@ void RunEnvmap(const EnvmapArgs& a) {
 
 void RegisterExport(CLI::App& app) {
   auto a = std::make_shared<ExportArgs>();
-  CLI::App* c = app.add_subcommand(
-      "export", "Write a solved scene's building with its albedos as binary glTF (.glb)");
+  CLI::App* c = app.add_subcommand("export", CommandSummary("export"));
   c->footer(
       "Writes the scene's model (one node, mesh and material per block) as one binary glTF 2.0\n"
       "file, its textures inside it:\n"
@@ -118,8 +118,7 @@ void RegisterExport(CLI::App& app) {
 
 void RegisterEnvmap(CLI::App& app) {
   auto a = std::make_shared<EnvmapArgs>();
-  CLI::App* c = app.add_subcommand(
-      "envmap", "Write the sun, sky and environment at a time as a latitude-longitude EXR");
+  CLI::App* c = app.add_subcommand("envmap", CommandSummary("envmap"));
   c->footer(
       "Writes the lighting rouen renders with -- a captured slot's measured lighting (--slot) or\n"
       "the lighting predicted for any daylight time (--time, as rouen render --time) -- as an\n"
@@ -152,17 +151,7 @@ void RegisterEnvmap(CLI::App& app) {
   c->add_option("--height", a->height,
                 "Height (ENU metres) the environment is seen from, between its layers (default: "
                 "the lowest panorama's)");
-  c->add_flag("--use-held-out", a->use_held_out,
-              "With --time: predict also from the lighting of held-out slots")
-      ->excludes(slot);
-  c->add_option("--sky-interp", a->sky_interp, kSkyInterpHelp)
-      ->check(CLI::IsMember({"elevation", "angular"}))
-      ->excludes(slot)
-      ->capture_default_str();
-  c->add_option("--pbs", a->pbs, "Blocked sunlight fraction 0..1 (0 clear, 1 overcast)")
-      ->check(Within(0, 1))
-      ->excludes(slot)
-      ->capture_default_str();
+  AddPredictionOptions(c, &a->prediction, kUseHeldOutOption | kSkyInterpOption | kPbsOption, slot);
   c->callback([a, slot] {
     a->have_slot = slot->count() > 0;
     RunEnvmap(*a);

@@ -4,6 +4,7 @@
 #include <string>
 #include <vector>
 
+#include "app/command_list.h"
 #include "app/commands.h"
 #include "app/options.h"
 #include "core/error.h"
@@ -56,8 +57,7 @@ void Run(const ImportArgs& a) {
 
 void RegisterImport(CLI::App& app) {
   auto a = std::make_shared<ImportArgs>();
-  CLI::App* c = app.add_subcommand(
-      "import", "Build a session folder from existing photos (JPEG/PNG/TIFF/EXR/DNG/RAW)");
+  CLI::App* c = app.add_subcommand("import", CommandSummary("import"));
   c->footer(
       "Exposure: --list value, else EXIF ExposureTime. Time: --list third column, else EXIF\n"
       "DateTimeOriginal in its own UTC offset, else in --timezone (required then); --time\n"

@@ -4,6 +4,7 @@
 #include <memory>
 #include <string>
 
+#include "app/command_list.h"
 #include "app/commands.h"
 #include "app/options.h"
 #include "core/error.h"
@@ -102,8 +103,7 @@ void Run(const PlanArgs& a) {
 
 void RegisterPlan(CLI::App& app) {
   auto a = std::make_shared<PlanArgs>();
-  CLI::App* c = app.add_subcommand(
-      "plan", "Choose capture times that show every face of a model both sunlit and in shadow");
+  CLI::App* c = app.add_subcommand("plan", CommandSummary("plan"));
   c->footer(
       "Separating the sun albedo from the sky+environment albedo (paper §4.1, eqs. 11-12) needs\n"
       "each point photographed once in the sun and once in shadow. plan samples the model's\n"

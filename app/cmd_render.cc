@@ -8,8 +8,10 @@
 #include <string>
 #include <utility>
 
+#include "app/command_list.h"
 #include "app/commands.h"
 #include "app/options.h"
+#include "app/render_options.h"
 #include "core/error.h"
 #include "core/image.h"
 #include "core/lens.h"
@@ -29,12 +31,10 @@ struct RenderArgs {
   bool have_slot = false;
   std::string time, from, to, step;
   CameraArgs camera;
-  double pbs = 0;
+  PredictionArgs prediction;
   std::vector<double> overcast_colour;
   double overcast_brightness = 1;
   double exposure = 0;
-  bool use_held_out = false;
-  std::string sky_interp = "elevation";
 };
 
 // The longest sequence --from/--to/--step renders (a day at one frame a minute is 1440).
@@ -71,13 +71,12 @@ void Run(const RenderArgs& a) {
                   std::to_string(kMaxSequenceFrames) + "; take a longer --step");
     for (double t = 0; t <= span + 1e-6; t += step) times.push_back(from.PlusSeconds(t));
   }
-  request.relight.pbs = a.pbs;
+  ApplyPrediction(a.prediction, &request.relight);
   if (!a.overcast_colour.empty())
     request.relight.overcast_colour =
         Eigen::Vector3d(a.overcast_colour[0], a.overcast_colour[1], a.overcast_colour[2]);
   request.relight.overcast_brightness = a.overcast_brightness;
-  request.relight.sky.mode = ParseSkyInterp(a.sky_interp);
-  request.use_held_out_lighting = a.use_held_out;
+  request.use_held_out_lighting = a.prediction.use_held_out;
   const bool own_camera = CameraFromArgs(a.camera, &request.intrinsics, &request.pose);
 
   // Outputs: one image (and PNG), or folders of frames named by their times (declared once
@@ -170,8 +169,7 @@ void Run(const RenderArgs& a) {
 
 void RegisterRender(CLI::App& app) {
   auto a = std::make_shared<RenderArgs>();
-  CLI::App* c = app.add_subcommand(
-      "render", "Render a solved scene's building at a captured time of day or at any other time");
+  CLI::App* c = app.add_subcommand("render", CommandSummary("render"));
   c->footer(
       "Renders the building's radiance from a scene (written once by `rouen solve`; render never\n"
       "solves) with the recovered pseudo-albedos under the chosen lighting:\n"
@@ -211,18 +209,7 @@ void RegisterRender(CLI::App& app) {
   c->add_option("--to", a->to, "Last time of the sequence (ISO 8601)");
   c->add_option("--step", a->step, "Time between frames of the sequence (e.g. 15min, 1h, 30s)");
   AddCameraOptions(c, &a->camera);
-  c->add_flag("--use-held-out", a->use_held_out,
-              "With --time/--from: predict also from the lighting of held-out slots")
-      ->excludes(slot);
-  // The predicted sky's options have no meaning for a captured slot's lighting.
-  c->add_option("--sky-interp", a->sky_interp, kSkyInterpHelp)
-      ->check(CLI::IsMember({"elevation", "angular"}))
-      ->excludes(slot)
-      ->capture_default_str();
-  c->add_option("--pbs", a->pbs, "Blocked sunlight fraction 0..1 (0 clear, 1 overcast)")
-      ->check(Within(0, 1))
-      ->excludes(slot)
-      ->capture_default_str();
+  AddPredictionOptions(c, &a->prediction, kUseHeldOutOption | kSkyInterpOption | kPbsOption, slot);
   c->add_option("--overcast-colour", a->overcast_colour, "Overcast sky colour R,G,B (relative)")
       ->delimiter(',')
       ->check(Positive())

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "app/command_list.h"
 #include "app/commands.h"
 #include "app/options.h"
 #include "core/error.h"
@@ -73,8 +74,7 @@ void Run(const ReportArgs& a) {
 
 void RegisterReport(CLI::App& app) {
   auto a = std::make_shared<ReportArgs>();
-  CLI::App* c = app.add_subcommand(
-      "report", "One self-contained HTML page of a solved scene: plots, maps, albedos, figures");
+  CLI::App* c = app.add_subcommand("report", CommandSummary("report"));
   c->footer(
       "Writes a single HTML file (images inlined, plots as SVG drawn by rouen; no script, no\n"
       "network) with: the capture timeline (with --session), the sun's path and the capture\n"

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "app/command_list.h"
 #include "app/commands.h"
 #include "app/options.h"
 #include "core/angles.h"
@@ -250,8 +251,7 @@ void RunRender(const SkyRenderArgs& a) {
 }  // namespace
 
 void RegisterSky(CLI::App& app) {
-  CLI::App* sky = app.add_subcommand(
-      "sky", "Sky model (Yu & Malik 1998 §3.2): fit a sky panorama, render a fitted sky");
+  CLI::App* sky = app.add_subcommand("sky", CommandSummary("sky"));
   sky->require_subcommand(1);
 
   auto f = std::make_shared<SkyFitArgs>();

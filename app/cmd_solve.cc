@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "app/command_list.h"
 #include "app/commands.h"
 #include "app/options.h"
 #include "core/error.h"
@@ -73,8 +74,7 @@ void Run(const SolveArgs& a) {
 
 void RegisterSolve(CLI::App& app) {
   auto a = std::make_shared<SolveArgs>();
-  CLI::App* c = app.add_subcommand(
-      "solve", "Calibrate and solve a session once; write the scene that render reads");
+  CLI::App* c = app.add_subcommand("solve", CommandSummary("solve"));
   c->footer(
       "Recovers the response curve and merges every bracket to radiance (files in --work), then\n"
       "per time of day the sun (§3.1), the sky model (§3.2) and the environment (§3.3), the\n"

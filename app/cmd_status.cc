@@ -7,6 +7,7 @@
 #include <memory>
 #include <string>
 
+#include "app/command_list.h"
 #include "app/commands.h"
 #include "core/error.h"
 #include "core/files.h"
@@ -122,8 +123,7 @@ void Run(const StatusArgs& a) {
 
 void RegisterStatus(CLI::App& app) {
   auto a = std::make_shared<StatusArgs>();
-  CLI::App* c = app.add_subcommand(
-      "status", "What a session holds and what its solve still lacks, with the commands to add it");
+  CLI::App* c = app.add_subcommand("status", CommandSummary("status"));
   c->footer(
       "Per time-of-day slot (its time: the median of its sky frames, as the solve takes it)\n"
       "and bracket (slot<k>/<target>/view<v>): frames, LDR or HDR, exposure range, ND density,\n"

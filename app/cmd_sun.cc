@@ -3,6 +3,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "app/command_list.h"
 #include "app/commands.h"
 #include "app/options.h"
 #include "core/error.h"
@@ -103,8 +104,7 @@ void Run(const SunArgs& a) {
 
 void RegisterSun(CLI::App& app) {
   auto a = std::make_shared<SunArgs>();
-  CLI::App* c = app.add_subcommand(
-      "sun", "Solar position (topocentric azimuth/elevation) for a place and a UTC time");
+  CLI::App* c = app.add_subcommand("sun", CommandSummary("sun"));
   c->footer(
       "Examples:\n"
       "  rouen sun --lat 37.8722 --lon -122.2578 --height 60 --time 2026-08-25T13:30:00-07:00\n"

@@ -6,9 +6,11 @@
 #include <memory>
 #include <string>
 
+#include "app/command_list.h"
 #include "app/commands.h"
 #include "app/options.h"
 #include "app/progress.h"
+#include "app/render_options.h"
 #include "app/stop_signal.h"
 #include "core/error.h"
 #include "core/limits.h"
@@ -22,8 +24,7 @@ namespace {
 struct TimelapseArgs {
   std::string scene, out, date, from = "sunrise", to = "sunset", step = "10min", tz;
   CameraArgs camera;
-  std::string sky_interp = "elevation";
-  double pbs = 0;
+  PredictionArgs prediction;
   double exposure = 0;
   double fps = 12;
   bool no_video = false;
@@ -43,8 +44,7 @@ void Run(const TimelapseArgs& a) {
   mp4.fps = a.fps;
   mp4.Validate();
   RenderRequest request;
-  request.relight.pbs = a.pbs;
-  request.relight.sky.mode = ParseSkyInterp(a.sky_interp);
+  ApplyPrediction(a.prediction, &request.relight);
   const bool own_camera = CameraFromArgs(a.camera, &request.intrinsics, &request.pose);
   CheckWritableFolder("--out", a.out);
   const fs::path video = fs::path(a.out) / "timelapse.mp4";
@@ -120,8 +120,7 @@ void Run(const TimelapseArgs& a) {
 
 void RegisterTimelapse(CLI::App& app) {
   auto a = std::make_shared<TimelapseArgs>();
-  CLI::App* c = app.add_subcommand(
-      "timelapse", "Render a solved scene through one day, sunrise to sunset, as frames and MP4");
+  CLI::App* c = app.add_subcommand("timelapse", CommandSummary("timelapse"));
   c->footer(
       "Renders the building under lighting predicted for each time of one local day (as `rouen\n"
       "render --time`: sun from the site and time, sky interpolated, environment from its\n"
@@ -156,12 +155,7 @@ void RegisterTimelapse(CLI::App& app) {
                 "Local time's offset from UTC, +HH:MM or -HH:MM (default: from the site's "
                 "longitude)");
   AddCameraOptions(c, &a->camera);
-  c->add_option("--sky-interp", a->sky_interp, kSkyInterpHelp)
-      ->check(CLI::IsMember({"elevation", "angular"}))
-      ->capture_default_str();
-  c->add_option("--pbs", a->pbs, "Blocked sunlight fraction 0..1 (0 clear, 1 overcast)")
-      ->check(Within(0, 1))
-      ->capture_default_str();
+  AddPredictionOptions(c, &a->prediction, kSkyInterpOption | kPbsOption);
   c->add_option("--exposure", a->exposure,
                 "PNG exposure factor for every frame (default: automatic at the highest sun)")
       ->check(Positive());

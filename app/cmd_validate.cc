@@ -8,8 +8,10 @@
 #include <string>
 #include <vector>
 
+#include "app/command_list.h"
 #include "app/commands.h"
 #include "app/options.h"
+#include "app/render_options.h"
 #include "core/error.h"
 #include "core/files.h"
 #include "core/image.h"
@@ -25,7 +27,7 @@ struct ValidateArgs {
   std::vector<std::string> exclude_blocks;
   int erode_px = 1;
   bool no_predicted = false;
-  std::string sky_interp = "elevation";
+  PredictionArgs prediction;
 };
 
 std::string SafeName(std::string s) {
@@ -44,7 +46,7 @@ void Run(const ValidateArgs& a) {
   vo.exclude_blocks = a.exclude_blocks;
   vo.erode_px = a.erode_px;
   vo.predicted = !a.no_predicted;
-  vo.relight.sky.mode = ParseSkyInterp(a.sky_interp);
+  ApplyPrediction(a.prediction, &vo.relight);
   vo.Validate();
   // Outputs before any work: the JSON now, the images' folder now and its files once the
   // scene names the photos.
@@ -122,8 +124,7 @@ void Run(const ValidateArgs& a) {
 
 void RegisterValidate(CLI::App& app) {
   auto a = std::make_shared<ValidateArgs>();
-  CLI::App* c = app.add_subcommand(
-      "validate", "Compare a solved scene's renders with the architecture photos of one slot");
+  CLI::App* c = app.add_subcommand("validate", CommandSummary("validate"));
   c->footer(
       "Renders every architecture photo of slot N at its camera and time from the scene (as\n"
       "`rouen render` does; nothing is solved) and compares it with the photo merged to radiance\n"
@@ -149,9 +150,7 @@ void RegisterValidate(CLI::App& app) {
   c->add_flag("--no-predicted", a->no_predicted,
               "Only the slot's measured lighting (no prediction from the other slots)");
   c->add_option("--json", a->json, "Write the figures as JSON");
-  c->add_option("--sky-interp", a->sky_interp, kSkyInterpHelp)
-      ->check(CLI::IsMember({"elevation", "angular"}))
-      ->capture_default_str();
+  AddPredictionOptions(c, &a->prediction, kSkyInterpOption);
   c->add_option("--images", a->images,
                 "Folder for each photo's radiance, render and relative difference (EXR)");
   c->callback([a] { Run(*a); });

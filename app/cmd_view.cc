@@ -4,6 +4,7 @@
 #include <memory>
 #include <string>
 
+#include "app/command_list.h"
 #include "app/commands.h"
 #include "app/options.h"
 #include "app/progress.h"
@@ -43,8 +44,7 @@ void Run(const ViewArgs& a) {
 
 void RegisterView(CLI::App& app) {
   auto a = std::make_shared<ViewArgs>();
-  CLI::App* c = app.add_subcommand(
-      "view", "Write a web page that relights a solved scene's building at any time of its day");
+  CLI::App* c = app.add_subcommand("view", CommandSummary("view"));
   c->footer(
       "Writes the folder --out with index.html and viewer_data.js: open index.html in a browser\n"
       "(WebGL 2; no server, no network). The page shows the building lit by rouen's recovered\n"

@@ -1,5 +1,7 @@
 // End-to-end tests of the rouen CLI: run the binary as a user would and check its output,
 // its files and its errors.
+#include "app/cli.h"
+
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
@@ -10,6 +12,7 @@
 #include <sstream>
 #include <string>
 
+#include "app/command_list.h"
 #include "core/image.h"
 #include "tests/cli_util.h"
 
@@ -38,6 +41,57 @@ TEST(CliTest, HelpExplainsEveryCommand) {
   Result c = RunRouen("capture --help");
   EXPECT_EQ(c.code, 0);
   EXPECT_NE(c.out.find("--resume"), std::string::npos);
+}
+
+// `rouen --help` and `rouen sun` run in the light binary (app/main.cc); every other command in
+// the librouen_cli module. The light path must list exactly what the full CLI registers.
+TEST(CliTest, LightStartUpListsWhatTheFullCliRegisters) {
+  Result light = RunRouen("--help");
+  ASSERT_EQ(light.code, 0) << light.out;
+  std::string name = "rouen";
+  std::vector<char*> argv = {name.data(), const_cast<char*>("--help")};
+  testing::internal::CaptureStdout();
+  const int code = rouen::RunCli(static_cast<int>(argv.size()), argv.data());
+  std::string full = testing::internal::GetCapturedStdout();
+  EXPECT_EQ(code, 0);
+  // Only the program name in the usage line differs.
+  const std::string usage = "Usage: ";
+  const size_t at = light.out.find(usage), end = light.out.find(' ', at + usage.size());
+  ASSERT_NE(at, std::string::npos) << light.out;
+  light.out.replace(at + usage.size(), end - at - usage.size(), name);
+  EXPECT_EQ(light.out, full);
+  for (const rouen::CommandInfo& c : rouen::kCommands) {
+    EXPECT_NE(full.find(c.summary), std::string::npos) << c.name;
+  }
+}
+
+// The light binary does not link the camera drivers, OpenCV, OpenImageIO, Ceres or Embree:
+// loading them is what makes the full CLI take ~0.3 s to start.
+TEST(CliTest, TheRouenBinaryLinksNoHeavyLibrary) {
+  const Result r = rouen::cli_test::RunShell("readelf -d " + std::string(ROUEN_BINARY));
+  const std::string& out = r.out;
+  if (r.code != 0) GTEST_SKIP() << "readelf (binutils) cannot read the binary: " << out;
+  ASSERT_NE(out.find("(NEEDED)"), std::string::npos) << out;
+  for (const char* heavy : {"OpenImageIO", "opencv", "camera", "aravis", "usb", "gps", "ceres",
+                            "embree", "tbb", "glog"})
+    EXPECT_EQ(out.find(heavy), std::string::npos) << heavy << " in\n" << out;
+}
+
+// Without the module beside it, the binary still answers `sun` and names what is missing for
+// the rest.
+TEST(CliTest, AMissingCommandModuleIsNamed) {
+  const fs::path dir = TempDir("module");
+  fs::copy_file(ROUEN_BINARY, dir / "rouen");
+  const std::string rouen = rouen::cli_test::Q(dir / "rouen");
+  const Result r = rouen::cli_test::RunShell(rouen + " status " + rouen::cli_test::Q(dir));
+  const std::string& out = r.out;
+  EXPECT_EQ(r.code, 2) << out;
+  EXPECT_NE(out.find("librouen_cli.so"), std::string::npos) << out;
+  EXPECT_NE(out.find((dir / "librouen_cli.so").string() + ": not found"), std::string::npos) << out;
+  EXPECT_EQ(
+      rouen::cli_test::RunShell(rouen + " sun --lat 0 --lon 0 --time 2026-03-20T12:00:00Z").code,
+      0);
+  fs::remove_all(dir);
 }
 
 TEST(CliTest, SunSingleAndJson) {

@@ -28,9 +28,9 @@ struct Result {
   std::string out;  // stdout and stderr together
 };
 
-// Runs `rouen ARGS` (the binary under test, ROUEN_BINARY) through the shell.
-inline Result RunRouen(const std::string& args) {
-  const std::string cmd = std::string(ROUEN_BINARY) + " " + args + " 2>&1";
+// Runs `command` through the shell, stderr with stdout.
+inline Result RunShell(const std::string& command) {
+  const std::string cmd = command + " 2>&1";
   Result r;
   FILE* p = popen(cmd.c_str(), "r");
   if (!p) return r;
@@ -40,6 +40,11 @@ inline Result RunRouen(const std::string& args) {
   const int status = pclose(p);
   r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   return r;
+}
+
+// Runs `rouen ARGS` (the binary under test, ROUEN_BINARY) through the shell.
+inline Result RunRouen(const std::string& args) {
+  return RunShell(std::string(ROUEN_BINARY) + " " + args);
 }
 
 // A path quoted for the shell (the tests' paths hold no quote). Built by appending: GCC 12
