@@ -4,6 +4,7 @@
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -16,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/results.h"
 #include "calib/hdr.h"
 #include "calib/response.h"
 #include "calib/test_util.h"
@@ -26,8 +28,18 @@ namespace {
 
 namespace fs = std::filesystem;
 
+using bench::Record;
+
+std::string Lower(std::string s) {
+  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  for (char& c : s)
+    if (c == '-') c = '_';
+  return s;
+}
+
 struct DataSet {
   std::string name;
+  std::string key;  // in bench/results.json's figure names ("memorial")
   // One bracket of rouen frames (RGB, kDigital), held in the vector RecoverResponse takes so
   // the timed calls do not copy it (St Louis: 285 MB of frames).
   std::vector<Bracket> brackets;
@@ -42,6 +54,8 @@ DataSet Load(const std::string& name, const fs::path& dir, int top, int bottom, 
              int right) {
   DataSet d;
   d.name = name;
+  d.key = Lower(name);
+  std::replace(d.key.begin(), d.key.end(), ' ', '_');
   d.brackets.push_back(testing::LoadBracket(dir, top, bottom, left, right));
   if (d.brackets[0].frames.empty()) {
     throw std::runtime_error("no frames listed in " + (dir / "exposures.txt").string());
@@ -195,6 +209,9 @@ void PrintTable(std::vector<DataSet>& sets) {
         const double t = Time(3, [&] { c1 = RecoverResponse(d.brackets, Samples(200, m), &s1); });
         c2 = RecoverResponse(d.brackets, Samples(400, m), nullptr);
         const std::string name = std::string("rouen ") + ResponseMethodName(m);
+        const std::string key = "response." + d.key + "." + Lower(ResponseMethodName(m));
+        Record(key + ".ms", t * 1e3, "ms");
+        Record(key + ".x_opencv", t_cv_dm / t, "ratio", "OpenCV CalibrateDebevec(70), same frames");
         std::printf("%-28s %10.1f %10.2f %12.3f %9s %10.3f", name.c_str(), t * 1e3, t_cv_dm / t,
                     MaxDelta(c1, c2), Monotone(c1) && Monotone(c2) ? "yes" : "NO", s1.residual_rms);
         if (m == ResponseMethod::kDebevecMalik) {
@@ -244,6 +261,13 @@ void PrintTable(std::vector<DataSet>& sets) {
                 d.input_mp / t_r, t_cv / t_r);
     std::printf("%-28s %10.1f %12.1f %10.2f   (%lld ghost pixels)\n", "rouen + ghost removal",
                 t_g * 1e3, d.input_mp / t_g, t_cv / t_g, static_cast<long long>(gs.ghost_pixels));
+    Record("merge." + d.key + ".opencv_ms", t_cv * 1e3, "ms");
+    Record("merge." + d.key + ".ms", t_r * 1e3, "ms");
+    Record("merge." + d.key + ".x_opencv", t_cv / t_r, "ratio",
+           "OpenCV MergeDebevec, same frames and curve (rouen into a reused image)");
+    Record("merge." + d.key + ".x_opencv_new_image", t_cv / t_new, "ratio",
+           "OpenCV MergeDebevec, same frames and curve (rouen allocating its image)");
+    Record("merge." + d.key + ".log_luminance_correlation", corr, "");
     std::printf("  log-luminance correlation rouen vs OpenCV: %.4f over %lld pixels\n", corr,
                 static_cast<long long>(used));
   }

@@ -32,6 +32,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/results.h"
 #include "capture/sim/sim_scene.h"
 #include "core/angles.h"
 #include "core/mesh.h"
@@ -389,6 +390,13 @@ void Study(bool use_env) {
       "RATIO (ii) visibility cached (per lighting), %s: monte carlo %.2f ms / vector "
       "flux %.2f us = %.0fx at error %.2e\n",
       path, mc_cached * 1e3, vf_cached * 1e6, mc_cached / vf_cached, vf_err);
+  const std::string key = std::string("irradiance.") + path;
+  bench::Record(key + ".vector_flux_rel_error", vf_err, "");
+  bench::Record(key + ".x_monte_carlo_from_scratch", mc_scratch / vf_scratch, "ratio",
+                "Monte Carlo with ray-cast visibility at equal mean error (directions from a "
+                "log-log fit of its measured error)");
+  bench::Record(key + ".x_monte_carlo_cached", mc_cached / vf_cached, "ratio",
+                "Monte Carlo with cached visibility at equal mean error");
   if (vf_err <= big_err) {
     // No extrapolation: Monte Carlo at 1048576 directions is measured to be still worse.
     std::printf(
@@ -444,6 +452,10 @@ void DemoGridTiming() {
       "%.2f s; per slot: monte carlo %.2f s, vector flux %.2f s (ratio vf/mc %.2f); "
       "mean rel difference of direct E_se %.2e (the 256-direction noise)\n",
       w.grid.size(), cache_s, mc_s, vf_s, vf_s / mc_s, count ? diff / count : 0.0);
+  bench::Record("irradiance.demo_grid.monte_carlo_256_s", mc_s, "s");
+  bench::Record("irradiance.demo_grid.vector_flux_s", vf_s, "s");
+  bench::Record("irradiance.demo_grid.vector_flux_over_monte_carlo_256", vf_s / mc_s, "ratio",
+                "the albedo solve's 256-direction Monte Carlo per slot (wall time, TBB)");
   std::printf(
       "without the ground-shadow correction: monte carlo %.2f s, vector flux %.2f s "
       "(ratio vf/mc %.2f)\n",

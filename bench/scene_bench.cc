@@ -6,13 +6,26 @@
 // Setup (not timed by Google Benchmark, printed): the quick simulated session is captured
 // through the capture controller and solved into a scene, as `rouen demo --quick` does.
 #include <benchmark/benchmark.h>
+#include <embree3/rtcore.h>
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <tbb/parallel_for.h>
 #include <unistd.h>
 
+#include <cctype>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
+#include "bench/results.h"
 #include "capture/devices/devices.h"
 #include "capture/rig.h"
 #include "core/camera.h"
@@ -20,6 +33,8 @@
 #include "pipeline/capture_session.h"
 #include "pipeline/scene.h"
 #include "pipeline/solve_config.h"
+
+extern char** environ;
 
 namespace rouen {
 namespace {
@@ -59,7 +74,19 @@ Fixture& Shared() {
       std::printf("solve stage %-44s %8.2f s\n", t.stage.c_str(), t.seconds);
       total += t.seconds;
     }
-    std::printf("solve total %.2f s (%d grid points)\n", total, solved.solved.grid.size());
+    rusage usage{};
+    getrusage(RUSAGE_SELF, &usage);
+    const double peak_mb = usage.ru_maxrss / 1024.0;  // capture and solve, in this process
+    std::printf("solve total %.2f s (%d grid points), peak memory %.0f MB\n", total,
+                solved.solved.grid.size(), peak_mb);
+    for (const StageTime& t : solved.stages) {
+      std::string key = t.stage;
+      for (char& c : key) c = std::isalnum(static_cast<unsigned char>(c)) ? std::tolower(c) : '_';
+      bench::Record("solve.quick_demo.stage." + key + "_s", t.seconds, "s");
+    }
+    bench::Record("solve.quick_demo.total_s", total, "s");
+    bench::Record("solve.quick_demo.peak_memory_mb", peak_mb, "MB");
+    bench::Record("solve.quick_demo.grid_points", solved.solved.grid.size(), "points");
     return x;
   }();
   return f;
@@ -104,6 +131,136 @@ void BM_Render640x480Predicted(benchmark::State& state) { RenderView(state, true
 BENCHMARK(BM_Render640x480Measured)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_Render640x480Predicted)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// The peer of the render: Embree alone casting the same 640x480 primary rays at the scene's
+// mesh (one rtcIntersect1 per pixel, rows in parallel with TBB like the renderer), nothing
+// shaded. The ratio render / rays is what rouen's shading costs on top of finding the surface.
+void BM_EmbreePrimaryRays640x480(benchmark::State& state) {
+  Fixture& f = Shared();
+  const LoadedScene scene = LoadScene(f.scene);
+  const Mesh& mesh = scene.solved.mesh;
+  RTCDevice device = rtcNewDevice(nullptr);
+  RTCScene rtc = rtcNewScene(device);
+  RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(
+      geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), mesh.vertices.size()));
+  for (size_t i = 0; i < mesh.vertices.size(); ++i)
+    for (int k = 0; k < 3; ++k) vb[3 * i + k] = static_cast<float>(mesh.vertices[i][k]);
+  auto* ib = static_cast<unsigned*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0,
+                                                            RTC_FORMAT_UINT3, 3 * sizeof(unsigned),
+                                                            mesh.triangles.size()));
+  for (size_t i = 0; i < mesh.triangles.size(); ++i)
+    for (int k = 0; k < 3; ++k) ib[3 * i + k] = static_cast<unsigned>(mesh.triangles[i][k]);
+  rtcCommitGeometry(geom);
+  rtcAttachGeometry(rtc, geom);
+  rtcReleaseGeometry(geom);
+  rtcCommitScene(rtc);
+  const Intrinsics k = Intrinsics::PinholeFov(640, 480, 50);
+  const Pose pose = FindView(scene, "").pose;
+  std::vector<int> hit(640 * 480);
+  for (auto _ : state) {
+    tbb::parallel_for(0, 480, [&](int y) {
+      RTCIntersectContext context;
+      rtcInitIntersectContext(&context);
+      for (int x = 0; x < 640; ++x) {
+        const Eigen::Vector3d d = pose.rotation * Unproject(k, Eigen::Vector2d(x + 0.5, y + 0.5));
+        RTCRayHit rh{};
+        rh.ray.org_x = static_cast<float>(pose.position.x());
+        rh.ray.org_y = static_cast<float>(pose.position.y());
+        rh.ray.org_z = static_cast<float>(pose.position.z());
+        rh.ray.dir_x = static_cast<float>(d.x());
+        rh.ray.dir_y = static_cast<float>(d.y());
+        rh.ray.dir_z = static_cast<float>(d.z());
+        rh.ray.tfar = std::numeric_limits<float>::infinity();
+        rh.ray.mask = ~0u;
+        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+        rtcIntersect1(rtc, &context, &rh);
+        hit[y * 640 + x] = rh.hit.geomID == RTC_INVALID_GEOMETRY_ID ? -1 : rh.hit.primID;
+      }
+    });
+    benchmark::DoNotOptimize(hit.data());
+  }
+  state.counters["rays_per_s"] =
+      benchmark::Counter(640.0 * 480 * state.iterations(), benchmark::Counter::kIsRate);
+  rtcReleaseScene(rtc);
+  rtcReleaseDevice(device);
+}
+BENCHMARK(BM_EmbreePrimaryRays640x480)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// End-to-end `rouen solve --quick` of the quick session as a user runs it (a process of its
+// own: wall time and peak resident memory from wait4), then with the grid's spacing divided by
+// sqrt(2) (about twice the grid points). How the solve grows with the surface it solves for.
+struct CliSolve {
+  double seconds = 0, peak_mb = 0;
+  int64_t points = 0;
+};
+
+CliSolve SolveWithCli(const Fixture& f, const std::string& name, const std::string& toml) {
+  const fs::path out = f.dir / name;
+  std::vector<std::string> args = {ROUEN_BINARY, "solve", f.session.string(), "--quick",
+                                   "--force",    "--out", out.string()};
+  for (int s : f.options.exclude_albedo_slots) {
+    args.push_back("--holdout-slot");
+    args.push_back(std::to_string(s));
+  }
+  if (!toml.empty()) {
+    const fs::path config = f.dir / (name + ".toml");
+    std::ofstream(config) << toml;
+    args.push_back("--config");
+    args.push_back(config.string());
+  }
+  std::vector<char*> argv;
+  for (std::string& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, 1, "/dev/null", O_WRONLY, 0);
+  const auto t0 = std::chrono::steady_clock::now();
+  pid_t pid = -1;
+  CliSolve r;
+  if (posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ) != 0) return r;
+  posix_spawn_file_actions_destroy(&actions);
+  int status = 0;
+  rusage usage{};
+  wait4(pid, &status, 0, &usage);
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  r.peak_mb = usage.ru_maxrss / 1024.0;
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) return CliSolve{};
+  std::ifstream in(out / "scene.json");
+  r.points = nlohmann::json::parse(in).value("points", int64_t{0});
+  return r;
+}
+
+void ScalingStudy() {
+  const Fixture& f = Shared();
+  const nlohmann::json grid = nlohmann::json::parse(std::ifstream(f.scene / "scene.json"))["grid"];
+  const double spacing = grid["spacing_m"].get<double>() / std::sqrt(2.0);
+  std::string toml =
+      "[grid]\nspacing_m = " + std::to_string(spacing) + "\n[grid.block_spacing_m]\n";
+  for (const auto& [block, m] : grid["block_spacing_m"].items())
+    toml += block + " = " + std::to_string(m.get<double>() / std::sqrt(2.0)) + "\n";
+  const CliSolve base = SolveWithCli(f, "scene_cli", "");
+  const CliSolve dense = SolveWithCli(f, "scene_cli_dense", toml);
+  if (base.points == 0 || dense.points == 0) {
+    std::printf("rouen solve (CLI): failed; is %s built?\n", ROUEN_BINARY);
+    return;
+  }
+  std::printf(
+      "rouen solve --quick (CLI, whole process): %lld points %.1f s %.0f MB; spacing / sqrt(2): "
+      "%lld points (x%.2f) %.1f s (x%.2f) %.0f MB (x%.2f)\n",
+      static_cast<long long>(base.points), base.seconds, base.peak_mb,
+      static_cast<long long>(dense.points), static_cast<double>(dense.points) / base.points,
+      dense.seconds, dense.seconds / base.seconds, dense.peak_mb, dense.peak_mb / base.peak_mb);
+  bench::Record("solve.cli_quick.seconds", base.seconds, "s");
+  bench::Record("solve.cli_quick.peak_memory_mb", base.peak_mb, "MB");
+  bench::Record("solve.cli_quick.points", static_cast<double>(base.points), "points");
+  bench::Record("solve.cli_quick_dense.points_ratio",
+                static_cast<double>(dense.points) / base.points, "ratio");
+  bench::Record("solve.cli_quick_dense.time_ratio", dense.seconds / base.seconds, "ratio",
+                "the same solve with about twice the grid points");
+  bench::Record("solve.cli_quick_dense.memory_ratio", dense.peak_mb / base.peak_mb, "ratio",
+                "the same solve with about twice the grid points");
+}
+
 }  // namespace
 }  // namespace rouen
 
@@ -111,6 +268,7 @@ int main(int argc, char** argv) {
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
   rouen::Shared();
+  rouen::ScalingStudy();
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();
   std::error_code ec;

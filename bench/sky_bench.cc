@@ -12,15 +12,20 @@
 
 #include <Eigen/Core>
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <functional>
+#include <nlohmann/json.hpp>
 #include <random>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "bench/results.h"
 #include "capture/sim/almanac.h"
 #include "capture/sim/atmosphere.h"
 #include "capture/sim/sim_world.h"
@@ -421,6 +426,127 @@ void PrintPhotoStudy() {
   }
 }
 
+// The peer: scipy.optimize.least_squares fitting the same model (bench/sky_fit_scipy.py) on the
+// same 20000 samples of each sky, the demo's five skies at visibility 35 km and the same five
+// times in haze (15 km). Both fits are scored against the truth as PrintAccuracy scores them;
+// times are wall times of the fit alone (rouen: FitSky with the pipeline's options; scipy:
+// the three channels' fits, measured inside Python, without its start-up and parsing).
+void CompareWithScipy() {
+  namespace fs = std::filesystem;
+  const fs::path script = fs::path(ROUEN_SOURCE_DIR) / "bench" / "sky_fit_scipy.py";
+  // Debian's python3 (python3-scipy) first: a python3 earlier on PATH may lack scipy.
+  std::string python;
+  for (const char* candidate : {"/usr/bin/python3", "python3"}) {
+    const std::string probe = std::string(candidate) + " -c 'import scipy.optimize' 2>/dev/null";
+    if (std::system(probe.c_str()) == 0) {
+      python = candidate;
+      break;
+    }
+  }
+  if (python.empty()) {
+    std::printf(
+        "\nsky fit vs scipy: skipped (no python3 with scipy: apt-get install python3-scipy)\n");
+    return;
+  }
+  struct Case {
+    std::string name;
+    TruthSky sky;
+    std::vector<SkySample> samples;
+  };
+  std::vector<Case> cases;
+  AtmosphereParams hazy;
+  hazy.visibility_km = 15;
+  for (const auto& [label, params] :
+       {std::pair<std::string, AtmosphereParams>{"clear", AtmosphereParams{}}, {"hazy", hazy}}) {
+    for (TruthSky& t : Skies(params)) {
+      Case c;
+      c.name = label + "_" + t.label;
+      c.samples = Samples(t, 20000, 13);
+      c.sky = std::move(t);
+      cases.push_back(std::move(c));
+    }
+  }
+  const fs::path input = fs::temp_directory_path() / "rouen_sky_bench_samples.txt";
+  {
+    std::ofstream out(input);
+    for (const Case& c : cases) {
+      out << "sky " << c.name << " " << c.sky.sun.x() << " " << c.sky.sun.y() << " "
+          << c.sky.sun.z() << " " << c.samples.size() << "\n";
+      out.precision(9);
+      for (const SkySample& k : c.samples)
+        out << k.dir.x() << " " << k.dir.y() << " " << k.dir.z() << " " << k.radiance.x() << " "
+            << k.radiance.y() << " " << k.radiance.z() << "\n";
+    }
+  }
+  std::vector<nlohmann::json> peer;
+  FILE* p = popen((python + " '" + script.string() + "' '" + input.string() + "'").c_str(), "r");
+  if (p != nullptr) {
+    char line[1 << 14];
+    while (std::fgets(line, sizeof line, p)) peer.push_back(nlohmann::json::parse(line));
+    pclose(p);
+  }
+  std::filesystem::remove(input);
+  if (peer.size() != cases.size()) {
+    std::printf("\nsky fit vs scipy: the peer answered %zu of %zu skies\n", peer.size(),
+                cases.size());
+    return;
+  }
+  std::printf(
+      "\nSky fit vs scipy least_squares (soft_l1, 16 starts) on the same 20000 samples, "
+      "scored against the truth\n%-14s %6s  %10s %8s %8s  %10s %8s %8s  %8s\n",
+      "sky", "sun el", "rouen ms", "median", "p90", "scipy ms", "median", "p90", "x scipy");
+  std::vector<double> ratios, rouen_all, scipy_all;
+  int rouen_p90_worse = 0;
+  for (size_t k = 0; k < cases.size(); ++k) {
+    const Case& c = cases[k];
+    SkyModel mine;
+    const auto t0 = std::chrono::steady_clock::now();
+    FitSky(c.samples, c.sky.sun, SkyFitOptions{}, &mine);
+    const double t_rouen =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    SkyModel theirs;
+    theirs.sun_dir = c.sky.sun;
+    bool complete = true;
+    for (int ch = 0; ch < 3; ++ch) {
+      const nlohmann::json& q = peer[k]["channels"][ch];
+      if (q.is_null()) {
+        complete = false;
+        continue;
+      }
+      SkyParams& sp = theirs.channel[ch];
+      double* fields[] = {&sp.Lz, &sp.a, &sp.b, &sp.c, &sp.d, &sp.e, &sp.h};
+      for (int i = 0; i < 7; ++i) *fields[i] = q[i].get<double>();
+    }
+    std::vector<double> e_rouen, e_scipy;
+    AppendErrors(mine, c.sky, &e_rouen);
+    AppendErrors(theirs, c.sky, &e_scipy);
+    const double t_scipy = peer[k]["seconds"].get<double>();
+    const double p90_r = Quantile(e_rouen, 0.9), p90_s = Quantile(e_scipy, 0.9);
+    if (p90_r > p90_s * 1.05) ++rouen_p90_worse;
+    ratios.push_back(t_scipy / t_rouen);
+    rouen_all.insert(rouen_all.end(), e_rouen.begin(), e_rouen.end());
+    scipy_all.insert(scipy_all.end(), e_scipy.begin(), e_scipy.end());
+    std::printf("%-14s %6.1f  %10.1f %8.4f %8.4f  %10.1f %8.4f %8.4f  %8.1f%s\n", c.name.c_str(),
+                c.sky.sun_elevation_deg, t_rouen * 1e3, Quantile(e_rouen, 0.5), p90_r,
+                t_scipy * 1e3, Quantile(e_scipy, 0.5), p90_s, t_scipy / t_rouen,
+                complete ? "" : "  (scipy failed on a channel)");
+  }
+  const double ratio = Quantile(ratios, 0.5);
+  std::printf(
+      "pooled: rouen median %.4f p90 %.4f; scipy median %.4f p90 %.4f; rouen's p90 more than "
+      "5%% above scipy's on %d of %zu skies; median speed ratio %.1fx\n",
+      Quantile(rouen_all, 0.5), Quantile(rouen_all, 0.9), Quantile(scipy_all, 0.5),
+      Quantile(scipy_all, 0.9), rouen_p90_worse, cases.size(), ratio);
+  bench::Record("sky_fit.x_scipy", ratio, "ratio",
+                "scipy least_squares (soft_l1, 16 starts) on the same samples, median over 10 "
+                "skies, wall time of the fit");
+  bench::Record("sky_fit.rouen_rel_error_p90", Quantile(rouen_all, 0.9), "");
+  bench::Record("sky_fit.scipy_rel_error_p90", Quantile(scipy_all, 0.9), "");
+  bench::Record("sky_fit.rouen_rel_error_median", Quantile(rouen_all, 0.5), "");
+  bench::Record("sky_fit.scipy_rel_error_median", Quantile(scipy_all, 0.5), "");
+  bench::Record("sky_fit.skies_rouen_p90_worse", rouen_p90_worse, "skies of 10");
+}
+
 void BM_FitSky20k(benchmark::State& state, SkyModelKind kind, SkyWeighting weighting,
                   double norm_p) {
   static const std::vector<TruthSky> skies = DemoSkies();
@@ -458,6 +584,7 @@ int main(int argc, char** argv) {
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
   rouen::PrintAccuracy();
+  rouen::CompareWithScipy();
   if (const char* d = std::getenv("ROUEN_SKY_BENCH_DIAG"); d && *d == '1') {
     rouen::PrintDiagnostics();
   }
