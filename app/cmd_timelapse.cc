@@ -13,6 +13,7 @@
 #include "app/render_options.h"
 #include "app/stop_signal.h"
 #include "core/error.h"
+#include "core/files.h"
 #include "core/limits.h"
 #include "core/outputs.h"
 #include "pipeline/scene.h"

@@ -175,4 +175,11 @@ TEST(FilesTest, ImagesAreEncodedInMemoryAndWrittenThroughTheCheckedWriter) {
 }
 
 }  // namespace
+TEST(FindOnPath, FindsProgramsAsTheShellDoes) {
+  EXPECT_FALSE(FindOnPath("sh").empty());
+  EXPECT_EQ(FindOnPath("/bin/sh"), "/bin/sh");
+  EXPECT_TRUE(FindOnPath("rouen-no-such-program").empty());
+  EXPECT_TRUE(FindOnPath("").empty());
+}
+
 }  // namespace rouen

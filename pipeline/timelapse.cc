@@ -316,20 +316,6 @@ TimelapseSummary RenderTimelapse(const LoadedScene& scene, const RenderRequest& 
   return summary;
 }
 
-std::string FindOnPath(const std::string& program) {
-  if (program.empty()) return {};
-  if (program.find('/') != std::string::npos)
-    return ::access(program.c_str(), X_OK) == 0 ? program : std::string();
-  const char* path = std::getenv("PATH");
-  for (const std::string& dir : Split(path ? path : "/usr/bin:/bin", ':')) {
-    const fs::path candidate = fs::path(dir.empty() ? "." : dir) / program;
-    std::error_code ec;
-    if (fs::is_regular_file(candidate, ec) && ::access(candidate.c_str(), X_OK) == 0)
-      return candidate.string();
-  }
-  return {};
-}
-
 void Mp4Options::Validate() const {
   if (!(fps >= 0.1 && fps <= 240)) throw Error("--fps " + FormatNumber(fps) + ": must be 0.1..240");
 }

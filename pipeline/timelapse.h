@@ -109,9 +109,6 @@ TimelapseSummary RenderTimelapse(
     const std::filesystem::path& out, const TimelapseOptions& options,
     const std::function<bool(const TimelapseProgress&)>& progress = {});
 
-// The full path of `program` on PATH (executable), or empty.
-std::string FindOnPath(const std::string& program);
-
 struct Mp4Options {
   double fps = 12;
   std::string ffmpeg = "ffmpeg";  // a name looked up on PATH, or a path

@@ -161,11 +161,6 @@ TEST(Timelapse, PolarNightIsRefusedAndPolarDayFillsTheDay) {
   EXPECT_EQ(d.sunset, d.midnight.PlusSeconds(86400));
 }
 
-TEST(Timelapse, FindsProgramsOnPath) {
-  EXPECT_FALSE(FindOnPath("sh").empty());
-  EXPECT_TRUE(FindOnPath("rouen-no-such-program").empty());
-}
-
 TEST(Timelapse, Mp4WithoutFfmpegSaysSoAndWritesNothing) {
   const fs::path dir = fs::temp_directory_path() / ("rouen_mp4_" + std::to_string(::getpid()));
   fs::create_directories(dir);

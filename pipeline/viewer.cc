@@ -96,13 +96,6 @@ std::string PngDataUrl(const Image& img, double scale) {
   return "data:image/png;base64," + Base64(EncodeImage("layer.png", q, StoredType::kUint8));
 }
 
-Image OneChannel(const Image& rgb) {
-  Image g(rgb.width, rgb.height, 1, rgb.units, 0.f);
-  for (size_t p = 0; p < static_cast<size_t>(rgb.width) * rgb.height; ++p)
-    g.data[p] = rgb.data[p * 3];
-  return g;
-}
-
 }  // namespace
 
 void ViewerOptions::Validate() const {

@@ -29,23 +29,7 @@ namespace fs = std::filesystem;
 using cli_test::Q;
 using cli_test::Result;
 using cli_test::RunRouen;
-
-bool OnPath(const std::string& program) {
-  return std::system(("command -v " + program + " >/dev/null 2>&1").c_str()) == 0;
-}
-
-// stdout and stderr of a shell command, and its exit code.
-Result Shell(const std::string& command) {
-  Result r;
-  FILE* p = popen((command + " 2>&1").c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof buf, p)) > 0) r.out.append(buf, n);
-  const int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+using cli_test::RunShell;
 
 // The JSON after `tag` on each line of `out` that starts with it.
 std::vector<nlohmann::json> Tagged(const std::string& out, const std::string& tag) {
@@ -84,7 +68,7 @@ TEST_F(ExportCli, TheGlbPassesTheKhronosValidator) {
   const Result r = RunRouen("export " + Q(Scene()) + " --gltf " + Q(glb));
   ASSERT_EQ(r.code, 0) << r.out;
   ASSERT_EQ(testing::ReadGlb(ReadFileToString(glb)).error, "");
-  if (!OnPath("node") || !OnPath("npm"))
+  if (FindOnPath("node").empty() || FindOnPath("npm").empty())
     GTEST_SKIP() << "node and npm are not installed (Debian: nodejs, npm): the Khronos glTF "
                     "validator (npm gltf-validator) cannot run";
   // Installed once per build folder, beside the binary under test.
@@ -92,12 +76,12 @@ TEST_F(ExportCli, TheGlbPassesTheKhronosValidator) {
   const fs::path modules = prefix / "node_modules";
   if (!fs::exists(modules / "gltf-validator" / "package.json")) {
     const Result npm =
-        Shell("npm install --no-audit --no-fund --prefix " + Q(prefix) + " gltf-validator");
+        RunShell("npm install --no-audit --no-fund --prefix " + Q(prefix) + " gltf-validator");
     if (npm.code != 0 || !fs::exists(modules / "gltf-validator" / "package.json"))
       GTEST_SKIP() << "npm could not install gltf-validator (no registry?): " << npm.out;
   }
-  const Result v = Shell("node " + Q(fs::path(ROUEN_SOURCE_DIR) / "tests/gltf_validate.js") + " " +
-                         Q(modules) + " " + Q(glb));
+  const Result v = RunShell("node " + Q(fs::path(ROUEN_SOURCE_DIR) / "tests/gltf_validate.js") +
+                            " " + Q(modules) + " " + Q(glb));
   ASSERT_EQ(v.code, 0) << v.out;
   const nlohmann::json report = nlohmann::json::parse(v.out.substr(v.out.find('{')));
   const nlohmann::json& issues = report["issues"];
@@ -116,10 +100,11 @@ TEST_F(ExportCli, BlenderImportsTheGlbInTheScenesFrame) {
   const fs::path glb = *dir_ / "blender.glb";
   const Result r = RunRouen("export " + Q(Scene()) + " --gltf " + Q(glb));
   ASSERT_EQ(r.code, 0) << r.out;
-  if (!OnPath("blender")) GTEST_SKIP() << "blender is not installed: the import is not checked";
+  if (FindOnPath("blender").empty())
+    GTEST_SKIP() << "blender is not installed: the import is not checked";
   const Result b =
-      Shell("blender -b --factory-startup --python " +
-            Q(fs::path(ROUEN_SOURCE_DIR) / "tests/blender_gltf_import.py") + " -- " + Q(glb));
+      RunShell("blender -b --factory-startup --python " +
+               Q(fs::path(ROUEN_SOURCE_DIR) / "tests/blender_gltf_import.py") + " -- " + Q(glb));
   const std::vector<nlohmann::json> found = Tagged(b.out, "ROUEN_GLTF");
   ASSERT_EQ(found.size(), 1u) << b.out;
   const nlohmann::json& j = found[0];
@@ -186,13 +171,14 @@ TEST_F(ExportCli, TheEnvmapLightsPlanesAsRouenPredicts) {
     const Eigen::Vector3d e = LatLongIrradiance(map, n);
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(e[c], rouen.back()[c], 0.02 * rouen.back()[c]);
   }
-  if (!OnPath("blender")) GTEST_SKIP() << "blender is not installed: Cycles is not asked";
+  if (FindOnPath("blender").empty())
+    GTEST_SKIP() << "blender is not installed: Cycles is not asked";
   std::string args;
   for (const Eigen::Vector3d& n : normals)
     args += " " + std::to_string(n.x()) + "," + std::to_string(n.y()) + "," + std::to_string(n.z());
-  const Result b = Shell("blender -b --factory-startup --python " +
-                         Q(fs::path(ROUEN_SOURCE_DIR) / "tests/blender_envmap_plane.py") + " -- " +
-                         Q(sky) + " " + Q(*dir_) + " 512" + args);
+  const Result b = RunShell("blender -b --factory-startup --python " +
+                            Q(fs::path(ROUEN_SOURCE_DIR) / "tests/blender_envmap_plane.py") +
+                            " -- " + Q(sky) + " " + Q(*dir_) + " 512" + args);
   const std::vector<nlohmann::json> planes = Tagged(b.out, "ROUEN_PLANE");
   ASSERT_EQ(planes.size(), normals.size()) << b.out;
   for (size_t i = 0; i < normals.size(); ++i) {

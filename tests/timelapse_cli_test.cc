@@ -19,19 +19,7 @@ namespace fs = std::filesystem;
 using cli_test::Q;
 using cli_test::Result;
 using cli_test::RunRouen;
-
-// stdout and stderr of a shell command, and its exit code.
-Result Shell(const std::string& command) {
-  Result r;
-  FILE* p = popen((command + " 2>&1").c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof buf, p)) > 0) r.out.append(buf, n);
-  const int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+using cli_test::RunShell;
 
 // The building's mean radiance in an RGBA render: colours weighted by alpha (the sky and the sun
 // disc, which a sunset view may hold, are left out).
@@ -119,7 +107,7 @@ TEST_F(TimelapseCli, RendersTheDayAndDarkensTowardsSunset) {
             std::string::npos)
       << r.out;
   if (FindOnPath("ffprobe").empty()) GTEST_SKIP() << "ffprobe is not installed";
-  const Result probe = Shell(
+  const Result probe = RunShell(
       "ffprobe -v error -count_frames -select_streams v:0 -show_entries "
       "stream=nb_read_frames,codec_name,pix_fmt,width,height -of default=nw=1 " +
       Q(mp4));
@@ -134,9 +122,9 @@ TEST_F(TimelapseCli, RendersTheDayAndDarkensTowardsSunset) {
 // Without ffmpeg on PATH the frames are written and the command says there is no video.
 TEST_F(TimelapseCli, WithoutFfmpegKeepsTheFramesAndSaysSo) {
   const fs::path out = *dir_ / "no_ffmpeg";
-  const Result r = Shell("env PATH=/nonexistent " + std::string(ROUEN_BINARY) + " timelapse " +
-                         Q(Scene()) + " --date 2026-06-21 --tz -07:00 --from 09:00 --to 11:00 " +
-                         "--step 1h --out " + Q(out));
+  const Result r = RunShell("env PATH=/nonexistent " + std::string(ROUEN_BINARY) + " timelapse " +
+                            Q(Scene()) + " --date 2026-06-21 --tz -07:00 --from 09:00 --to 11:00 " +
+                            "--step 1h --out " + Q(out));
   ASSERT_EQ(r.code, 0) << r.out;
   EXPECT_NE(r.out.find("no MP4: ffmpeg is not on PATH"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("local time UTC-07:00 (--tz)"), std::string::npos) << r.out;

@@ -25,23 +25,7 @@ namespace fs = std::filesystem;
 using cli_test::Q;
 using cli_test::Result;
 using cli_test::RunRouen;
-
-bool OnPath(const std::string& program) {
-  return std::system(("command -v " + program + " >/dev/null 2>&1").c_str()) == 0;
-}
-
-// stdout and stderr of a shell command, and its exit code.
-Result Shell(const std::string& command) {
-  Result r;
-  FILE* p = popen((command + " 2>&1").c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof buf, p)) > 0) r.out.append(buf, n);
-  const int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+using cli_test::RunShell;
 
 double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
@@ -78,7 +62,7 @@ void ExpectFinite(const nlohmann::json& figures, const std::string& what) {
 class WorkflowTest : public testing::Test {
  protected:
   void SetUp() override {
-    if (!OnPath("snakemake"))
+    if (FindOnPath("snakemake").empty())
       GTEST_SKIP() << "snakemake is not installed (Debian: snakemake; ./dev installs it): "
                       "workflow/Snakefile is not run";
     dir_ = cli_test::TempDir("workflow");
@@ -90,10 +74,10 @@ class WorkflowTest : public testing::Test {
   // snakemake on the workflow in dir_ (its .snakemake folder there), sessions in dir_/sessions,
   // outputs in dir_/out, the solve quick; `extra` goes before the config.
   Result Snakemake(const std::string& extra) const {
-    return Shell("cd " + Q(dir_) + " && snakemake -s " +
-                 Q(fs::path(ROUEN_SOURCE_DIR) / "workflow/Snakefile") + " --cores 2 --nocolor " +
-                 extra + " --config sessions=" + Q(dir_ / "sessions") + " out=" + Q(Out()) +
-                 " rouen=" + Q(ROUEN_BINARY) + " quick=true exclude_blocks=plaza");
+    return RunShell("cd " + Q(dir_) + " && snakemake -s " +
+                    Q(fs::path(ROUEN_SOURCE_DIR) / "workflow/Snakefile") + " --cores 2 --nocolor " +
+                    extra + " --config sessions=" + Q(dir_ / "sessions") + " out=" + Q(Out()) +
+                    " rouen=" + Q(ROUEN_BINARY) + " quick=true exclude_blocks=plaza");
   }
   fs::path Out() const { return dir_ / "out"; }
 

@@ -19,6 +19,7 @@
 #include "capture/aravis/aravis_camera.h"
 #include "capture/clock.h"
 #include "capture/controller.h"
+#include "core/files.h"
 #include "core/session.h"
 #include "tests/sanitizers.h"
 
@@ -32,19 +33,6 @@ using Seconds = std::chrono::duration<double>;
 double Now() {
   return std::chrono::duration_cast<Seconds>(std::chrono::steady_clock::now().time_since_epoch())
       .count();
-}
-
-std::string FindOnPath(const std::string& name) {
-  const char* path = std::getenv("PATH");
-  std::string dirs = path ? path : "/usr/bin:/bin";
-  size_t start = 0;
-  while (start <= dirs.size()) {
-    const size_t end = std::min(dirs.find(':', start), dirs.size());
-    const std::string candidate = dirs.substr(start, end - start) + "/" + name;
-    if (::access(candidate.c_str(), X_OK) == 0) return candidate;
-    start = end + 1;
-  }
-  return "";
 }
 
 // The simulator as a child process, killed and reaped by the destructor (also when a test
