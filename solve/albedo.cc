@@ -860,13 +860,17 @@ std::vector<SpecularLobe> FitSunLobes(const SurfaceGrid& grid,
     const double pred = Predicted(res, irradiance[ob.slot], ob, SunFactor(grid, ob, &shading), 1);
     rel[b].push_back(std::abs(y - pred) / y);
   }
+  // Each block's robust scale of the diffuse fit's relative residuals (MAD), once per block.
+  std::vector<double> block_scale(nblocks);
+  for (int b = 0; b < nblocks; ++b)
+    block_scale[b] = std::max(options.min_scale, 1.4826 * Median(rel[b]));
   std::vector<std::vector<LobeSample>> samples(nblocks);
   for (const Observation& ob : observations) {
     const GridPoint& gp = grid.points[ob.point];
     if (gp.block < 0 || (res.flags[ob.point] & kAlbedoNoObservations)) continue;
     const SlotIrradiance& irr = irradiance[ob.slot];
     if (!IsSunlit(irr.sun[ob.point], irr.se[ob.point], options.sunlit_threshold)) continue;
-    const double scale = std::max(options.min_scale, 1.4826 * Median(rel[gp.block]));
+    const double scale = block_scale[gp.block];
     const double f = SunFactor(grid, ob, &shading);
     LobeSample s;
     s.normal = gp.normal;
