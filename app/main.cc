@@ -13,7 +13,6 @@
 #include <system_error>
 #include <vector>
 
-#include "app/cli.h"
 #include "app/command_list.h"
 #include "app/commands.h"
 

@@ -8,14 +8,24 @@
 #include "core/error.h"
 #include "core/image.h"
 #include "core/lens.h"
+#include "solve/sky_time.h"
 
 namespace rouen {
+namespace {
+
+// --sky-interp: "elevation" (default) or "angular" (solve/sky_time.h SkyInterpMode).
+constexpr char kSkyInterpHelp[] =
+    "How the sky at a new time is made from the captured ones: elevation (by the sun's "
+    "elevation, log-linear, extrapolates to lower suns) or angular (the paper's inverse angular "
+    "distance average, §5.1)";
 
 SkyInterpMode ParseSkyInterp(const std::string& text) {
   if (text == "elevation") return SkyInterpMode::kElevation;
   if (text == "angular") return SkyInterpMode::kAngularDistance;
   throw Error("--sky-interp takes elevation or angular, not '" + text + "'");
 }
+
+}  // namespace
 
 void AddPredictionOptions(CLI::App* c, PredictionArgs* a, unsigned which, CLI::Option* slot) {
   std::vector<CLI::Option*> added;

@@ -8,16 +8,8 @@
 
 #include "core/camera.h"
 #include "solve/relight.h"
-#include "solve/sky_time.h"
 
 namespace rouen {
-
-// --sky-interp: "elevation" (default) or "angular" (solve/sky_time.h SkyInterpMode).
-inline constexpr char kSkyInterpHelp[] =
-    "How the sky at a new time is made from the captured ones: elevation (by the sun's "
-    "elevation, log-linear, extrapolates to lower suns) or angular (the paper's inverse angular "
-    "distance average, §5.1)";
-SkyInterpMode ParseSkyInterp(const std::string& text);
 
 // How lighting is predicted at a time no slot captured: --sky-interp, --pbs, --use-held-out.
 struct PredictionArgs {

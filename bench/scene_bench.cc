@@ -7,10 +7,7 @@
 // through the capture controller and solved into a scene, as `rouen demo --quick` does.
 #include <benchmark/benchmark.h>
 #include <embree3/rtcore.h>
-#include <fcntl.h>
-#include <spawn.h>
 #include <sys/resource.h>
-#include <sys/wait.h>
 #include <tbb/parallel_for.h>
 #include <unistd.h>
 
@@ -29,12 +26,11 @@
 #include "capture/devices/devices.h"
 #include "capture/rig.h"
 #include "core/camera.h"
+#include "core/process.h"
 #include "core/session.h"
 #include "pipeline/capture_session.h"
 #include "pipeline/scene.h"
 #include "pipeline/solve_config.h"
-
-extern char** environ;
 
 namespace rouen {
 namespace {
@@ -208,23 +204,12 @@ CliSolve SolveWithCli(const Fixture& f, const std::string& name, const std::stri
     args.push_back("--config");
     args.push_back(config.string());
   }
-  std::vector<char*> argv;
-  for (std::string& a : args) argv.push_back(a.data());
-  argv.push_back(nullptr);
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, 1, "/dev/null", O_WRONLY, 0);
   const auto t0 = std::chrono::steady_clock::now();
-  pid_t pid = -1;
-  CliSolve r;
-  if (posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ) != 0) return r;
-  posix_spawn_file_actions_destroy(&actions);
-  int status = 0;
   rusage usage{};
-  wait4(pid, &status, 0, &usage);
+  CliSolve r;
+  if (RunProcess(args, f.dir / (name + ".log"), &usage) != 0) return r;
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   r.peak_mb = usage.ru_maxrss / 1024.0;
-  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) return CliSolve{};
   std::ifstream in(out / "scene.json");
   r.points = nlohmann::json::parse(in).value("points", int64_t{0});
   return r;

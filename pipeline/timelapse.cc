@@ -1,10 +1,5 @@
 #include "pipeline/timelapse.h"
 
-#include <fcntl.h>
-#include <spawn.h>
-#include <sys/wait.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -18,11 +13,10 @@
 #include "core/image.h"
 #include "core/limits.h"
 #include "core/outputs.h"
+#include "core/process.h"
 #include "core/text.h"
 #include "pipeline/export.h"
 #include "render/tonemap.h"
-
-extern char** environ;
 
 namespace fs = std::filesystem;
 
@@ -362,23 +356,13 @@ uintmax_t EncodeMp4(const std::vector<std::string>& pngs, const fs::path& out,
                                    "yuv420p",    "-r",         fps,
                                    "-movflags",  "+faststart", "-f",
                                    "mp4",        temp};
-  std::vector<char*> argv;
-  for (std::string& a : args) argv.push_back(a.data());
-  argv.push_back(nullptr);
-  posix_spawn_file_actions_t fa;
-  posix_spawn_file_actions_init(&fa);
-  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_adddup2(&fa, 1, 2);
-  posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
-  pid_t pid = -1;
-  const int rc = posix_spawn(&pid, ffmpeg.c_str(), &fa, nullptr, argv.data(), environ);
-  posix_spawn_file_actions_destroy(&fa);
-  if (rc != 0) throw Error(out.string() + ": cannot start " + ffmpeg + ": " + std::strerror(rc));
-  int status = 0;
-  while (::waitpid(pid, &status, 0) < 0)
-    if (errno != EINTR) throw Error(out.string() + ": waiting for ffmpeg: " + std::strerror(errno));
-  const bool ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
-  if (!ok) {
+  int code = 0;
+  try {
+    code = RunProcess(args, log);
+  } catch (const Error& e) {
+    throw Error(out.string() + ": " + e.what());
+  }
+  if (code != 0) {
     std::string messages;
     std::ifstream in(log);
     std::string line;
@@ -387,8 +371,8 @@ uintmax_t EncodeMp4(const std::vector<std::string>& pngs, const fs::path& out,
     for (size_t k = lines.size() > 8 ? lines.size() - 8 : 0; k < lines.size(); ++k)
       messages += "\n  " + lines[k];
     throw Error(out.string() + ": ffmpeg " +
-                (WIFEXITED(status) ? "failed (exit " + std::to_string(WEXITSTATUS(status)) + ")"
-                                   : std::string("was killed")) +
+                (code < 128 ? "failed (exit " + std::to_string(code) + ")"
+                            : "was killed (signal " + std::to_string(code - 128) + ")") +
                 " encoding " + std::to_string(pngs.size()) + " frames; the frames are kept" +
                 (messages.empty() ? std::string() : ":" + messages));
   }

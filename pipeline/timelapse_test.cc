@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <string>
 
 #include "core/error.h"
@@ -171,6 +172,24 @@ TEST(Timelapse, Mp4WithoutFfmpegSaysSoAndWritesNothing) {
   EXPECT_FALSE(fs::exists(dir / "t.mp4"));
   o.fps = 0;
   EXPECT_NE(ErrorOf([&] { o.Validate(); }).find("--fps"), std::string::npos);
+  fs::remove_all(dir);
+}
+
+// ffmpeg run through RunProcess: its failure names the exit code and its last messages, and
+// no video is left behind.
+TEST(Timelapse, Mp4WhenFfmpegFailsNamesItsExitAndMessages) {
+  const fs::path dir = fs::temp_directory_path() / ("rouen_mp4_fail_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const fs::path fake = dir / "ffmpeg";
+  std::ofstream(fake) << "#!/bin/sh\necho 'bad input frame' >&2\nexit 3\n";
+  fs::permissions(fake, fs::perms::owner_all);
+  Mp4Options o;
+  o.ffmpeg = fake.string();
+  const std::string e = ErrorOf([&] { EncodeMp4({(dir / "a.png").string()}, dir / "t.mp4", o); });
+  EXPECT_NE(e.find("ffmpeg failed (exit 3)"), std::string::npos) << e;
+  EXPECT_NE(e.find("bad input frame"), std::string::npos) << e;
+  EXPECT_NE(e.find("the frames are kept"), std::string::npos) << e;
+  EXPECT_FALSE(fs::exists(dir / "t.mp4"));
   fs::remove_all(dir);
 }
 
