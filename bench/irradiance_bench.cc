@@ -57,7 +57,8 @@ struct World {
   SurfaceGrid grid;
   std::unique_ptr<RayCaster> rc;
   std::unique_ptr<FaceAdjacency> adj;
-  std::vector<int> sample;  // grid points studied
+  std::unique_ptr<OccluderFaces> faces;  // the occluders ComputeIrradiance uses
+  std::vector<int> sample;               // grid points studied
   World() {
     sim::TexelSizes sizes;
     mesh = sim::BuildScene(sizes).model;
@@ -67,6 +68,7 @@ struct World {
     grid = BuildSurfaceGrid(mesh, go);
     rc = std::make_unique<RayCaster>(mesh);
     adj = std::make_unique<FaceAdjacency>(mesh);
+    faces = std::make_unique<OccluderFaces>(mesh);
     const int n = 48;
     for (int k = 0; k < n; ++k) {
       sample.push_back(static_cast<int>((static_cast<int64_t>(k) * 7919 + 13) % grid.size()));
@@ -153,43 +155,49 @@ struct VfSetup {
   OccluderSelectOptions select;
   bool all_faces = false;  // every face in front as occluder (no id buffer)
   std::unique_ptr<SkyPatchTree> tree;
-  std::vector<SphericalPolygon> regions;
+  std::unique_ptr<EnvironmentRegions> regions;
   VfSetup(const Lighting& l, int levels, double tol, int segments, bool all) : all_faces(all) {
     options.sky_tolerance = tol;
     options.env_parallel_segments = segments;
     tree = std::make_unique<SkyPatchTree>(levels);
-    regions = EnvironmentRegionPolygons(l.env, options);
+    regions = std::make_unique<EnvironmentRegions>(l.env, options);
   }
 };
 
+// What a point keeps between lightings: the sky tree's or the environment regions' weights.
+struct VfCache {
+  PointFluxCache sky;
+  EnvironmentView env;
+};
+
 // The per-point, lighting-independent part from scratch.
-PointFluxCache VfGeometry(const World& w, const VfSetup& s, int i, bool use_env,
-                          int* occluders = nullptr) {
+VfCache VfGeometry(const World& w, const VfSetup& s, int i, bool use_env,
+                   int* occluders = nullptr) {
   const GridPoint& p = w.grid.points[i];
   const Eigen::Vector3d o = w.Origin(i);
-  PointFluxCache c;
+  VfCache c;
   auto run = [&](const PointVisibility& vis) {
     if (occluders) *occluders = vis.num_occluders();
     if (use_env) {
-      CacheEnvironment(vis, s.regions, &c);
+      SeeEnvironment(vis, *s.regions, false, &c.env);
     } else {
-      CacheSky(vis, *s.tree, &c);
+      CacheSky(vis, *s.tree, &c.sky);
     }
   };
   if (s.all_faces) {
-    run(PointVisibility(w.mesh, o, p.normal, p.triangle));
+    run(PointVisibility(*w.faces, o, p.normal, p.triangle));
   } else {
     const std::vector<int> cand =
         SelectOccluders(w.mesh, *w.rc, *w.adj, o, p.normal, p.triangle, s.select);
-    run(PointVisibility(w.mesh, o, p.normal, p.triangle, cand));
+    run(PointVisibility(*w.faces, o, p.normal, p.triangle, &cand));
   }
   return c;
 }
 
-Eigen::Vector3d VfEval(const World& w, const PointFluxCache& c, const Lighting& l,
+Eigen::Vector3d VfEval(const World& w, const VfCache& c, const Lighting& l,
                        const SkyTreeRadiance* sky, int i) {
-  if (l.use_env) return EvaluateEnvironment(c, l.env, w.grid.points[i].position.z());
-  return EvaluateSky(c, *sky);
+  if (l.use_env) return EnvironmentIrradiance(c.env, l.env, w.grid.points[i].position.z());
+  return EvaluateSky(c.sky, *sky);
 }
 
 double MeanRelError(const std::vector<Eigen::Vector3d>& e, const std::vector<Eigen::Vector3d>& ref,
@@ -222,7 +230,7 @@ void Study(bool use_env) {
   const double fine_tree_s = CpuNow() - t0;
   std::vector<Eigen::Vector3d> ref(n);
   tbb::parallel_for(0, n, [&](int k) {
-    const PointFluxCache c = VfGeometry(w, fine, w.sample[k], use_env);
+    const VfCache c = VfGeometry(w, fine, w.sample[k], use_env);
     ref[k] = VfEval(w, c, l, &fine_sky, w.sample[k]);
   });
   const int nval = 12;
@@ -249,7 +257,7 @@ void Study(bool use_env) {
   t0 = CpuNow();
   const SkyTreeRadiance sky(*def.tree, l.sky, def.options);
   const double tree_s = CpuNow() - t0;
-  std::vector<PointFluxCache> caches(n);
+  std::vector<VfCache> caches(n);
   std::vector<Eigen::Vector3d> vf(n), vf_sel(n);
   int occ_sel = 0, occ_all = 0, entries = 0, partial = 0;
   t0 = CpuNow();
@@ -266,13 +274,13 @@ void Study(bool use_env) {
   }
   const double eval_s = (CpuNow() - t0) / (n * reps);
   for (const auto& c : caches) {
-    entries += static_cast<int>(c.sky_node.size() + c.env_region.size());
-    partial += c.partial_nodes;
+    entries += static_cast<int>(c.sky.sky_node.size() + c.env.region.size());
+    partial += c.sky.partial_nodes;
   }
   t0 = CpuNow();
   for (int k = 0; k < n; ++k) {
     int o = 0;
-    const PointFluxCache c = VfGeometry(w, def_sel, w.sample[k], use_env, &o);
+    const VfCache c = VfGeometry(w, def_sel, w.sample[k], use_env, &o);
     occ_sel += o;
     vf_sel[k] = VfEval(w, c, l, &sky, w.sample[k]);
   }
@@ -460,6 +468,34 @@ void DemoGridTiming() {
       "without the ground-shadow correction: monte carlo %.2f s, vector flux %.2f s "
       "(ratio vf/mc %.2f)\n",
       mc_ns_s, vf_ns_s, vf_ns_s / mc_ns_s);
+  // As the albedo solve calls it: every time slot in one call (five suns from morning to
+  // evening), the vector flux's per-point geometry shared by all of them.
+  std::vector<Lighting> day;
+  for (int k = 0; k < 5; ++k) {
+    const double az = (100 + 40 * k) * kPi / 180,
+                 el = (25 + 25 * std::sin(kPi * k / 4)) * kPi / 180;
+    Lighting d = l;
+    d.sun_dir =
+        Eigen::Vector3d(std::cos(el) * std::sin(az), std::cos(el) * std::cos(az), std::sin(el));
+    d.sky.sun_dir = d.sun_dir;
+    day.push_back(d);
+  }
+  t0 = std::chrono::steady_clock::now();
+  ComputeIrradiance(w.grid, cache, *w.rc, day, mc);
+  const double mc5_s = secs(t0);
+  t0 = std::chrono::steady_clock::now();
+  ComputeIrradiance(w.grid, cache, *w.rc, day, vf);
+  const double vf5_s = secs(t0);
+  std::printf(
+      "five slots in one call (the albedo solve): monte carlo %.2f s, vector flux %.2f s (ratio "
+      "vf/mc %.2f)\n",
+      mc5_s, vf5_s, vf5_s / mc5_s);
+  bench::Record("irradiance.demo_grid.five_slots.monte_carlo_256_s", mc5_s, "s");
+  bench::Record("irradiance.demo_grid.five_slots.vector_flux_s", vf5_s, "s");
+  bench::Record("irradiance.demo_grid.five_slots.vector_flux_over_monte_carlo_256", vf5_s / mc5_s,
+                "ratio",
+                "the 256-direction Monte Carlo for the same five slots in one call (wall time, "
+                "TBB)");
 }
 
 void BM_VectorFluxGeometryEnv(benchmark::State& state) {

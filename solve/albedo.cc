@@ -996,10 +996,9 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   const auto start = std::chrono::steady_clock::now();
   options.Validate();
   if (slots.empty()) throw Error("albedo: no time-of-day slots");
-  std::vector<SlotIrradiance> irr(slots.size());
-  tbb::parallel_for(0, static_cast<int>(slots.size()), [&](int s) {
-    irr[s] = ComputeIrradiance(grid, cache, model, slots[s], options.irradiance);
-  });
+  // Every slot at once: the vector flux's per-point geometry is shared by all of them.
+  std::vector<SlotIrradiance> irr =
+      ComputeIrradiance(grid, cache, model, slots, options.irradiance);
   SunShading shading;
   for (const Lighting& l : slots) shading.sun_dirs.push_back(l.sun_dir.normalized());
   AlbedoSummary retro_summary;

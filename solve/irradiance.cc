@@ -120,17 +120,23 @@ HemisphereCache BuildHemisphereCache(const SurfaceGrid& grid, const RayCaster& m
   return cache;
 }
 
-SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache& cache,
-                                 const RayCaster& model, const Lighting& lighting,
-                                 const IrradianceOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
-  options.Validate();
-  const int n = grid.size();
-  if (static_cast<int64_t>(cache.hit.size()) != static_cast<int64_t>(n) * cache.directions) {
-    throw Error("irradiance: the hemisphere cache has " + std::to_string(cache.hit.size()) +
-                " entries but the grid needs " + std::to_string(n) + " x " +
-                std::to_string(cache.directions));
-  }
+namespace {
+
+// What ComputeIrradiance needs of one lighting besides the lighting itself.
+struct LightingSetup {
+  const Lighting* lighting = nullptr;
+  Eigen::Vector3d sun_e = Eigen::Vector3d::Zero();  // radiance x solid angle
+  std::vector<Eigen::Vector3d> disc;                // shadow-ray directions over the sun disc
+  // Ground beyond the model (IrradianceOptions::ground_shadow): its shadowed/sunlit radiance
+  // ratio, and (vector flux) the model's shadow on it.
+  bool ground_shadow = false;
+  Eigen::Vector3d shadow_ratio = Eigen::Vector3d::Ones();
+  std::vector<std::vector<Eigen::Vector3d>> shadow_on_ground;
+  int layout = -1;                            // vector flux, environment: index into the layouts
+  std::unique_ptr<SkyTreeRadiance> sky_tree;  // vector flux, sky model
+};
+
+void CheckLighting(const Lighting& lighting) {
   if (!lighting.sun_dir.allFinite() || std::abs(lighting.sun_dir.norm() - 1) > 1e-3) {
     throw Error("irradiance: the sun direction is not a unit vector");
   }
@@ -139,127 +145,195 @@ SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache&
     throw Error("irradiance: sun radiance must be finite and >= 0, solid angle in [0, 1) sr");
   }
   if (lighting.use_env) lighting.env.Validate();
+}
+
+}  // namespace
+
+SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache& cache,
+                                 const RayCaster& model, const Lighting& lighting,
+                                 const IrradianceOptions& options) {
+  std::vector<SlotIrradiance> irr =
+      ComputeIrradiance(grid, cache, model, std::vector<Lighting>{lighting}, options);
+  return std::move(irr[0]);
+}
+
+std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache& cache,
+                                              const RayCaster& model,
+                                              const std::vector<Lighting>& lightings,
+                                              const IrradianceOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  options.Validate();
+  const int n = grid.size();
+  if (static_cast<int64_t>(cache.hit.size()) != static_cast<int64_t>(n) * cache.directions) {
+    throw Error("irradiance: the hemisphere cache has " + std::to_string(cache.hit.size()) +
+                " entries but the grid needs " + std::to_string(n) + " x " +
+                std::to_string(cache.directions));
+  }
+  for (const Lighting& l : lightings) CheckLighting(l);
   const bool vector_flux = options.method == IrradianceMethod::kVectorFlux;
   if (vector_flux && static_cast<int>(options.mesh->triangles.size()) != model.num_triangles()) {
     throw Error("irradiance: the mesh has " + std::to_string(options.mesh->triangles.size()) +
                 " triangles but the ray-casting model " + std::to_string(model.num_triangles()) +
                 " (not the same model)");
   }
-  std::vector<SphericalPolygon> regions;
-  std::unique_ptr<FaceAdjacency> adjacency;
+  // The ground's level: the lowest grid point.
+  double ground_z = n > 0 ? grid.points[0].position.z() : 0;
+  for (const auto& p : grid.points) ground_z = std::min(ground_z, p.position.z());
+
+  const int nl = static_cast<int>(lightings.size());
+  std::vector<LightingSetup> setup(nl);
+  // Vector flux: one set of region polygons per environment layout, one sky tree, shared by
+  // every lighting (and each point's clipping by every lighting that uses it).
+  std::vector<std::unique_ptr<EnvironmentRegions>> layouts;
+  std::vector<bool> layout_shadow;
   std::unique_ptr<SkyPatchTree> tree;
-  std::unique_ptr<SkyTreeRadiance> sky_tree;
-  if (vector_flux) {
-    if (lighting.use_env) {
-      regions = EnvironmentRegionPolygons(lighting.env, options.vector_flux);
+  std::unique_ptr<FaceAdjacency> adjacency;
+  std::unique_ptr<OccluderFaces> faces;
+  for (int li = 0; li < nl; ++li) {
+    const Lighting& lighting = lightings[li];
+    LightingSetup& ls = setup[li];
+    ls.lighting = &lighting;
+    const Eigen::Vector3d s = lighting.sun_dir;
+    ls.sun_e = lighting.sun_radiance * lighting.sun_solid_angle_sr;
+    // Sun-disc sample directions (stratified rings) for soft shadow edges.
+    if (options.sun_samples == 1) {
+      ls.disc.push_back(s);
     } else {
-      tree = std::make_unique<SkyPatchTree>(options.vector_flux.sky_tree_levels);
-      sky_tree = std::make_unique<SkyTreeRadiance>(*tree, lighting.sky, options.vector_flux);
+      Eigen::Vector3d t, b;
+      TangentFrame(s, &t, &b);
+      const double radius = std::tan(lighting.SunAngularRadius());
+      for (int m = 0; m < options.sun_samples; ++m) {
+        // Fibonacci spiral over the disc: uniform in area.
+        const double rr = radius * std::sqrt((m + 0.5) / options.sun_samples);
+        const double phi = m * 2.399963229728653;
+        ls.disc.push_back((s + rr * (std::cos(phi) * t + std::sin(phi) * b)).normalized());
+      }
     }
-    if (options.vector_flux.select_occluders) {
-      adjacency = std::make_unique<FaceAdjacency>(*options.mesh);
+    ls.ground_shadow =
+        options.ground_shadow && lighting.use_env && s.z() > 0 && n > 0 && ls.sun_e.maxCoeff() > 0;
+    if (ls.ground_shadow) {
+      // The shadowed/sunlit radiance ratio of horizontal Lambertian ground.
+      const Eigen::Vector3d e_sky = lighting.env.HorizontalSkyIrradiance();
+      const Eigen::Vector3d e_total = e_sky + ls.sun_e * s.z();
+      for (int c = 0; c < 3; ++c) {
+        ls.shadow_ratio[c] = e_total[c] > 0 ? e_sky[c] / e_total[c] : 1.0;
+      }
+      if (vector_flux) {
+        if (!faces) faces = std::make_unique<OccluderFaces>(*options.mesh);
+        ls.shadow_on_ground = GroundShadowOnPlane(*options.mesh, *faces, s, ground_z);
+      }
     }
+    if (!vector_flux) continue;
+    if (lighting.use_env) {
+      for (size_t k = 0; k < layouts.size() && ls.layout < 0; ++k) {
+        if (layouts[k]->Fits(lighting.env)) ls.layout = static_cast<int>(k);
+      }
+      if (ls.layout < 0) {
+        ls.layout = static_cast<int>(layouts.size());
+        layouts.push_back(std::make_unique<EnvironmentRegions>(lighting.env, options.vector_flux));
+        layout_shadow.push_back(false);
+      }
+      if (ls.ground_shadow && !ls.shadow_on_ground.empty()) layout_shadow[ls.layout] = true;
+    } else {
+      if (!tree) tree = std::make_unique<SkyPatchTree>(options.vector_flux.sky_tree_levels);
+      ls.sky_tree = std::make_unique<SkyTreeRadiance>(*tree, lighting.sky, options.vector_flux);
+    }
+  }
+  if (vector_flux && !faces) faces = std::make_unique<OccluderFaces>(*options.mesh);
+  if (vector_flux && options.vector_flux.select_occluders) {
+    adjacency = std::make_unique<FaceAdjacency>(*options.mesh);
   }
 
-  SlotIrradiance irr;
-  irr.sun.assign(n, Eigen::Vector3d::Zero());
-  irr.direct_se.assign(n, Eigen::Vector3d::Zero());
-  irr.sun_visibility.assign(n, 0.f);
+  std::vector<SlotIrradiance> out(nl);
+  for (auto& irr : out) {
+    irr.sun.assign(n, Eigen::Vector3d::Zero());
+    irr.direct_se.assign(n, Eigen::Vector3d::Zero());
+    irr.sun_visibility.assign(n, 0.f);
+  }
   const int K = cache.directions;
   const double offset = model.surface_offset();
-  const Eigen::Vector3d s = lighting.sun_dir;
-  const Eigen::Vector3d sun_e = lighting.sun_radiance * lighting.sun_solid_angle_sr;
-  // Sun-disc sample directions (stratified rings) for soft shadow edges.
-  std::vector<Eigen::Vector3d> disc;
-  if (options.sun_samples == 1) {
-    disc.push_back(s);
-  } else {
-    Eigen::Vector3d t, b;
-    TangentFrame(s, &t, &b);
-    const double radius = std::tan(lighting.SunAngularRadius());
-    for (int m = 0; m < options.sun_samples; ++m) {
-      // Fibonacci spiral over the disc: uniform in area.
-      const double rr = radius * std::sqrt((m + 0.5) / options.sun_samples);
-      const double phi = m * 2.399963229728653;
-      disc.push_back((s + rr * (std::cos(phi) * t + std::sin(phi) * b)).normalized());
-    }
-  }
-  // Ground beyond the model (see IrradianceOptions::ground_shadow): its level, and the
-  // shadowed/sunlit radiance ratio of horizontal Lambertian ground.
-  const bool ground_shadow =
-      options.ground_shadow && lighting.use_env && s.z() > 0 && n > 0 && sun_e.maxCoeff() > 0;
-  double ground_z = 0;
-  Eigen::Vector3d shadow_ratio = Eigen::Vector3d::Ones();
-  if (ground_shadow) {
-    ground_z = grid.points[0].position.z();
-    for (const auto& p : grid.points) ground_z = std::min(ground_z, p.position.z());
-    const Eigen::Vector3d e_sky = lighting.env.HorizontalSkyIrradiance();
-    const Eigen::Vector3d e_total = e_sky + sun_e * s.z();
-    for (int c = 0; c < 3; ++c) shadow_ratio[c] = e_total[c] > 0 ? e_sky[c] / e_total[c] : 1.0;
-  }
   tbb::parallel_for(tbb::blocked_range<int>(0, n, 32), [&](const tbb::blocked_range<int>& range) {
+    std::vector<EnvironmentView> views(layouts.size());
+    PointFluxCache sky_cache;
     for (int i = range.begin(); i < range.end(); ++i) {
       const GridPoint& p = grid.points[i];
       const Eigen::Vector3d origin = p.position + offset * p.normal;
-      const double cosi = p.normal.dot(s);
-      if (cosi > 0 && sun_e.maxCoeff() > 0) {
-        int visible = 0;
-        for (const auto& d : disc) visible += !model.Occluded(origin, d, 0.0);
-        const double v = static_cast<double>(visible) / disc.size();
-        irr.sun_visibility[i] = static_cast<float>(v);
-        irr.sun[i] = sun_e * (cosi * v);
+      for (int li = 0; li < nl; ++li) {
+        const LightingSetup& ls = setup[li];
+        const double cosi = p.normal.dot(ls.lighting->sun_dir);
+        if (cosi > 0 && ls.sun_e.maxCoeff() > 0) {
+          int visible = 0;
+          for (const auto& d : ls.disc) visible += !model.Occluded(origin, d, 0.0);
+          const double v = static_cast<double>(visible) / ls.disc.size();
+          out[li].sun_visibility[i] = static_cast<float>(v);
+          out[li].sun[i] = ls.sun_e * (cosi * v);
+        }
       }
       if (vector_flux) {
-        // App. A: vector flux of the visible sky patches / environment regions.
-        // The faces in front of the point: an id buffer cast with Embree, or all of them.
+        // App. A: vector flux of the visible sky patches / environment regions. The faces in
+        // front of the point (an id buffer cast with Embree, or all of them) are projected
+        // once, each layout's regions and the sky tree clipped once, for every lighting.
         const auto visibility = [&]() {
-          if (!adjacency) return PointVisibility(*options.mesh, origin, p.normal, p.triangle);
-          return PointVisibility(*options.mesh, origin, p.normal, p.triangle,
-                                 SelectOccluders(*options.mesh, model, *adjacency, origin, p.normal,
-                                                 p.triangle, options.vector_flux.select));
+          if (!adjacency) return PointVisibility(*faces, origin, p.normal, p.triangle);
+          const std::vector<int> candidates =
+              SelectOccluders(*options.mesh, model, *adjacency, origin, p.normal, p.triangle,
+                              options.vector_flux.select);
+          return PointVisibility(*faces, origin, p.normal, p.triangle, &candidates);
         };
         const PointVisibility vis = visibility();
-        if (lighting.use_env) {
-          std::vector<ConvexSpherical> shadow;
-          if (ground_shadow && origin.z() > ground_z) {
-            shadow = GroundShadowPolygons(*options.mesh, s, ground_z, origin);
+        for (size_t k = 0; k < layouts.size(); ++k) {
+          SeeEnvironment(vis, *layouts[k], layout_shadow[k] && origin.z() > ground_z, &views[k]);
+        }
+        if (tree) CacheSky(vis, *tree, &sky_cache);
+        for (int li = 0; li < nl; ++li) {
+          const LightingSetup& ls = setup[li];
+          if (ls.layout < 0) {
+            out[li].direct_se[i] = EvaluateSky(sky_cache, *ls.sky_tree);
+            continue;
           }
-          irr.direct_se[i] =
-              EnvironmentIrradianceVectorFlux(vis, lighting.env, p.position.z(), regions,
-                                              ground_shadow ? &shadow : nullptr, shadow_ratio);
-        } else {
-          // The sky tree clipped for this point, against the sky integrated once per lighting.
-          PointFluxCache c;
-          CacheSky(vis, *tree, &c);
-          irr.direct_se[i] = EvaluateSky(c, *sky_tree);
+          const EnvironmentView& view = views[ls.layout];
+          Eigen::Vector3d e = EnvironmentIrradiance(view, ls.lighting->env, p.position.z());
+          if (ls.ground_shadow && origin.z() > ground_z) {
+            e += GroundShadowChange(view, *layouts[ls.layout], ls.lighting->env, p.position.z(),
+                                    GroundShadowPolygons(ls.shadow_on_ground, origin),
+                                    ls.shadow_ratio);
+          }
+          out[li].direct_se[i] = e;
         }
         continue;
       }
-      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-      for (int k = 0; k < K; ++k) {
-        if (cache.Hit(i, k) != -1) continue;
-        const Eigen::Vector3d d = cache.Direction(p, i, k);
-        Eigen::Vector3d l = lighting.EscapedRadiance(d, p.position.z());
-        if (ground_shadow && d.z() < -1e-3 && origin.z() > ground_z) {
-          const Eigen::Vector3d q = origin + ((origin.z() - ground_z) / -d.z()) * d;
-          if (model.Occluded(q + Eigen::Vector3d(0, 0, offset), s, 0.0)) {
-            l = l.cwiseProduct(shadow_ratio);
+      for (int li = 0; li < nl; ++li) {
+        const LightingSetup& ls = setup[li];
+        const Eigen::Vector3d& s = ls.lighting->sun_dir;
+        Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+        for (int k = 0; k < K; ++k) {
+          if (cache.Hit(i, k) != -1) continue;
+          const Eigen::Vector3d d = cache.Direction(p, i, k);
+          Eigen::Vector3d l = ls.lighting->EscapedRadiance(d, p.position.z());
+          if (ls.ground_shadow && d.z() < -1e-3 && origin.z() > ground_z) {
+            const Eigen::Vector3d q = origin + ((origin.z() - ground_z) / -d.z()) * d;
+            if (model.Occluded(q + Eigen::Vector3d(0, 0, offset), s, 0.0)) {
+              l = l.cwiseProduct(ls.shadow_ratio);
+            }
           }
+          sum += l;
         }
-        sum += l;
+        out[li].direct_se[i] = sum * (kPi / K);
       }
-      irr.direct_se[i] = sum * (kPi / K);
     }
   });
-  for (int i = 0; i < n; ++i) {
-    if (!irr.sun[i].allFinite() || !irr.direct_se[i].allFinite()) {
-      throw Error("irradiance: non-finite irradiance at grid point " + std::to_string(i) +
-                  " (check the sky model and environment map)");
+  const double seconds = Seconds(start);
+  for (auto& irr : out) {
+    for (int i = 0; i < n; ++i) {
+      if (!irr.sun[i].allFinite() || !irr.direct_se[i].allFinite()) {
+        throw Error("irradiance: non-finite irradiance at grid point " + std::to_string(i) +
+                    " (check the sky model and environment map)");
+      }
     }
+    irr.se = irr.direct_se;
+    irr.seconds = seconds / std::max(nl, 1);
   }
-  irr.se = irr.direct_se;
-  irr.seconds = Seconds(start);
-  return irr;
+  return out;
 }
 
 // §4.1: one-bounce interreflection between model faces.

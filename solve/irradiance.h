@@ -105,6 +105,13 @@ struct IrradianceOptions {
 SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache& cache,
                                  const RayCaster& model, const Lighting& lighting,
                                  const IrradianceOptions& options = {});
+// The same for several lightings at once: the vector flux's per-point geometry (the faces in
+// front, each environment layout's and the sky tree's clipping) is computed once and shared by
+// all of them; the result is as each lighting's own call. `seconds` is the mean per lighting.
+std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache& cache,
+                                              const RayCaster& model,
+                                              const std::vector<Lighting>& lightings,
+                                              const IrradianceOptions& options = {});
 
 // One-bounce interreflection (§4.1): E_se[i] = E_direct_se[i] + (pi/K) sum over directions
 // hitting point j of B_j / pi, with B_j = rho_sun_j E_sun_j + rho_se_j E_direct_se_j. With

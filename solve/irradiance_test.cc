@@ -360,6 +360,84 @@ TEST(IrradianceVectorFluxTest, InterreflectionStillWorks) {
   EXPECT_GT(brighter, 0);
 }
 
+// One call for several lightings shares the per-point geometry; each lighting's irradiance is
+// what a call of its own gives (environment maps of two layouts, a sky model, sun or none).
+TEST(IrradianceVectorFluxTest, SeveralLightingsAtOnceEqualEachAlone) {
+  const BoxScene s;
+  const HemisphereCache cache = BuildHemisphereCache(s.grid, *s.rc);
+  std::vector<Lighting> ls = {VaryingEnvironment(true), VaryingEnvironment(false),
+                              VaryingEnvironment(true), VaryingEnvironment(true)};
+  ls[1].sun_dir = Eigen::Vector3d(-0.6, 0.2, 0.3).normalized();
+  ls[1].sun_radiance = Eigen::Vector3d(1e4, 9e3, 8e3);
+  ls[2].use_env = false;
+  EnvOptions coarse;
+  coarse.sectors = 12;
+  ls[3].env = EnvironmentMap::FromSky(coarse, ls[3].sky, Eigen::Vector3d(0.3, 0.25, 0.2));
+  for (const IrradianceMethod method :
+       {IrradianceMethod::kVectorFlux, IrradianceMethod::kMonteCarlo}) {
+    IrradianceOptions o;
+    o.method = method;
+    o.mesh = &s.mesh;
+    const std::vector<SlotIrradiance> all = ComputeIrradiance(s.grid, cache, *s.rc, ls, o);
+    ASSERT_EQ(all.size(), ls.size());
+    for (size_t k = 0; k < ls.size(); ++k) {
+      const SlotIrradiance one = ComputeIrradiance(s.grid, cache, *s.rc, ls[k], o);
+      for (int i = 0; i < s.grid.size(); ++i) {
+        EXPECT_EQ(all[k].sun[i], one.sun[i]);
+        EXPECT_EQ(all[k].direct_se[i], one.direct_se[i]) << "lighting " << k << " point " << i;
+      }
+    }
+  }
+}
+
+// A convex block standing on the ground casts the hull of its corners' shadows, a closed
+// non-convex block (two boxes) the shadows of its sun-facing faces; the same triangles each a
+// block of its own (open: every face casts its shadow) cast the same shadow as a union.
+TEST(IrradianceVectorFluxTest, BlockShadowsEqualTheirFacesShadows) {
+  const Eigen::Vector3d sun = Eigen::Vector3d(0.4, -0.7, 0.5).normalized();
+  for (const bool two_boxes : {false, true}) {
+    Mesh m;
+    testing::AddHorizontalRect(&m, -30, 30, -30, 30, 0, true, m.AddBlock("plaza"));
+    const int block = m.AddBlock("building");
+    // Tall enough for its shadow to reach beyond the plaza (the ground rays escape to).
+    testing::AddBox(&m, {-5, -5, 0}, {5, 5, 40}, block);
+    if (two_boxes) testing::AddBox(&m, {5, -5, 0}, {12, 0, 4}, block);
+    Mesh apart = m;
+    for (size_t t = 0; t < apart.triangles.size(); ++t) {
+      apart.triangle_block[t] = apart.AddBlock("face" + std::to_string(t));
+    }
+    // One hull; the sun-facing faces (roofs, south and east sides, as quads); every triangle.
+    EXPECT_EQ(GroundShadowOnPlane(m, OccluderFaces(m), sun, 0).size(), two_boxes ? 6u : 1u);
+    EXPECT_EQ(GroundShadowOnPlane(apart, OccluderFaces(apart), sun, 0).size(),
+              two_boxes ? 20u : 10u);
+    GridOptions go;
+    go.spacing_m = 8;
+    const SurfaceGrid grid = BuildSurfaceGrid(m, go);
+    const RayCaster rc(m);
+    const HemisphereCache cache = BuildHemisphereCache(grid, rc);
+    Lighting l = VaryingEnvironment(true);
+    l.sun_dir = sun;
+    l.sky.sun_dir = sun;
+    IrradianceOptions o;
+    o.method = IrradianceMethod::kVectorFlux;
+    o.mesh = &m;
+    const SlotIrradiance whole = ComputeIrradiance(grid, cache, rc, l, o);
+    o.mesh = &apart;
+    const SlotIrradiance tris = ComputeIrradiance(grid, cache, rc, l, o);
+    o.ground_shadow = false;
+    const SlotIrradiance none = ComputeIrradiance(grid, cache, rc, l, o);
+    int shaded = 0;
+    for (int i = 0; i < grid.size(); ++i) {
+      // Exact clippings of the same set: equal to rounding.
+      EXPECT_NEAR((whole.direct_se[i] - tris.direct_se[i]).norm(), 0,
+                  1e-9 * tris.direct_se[i].norm() + 1e-12)
+          << i;
+      shaded += (none.direct_se[i] - tris.direct_se[i]).norm() > 1e-6 * none.direct_se[i].norm();
+    }
+    EXPECT_GT(shaded, 3);
+  }
+}
+
 TEST(IrradianceVectorFluxTest, RejectsMissingOrMismatchedMesh) {
   const BoxScene s;
   const HemisphereCache cache = BuildHemisphereCache(s.grid, *s.rc);

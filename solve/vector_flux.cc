@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <string>
+#include <tuple>
 #include <unordered_map>
 
 #include "core/angles.h"
@@ -109,6 +110,21 @@ SphericalPolygon ClipToHalfSpace(const SphericalPolygon& poly, const Eigen::Vect
   return out;
 }
 
+SphericalCap::SphericalCap(const SphericalPolygon& p) {
+  Eigen::Vector3d c = Eigen::Vector3d::Zero();
+  for (const auto& v : p) c += v;
+  const double len = c.norm();
+  if (!(len > 1e-9)) return;
+  centre = c / len;
+  double m = 1;
+  for (const auto& v : p) m = std::min(m, centre.dot(v));
+  m -= 1e-12;
+  if (!(m > 0)) return;
+  cos = m;
+  sin = std::sqrt(std::max(0.0, 1 - m * m));
+  valid = true;
+}
+
 bool ConvexSpherical::Set(const SphericalPolygon& ccw) {
   SphericalPolygon v = ccw;
   DropDuplicates(&v);
@@ -133,29 +149,8 @@ namespace {
 // Cheap tests that `p` (edges great arcs shorter than pi) and the convex `q` are disjoint:
 // bounding caps apart, or every vertex of p outside one edge of q (or, when p is convex, every
 // vertex of q outside one edge of p).
-// A bounding cap of a polygon's vertices (about their normalised mean); `valid` false when
-// it is not smaller than a hemisphere.
-struct Cap {
-  Eigen::Vector3d centre;
-  double cos = -1, sin = 0;
-  bool valid = false;
-  explicit Cap(const SphericalPolygon& p) {
-    Eigen::Vector3d c = Eigen::Vector3d::Zero();
-    for (const auto& v : p) c += v;
-    const double len = c.norm();
-    if (!(len > 1e-9)) return;
-    centre = c / len;
-    double m = 1;
-    for (const auto& v : p) m = std::min(m, centre.dot(v));
-    m -= 1e-12;
-    if (!(m > 0)) return;
-    cos = m;
-    sin = std::sqrt(std::max(0.0, 1 - m * m));
-    valid = true;
-  }
-};
-
-bool Disjoint(const SphericalPolygon& p, const Cap& pcap, const ConvexSpherical& q, bool p_convex) {
+bool Disjoint(const SphericalPolygon& p, const SphericalCap& pcap, const ConvexSpherical& q,
+              bool p_convex) {
   // Bounding caps apart (valid for caps smaller than a hemisphere): the angle between the
   // centres exceeds the sum of the radii.
   if (pcap.valid && q.cap_radius < kPi / 2 &&
@@ -206,7 +201,7 @@ bool Inside(const SphericalPolygon& p, const ConvexSpherical& q) {
 void SubtractConvex(const SphericalPolygon& p, const ConvexSpherical& q,
                     std::vector<SphericalPolygon>* outside, std::vector<SphericalPolygon>* inside) {
   if (p.size() < 3) return;
-  if (Disjoint(p, Cap(p), q, false)) {
+  if (Disjoint(p, SphericalCap(p), q, false)) {
     outside->push_back(p);
     return;
   }
@@ -420,12 +415,125 @@ std::vector<int> SelectOccluders(const Mesh& mesh, const RayCaster& model,
   return hit;
 }
 
+namespace {
+
+// Convex polygon `a` and `b` (counter-clockwise about `n`) joined along an edge they share in
+// opposite directions, when the union is convex: its corners (collinear ones dropped) in
+// `out`.
+bool JoinConvex(const std::vector<Eigen::Vector3d>& a, const std::vector<Eigen::Vector3d>& b,
+                const Eigen::Vector3d& n, double tol, std::vector<Eigen::Vector3d>* out) {
+  const size_t na = a.size(), nb = b.size();
+  for (size_t i = 0; i < na; ++i) {
+    for (size_t j = 0; j < nb; ++j) {
+      if ((a[i] - b[(j + 1) % nb]).norm() > tol || (a[(i + 1) % na] - b[j]).norm() > tol) {
+        continue;
+      }
+      // a from a[i+1] round to a[i], then b after b[j+1] round to before b[j].
+      std::vector<Eigen::Vector3d> p;
+      for (size_t k = 0; k < na; ++k) p.push_back(a[(i + 1 + k) % na]);
+      for (size_t k = 2; k < nb; ++k) p.push_back(b[(j + k) % nb]);
+      // Drop collinear corners, then require every turn to the left.
+      std::vector<Eigen::Vector3d> q;
+      const size_t m = p.size();
+      for (size_t k = 0; k < m; ++k) {
+        const Eigen::Vector3d& prev = p[(k + m - 1) % m];
+        const Eigen::Vector3d& next = p[(k + 1) % m];
+        const double turn = n.dot((p[k] - prev).cross(next - p[k]));
+        const double scale = (p[k] - prev).norm() * (next - p[k]).norm();
+        if (turn < -1e-9 * scale) return false;
+        if (turn > 1e-9 * scale) q.push_back(p[k]);
+      }
+      if (q.size() < 3) return false;
+      *out = std::move(q);
+      return true;
+    }
+  }
+  return false;
+}
+
+}  // namespace
+
+OccluderFaces::OccluderFaces(const Mesh& mesh) {
+  const int nt = static_cast<int>(mesh.triangles.size());
+  const int nv = static_cast<int>(mesh.vertices.size());
+  face_of_.assign(nt, -1);
+  double extent = 0;
+  for (const auto& v : mesh.vertices) {
+    if (v.allFinite()) extent = std::max(extent, v.cwiseAbs().maxCoeff());
+  }
+  const double tol = 1e-9 * std::max(extent, 1.0);
+  // Triangles grouped by block and plane (normal and offset rounded), then merged greedily.
+  struct Item {
+    int block;
+    std::array<int64_t, 4> plane;
+    int t;
+  };
+  std::vector<Item> items;
+  for (int t = 0; t < nt; ++t) {
+    const Eigen::Vector3i& tri = mesh.triangles[t];
+    if (tri.minCoeff() < 0 || tri.maxCoeff() >= nv) continue;
+    const Eigen::Vector3d nrm = mesh.Normal(t);
+    if (!nrm.allFinite()) continue;
+    const double d = nrm.dot(mesh.vertices[tri[0]]);
+    const int block =
+        t < static_cast<int>(mesh.triangle_block.size()) ? mesh.triangle_block[t] : -1;
+    items.push_back(
+        {block,
+         {std::llround(nrm.x() * 1e7), std::llround(nrm.y() * 1e7), std::llround(nrm.z() * 1e7),
+          std::llround(d / (1e-7 * std::max(extent, 1.0)))},
+         t});
+  }
+  std::sort(items.begin(), items.end(), [](const Item& a, const Item& b) {
+    return std::tie(a.block, a.plane, a.t) < std::tie(b.block, b.plane, b.t);
+  });
+  for (size_t i = 0; i < items.size();) {
+    size_t j = i;
+    while (j < items.size() && items[j].block == items[i].block &&
+           items[j].plane == items[i].plane) {
+      ++j;
+    }
+    // One plane of one block: its triangles as polygons, joined while a join stays convex.
+    const Eigen::Vector3d n = mesh.Normal(items[i].t);
+    std::vector<std::vector<Eigen::Vector3d>> polys;
+    std::vector<std::vector<int>> tris;
+    for (size_t k = i; k < j; ++k) {
+      const Eigen::Vector3i& tri = mesh.triangles[items[k].t];
+      polys.push_back({mesh.vertices[tri[0]], mesh.vertices[tri[1]], mesh.vertices[tri[2]]});
+      tris.push_back({items[k].t});
+    }
+    // (Large planes, e.g. a finely tessellated plaza, stay triangles: joining is quadratic.)
+    constexpr size_t kMaxJoin = 256;
+    for (size_t a = 0; a < polys.size() && polys.size() <= kMaxJoin; ++a) {
+      for (size_t b = a + 1; b < polys.size();) {
+        std::vector<Eigen::Vector3d> u;
+        if (!JoinConvex(polys[a], polys[b], n, tol, &u)) {
+          ++b;
+          continue;
+        }
+        polys[a] = std::move(u);
+        tris[a].insert(tris[a].end(), tris[b].begin(), tris[b].end());
+        polys.erase(polys.begin() + b);
+        tris.erase(tris.begin() + b);
+        b = a + 1;  // the grown polygon may now join one passed over
+      }
+    }
+    for (size_t k = 0; k < polys.size(); ++k) {
+      for (int t : tris[k]) face_of_[t] = static_cast<int>(polygons_.size());
+      polygons_.push_back(std::move(polys[k]));
+    }
+    i = j;
+  }
+}
+
 void PointVisibility::Add(const Mesh& mesh, int t, std::vector<Candidate>* found) const {
   const Eigen::Vector3i& tri = mesh.triangles[t];
   const int nv = static_cast<int>(mesh.vertices.size());
   if (tri.minCoeff() < 0 || tri.maxCoeff() >= nv) return;
-  const std::vector<Eigen::Vector3d> pts = {mesh.vertices[tri[0]], mesh.vertices[tri[1]],
-                                            mesh.vertices[tri[2]]};
+  AddPolygon({mesh.vertices[tri[0]], mesh.vertices[tri[1]], mesh.vertices[tri[2]]}, found);
+}
+
+void PointVisibility::AddPolygon(std::vector<Eigen::Vector3d> pts,
+                                 std::vector<Candidate>* found) const {
   bool front = false;
   for (const auto& v : pts) front |= normal_.dot(v - origin_) > 0;
   if (!front) return;
@@ -433,9 +541,11 @@ void PointVisibility::Add(const Mesh& mesh, int t, std::vector<Candidate>* found
   if (!ProjectPolygon(pts, origin_, normal_, &c.cs)) return;
   c.omega = std::abs(SolidAngle(c.cs.vertices));
   if (!(c.omega > 0)) return;
-  c.plane_n = (pts[1] - pts[0]).cross(pts[2] - pts[0]).normalized();
+  Eigen::Vector3d newell = Eigen::Vector3d::Zero();
+  for (size_t i = 0; i < pts.size(); ++i) newell += pts[i].cross(pts[(i + 1) % pts.size()]);
+  c.plane_n = newell.normalized();
   c.plane_d = c.plane_n.dot(pts[0]);
-  c.corners = {pts[0], pts[1], pts[2]};
+  c.corners = std::move(pts);
   found->push_back(std::move(c));
 }
 
@@ -448,6 +558,8 @@ void PointVisibility::Finish(std::vector<Candidate>* found) {
     bool hidden = false;
     for (int j : kept) {
       const Candidate& q = (*found)[j];
+      // Inside q's projection needs every corner inside its bounding cap: one checked first.
+      if (q.cs.cap_centre.dot(f.cs.vertices[0]) < q.cs.cap_cos - 1e-12) continue;
       const double so = q.plane_n.dot(origin_) - q.plane_d;  // the origin's side of q
       if (!(std::abs(so) > 0)) continue;
       bool behind = true;
@@ -497,6 +609,34 @@ PointVisibility::PointVisibility(const Mesh& mesh, const Eigen::Vector3d& origin
   Finish(&found);
 }
 
+PointVisibility::PointVisibility(const OccluderFaces& faces, const Eigen::Vector3d& origin,
+                                 const Eigen::Vector3d& normal, int own_triangle,
+                                 const std::vector<int>* candidates)
+    : origin_(origin), normal_(normal) {
+  const int own = own_triangle >= 0 && own_triangle < faces.num_triangles()
+                      ? faces.face_of_triangle(own_triangle)
+                      : -1;
+  std::vector<Candidate> found;
+  if (candidates == nullptr) {
+    for (int f = 0; f < faces.size(); ++f) {
+      if (f != own) AddPolygon(faces.polygon(f), &found);
+    }
+  } else {
+    std::vector<int> list;
+    for (int t : *candidates) {
+      if (t >= 0 && t < faces.num_triangles() && faces.face_of_triangle(t) >= 0) {
+        list.push_back(faces.face_of_triangle(t));
+      }
+    }
+    std::sort(list.begin(), list.end());
+    list.erase(std::unique(list.begin(), list.end()), list.end());
+    for (int f : list) {
+      if (f != own) AddPolygon(faces.polygon(f), &found);
+    }
+  }
+  Finish(&found);
+}
+
 void PointVisibility::Clip(const SphericalPolygon& patch,
                            std::vector<SphericalPolygon>* out) const {
   SphericalPolygon front = ClipToHalfSpace(patch, normal_);
@@ -528,6 +668,13 @@ void PointVisibility::ClipWith(const SphericalPolygon& patch, const std::vector<
 PointVisibility::Cover PointVisibility::Classify(const SphericalPolygon& patch,
                                                  const std::vector<int>* subset, bool convex,
                                                  std::vector<int>* overlapping) const {
+  return Classify(patch, SphericalCap(patch), subset, convex, overlapping);
+}
+
+PointVisibility::Cover PointVisibility::Classify(const SphericalPolygon& patch,
+                                                 const SphericalCap& cap,
+                                                 const std::vector<int>* subset, bool convex,
+                                                 std::vector<int>* overlapping) const {
   bool all_front = true, all_back = true;
   for (const auto& v : patch) {
     const double d = normal_.dot(v);
@@ -536,7 +683,6 @@ PointVisibility::Cover PointVisibility::Classify(const SphericalPolygon& patch,
   }
   if (all_back) return Cover::kHidden;
   const size_t start = overlapping->size();
-  const Cap cap(patch);
   auto test = [&](int k) {
     const ConvexSpherical& q = occluders_[k];
     if (Disjoint(patch, cap, q, convex)) return false;
@@ -691,14 +837,20 @@ Eigen::Vector3d SkyIrradianceVectorFlux(const PointVisibility& vis, const SkyMod
   return e;
 }
 
-std::vector<SphericalPolygon> EnvironmentRegionPolygons(const EnvironmentMap& env,
-                                                        const VectorFluxOptions& options) {
-  std::vector<SphericalPolygon> regions(env.num_regions());
-  for (int r = 0; r < env.num_regions(); ++r) {
+EnvironmentRegions::EnvironmentRegions(const EnvironmentMap& env, const VectorFluxOptions& options)
+    : bands_below_(env.bands_below), bands_above_(env.bands_above), sectors_(env.sectors) {
+  options.Validate();
+  const int n = env.num_regions();
+  polygons_.resize(n);
+  caps_.resize(n);
+  flux_.resize(n);
+  double widest_arc = 0;
+  for (int r = 0; r < n; ++r) {
     double el0, el1, az0, az1;
     env.RegionBounds(r, &el0, &el1, &az0, &az1);
     const int seg = std::max(options.env_parallel_segments,
                              static_cast<int>(std::ceil((az1 - az0) / (kPi / 3) - 1e-9)));
+    widest_arc = std::max(widest_arc, (az1 - az0) / seg);
     SphericalPolygon p;
     for (int k = 0; k <= seg; ++k) p.push_back(Direction(el0, az0 + (az1 - az0) * k / seg));
     for (int k = seg; k >= 0; --k) p.push_back(Direction(el1, az0 + (az1 - az0) * k / seg));
@@ -706,82 +858,399 @@ std::vector<SphericalPolygon> EnvironmentRegionPolygons(const EnvironmentMap& en
     // Azimuth runs clockwise seen from above: make the loop counter-clockwise from outside.
     const Eigen::Vector3d mid = Direction((el0 + el1) / 2, (az0 + az1) / 2);
     if (VectorFlux(p).dot(mid) < 0) std::reverse(p.begin(), p.end());
-    regions[r] = std::move(p);
+    caps_[r] = SphericalCap(p);
+    flux_[r] = VectorFlux(p);
+    polygons_[r] = std::move(p);
   }
-  return regions;
+  // A great arc between two points of a parallel strays from it by less than 1 - cos of half
+  // its azimuth span (in elevation, radians); twice that, and more, as margin.
+  margin_ = 2 * (1 - std::cos(widest_arc / 2)) + 1e-9;
 }
 
-Eigen::Vector3d EnvironmentIrradianceVectorFlux(const PointVisibility& vis,
-                                                const EnvironmentMap& env, double z,
-                                                const std::vector<SphericalPolygon>& regions,
-                                                const std::vector<ConvexSpherical>* ground_shadow,
-                                                const Eigen::Vector3d& shadow_ratio,
-                                                FluxStats* stats) {
-  if (static_cast<int>(regions.size()) != env.num_regions()) {
-    throw Error("vector flux: " + std::to_string(regions.size()) +
-                " region polygons for an environment map of " + std::to_string(env.num_regions()) +
-                " regions");
+bool EnvironmentRegions::Fits(const EnvironmentMap& env) const {
+  return env.bands_below == bands_below_ && env.bands_above == bands_above_ &&
+         env.sectors == sectors_;
+}
+
+void EnvironmentRegions::Near(const ConvexSpherical& q, std::vector<int>* out) const {
+  // A cap of a hemisphere or more bounds the vertices but not the arcs between them.
+  if (!(q.cap_radius + margin_ < kPi / 2)) {
+    for (int r = 0; r < size(); ++r) out->push_back(r);
+    return;
   }
+  const double el = std::asin(std::clamp(q.cap_centre.z(), -1.0, 1.0));
+  const double r = q.cap_radius + margin_;
+  const double lo = el - r, hi = el + r;
+  // Sectors: all when the cap reaches a pole, else the azimuths within asin(sin r / cos el).
+  int s_first = 0, s_count = sectors_;
+  if (hi < kPi / 2 && lo > -kPi / 2) {
+    const double half = std::asin(std::min(1.0, std::sin(r) / std::cos(el)));
+    double az = std::atan2(q.cap_centre.x(), q.cap_centre.y());
+    if (az < 0) az += 2 * kPi;
+    const double width = 2 * kPi / sectors_;
+    const int first = static_cast<int>(std::floor((az - half) / width));
+    const int last = static_cast<int>(std::floor((az + half) / width));
+    if (last - first + 1 < sectors_) {
+      s_first = first;
+      s_count = last - first + 1;
+    }
+  }
+  const int bands = bands_below_ + bands_above_;
+  for (int b = 0; b < bands; ++b) {
+    const double b_lo = b < bands_below_ ? -kPi / 2 + b * (kPi / 2) / bands_below_
+                                         : (b - bands_below_) * (kPi / 2) / bands_above_;
+    const double b_hi = b < bands_below_ ? -kPi / 2 + (b + 1) * (kPi / 2) / bands_below_
+                                         : (b - bands_below_ + 1) * (kPi / 2) / bands_above_;
+    if (b_hi < lo || b_lo > hi) continue;
+    for (int k = 0; k < s_count; ++k) {
+      const int sector = ((s_first + k) % sectors_ + sectors_) % sectors_;
+      out->push_back(b * sectors_ + sector);
+    }
+  }
+}
+
+void EnvironmentView::Clear() {
+  region.clear();
+  weight.clear();
+  piece_region.clear();
+  pieces.clear();
+}
+
+void SeeEnvironment(const PointVisibility& vis, const EnvironmentRegions& regions,
+                    bool keep_ground_pieces, EnvironmentView* view, FluxStats* stats) {
+  view->Clear();
+  view->normal = vis.normal();
   if (stats) stats->occluders = vis.num_occluders();
+  const int nreg = regions.size();
+  // The occluders that may overlap each region (compressed rows, occluders in order).
+  std::vector<int> start(nreg + 1, 0), near, first_near(vis.num_occluders() + 1, 0);
+  for (int k = 0; k < vis.num_occluders(); ++k) {
+    regions.Near(vis.occluder(k), &near);
+    first_near[k + 1] = static_cast<int>(near.size());
+  }
+  for (int r : near) ++start[r + 1];
+  for (int r = 0; r < nreg; ++r) start[r + 1] += start[r];
+  std::vector<int> fill(start.begin(), start.end() - 1), list(near.size());
+  for (int k = 0; k < vis.num_occluders(); ++k) {
+    for (int m = first_near[k]; m < first_near[k + 1]; ++m) list[fill[near[m]]++] = k;
+  }
   const Eigen::Vector3d& n = vis.normal();
-  Eigen::Vector3d e = Eigen::Vector3d::Zero();
-  std::vector<SphericalPolygon> visible, rest, next, inside;
-  std::vector<int> overlap;
-  double el0, el1, az0, az1;
-  for (int r = 0; r < env.num_regions(); ++r) {
-    visible.clear();
+  std::vector<int> subset, overlap;
+  std::vector<SphericalPolygon> visible;
+  for (int r = 0; r < nreg; ++r) {
+    subset.assign(list.begin() + start[r], list.begin() + start[r + 1]);
+    const SphericalPolygon& poly = regions.polygon(r);
     overlap.clear();
-    // Cheap whole-region tests first (behind the plane, inside one occluder, or untouched).
-    const PointVisibility::Cover cover = vis.Classify(regions[r], nullptr, false, &overlap);
+    const PointVisibility::Cover cover =
+        vis.Classify(poly, regions.cap(r), &subset, false, &overlap);
     if (cover == PointVisibility::Cover::kHidden) continue;
+    visible.clear();
+    Eigen::Vector3d phi = Eigen::Vector3d::Zero();
     if (cover == PointVisibility::Cover::kFull) {
-      visible.push_back(regions[r]);
+      visible.push_back(poly);
+      phi = regions.flux(r);
     } else {
-      vis.ClipWith(regions[r], overlap, &visible);
+      vis.ClipWith(poly, overlap, &visible);
+      for (const auto& p : visible) phi += VectorFlux(p);
     }
     if (visible.empty()) continue;
-    env.RegionBounds(r, &el0, &el1, &az0, &az1);
-    const Eigen::Vector3d l = env.Radiance(Direction((el0 + el1) / 2, (az0 + az1) / 2), z);
-    Eigen::Vector3d phi = Eigen::Vector3d::Zero();
-    for (const auto& p : visible) phi += VectorFlux(p);
-    e += l * n.dot(phi);
     if (stats) stats->patches += static_cast<int>(visible.size());
-    if (ground_shadow == nullptr || ground_shadow->empty() || el0 >= 0) continue;
-    // Shadowed ground: the union of the (overlapping) shadow polygons, taken apart piece by
-    // piece so no direction counts twice; shadows clear of the whole region are skipped.
-    Eigen::Vector3d phi_shadow = Eigen::Vector3d::Zero();
-    const Cap region_cap(regions[r]);
-    rest = visible;
-    for (const auto& s : *ground_shadow) {
-      if (Disjoint(regions[r], region_cap, s, false)) continue;
-      next.clear();
-      inside.clear();
-      for (const auto& p : rest) SubtractConvex(p, s, &next, &inside);
-      for (const auto& p : inside) phi_shadow += VectorFlux(p);
-      rest.swap(next);
-      if (rest.empty()) break;
+    view->region.push_back(r);
+    view->weight.push_back(n.dot(phi));
+    if (keep_ground_pieces && regions.below_horizon(r)) {
+      for (auto& p : visible) {
+        view->piece_region.push_back(r);
+        view->pieces.push_back(std::move(p));
+      }
     }
-    e += l.cwiseProduct(shadow_ratio - Eigen::Vector3d::Ones()) * n.dot(phi_shadow);
+  }
+}
+
+namespace {
+
+// The layer pair and weight for height z (as EnvironmentMap::Radiance).
+struct LayerBlend {
+  size_t k0 = 0, k1 = 0;
+  double a = 0;
+  LayerBlend(const EnvironmentMap& env, double z) {
+    const int layers = env.num_layers();
+    if (layers <= 1 || z <= env.layer_z.front()) return;
+    if (z >= env.layer_z.back()) {
+      k0 = k1 = static_cast<size_t>(layers - 1);
+      return;
+    }
+    int k = 0;
+    while (k + 2 < layers && z > env.layer_z[k + 1]) ++k;
+    a = (z - env.layer_z[k]) / (env.layer_z[k + 1] - env.layer_z[k]);
+    k0 = k;
+    k1 = k + 1;
+  }
+  Eigen::Vector3d L(const EnvironmentMap& env, int r) const {
+    const size_t nreg = env.num_regions();
+    const Eigen::Vector3d& l0 = env.radiance[k0 * nreg + r];
+    return a == 0 ? l0 : Eigen::Vector3d((1 - a) * l0 + a * env.radiance[k1 * nreg + r]);
+  }
+};
+
+void CheckRegion(const EnvironmentMap& env, int r) {
+  if (r < 0 || r >= env.num_regions()) {
+    throw Error("vector flux: region " + std::to_string(r) + " is not in the environment map (" +
+                std::to_string(env.num_regions()) + " regions)");
+  }
+}
+
+}  // namespace
+
+Eigen::Vector3d EnvironmentIrradiance(const EnvironmentView& view, const EnvironmentMap& env,
+                                      double z) {
+  if (env.radiance.size() < static_cast<size_t>(env.num_layers()) * env.num_regions()) {
+    throw Error("vector flux: the environment map holds fewer radiances than its regions");
+  }
+  const LayerBlend blend(env, z);
+  Eigen::Vector3d e = Eigen::Vector3d::Zero();
+  for (size_t k = 0; k < view.region.size(); ++k) {
+    CheckRegion(env, view.region[k]);
+    e += view.weight[k] * blend.L(env, view.region[k]);
   }
   return e;
 }
 
-std::vector<ConvexSpherical> GroundShadowPolygons(const Mesh& mesh, const Eigen::Vector3d& sun,
-                                                  double ground_z, const Eigen::Vector3d& origin) {
-  std::vector<ConvexSpherical> out;
-  if (!(sun.z() > 1e-9) || !(origin.z() > ground_z)) return out;
-  const Eigen::Vector3d down = -Eigen::Vector3d::UnitZ();
-  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
-    std::vector<Eigen::Vector3d> g;
-    bool above = false;
-    for (int k = 0; k < 3; ++k) {
-      const Eigen::Vector3d& v = mesh.vertices[mesh.triangles[t][k]];
-      const double h = v.z() - ground_z;
-      above |= h > 1e-9;
-      g.push_back(v - (h / sun.z()) * sun);
-      g.back().z() = ground_z;
+Eigen::Vector3d GroundShadowChange(const EnvironmentView& view, const EnvironmentRegions& regions,
+                                   const EnvironmentMap& env, double z,
+                                   const std::vector<ConvexSpherical>& ground_shadow,
+                                   const Eigen::Vector3d& shadow_ratio) {
+  Eigen::Vector3d e = Eigen::Vector3d::Zero();
+  if (ground_shadow.empty() || view.pieces.empty()) return e;
+  const LayerBlend blend(env, z);
+  // The shadows that may meet each region, in order.
+  std::vector<int> near, owner;
+  for (int k = 0; k < static_cast<int>(ground_shadow.size()); ++k) {
+    regions.Near(ground_shadow[k], &near);
+    owner.resize(near.size(), k);
+  }
+  std::vector<std::pair<int, int>> by_region(near.size());  // (region, shadow)
+  for (size_t m = 0; m < near.size(); ++m) by_region[m] = {near[m], owner[m]};
+  std::sort(by_region.begin(), by_region.end());
+  std::vector<SphericalPolygon> rest, next, inside;
+  size_t k = 0;
+  while (k < view.pieces.size()) {
+    // The pieces of one region.
+    const int r = view.piece_region[k];
+    CheckRegion(env, r);
+    rest.clear();
+    for (; k < view.pieces.size() && view.piece_region[k] == r; ++k) rest.push_back(view.pieces[k]);
+    // Shadowed ground: the union of the (overlapping) shadow polygons, taken apart piece by
+    // piece so no direction counts twice; shadows clear of the whole region are skipped.
+    Eigen::Vector3d phi = Eigen::Vector3d::Zero();
+    auto it = std::lower_bound(by_region.begin(), by_region.end(), std::make_pair(r, -1));
+    for (; it != by_region.end() && it->first == r; ++it) {
+      const ConvexSpherical& s = ground_shadow[it->second];
+      if (Disjoint(regions.polygon(r), regions.cap(r), s, false)) continue;
+      next.clear();
+      inside.clear();
+      for (const auto& p : rest) SubtractConvex(p, s, &next, &inside);
+      for (const auto& p : inside) phi += VectorFlux(p);
+      rest.swap(next);
+      if (rest.empty()) break;
     }
-    if (!above) continue;  // a face on the ground shades nothing beyond itself
+    e +=
+        blend.L(env, r).cwiseProduct(shadow_ratio - Eigen::Vector3d::Ones()) * view.normal.dot(phi);
+  }
+  return e;
+}
+
+Eigen::Vector3d EnvironmentIrradianceVectorFlux(const PointVisibility& vis,
+                                                const EnvironmentMap& env, double z,
+                                                const EnvironmentRegions& regions,
+                                                const std::vector<ConvexSpherical>* ground_shadow,
+                                                const Eigen::Vector3d& shadow_ratio,
+                                                FluxStats* stats) {
+  if (!regions.Fits(env)) {
+    throw Error("vector flux: " + std::to_string(regions.size()) +
+                " region polygons for an environment map of " + std::to_string(env.num_regions()) +
+                " regions");
+  }
+  const bool shadow = ground_shadow != nullptr && !ground_shadow->empty();
+  EnvironmentView view;
+  SeeEnvironment(vis, regions, shadow, &view, stats);
+  Eigen::Vector3d e = EnvironmentIrradiance(view, env, z);
+  if (shadow) e += GroundShadowChange(view, regions, env, z, *ground_shadow, shadow_ratio);
+  return e;
+}
+
+namespace {
+
+// The shape of one block's triangles: `closed` when every edge is shared by exactly two of
+// them (corners welded by position) except edges on the ground z = ground_z (an open bottom),
+// `convex` when every corner lies on or behind every face's plane.
+struct BlockShape {
+  bool closed = false, convex = false;
+};
+
+BlockShape ShapeOf(const Mesh& mesh, const std::vector<int>& faces, double ground_z) {
+  BlockShape shape;
+  std::vector<Eigen::Vector3d> corners;
+  for (int t : faces) {
+    for (int k = 0; k < 3; ++k) corners.push_back(mesh.vertices[mesh.triangles[t][k]]);
+  }
+  double extent = 0;
+  for (const auto& v : corners) extent = std::max(extent, (v - corners[0]).norm());
+  const double tol = 1e-9 * std::max(extent, 1e-9);
+  // Corner ids by position, then each undirected edge counted.
+  std::vector<int> order(corners.size()), id(corners.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
+  auto key = [&](int i) {
+    return std::array<int64_t, 3>{std::llround(corners[i].x() / tol),
+                                  std::llround(corners[i].y() / tol),
+                                  std::llround(corners[i].z() / tol)};
+  };
+  std::sort(order.begin(), order.end(), [&](int a, int b) { return key(a) < key(b); });
+  for (size_t k = 0; k < order.size(); ++k) {
+    id[order[k]] = k > 0 && key(order[k]) == key(order[k - 1]) ? id[order[k - 1]] : order[k];
+  }
+  std::vector<std::pair<int, int>> edges;
+  for (size_t f = 0; f < faces.size(); ++f) {
+    for (int k = 0; k < 3; ++k) {
+      const int a = id[3 * f + k], b = id[3 * f + (k + 1) % 3];
+      edges.emplace_back(std::min(a, b), std::max(a, b));
+    }
+  }
+  std::sort(edges.begin(), edges.end());
+  shape.closed = true;
+  for (size_t i = 0; i < edges.size() && shape.closed;) {
+    size_t j = i;
+    while (j < edges.size() && edges[j] == edges[i]) ++j;
+    const bool on_ground = std::abs(corners[edges[i].first].z() - ground_z) <= tol &&
+                           std::abs(corners[edges[i].second].z() - ground_z) <= tol;
+    if (j - i > 2 || (j - i == 1 && !on_ground)) shape.closed = false;
+    i = j;
+  }
+  std::vector<Eigen::Vector3d> unique;
+  for (size_t i = 0; i < id.size(); ++i) {
+    if (id[i] == static_cast<int>(i)) unique.push_back(corners[i]);
+  }
+  shape.convex = true;
+  for (size_t f = 0; f < faces.size() && shape.convex; ++f) {
+    const Eigen::Vector3d nrm = mesh.Normal(faces[f]);
+    const Eigen::Vector3d& v0 = mesh.vertices[mesh.triangles[faces[f]][0]];
+    for (const auto& v : unique) {
+      if (nrm.dot(v - v0) > tol) {
+        shape.convex = false;
+        break;
+      }
+    }
+  }
+  return shape;
+}
+
+// Convex hull of points in the plane z = const (counter-clockwise seen from above; Andrew's
+// monotone chain).
+std::vector<Eigen::Vector3d> HullXY(std::vector<Eigen::Vector3d> p) {
+  std::sort(p.begin(), p.end(), [](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+    return a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
+  });
+  if (p.size() < 3) return p;
+  auto cross = [](const Eigen::Vector3d& o, const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+    return (a.x() - o.x()) * (b.y() - o.y()) - (a.y() - o.y()) * (b.x() - o.x());
+  };
+  std::vector<Eigen::Vector3d> h(2 * p.size());
+  size_t k = 0;
+  for (size_t i = 0; i < p.size(); ++i) {
+    while (k >= 2 && cross(h[k - 2], h[k - 1], p[i]) <= 0) --k;
+    h[k++] = p[i];
+  }
+  for (size_t i = p.size() - 1, t = k + 1; i > 0; --i) {
+    while (k >= t && cross(h[k - 2], h[k - 1], p[i - 1]) <= 0) --k;
+    h[k++] = p[i - 1];
+  }
+  h.resize(k - 1);
+  return h;
+}
+
+}  // namespace
+
+std::vector<std::vector<Eigen::Vector3d>> GroundShadowOnPlane(const Mesh& mesh,
+                                                              const OccluderFaces& faces,
+                                                              const Eigen::Vector3d& sun,
+                                                              double ground_z) {
+  std::vector<std::vector<Eigen::Vector3d>> out;
+  if (!(sun.z() > 1e-9)) return out;
+  if (faces.num_triangles() != static_cast<int>(mesh.triangles.size())) {
+    throw Error("ground shadow: the occluder faces were built from another mesh");
+  }
+  auto onto_ground = [&](const Eigen::Vector3d& v) {
+    Eigen::Vector3d g = v - ((v.z() - ground_z) / sun.z()) * sun;
+    g.z() = ground_z;
+    return g;
+  };
+  // Triangles per block (the last list: triangles of no block).
+  std::vector<std::vector<int>> of_block(mesh.block_names.size() + 1);
+  for (int t = 0; t < faces.num_triangles(); ++t) {
+    if (faces.face_of_triangle(t) < 0) continue;  // malformed
+    const int b = t < static_cast<int>(mesh.triangle_block.size()) ? mesh.triangle_block[t] : -1;
+    const size_t slot = b >= 0 && b < static_cast<int>(mesh.block_names.size())
+                            ? static_cast<size_t>(b)
+                            : mesh.block_names.size();
+    of_block[slot].push_back(t);
+  }
+  std::vector<int> block_faces;
+  for (size_t b = 0; b < of_block.size(); ++b) {
+    const std::vector<int>& tris = of_block[b];
+    if (tris.empty()) continue;
+    bool above = false, below = false;
+    for (int t : tris) {
+      for (int k = 0; k < 3; ++k) {
+        const double h = mesh.vertices[mesh.triangles[t][k]].z() - ground_z;
+        above |= h > 1e-9;
+        below |= h < -1e-9;
+      }
+    }
+    if (!above) continue;  // on the ground: shades nothing beyond itself
+    const BlockShape shape = b < mesh.block_names.size() && !below && tris.size() >= 4
+                                 ? ShapeOf(mesh, tris, ground_z)
+                                 : BlockShape{};
+    if (shape.closed && shape.convex) {
+      // A convex solid's shadow is the hull of its corners' shadows.
+      std::vector<Eigen::Vector3d> g;
+      for (int t : tris) {
+        for (int k = 0; k < 3; ++k) g.push_back(onto_ground(mesh.vertices[mesh.triangles[t][k]]));
+      }
+      std::vector<Eigen::Vector3d> hull = HullXY(std::move(g));
+      if (hull.size() >= 3) out.push_back(std::move(hull));
+      continue;
+    }
+    // Its faces (coplanar triangles merged); of a closed solid only those facing the sun: a
+    // shadowed ground point's ray to the sun leaves the solid through one of them.
+    block_faces.clear();
+    for (int t : tris) block_faces.push_back(faces.face_of_triangle(t));
+    std::sort(block_faces.begin(), block_faces.end());
+    block_faces.erase(std::unique(block_faces.begin(), block_faces.end()), block_faces.end());
+    for (int f : block_faces) {
+      const std::vector<Eigen::Vector3d>& poly = faces.polygon(f);
+      if (shape.closed) {
+        Eigen::Vector3d newell = Eigen::Vector3d::Zero();
+        for (size_t i = 0; i < poly.size(); ++i)
+          newell += poly[i].cross(poly[(i + 1) % poly.size()]);
+        if (!(newell.dot(sun) > 0)) continue;
+      }
+      std::vector<Eigen::Vector3d> g;
+      bool face_above = false;
+      for (const auto& v : poly) {
+        face_above |= v.z() - ground_z > 1e-9;
+        g.push_back(onto_ground(v));
+      }
+      if (face_above) out.push_back(std::move(g));
+    }
+  }
+  return out;
+}
+
+std::vector<ConvexSpherical> GroundShadowPolygons(
+    const std::vector<std::vector<Eigen::Vector3d>>& on_plane, const Eigen::Vector3d& origin) {
+  std::vector<ConvexSpherical> out;
+  if (on_plane.empty() || !(origin.z() > on_plane[0][0].z())) return out;
+  const Eigen::Vector3d down = -Eigen::Vector3d::UnitZ();
+  for (const auto& g : on_plane) {
     ConvexSpherical cs;
     if (ProjectPolygon(g, origin, down, &cs)) out.push_back(std::move(cs));
   }

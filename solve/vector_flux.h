@@ -14,6 +14,7 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <cstdint>
 #include <vector>
 
 #include "core/mesh.h"
@@ -41,6 +42,16 @@ double SolidAngle(const SphericalPolygon& poly);
 // Empty when nothing is left. `m` need not be unit. `poly` must lie in an open hemisphere
 // (e.g. be convex and smaller than a hemisphere), so that the cut is shorter than pi.
 SphericalPolygon ClipToHalfSpace(const SphericalPolygon& poly, const Eigen::Vector3d& m);
+
+// A cap holding every vertex of a polygon, about their normalised mean (and so, when it is
+// smaller than a hemisphere, every short arc between them); `valid` false when it is not.
+struct SphericalCap {
+  Eigen::Vector3d centre = Eigen::Vector3d::UnitZ();
+  double cos = -1, sin = 0;
+  bool valid = false;
+  SphericalCap() = default;
+  explicit SphericalCap(const SphericalPolygon& p);
+};
 
 // A convex spherical polygon (smaller than a hemisphere) with its inward edge normals
 // (unit; the polygon is the intersection of the half spaces edge_normal[i].x >= 0).
@@ -106,6 +117,24 @@ std::vector<int> SelectOccluders(const Mesh& mesh, const RayCaster& model,
                                  const Eigen::Vector3d& normal, int own_triangle,
                                  const OccluderSelectOptions& options, int* rays = nullptr);
 
+// The model's faces as occluders: edge-adjacent, coplanar triangles of one block merged into
+// convex planar polygons (a box's side is one quad, not two triangles), so that a point sees
+// fewer, larger faces and more of the far ones are culled behind a single nearer one. Built
+// once per model.
+class OccluderFaces {
+ public:
+  explicit OccluderFaces(const Mesh& mesh);
+  int size() const { return static_cast<int>(polygons_.size()); }
+  // Counter-clockwise seen from outside (as the mesh's triangles).
+  const std::vector<Eigen::Vector3d>& polygon(int f) const { return polygons_[f]; }
+  int face_of_triangle(int t) const { return face_of_[t]; }  // -1: a malformed triangle
+  int num_triangles() const { return static_cast<int>(face_of_.size()); }
+
+ private:
+  std::vector<std::vector<Eigen::Vector3d>> polygons_;
+  std::vector<int> face_of_;
+};
+
 // What a surface point sees: the hemisphere above its tangent plane minus the model faces
 // in front of it (either every triangle with a vertex in front of the plane, or a given
 // candidate list such as SelectOccluders' -- extra faces hidden behind others cost time, never
@@ -119,6 +148,11 @@ class PointVisibility {
   // Only the faces listed in `candidates` (indices into mesh.triangles) can occlude.
   PointVisibility(const Mesh& mesh, const Eigen::Vector3d& origin, const Eigen::Vector3d& normal,
                   int own_triangle, const std::vector<int>& candidates);
+  // The faces of `faces` in front of the point (the face holding `own_triangle` skipped), or
+  // with `candidates` (triangle indices, e.g. SelectOccluders') only the faces holding them.
+  PointVisibility(const OccluderFaces& faces, const Eigen::Vector3d& origin,
+                  const Eigen::Vector3d& normal, int own_triangle,
+                  const std::vector<int>* candidates = nullptr);
   // Appends the visible parts of `patch` to `out` (convex pieces when `patch` is convex).
   void Clip(const SphericalPolygon& patch, std::vector<SphericalPolygon>* out) const;
   // The same with only the occluders listed in `subset` (indices into this object's list,
@@ -134,6 +168,9 @@ class PointVisibility {
   // shorter than pi; `convex` enables one more rejection test.
   Cover Classify(const SphericalPolygon& patch, const std::vector<int>* subset, bool convex,
                  std::vector<int>* overlapping) const;
+  // The same with the patch's bounding cap given (SphericalCap(patch)).
+  Cover Classify(const SphericalPolygon& patch, const SphericalCap& cap,
+                 const std::vector<int>* subset, bool convex, std::vector<int>* overlapping) const;
 
   const Eigen::Vector3d& origin() const { return origin_; }
   const Eigen::Vector3d& normal() const { return normal_; }
@@ -147,9 +184,10 @@ class PointVisibility {
     ConvexSpherical cs;
     Eigen::Vector3d plane_n;  // the face's plane: plane_n . x = plane_d
     double plane_d;
-    std::array<Eigen::Vector3d, 3> corners;
+    std::vector<Eigen::Vector3d> corners;
   };
   void Add(const Mesh& mesh, int t, std::vector<Candidate>* found) const;
+  void AddPolygon(std::vector<Eigen::Vector3d> pts, std::vector<Candidate>* found) const;
   // Sorts by solid angle and drops faces hidden behind a single larger, nearer face (their
   // projection inside its projection, every corner behind its plane): exact culling.
   void Finish(std::vector<Candidate>* found);
@@ -196,10 +234,61 @@ Eigen::Vector3d SkyIrradianceVectorFlux(const PointVisibility& vis, const SkyMod
                                         const VectorFluxOptions& options,
                                         FluxStats* stats = nullptr);
 
-// The environment map's regions as spherical polygons (counter-clockwise), one per region,
-// built once per map layout.
-std::vector<SphericalPolygon> EnvironmentRegionPolygons(const EnvironmentMap& env,
-                                                        const VectorFluxOptions& options);
+// The environment map's regions (bands of elevation x sectors of azimuth) as spherical
+// polygons, counter-clockwise, with their bounding caps: built once per map layout and shared
+// by every point and every lighting of that layout.
+class EnvironmentRegions {
+ public:
+  EnvironmentRegions(const EnvironmentMap& env, const VectorFluxOptions& options);
+  int size() const { return static_cast<int>(polygons_.size()); }
+  const SphericalPolygon& polygon(int r) const { return polygons_[r]; }
+  const SphericalCap& cap(int r) const { return caps_[r]; }
+  const Eigen::Vector3d& flux(int r) const { return flux_[r]; }  // eq. 20 of the whole region
+  bool below_horizon(int r) const { return r < bands_below_ * sectors_; }
+  // Whether `env` has this layout (its radiances can be looked up by these regions' indices).
+  bool Fits(const EnvironmentMap& env) const;
+  // Appends the regions whose polygons may meet the bounding cap of `q` (conservative: the
+  // cap against each band's elevations and the sectors its azimuths span).
+  void Near(const ConvexSpherical& q, std::vector<int>* out) const;
+
+ private:
+  int bands_below_ = 0, bands_above_ = 0, sectors_ = 0;
+  double margin_ = 0;  // how far a polygon's great arcs bulge beyond its band, radians
+  std::vector<SphericalPolygon> polygons_;
+  std::vector<SphericalCap> caps_;
+  std::vector<Eigen::Vector3d> flux_;
+};
+
+// What one surface point sees of each environment region (geometry only): n . Phi (sr) of the
+// visible part of every region not hidden, and, when asked, the visible pieces of the regions
+// below the horizon (where a ground shadow may cut them).
+struct EnvironmentView {
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
+  std::vector<int32_t> region;
+  std::vector<double> weight;
+  std::vector<int32_t> piece_region;  // region of each piece
+  std::vector<SphericalPolygon> pieces;
+  void Clear();
+};
+
+// App. A: clips every region against the point's tangent plane and the occluders that may
+// overlap it (EnvironmentRegions::Near), replacing `view`.
+void SeeEnvironment(const PointVisibility& vis, const EnvironmentRegions& regions,
+                    bool keep_ground_pieces, EnvironmentView* view, FluxStats* stats = nullptr);
+
+// Direct environment irradiance from a view: sum of L(region at height z) n . Phi, RGB.
+// Throws rouen::Error when the view holds a region the map does not have.
+Eigen::Vector3d EnvironmentIrradiance(const EnvironmentView& view, const EnvironmentMap& env,
+                                      double z);
+
+// The change the ground shadow makes to a view's irradiance: the visible pieces below the
+// horizon inside the shadow polygons (convex, seen from the point, possibly overlapping:
+// their union is taken piece by piece) count `shadow_ratio` of their radiance, per channel.
+// Needs the view's ground pieces.
+Eigen::Vector3d GroundShadowChange(const EnvironmentView& view, const EnvironmentRegions& regions,
+                                   const EnvironmentMap& env, double z,
+                                   const std::vector<ConvexSpherical>& ground_shadow,
+                                   const Eigen::Vector3d& shadow_ratio);
 
 // Direct environment irradiance at one point: regions (uniform radiance, looked up at height
 // `z`) clipped for visibility, no subdivision. When `ground_shadow` is given (convex spherical
@@ -207,15 +296,24 @@ std::vector<SphericalPolygon> EnvironmentRegionPolygons(const EnvironmentMap& en
 // below the horizon inside them are scaled per channel by `shadow_ratio`.
 Eigen::Vector3d EnvironmentIrradianceVectorFlux(const PointVisibility& vis,
                                                 const EnvironmentMap& env, double z,
-                                                const std::vector<SphericalPolygon>& regions,
+                                                const EnvironmentRegions& regions,
                                                 const std::vector<ConvexSpherical>* ground_shadow,
                                                 const Eigen::Vector3d& shadow_ratio,
                                                 FluxStats* stats = nullptr);
 
-// The model's shadow on the ground plane z = ground_z (every face above it projected along
-// the sun direction `sun`, z > 0), seen from `origin` (above the plane): convex polygons,
-// possibly overlapping.
-std::vector<ConvexSpherical> GroundShadowPolygons(const Mesh& mesh, const Eigen::Vector3d& sun,
-                                                  double ground_z, const Eigen::Vector3d& origin);
+// The model's shadow on the ground plane z = ground_z, cast along the sun direction `sun`
+// (z > 0): convex planar polygons (world frame, on the plane), possibly overlapping. A convex
+// block standing on the ground, closed but for its bottom, casts one polygon, the convex hull
+// of its corners' shadows; another closed block the shadows of its faces (`faces`, built from
+// `mesh`) that face the sun; any other block the shadows of all its faces above the plane.
+// Built once per lighting.
+std::vector<std::vector<Eigen::Vector3d>> GroundShadowOnPlane(const Mesh& mesh,
+                                                              const OccluderFaces& faces,
+                                                              const Eigen::Vector3d& sun,
+                                                              double ground_z);
+
+// Those polygons seen from `origin` (above the plane): convex spherical polygons.
+std::vector<ConvexSpherical> GroundShadowPolygons(
+    const std::vector<std::vector<Eigen::Vector3d>>& on_plane, const Eigen::Vector3d& origin);
 
 }  // namespace rouen

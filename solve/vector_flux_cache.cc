@@ -210,74 +210,11 @@ void CacheSky(const PointVisibility& vis, const SkyPatchTree& tree, PointFluxCac
   for (int q = 0; q < 4; ++q) c.Visit(q, 0, nullptr);
 }
 
-void CacheEnvironment(const PointVisibility& vis, const std::vector<SphericalPolygon>& regions,
-                      PointFluxCache* cache) {
-  cache->env_region.clear();
-  cache->env_weight.clear();
-  const Eigen::Vector3d& n = vis.normal();
-  std::vector<SphericalPolygon> visible;
-  std::vector<int> overlap;
-  for (size_t r = 0; r < regions.size(); ++r) {
-    overlap.clear();
-    const PointVisibility::Cover cover = vis.Classify(regions[r], nullptr, false, &overlap);
-    if (cover == PointVisibility::Cover::kHidden) continue;
-    double w;
-    if (cover == PointVisibility::Cover::kFull) {
-      w = n.dot(VectorFlux(regions[r]));
-    } else {
-      visible.clear();
-      vis.ClipWith(regions[r], overlap, &visible);
-      Eigen::Vector3d phi = Eigen::Vector3d::Zero();
-      for (const auto& p : visible) phi += VectorFlux(p);
-      w = n.dot(phi);
-    }
-    if (w != 0) {
-      cache->env_region.push_back(static_cast<int32_t>(r));
-      cache->env_weight.push_back(static_cast<float>(w));
-    }
-  }
-}
-
 Eigen::Vector3d EvaluateSky(const PointFluxCache& cache, const SkyTreeRadiance& sky) {
   Eigen::Vector3d e = Eigen::Vector3d::Zero();
   const size_t n = cache.sky_node.size();
   for (size_t k = 0; k < n; ++k) {
     e += sky.G(cache.sky_node[k]) * cache.sky_weight[k].cast<double>();
-  }
-  return e;
-}
-
-Eigen::Vector3d EvaluateEnvironment(const PointFluxCache& cache, const EnvironmentMap& env,
-                                    double z) {
-  const int nreg = env.num_regions();
-  const int layers = env.num_layers();
-  // The layer pair and weight for height z (as EnvironmentMap::Radiance).
-  size_t k0 = 0, k1 = 0;
-  double a = 0;
-  if (layers > 1 && z > env.layer_z.front()) {
-    if (z >= env.layer_z.back()) {
-      k0 = k1 = static_cast<size_t>(layers - 1);
-    } else {
-      int k = 0;
-      while (k + 2 < layers && z > env.layer_z[k + 1]) ++k;
-      a = (z - env.layer_z[k]) / (env.layer_z[k + 1] - env.layer_z[k]);
-      k0 = k;
-      k1 = k + 1;
-    }
-  }
-  if (env.radiance.size() < static_cast<size_t>(layers) * nreg) {
-    throw Error("vector flux: the environment map holds fewer radiances than its regions");
-  }
-  Eigen::Vector3d e = Eigen::Vector3d::Zero();
-  for (size_t k = 0; k < cache.env_region.size(); ++k) {
-    const int r = cache.env_region[k];
-    if (r < 0 || r >= nreg) {
-      throw Error("vector flux: cached region " + std::to_string(r) +
-                  " is not in the environment map (" + std::to_string(nreg) + " regions)");
-    }
-    const Eigen::Vector3d& l0 = env.radiance[k0 * nreg + r];
-    const Eigen::Vector3d l = a == 0 ? l0 : ((1 - a) * l0 + a * env.radiance[k1 * nreg + r]);
-    e += cache.env_weight[k] * l;
   }
   return e;
 }

@@ -13,7 +13,8 @@
 //   E_c = sum over whole nodes of n . G_c(node)
 //       + sum over partly visible deepest nodes of (n . Phi_visible) Lbar_c(node),
 // with Lbar_c(node) = c . G_c / |Phi(node)| (c: the direction of Phi(node)), the node's mean
-// radiance. The environment regions (uniform radiance) keep n . Phi of their visible parts.
+// radiance. The environment regions (uniform radiance) keep n . Phi of their visible parts
+// (EnvironmentView, solve/vector_flux.h).
 #pragma once
 
 #include <Eigen/Core>
@@ -72,29 +73,12 @@ struct PointFluxCache {
   // Sky: E_c += sky_weight[k] . G_c(sky_node[k]).
   std::vector<int32_t> sky_node;
   std::vector<Eigen::Vector3f> sky_weight;
-  // Environment: E += env_weight[k] L(env_region[k]), env_weight = n . Phi (sr) of the visible
-  // part of the region.
-  std::vector<int32_t> env_region;
-  std::vector<float> env_weight;
   int partial_nodes = 0;  // deepest sky nodes clipped
-  size_t Bytes() const {
-    return sky_node.size() * (sizeof(int32_t) + sizeof(Eigen::Vector3f)) +
-           env_region.size() * (sizeof(int32_t) + sizeof(float));
-  }
+  size_t Bytes() const { return sky_node.size() * (sizeof(int32_t) + sizeof(Eigen::Vector3f)); }
 };
 
 // Clips the tree for one point (replaces the sky part of `cache`).
 void CacheSky(const PointVisibility& vis, const SkyPatchTree& tree, PointFluxCache* cache);
-// Clips the environment regions (EnvironmentRegionPolygons) for one point (replaces the
-// environment part of `cache`).
-void CacheEnvironment(const PointVisibility& vis, const std::vector<SphericalPolygon>& regions,
-                      PointFluxCache* cache);
-
 // Direct sky irradiance (sky model above the horizon, nothing below), RGB.
 Eigen::Vector3d EvaluateSky(const PointFluxCache& cache, const SkyTreeRadiance& sky);
-// Direct environment irradiance, regions looked up at height z, RGB. Throws rouen::Error when
-// the cache holds a region the map does not have.
-Eigen::Vector3d EvaluateEnvironment(const PointFluxCache& cache, const EnvironmentMap& env,
-                                    double z);
-
 }  // namespace rouen

@@ -100,28 +100,40 @@ TEST(VectorFluxCacheTest, CachedSkyMatchesAdaptiveUncached) {
   }
 }
 
-TEST(VectorFluxCacheTest, CachedEnvironmentEqualsUncached) {
+// SeeEnvironment clips each region only against the occluders EnvironmentRegions::Near
+// finds for it; every region clipped against every occluder must give the same irradiance.
+TEST(VectorFluxCacheTest, EnvironmentViewEqualsClippingByEveryOccluder) {
   const Mesh m = Street();
   EnvironmentMap env =
       EnvironmentMap::Constant(EnvOptions(), Eigen::Vector3d(1, 2, 3), Eigen::Vector3d(0, 0, 0));
   for (int r = 0; r < env.num_regions(); ++r) {
     env.radiance[r] = Eigen::Vector3d(0.5 + 0.3 * std::sin(r), 1 + 0.2 * std::cos(r), 0.7);
   }
-  const auto regions = EnvironmentRegionPolygons(env, VectorFluxOptions());
-  PointFluxCache c;
+  const EnvironmentRegions regions(env, VectorFluxOptions());
+  EnvironmentView view;
+  int occluded = 0;
   for (const auto& [o, n] : {std::pair{Eigen::Vector3d(3, -3, 0.01), Eigen::Vector3d(0, 0, 1)},
                              {Eigen::Vector3d(3, -0.01, 6), Eigen::Vector3d(0, -1, 0)},
-                             {Eigen::Vector3d(-6, 7.99, 2), Eigen::Vector3d(0, -1, 0)}}) {
+                             {Eigen::Vector3d(-6, 7.99, 2), Eigen::Vector3d(0, -1, 0)},
+                             {Eigen::Vector3d(1, 4.01, 0.5), Eigen::Vector3d(0, 1, 0)},
+                             {Eigen::Vector3d(-2.01, 10, 4.9), Eigen::Vector3d(1, 0, 0)}}) {
     const PointVisibility vis(m, o, n);
-    const Eigen::Vector3d ref =
-        EnvironmentIrradianceVectorFlux(vis, env, 0, regions, nullptr, Eigen::Vector3d::Ones());
-    CacheEnvironment(vis, regions, &c);
-    EXPECT_NEAR((EvaluateEnvironment(c, env, 0) - ref).norm(), 0, 1e-6 * ref.norm());
+    occluded += vis.num_occluders() > 0;
+    Eigen::Vector3d ref = Eigen::Vector3d::Zero();
+    for (int r = 0; r < regions.size(); ++r) {
+      std::vector<SphericalPolygon> pieces;
+      vis.Clip(regions.polygon(r), &pieces);
+      for (const auto& p : pieces) ref += env.radiance[r] * n.dot(VectorFlux(p));
+    }
+    SeeEnvironment(vis, regions, false, &view);
+    EXPECT_NEAR((EnvironmentIrradiance(view, env, 0) - ref).norm(), 0, 1e-12 * ref.norm())
+        << o.transpose();
   }
-  // A cache from a larger map is refused by a smaller one.
-  c.env_region.push_back(env.num_regions());
-  c.env_weight.push_back(1.f);
-  EXPECT_THROW(EvaluateEnvironment(c, env, 0), Error);
+  EXPECT_GE(occluded, 4);
+  // A view of a larger map is refused by a smaller one.
+  view.region.push_back(env.num_regions());
+  view.weight.push_back(1);
+  EXPECT_THROW(EnvironmentIrradiance(view, env, 0), Error);
 }
 
 TEST(VectorFluxCacheTest, OccluderSelectionAgreesWithAllFaces) {

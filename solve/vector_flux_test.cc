@@ -147,21 +147,21 @@ TEST(VectorFluxTest, EnvironmentRegionsTileTheSphere) {
   const EnvironmentMap env =
       EnvironmentMap::Constant(EnvOptions(), Eigen::Vector3d(1, 1, 1), Eigen::Vector3d(0, 0, 0));
   VectorFluxOptions o;
-  const auto regions = EnvironmentRegionPolygons(env, o);
-  ASSERT_EQ(static_cast<int>(regions.size()), env.num_regions());
+  const EnvironmentRegions regions(env, o);
+  ASSERT_EQ(regions.size(), env.num_regions());
   Eigen::Vector3d total = Eigen::Vector3d::Zero();
   double omega = 0, worst = 0;
   for (int r = 0; r < env.num_regions(); ++r) {
-    total += VectorFlux(regions[r]);
-    omega += SolidAngle(regions[r]);
+    total += VectorFlux(regions.polygon(r));
+    omega += SolidAngle(regions.polygon(r));
     double el0, el1, az0, az1;
     env.RegionBounds(r, &el0, &el1, &az0, &az1);
     // Exact lat-long region: Phi_z = dAz (sin^2 el1 - sin^2 el0) / 2.
     const double exact =
         (az1 - az0) * (std::sin(el1) * std::sin(el1) - std::sin(el0) * std::sin(el0)) / 2;
     const double exact_omega = (az1 - az0) * (std::sin(el1) - std::sin(el0));
-    worst = std::max(worst, std::abs(SolidAngle(regions[r]) - exact_omega) / exact_omega);
-    EXPECT_NEAR(VectorFlux(regions[r]).z(), exact, 0.01 * std::abs(exact) + 1e-12) << r;
+    worst = std::max(worst, std::abs(SolidAngle(regions.polygon(r)) - exact_omega) / exact_omega);
+    EXPECT_NEAR(VectorFlux(regions.polygon(r)).z(), exact, 0.01 * std::abs(exact) + 1e-12) << r;
   }
   // The shared edges are the same polylines on both sides: an exact tiling.
   EXPECT_NEAR(total.norm(), 0, 1e-12);
@@ -174,7 +174,7 @@ TEST(VectorFluxTest, EnvironmentRegionsTileTheSphere) {
 TEST(VectorFluxTest, EnvironmentUniformHorizontalPlaneIsPiL) {
   const EnvironmentMap env =
       EnvironmentMap::Constant(EnvOptions(), Eigen::Vector3d(1, 2, 3), Eigen::Vector3d(5, 5, 5));
-  const auto regions = EnvironmentRegionPolygons(env, VectorFluxOptions());
+  const EnvironmentRegions regions(env, VectorFluxOptions());
   const Mesh empty;
   const PointVisibility pv(empty, Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ());
   const Eigen::Vector3d e =
@@ -185,8 +185,13 @@ TEST(VectorFluxTest, EnvironmentUniformHorizontalPlaneIsPiL) {
   const Eigen::Vector3d ew =
       EnvironmentIrradianceVectorFlux(wall, env, 0, regions, nullptr, Eigen::Vector3d::Ones());
   EXPECT_NEAR((ew - kPi / 2 * Eigen::Vector3d(6, 7, 8)).norm(), 0, 1e-12);
-  // A region list that does not fit the map is refused.
-  EXPECT_THROW(EnvironmentIrradianceVectorFlux(pv, env, 0, {}, nullptr, Eigen::Vector3d::Ones()),
+  // Regions of another layout are refused.
+  EnvOptions coarse;
+  coarse.sectors = 12;
+  const EnvironmentRegions other(
+      EnvironmentMap::Constant(coarse, Eigen::Vector3d::Ones(), Eigen::Vector3d::Ones()),
+      VectorFluxOptions());
+  EXPECT_THROW(EnvironmentIrradianceVectorFlux(pv, env, 0, other, nullptr, Eigen::Vector3d::Ones()),
                Error);
 }
 
