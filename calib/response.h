@@ -72,6 +72,9 @@ struct ResponseOptions {
   // and keeps the Memorial curve within 0.1 between 200 and 400 samples.
   double lambda = 1000.0;
   uint64_t seed = 1;
+  // Scan the frames for samples with the AVX2 kernel when the CPU has it (checked at run
+  // time). It chooses the same samples as the portable kernel; false forces the portable one.
+  bool use_simd = true;
   // Added to the hat weight w(z) = min(z, 255 - z) so that z = 0 and z = 255 keep a trace.
   double weight_epsilon = 0.01;
   // Samples whose digital numbers fall by more than this (DN) as exposure grows are rejected

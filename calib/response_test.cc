@@ -190,6 +190,61 @@ TEST(RecoverResponse, RejectsBadInput) {
   EXPECT_THROW(RecoverResponse({good}, bad, nullptr), Error);
 }
 
+// The AVX2 sample scan (used where the CPU has it) must choose the same samples as the
+// portable one: the same curve to the bit and the same summary, for 3 and 1 channels, widths
+// that leave a tail for the portable kernel, and with a mask.
+TEST(RecoverResponse, SimdScanChoosesTheSameSamplesAsThePortableOne) {
+  for (int w : {37, 64}) {
+    const Image radiance = RadianceField(w, 50, -5.0, 4.0, 3 + w);
+    Bracket b = MakeBracket(radiance, kExposures, 0.7, 13);
+    for (int nc : {3, 1}) {
+      if (nc == 1) {
+        for (Image& f : b.frames) {
+          Image g(f.width, f.height, 1, PixelUnits::kDigital);
+          for (int y = 0; y < f.height; ++y)
+            for (int x = 0; x < f.width; ++x) g.at(x, y) = f.at(x, y, 1);
+          f = std::move(g);
+        }
+      }
+      b.mask.assign(static_cast<size_t>(w) * 50, 1);
+      for (size_t i = 0; i < b.mask.size(); i += 5) b.mask[i] = 0;
+      ResponseOptions simd, portable;
+      portable.use_simd = false;
+      ResponseSummary ss, sp;
+      const ResponseCurve a = RecoverResponse({b}, simd, &ss);
+      const ResponseCurve c = RecoverResponse({b}, portable, &sp);
+      for (int ch = 0; ch < 3; ++ch) EXPECT_EQ(a.g[ch], c.g[ch]) << "w " << w << " nc " << nc;
+      EXPECT_EQ(ss.samples_used, sp.samples_used);
+      EXPECT_EQ(ss.residual_rms, sp.residual_rms);
+    }
+  }
+}
+
+// A value outside 0..255 (or NaN) is named by frame and pixel, by both scan kernels, in the
+// vector part of a row and in its tail.
+TEST(RecoverResponse, BothScanKernelsNameTheFrameAndPixelOfABadValue) {
+  const Image radiance = RadianceField(21, 12, -2.0, 2.0, 5);  // 16 points vectorised, 5 not
+  const Bracket good = MakeBracket(radiance, kExposures, 0.0, 3);
+  for (bool simd : {true, false}) {
+    for (int x : {4, 19}) {
+      for (float bad : {-1.f, 256.f, std::nanf("")}) {
+        Bracket b = good;
+        b.frames[3].at(x, 7, 2) = bad;
+        ResponseOptions o;
+        o.use_simd = simd;
+        try {
+          RecoverResponse({b}, o, nullptr);
+          ADD_FAILURE() << "accepted " << bad << " at x " << x << " simd " << simd;
+        } catch (const Error& e) {
+          const std::string what = e.what();
+          EXPECT_NE(what.find("frame 3: pixel (" + std::to_string(x) + ", 7)"), std::string::npos)
+              << what;
+        }
+      }
+    }
+  }
+}
+
 // ---- Real data: Debevec's Memorial Church bracket. ----
 
 using testing::LoadMemorial;
