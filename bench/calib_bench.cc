@@ -43,10 +43,11 @@ struct DataSet {
   // One bracket of rouen frames (RGB, kDigital), held in the vector RecoverResponse takes so
   // the timed calls do not copy it (St Louis: 285 MB of frames).
   std::vector<Bracket> brackets;
-  std::vector<CodeImage> codes;  // the same pixels as rouen 8-bit frames (RGB)
-  std::vector<cv::Mat> cv;       // the same pixels, 8-bit BGR
-  std::vector<float> cv_times;   // seconds
-  double input_mp = 0;           // megapixels over all frames
+  std::vector<CodeImage> codes;        // the same pixels as rouen 8-bit frames (RGB)
+  std::vector<Bracket> code_brackets;  // one bracket of `codes`
+  std::vector<cv::Mat> cv;             // the same pixels, 8-bit BGR
+  std::vector<float> cv_times;         // seconds
+  double input_mp = 0;                 // megapixels over all frames
 };
 
 // The bracket in `dir` (calib/test_util.h's loader, cropped by the given margins) and the
@@ -80,6 +81,9 @@ DataSet Load(const std::string& name, const fs::path& dir, int top, int bottom, 
     d.cv.push_back(mat);
     d.cv_times.push_back(static_cast<float>(d.brackets[0].exposures[j]));
   }
+  d.code_brackets.resize(1);
+  d.code_brackets[0].codes = d.codes;
+  d.code_brackets[0].exposures = d.brackets[0].exposures;
   return d;
 }
 
@@ -214,17 +218,31 @@ void PrintTable(std::vector<DataSet>& sets) {
       ResponseSummary s1;
       ResponseCurve c1, c2;
       try {
-        const double t = Time(3, [&] { c1 = RecoverResponse(d.brackets, Samples(200, m), &s1); });
-        c2 = RecoverResponse(d.brackets, Samples(400, m), nullptr);
+        // From the same 8-bit frames as OpenCV.
+        const double t =
+            Time(3, [&] { c1 = RecoverResponse(d.code_brackets, Samples(200, m), &s1); });
+        c2 = RecoverResponse(d.code_brackets, Samples(400, m), nullptr);
         const std::string name = std::string("rouen ") + ResponseMethodName(m);
         const std::string key = "response." + d.key + "." + Lower(ResponseMethodName(m));
         Record(key + ".ms", t * 1e3, "ms");
-        Record(key + ".x_opencv", t_cv_dm / t, "ratio", "OpenCV CalibrateDebevec(70), same frames");
+        Record(key + ".x_opencv", t_cv_dm / t, "ratio",
+               "OpenCV CalibrateDebevec(70), same 8-bit frames");
         std::printf("%-28s %10.1f %10.2f %12.3f %9s %10.3f", name.c_str(), t * 1e3, t_cv_dm / t,
                     MaxDelta(c1, c2), Monotone(c1) && Monotone(c2) ? "yes" : "NO", s1.residual_rms);
         if (m == ResponseMethod::kDebevecMalik) {
           dm = c1;
           std::printf("   (scan stride %d)\n", s1.scan_stride);
+          // The same frames as float Images: the same curve, more memory to scan.
+          ResponseCurve cf;
+          const double tf = Time(3, [&] { cf = RecoverResponse(d.brackets, Samples(200, m)); });
+          if (MaxDelta(cf, c1) != 0) {
+            throw std::runtime_error(d.name + ": the curves of 8-bit and float frames differ");
+          }
+          Record(key + ".float_frames_ms", tf * 1e3, "ms");
+          Record(key + ".x_opencv_float_frames", t_cv_dm / tf, "ratio",
+                 "OpenCV CalibrateDebevec(70) (8-bit frames), rouen from float Images");
+          std::printf("%-28s %10.1f %10.2f   (same curve as 8-bit)\n", "  from float frames",
+                      tf * 1e3, t_cv_dm / tf);
         } else {
           std::printf("   (vs Debevec-Malik: %.3f; %s %d)\n", MaxDelta(c1, dm),
                       m == ResponseMethod::kRobertson ? "iterations" : "order",
@@ -298,7 +316,7 @@ void PrintTable(std::vector<DataSet>& sets) {
 void BM_Response(benchmark::State& state, int set, ResponseMethod m) {
   const DataSet& d = (*g_sets)[set];
   for (auto _ : state) {
-    benchmark::DoNotOptimize(RecoverResponse(d.brackets, Samples(200, m), nullptr));
+    benchmark::DoNotOptimize(RecoverResponse(d.code_brackets, Samples(200, m), nullptr));
   }
 }
 

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/code_image.h"
 #include "core/image.h"
 #include "core/response_curve.h"
 
@@ -63,19 +64,6 @@ void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<dou
                   const ResponseCurve& curve, const MergeOptions& options, Image* out,
                   MergeSummary* summary = nullptr, std::vector<uint8_t>* valid_mask = nullptr,
                   std::vector<uint8_t>* ghost_mask = nullptr);
-
-// A frame as the camera's 8-bit codes (digital numbers 0..255; interleaved channels, row 0 at
-// the top): all an 8-bit PNG or JPEG frame holds, in a quarter of the memory of the same
-// frame as a kDigital Image, so MergeHdrInto reads it several times faster.
-struct CodeImage {
-  int width = 0, height = 0, channels = 3;
-  std::vector<uint8_t> data;
-};
-
-// The codes of a kDigital image whose values are whole numbers 0..255. Throws rouen::Error for
-// another unit or for a value that is not such a number (16-bit frames have fractional values:
-// merge those as Image), naming the pixel.
-CodeImage ToCodes(const Image& frame);
 
 // MergeHdrInto over 8-bit frames: the same floats as over Image frames holding the same
 // numbers (one implementation: a code z reads as the level 16 z that the float z does).

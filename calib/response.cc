@@ -43,13 +43,49 @@ struct Sample {
   size_t pixel;  // y * width + x
 };
 
+size_t FrameCount(const Bracket& b) { return b.frames.empty() ? b.codes.size() : b.frames.size(); }
+
+// The checks of one bracket's frames (Image or CodeImage); returns the channel count.
+template <typename Frame>
+int CheckFrames(const std::vector<Frame>& frames, const std::string& where) {
+  const Frame& f0 = frames[0];
+  if (f0.width <= 0 || f0.height <= 0) throw Error(where + "frame 0 is empty");
+  if (f0.channels != 1 && f0.channels != 3) {
+    throw Error(where + "frames must have 1 or 3 channels, frame 0 has " +
+                std::to_string(f0.channels));
+  }
+  for (size_t j = 0; j < frames.size(); ++j) {
+    const Frame& f = frames[j];
+    const std::string fw = where + "frame " + std::to_string(j) + ": ";
+    if constexpr (std::is_same_v<Frame, Image>) {
+      if (f.units != PixelUnits::kDigital) {
+        throw Error(fw + "is not in digital numbers (kDigital)");
+      }
+    }
+    if (f.width != f0.width || f.height != f0.height) {
+      throw Error(fw + "size " + std::to_string(f.width) + "x" + std::to_string(f.height) +
+                  " differs from frame 0 (" + std::to_string(f0.width) + "x" +
+                  std::to_string(f0.height) + ")");
+    }
+    if (f.channels != f0.channels) throw Error(fw + "channel count differs from frame 0");
+    if (f.data.size() != static_cast<size_t>(f.width) * f.height * f.channels) {
+      throw Error(fw + "pixel buffer size does not match its dimensions");
+    }
+  }
+  return f0.channels;
+}
+
 // Per-bracket validation; returns the channel count.
 int CheckBracket(const Bracket& b, size_t index) {
   const std::string where = "response: bracket " + std::to_string(index) + ": ";
-  if (b.frames.empty()) throw Error(where + "has no frames");
-  if (b.frames.size() != b.exposures.size()) {
-    throw Error(where + std::to_string(b.frames.size()) + " frames but " +
-                std::to_string(b.exposures.size()) + " exposures");
+  if (!b.frames.empty() && !b.codes.empty()) {
+    throw Error(where + "holds both frames and codes; give one of them");
+  }
+  const size_t n = FrameCount(b);
+  if (n == 0) throw Error(where + "has no frames");
+  if (n != b.exposures.size()) {
+    throw Error(where + std::to_string(n) + " frames but " + std::to_string(b.exposures.size()) +
+                " exposures");
   }
   for (size_t j = 0; j < b.exposures.size(); ++j) {
     if (!std::isfinite(b.exposures[j]) || b.exposures[j] <= 0) {
@@ -62,31 +98,14 @@ int CheckBracket(const Bracket& b, size_t index) {
     throw Error(where + "needs at least two distinct exposures (all are " + std::to_string(*lo) +
                 ")");
   }
-  const Image& f0 = b.frames[0];
-  if (f0.width <= 0 || f0.height <= 0) throw Error(where + "frame 0 is empty");
-  if (f0.channels != 1 && f0.channels != 3) {
-    throw Error(where + "frames must have 1 or 3 channels, frame 0 has " +
-                std::to_string(f0.channels));
-  }
-  for (size_t j = 0; j < b.frames.size(); ++j) {
-    const Image& f = b.frames[j];
-    const std::string fw = where + "frame " + std::to_string(j) + ": ";
-    if (f.units != PixelUnits::kDigital) throw Error(fw + "is not in digital numbers (kDigital)");
-    if (f.width != f0.width || f.height != f0.height) {
-      throw Error(fw + "size " + std::to_string(f.width) + "x" + std::to_string(f.height) +
-                  " differs from frame 0 (" + std::to_string(f0.width) + "x" +
-                  std::to_string(f0.height) + ")");
-    }
-    if (f.channels != f0.channels) throw Error(fw + "channel count differs from frame 0");
-    if (f.data.size() != static_cast<size_t>(f.width) * f.height * f.channels) {
-      throw Error(fw + "pixel buffer size does not match its dimensions");
-    }
-  }
-  if (!b.mask.empty() && b.mask.size() != static_cast<size_t>(f0.width) * f0.height) {
+  const int nc = b.frames.empty() ? CheckFrames(b.codes, where) : CheckFrames(b.frames, where);
+  const size_t np = b.frames.empty() ? static_cast<size_t>(b.codes[0].width) * b.codes[0].height
+                                     : static_cast<size_t>(b.frames[0].width) * b.frames[0].height;
+  if (!b.mask.empty() && b.mask.size() != np) {
     throw Error(where + "mask has " + std::to_string(b.mask.size()) + " entries, expected " +
-                std::to_string(static_cast<size_t>(f0.width) * f0.height));
+                std::to_string(np));
   }
-  return f0.channels;
+  return nc;
 }
 
 // One frame's pass over a grid row of the sample scan (SelectSamples): per grid point, the
@@ -95,12 +114,12 @@ int CheckBracket(const Bracket& b, size_t index) {
 // frames whose channel mean lies in 2..253 DN. `step` is the distance between grid points in
 // floats (NC when every pixel is a grid point). Returns nonzero when a value is outside
 // 0..255 or not finite.
-template <int NC>
-unsigned ScanFrameRow(const float* d, size_t step, int gw, float tol, float inv, float* run,
-                      float* acc, uint32_t* informative, uint32_t* darkened) {
+template <int NC, typename T>
+unsigned ScanFrameRow(const T* d, size_t step, int gw, float tol, float inv, float* run, float* acc,
+                      uint32_t* informative, uint32_t* darkened) {
   unsigned bad = 0;
   for (int i = 0; i < gw; ++i) {
-    const float* p = d + static_cast<size_t>(i) * step;
+    const T* p = d + static_cast<size_t>(i) * step;
     float sum = 0;
     unsigned dark = 0;
     for (int c = 0; c < NC; ++c) {
@@ -119,8 +138,9 @@ unsigned ScanFrameRow(const float* d, size_t step, int gw, float tol, float inv,
   return bad;
 }
 
-using ScanFrameRowFn = unsigned (*)(const float*, size_t, int, float, float, float*, float*,
-                                    uint32_t*, uint32_t*);
+template <typename T>
+using ScanFrameRowFn = unsigned (*)(const T*, size_t, int, float, float, float*, float*, uint32_t*,
+                                    uint32_t*);
 
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 // 24 interleaved RGB values (a, b, c) as R, G and B vectors of points 0..7: each channel's
@@ -138,10 +158,17 @@ __attribute__((target("avx2"), always_inline)) inline void SplitRgb(__m256 a, __
 
 // One vector of values of the scan: or-s into *bad the lanes outside 0..255 or NaN, sets *dark
 // where a value lies more than tol below the running maximum m, and updates m.
-__attribute__((target("avx2"), always_inline)) inline __m256 ScanValues(const float* p, float* m,
+template <typename T>
+__attribute__((target("avx2"), always_inline)) inline __m256 ScanValues(const T* p, float* m,
                                                                         __m256 tol, __m256* bad,
                                                                         __m256* dark) {
-  const __m256 v = _mm256_loadu_ps(p);
+  __m256 v;
+  if constexpr (std::is_same_v<T, float>) {
+    v = _mm256_loadu_ps(p);
+  } else {
+    v = _mm256_cvtepi32_ps(
+        _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(p))));
+  }
   const __m256 ok = _mm256_and_ps(_mm256_cmp_ps(v, _mm256_setzero_ps(), _CMP_GE_OQ),
                                   _mm256_cmp_ps(v, _mm256_set1_ps(255.f), _CMP_LE_OQ));
   *bad = _mm256_or_ps(*bad, _mm256_xor_ps(ok, _mm256_castsi256_ps(_mm256_set1_epi32(-1))));
@@ -156,8 +183,8 @@ __attribute__((target("avx2"), always_inline)) inline __m256 ScanValues(const fl
 // at run time), the rest by ScanFrameRow: the same operations in the same order, so the same
 // floats. RGB values are compared in their interleaved order, then gathered into R, G and B
 // vectors (two blends and a permutation each) for the per-point sums.
-template <int NC>
-__attribute__((target("avx2"))) unsigned ScanFrameRowAvx2(const float* d, size_t step, int gw,
+template <int NC, typename T>
+__attribute__((target("avx2"))) unsigned ScanFrameRowAvx2(const T* d, size_t step, int gw,
                                                           float tol, float inv, float* run,
                                                           float* acc, uint32_t* informative,
                                                           uint32_t* darkened) {
@@ -169,7 +196,7 @@ __attribute__((target("avx2"))) unsigned ScanFrameRowAvx2(const float* d, size_t
   __m256 bad = _mm256_setzero_ps();
   const int vec = gw - gw % 8;
   for (int i = 0; i < vec; i += 8) {
-    const float* p = d + static_cast<size_t>(i) * NC;
+    const T* p = d + static_cast<size_t>(i) * NC;
     float* m = run + static_cast<size_t>(i) * NC;
     __m256 sum, dark;
     if constexpr (NC == 3) {
@@ -198,20 +225,20 @@ __attribute__((target("avx2"))) unsigned ScanFrameRowAvx2(const float* d, size_t
   }
   const bool any_bad = _mm256_movemask_ps(bad) != 0;
   _mm256_zeroupper();
-  return ScanFrameRow<NC>(d + static_cast<size_t>(vec) * NC, step, gw - vec, tol, inv,
-                          run + static_cast<size_t>(vec) * NC, acc + vec, informative + vec,
-                          darkened + vec) |
+  return ScanFrameRow<NC, T>(d + static_cast<size_t>(vec) * NC, step, gw - vec, tol, inv,
+                             run + static_cast<size_t>(vec) * NC, acc + vec, informative + vec,
+                             darkened + vec) |
          any_bad;
 }
 #endif
 
-template <int NC>
-ScanFrameRowFn ChooseScan(int stride, bool simd) {
+template <int NC, typename T>
+ScanFrameRowFn<T> ChooseScan(int stride, bool simd) {
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-  if (simd && stride == 1 && __builtin_cpu_supports("avx2")) return ScanFrameRowAvx2<NC>;
+  if (simd && stride == 1 && __builtin_cpu_supports("avx2")) return ScanFrameRowAvx2<NC, T>;
 #endif
   (void)stride, (void)simd;
-  return ScanFrameRow<NC>;
+  return ScanFrameRow<NC, T>;
 }
 
 // Stratified sampling over brightness (mean over frames and channels, monotone in radiance),
@@ -221,11 +248,14 @@ ScanFrameRowFn ChooseScan(int stride, bool simd) {
 // has it and o.use_simd allows), and keeps per grid point only its stratum; the random draw
 // from each stratum is made on per-row counts, so only the drawn points (and their
 // neighbours, for the gradient) are read again.
-std::vector<size_t> SelectSamples(const Bracket& b, size_t index, const ResponseOptions& o,
+// `frames` holds the bracket's pixel data (w x h x nc values each) as T: float for Image
+// frames, uint8_t for CodeImage ones.
+template <typename T>
+std::vector<size_t> SelectSamples(const Bracket& b, const std::vector<const T*>& frames, int w,
+                                  int h, int nc, size_t index, const ResponseOptions& o,
                                   int* stride) {
-  const int w = b.frames[0].width, h = b.frames[0].height, nc = b.frames[0].channels;
   const size_t np = static_cast<size_t>(w) * h;
-  std::vector<int> order(b.frames.size());
+  std::vector<int> order(frames.size());
   std::iota(order.begin(), order.end(), 0);
   std::stable_sort(order.begin(), order.end(),
                    [&](int i, int j) { return b.exposures[i] < b.exposures[j]; });
@@ -244,9 +274,9 @@ std::vector<size_t> SelectSamples(const Bracket& b, size_t index, const Response
   std::vector<uint32_t> row_count(static_cast<size_t>(gh) * kBins, 0);
   std::atomic<int> bad_row{-1};
   const float tol = static_cast<float>(o.monotone_tolerance);
-  const float inv = 1.f / static_cast<float>(b.frames.size() * nc);
-  std::vector<const float*> data_by_exposure;
-  for (int j : order) data_by_exposure.push_back(b.frames[j].data.data());
+  const float inv = 1.f / static_cast<float>(frames.size() * nc);
+  std::vector<const T*> data_by_exposure;
+  for (int j : order) data_by_exposure.push_back(frames[j]);
   const int nf = static_cast<int>(order.size());
   // One grid row: the running maximum per channel, the count of informative frames and
   // whether the point darkened are kept for the row, and the frames are added in order of
@@ -255,7 +285,8 @@ std::vector<size_t> SelectSamples(const Bracket& b, size_t index, const Response
     std::vector<float> running, key;
     std::vector<uint32_t> informative, darkened;
   };
-  const ScanFrameRowFn scan = nc == 3 ? ChooseScan<3>(s, o.use_simd) : ChooseScan<1>(s, o.use_simd);
+  const ScanFrameRowFn<T> scan =
+      nc == 3 ? ChooseScan<3, T>(s, o.use_simd) : ChooseScan<1, T>(s, o.use_simd);
   auto scan_row = [&](int k, RowState* st) {
     float* run = st->running.data();
     uint32_t* informative = st->informative.data();
@@ -1022,15 +1053,28 @@ ResponseCurve RecoverResponse(const std::vector<Bracket>& brackets, const Respon
   int stride = 1;
   for (size_t i = 0; i < brackets.size(); ++i) {
     int s = 1;
-    for (size_t p : SelectSamples(brackets[i], i, options, &s)) {
+    const Bracket& b = brackets[i];
+    std::vector<size_t> chosen;
+    if (b.frames.empty()) {
+      std::vector<const uint8_t*> data;
+      for (const CodeImage& f : b.codes) data.push_back(f.data.data());
+      chosen =
+          SelectSamples(b, data, b.codes[0].width, b.codes[0].height, channels, i, options, &s);
+    } else {
+      std::vector<const float*> data;
+      for (const Image& f : b.frames) data.push_back(f.data.data());
+      chosen =
+          SelectSamples(b, data, b.frames[0].width, b.frames[0].height, channels, i, options, &s);
+    }
+    for (size_t p : chosen) {
       samples.push_back({static_cast<int>(i), p});
     }
     stride = std::max(stride, s);
     if (i + 1 < brackets.size()) {
-      first_frame[i + 1] = first_frame[i] + static_cast<int>(brackets[i].frames.size());
+      first_frame[i + 1] = first_frame[i] + static_cast<int>(FrameCount(brackets[i]));
     }
   }
-  if (first_frame.back() + brackets.back().frames.size() > 32767) {
+  if (first_frame.back() + FrameCount(brackets.back()) > 32767) {
     throw Error("response: more than 32767 frames in all brackets");
   }
   if (samples.size() < static_cast<size_t>(kMinSamples)) {
@@ -1043,8 +1087,9 @@ ResponseCurve RecoverResponse(const std::vector<Bracket>& brackets, const Respon
   for (int c = 0; c < channels; ++c) {
     for (size_t s = 0; s < samples.size(); ++s) {
       const Bracket& b = brackets[samples[s].bracket];
-      for (size_t j = 0; j < b.frames.size(); ++j) {
-        const float v = b.frames[j].data[samples[s].pixel * channels + c];
+      for (size_t j = 0; j < FrameCount(b); ++j) {
+        const size_t at = samples[s].pixel * channels + c;
+        const float v = b.frames.empty() ? b.codes[j].data[at] : b.frames[j].data[at];
         const int z = std::clamp(static_cast<int>(std::lround(v)), 0, 255);
         obs[c].push_back({static_cast<int>(s), static_cast<uint8_t>(z),
                           static_cast<int16_t>(first_frame[samples[s].bracket] + j),

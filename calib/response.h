@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/code_image.h"
 #include "core/image.h"
 #include "core/response_curve.h"
 
@@ -11,7 +12,10 @@ namespace rouen {
 
 // One static scene photographed at several exposures by the same camera.
 struct Bracket {
-  std::vector<Image> frames;      // kDigital 0..255, all the same size and channel count (1 or 3)
+  std::vector<Image> frames;  // kDigital 0..255, all the same size and channel count (1 or 3)
+  // Or, instead of `frames` (then empty), the same frames as 8-bit codes: a quarter of the
+  // memory, scanned for samples several times faster; the same curve.
+  std::vector<CodeImage> codes;
   std::vector<double> exposures;  // effective exposure factor = seconds x gain x 10^(-nd)
   // Optional, width x height: 0 marks pixels never to sample (padding, moving objects).
   std::vector<uint8_t> mask;
