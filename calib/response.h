@@ -67,7 +67,9 @@ struct ResponseOptions {
   // Brackets with more pixels than this are scanned for samples on a regular grid with
   // stride ceil(sqrt(pixels / scan_pixels)) (the gradient taken between grid neighbours).
   // Opt-in for now: with 1.5e6 (stride 2 on St Louis' 6 MP frames) the St Louis curve moved
-  // by 0.41 ln between 200 and 400 samples, against 0.105 with the full scan.
+  // by 0.41 ln between 200 and 400 samples, against 0.105 with the full scan -- for seed 1;
+  // over seeds 1..12 the full scan's figure ranges 0.10..0.36 (mean 0.24), so one seed does
+  // not separate the two.
   int64_t scan_pixels = 40000000;
   // Smoothness weight: ratio of the total squared weight of the 254 second-difference
   // equations to that of the data equations, so the bias does not change with the sample
