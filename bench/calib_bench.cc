@@ -43,9 +43,11 @@ struct DataSet {
   // One bracket of rouen frames (RGB, kDigital), held in the vector RecoverResponse takes so
   // the timed calls do not copy it (St Louis: 285 MB of frames).
   std::vector<Bracket> brackets;
-  std::vector<cv::Mat> cv;      // the same pixels, 8-bit BGR
-  std::vector<float> cv_times;  // seconds
-  double input_mp = 0;          // megapixels over all frames
+  std::vector<CodeImage> codes;        // the same pixels as rouen 8-bit frames (RGB)
+  std::vector<Bracket> code_brackets;  // one bracket of `codes`
+  std::vector<cv::Mat> cv;             // the same pixels, 8-bit BGR
+  std::vector<float> cv_times;         // seconds
+  double input_mp = 0;                 // megapixels over all frames
 };
 
 // The bracket in `dir` (calib/test_util.h's loader, cropped by the given margins) and the
@@ -74,10 +76,14 @@ DataSet Load(const std::string& name, const fs::path& dir, int top, int bottom, 
         }
       }
     }
+    d.codes.push_back(ToCodes(f));
     d.input_mp += f.width * static_cast<double>(f.height) * 1e-6;
     d.cv.push_back(mat);
     d.cv_times.push_back(static_cast<float>(d.brackets[0].exposures[j]));
   }
+  d.code_brackets.resize(1);
+  d.code_brackets[0].codes = d.codes;
+  d.code_brackets[0].exposures = d.brackets[0].exposures;
   return d;
 }
 
@@ -167,6 +173,12 @@ std::vector<const Image*> Pointers(const Bracket& b) {
   return p;
 }
 
+std::vector<const CodeImage*> Pointers(const std::vector<CodeImage>& frames) {
+  std::vector<const CodeImage*> p;
+  for (const CodeImage& f : frames) p.push_back(&f);
+  return p;
+}
+
 ResponseOptions Samples(int samples, ResponseMethod method = ResponseMethod::kDebevecMalik) {
   ResponseOptions o;
   o.method = method;
@@ -206,17 +218,31 @@ void PrintTable(std::vector<DataSet>& sets) {
       ResponseSummary s1;
       ResponseCurve c1, c2;
       try {
-        const double t = Time(3, [&] { c1 = RecoverResponse(d.brackets, Samples(200, m), &s1); });
-        c2 = RecoverResponse(d.brackets, Samples(400, m), nullptr);
+        // From the same 8-bit frames as OpenCV.
+        const double t =
+            Time(3, [&] { c1 = RecoverResponse(d.code_brackets, Samples(200, m), &s1); });
+        c2 = RecoverResponse(d.code_brackets, Samples(400, m), nullptr);
         const std::string name = std::string("rouen ") + ResponseMethodName(m);
         const std::string key = "response." + d.key + "." + Lower(ResponseMethodName(m));
         Record(key + ".ms", t * 1e3, "ms");
-        Record(key + ".x_opencv", t_cv_dm / t, "ratio", "OpenCV CalibrateDebevec(70), same frames");
+        Record(key + ".x_opencv", t_cv_dm / t, "ratio",
+               "OpenCV CalibrateDebevec(70), same 8-bit frames");
         std::printf("%-28s %10.1f %10.2f %12.3f %9s %10.3f", name.c_str(), t * 1e3, t_cv_dm / t,
                     MaxDelta(c1, c2), Monotone(c1) && Monotone(c2) ? "yes" : "NO", s1.residual_rms);
         if (m == ResponseMethod::kDebevecMalik) {
           dm = c1;
           std::printf("   (scan stride %d)\n", s1.scan_stride);
+          // The same frames as float Images: the same curve, more memory to scan.
+          ResponseCurve cf;
+          const double tf = Time(3, [&] { cf = RecoverResponse(d.brackets, Samples(200, m)); });
+          if (MaxDelta(cf, c1) != 0) {
+            throw std::runtime_error(d.name + ": the curves of 8-bit and float frames differ");
+          }
+          Record(key + ".float_frames_ms", tf * 1e3, "ms");
+          Record(key + ".x_opencv_float_frames", t_cv_dm / tf, "ratio",
+                 "OpenCV CalibrateDebevec(70) (8-bit frames), rouen from float Images");
+          std::printf("%-28s %10.1f %10.2f   (same curve as 8-bit)\n", "  from float frames",
+                      tf * 1e3, t_cv_dm / tf);
         } else {
           std::printf("   (vs Debevec-Malik: %.3f; %s %d)\n", MaxDelta(c1, dm),
                       m == ResponseMethod::kRobertson ? "iterations" : "order",
@@ -232,41 +258,54 @@ void PrintTable(std::vector<DataSet>& sets) {
         "70->140 for OpenCV; resid = common fit residual, ln; vs Debevec-Malik = max |delta "
         "ln g| over z=20..235)\n");
 
-    // Merge with the same (rouen DM) curve.
+    // Merge with the same (rouen DM) curve: rouen from the same 8-bit frames as OpenCV
+    // (CodeImage), and from the frames as float Images (what 16-bit files need).
     const cv::Mat resp = ToCv(dm);
     auto merge = cv::createMergeDebevec();
     cv::Mat cv_hdr;
     Image hdr;
     const auto ptrs = Pointers(d.brackets[0]);
+    const auto codes = Pointers(d.codes);
+    const std::vector<double>& x = d.brackets[0].exposures;
     const double t_cv = Time(5, [&] { merge->process(d.cv, cv_hdr, d.cv_times, resp); });
-    const double t_new =
-        Time(5, [&] { hdr = MergeHdr(ptrs, d.brackets[0].exposures, dm, MergeOptions{}); });
+    const double t_new = Time(5, [&] {
+      hdr = Image();
+      MergeHdrInto(codes, x, dm, MergeOptions{}, &hdr);
+    });
     Image reused;
-    const double t_r =
-        Time(5, [&] { MergeHdrInto(ptrs, d.brackets[0].exposures, dm, MergeOptions{}, &reused); });
+    const double t_r = Time(5, [&] { MergeHdrInto(codes, x, dm, MergeOptions{}, &reused); });
+    Image from_float;
+    const double t_f = Time(5, [&] { MergeHdrInto(ptrs, x, dm, MergeOptions{}, &from_float); });
+    if (from_float.data != reused.data) {
+      throw std::runtime_error(d.name + ": the merge of 8-bit and float frames differ");
+    }
     MergeOptions ghost;
     ghost.ghost_removal = true;
     MergeSummary gs;
-    const double t_g =
-        Time(3, [&] { MergeHdrInto(ptrs, d.brackets[0].exposures, dm, ghost, &reused, &gs); });
+    const double t_g = Time(3, [&] { MergeHdrInto(codes, x, dm, ghost, &reused, &gs); });
     int64_t used = 0;
     const double corr = LogLumCorrelation(hdr, cv_hdr, &used);
     std::printf("%-28s %10s %12s %10s\n", "HDR merge (same curve)", "time ms", "input MP/s",
                 "x OpenCV");
     std::printf("%-28s %10.1f %12.1f %10s\n", "OpenCV MergeDebevec", t_cv * 1e3, d.input_mp / t_cv,
                 "1.00");
-    std::printf("%-28s %10.1f %12.1f %10.2f\n", "rouen MergeHdr (new image)", t_new * 1e3,
+    std::printf("%-28s %10.1f %12.1f %10.2f\n", "rouen 8-bit (new image)", t_new * 1e3,
                 d.input_mp / t_new, t_cv / t_new);
-    std::printf("%-28s %10.1f %12.1f %10.2f\n", "rouen MergeHdrInto (reused)", t_r * 1e3,
+    std::printf("%-28s %10.1f %12.1f %10.2f\n", "rouen 8-bit (reused image)", t_r * 1e3,
                 d.input_mp / t_r, t_cv / t_r);
+    std::printf("%-28s %10.1f %12.1f %10.2f   (same floats as 8-bit)\n",
+                "rouen float frames (reused)", t_f * 1e3, d.input_mp / t_f, t_cv / t_f);
     std::printf("%-28s %10.1f %12.1f %10.2f   (%lld ghost pixels)\n", "rouen + ghost removal",
                 t_g * 1e3, d.input_mp / t_g, t_cv / t_g, static_cast<long long>(gs.ghost_pixels));
     Record("merge." + d.key + ".opencv_ms", t_cv * 1e3, "ms");
     Record("merge." + d.key + ".ms", t_r * 1e3, "ms");
     Record("merge." + d.key + ".x_opencv", t_cv / t_r, "ratio",
-           "OpenCV MergeDebevec, same frames and curve (rouen into a reused image)");
+           "OpenCV MergeDebevec, same 8-bit frames and curve (rouen into a reused image)");
     Record("merge." + d.key + ".x_opencv_new_image", t_cv / t_new, "ratio",
-           "OpenCV MergeDebevec, same frames and curve (rouen allocating its image)");
+           "OpenCV MergeDebevec, same 8-bit frames and curve (rouen allocating its image)");
+    Record("merge." + d.key + ".float_frames_ms", t_f * 1e3, "ms");
+    Record("merge." + d.key + ".x_opencv_float_frames", t_cv / t_f, "ratio",
+           "OpenCV MergeDebevec (8-bit frames), rouen from the same frames as float Images");
     Record("merge." + d.key + ".log_luminance_correlation", corr, "");
     std::printf("  log-luminance correlation rouen vs OpenCV: %.4f over %lld pixels\n", corr,
                 static_cast<long long>(used));
@@ -277,7 +316,7 @@ void PrintTable(std::vector<DataSet>& sets) {
 void BM_Response(benchmark::State& state, int set, ResponseMethod m) {
   const DataSet& d = (*g_sets)[set];
   for (auto _ : state) {
-    benchmark::DoNotOptimize(RecoverResponse(d.brackets, Samples(200, m), nullptr));
+    benchmark::DoNotOptimize(RecoverResponse(d.code_brackets, Samples(200, m), nullptr));
   }
 }
 
@@ -298,10 +337,10 @@ void BM_CvCalibrateRobertson(benchmark::State& state, int set) {
 void BM_MergeHdr(benchmark::State& state, int set) {
   const DataSet& d = (*g_sets)[set];
   const ResponseCurve curve = RecoverResponse(d.brackets, ResponseOptions{}, nullptr);
-  const auto ptrs = Pointers(d.brackets[0]);
+  const auto codes = Pointers(d.codes);
   Image out;
   for (auto _ : state) {
-    MergeHdrInto(ptrs, d.brackets[0].exposures, curve, MergeOptions{}, &out);
+    MergeHdrInto(codes, d.brackets[0].exposures, curve, MergeOptions{}, &out);
     benchmark::DoNotOptimize(out.data.data());
   }
   state.counters["input_MP/s"] =

@@ -5,10 +5,12 @@
 
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <string>
+#include <type_traits>
 
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 #include <immintrin.h>
@@ -61,6 +63,9 @@ struct Levels {
     float g;  // g_c(k), ln exposure
   };
   std::vector<Entry> e;
+  // For 8-bit codes: per frame j, g_c(z) - ln X_j at j * 256 nc + z nc + c (the float
+  // g - ln X that the per-level path computes; the AVX2 kernel gathers it).
+  std::vector<float> code_g;
   int nc = 3;
   float dark = 0, sat = 255;  // MergeOptions' levels, DN
 
@@ -76,6 +81,7 @@ struct Levels {
   const Entry& At(unsigned k, int c) const { return e[static_cast<size_t>(k) * nc + c]; }
   float Weight(unsigned k) const { return e[static_cast<size_t>(k) * nc].w; }
   float G(unsigned k, int c) const { return At(k, c).g; }
+  const float* CodeTable(int j) const { return code_g.data() + static_cast<size_t>(j) * 256 * nc; }
 };
 
 // Per-sample level: v = z * 16 + 0.5 truncated. The sample is valid when v lies in
@@ -88,11 +94,13 @@ inline unsigned SampleLevel(float z, unsigned* bad) {
   *bad |= !ok;
   return ok ? static_cast<unsigned>(static_cast<int>(v)) : 0u;
 }
+// An 8-bit code is always valid, and its level is what the float path gives the same number.
+inline unsigned SampleLevel(uint8_t z, unsigned*) { return static_cast<unsigned>(z) * kSteps; }
 
 // Adds one frame's row to the per-value sums num += w (g - ln X), den += w. Returns true when
 // some value was outside 0..255 (see SampleLevel) or not finite.
-template <int NC>
-bool AccumulateRow(const float* s, const Levels& lv, float log_x, size_t row_len, float* num,
+template <int NC, typename T>
+bool AccumulateRow(const T* s, const Levels& lv, float log_x, size_t row_len, float* num,
                    float* den) {
   unsigned bad = 0;
   for (size_t i = 0; i < row_len; i += NC) {
@@ -107,9 +115,9 @@ bool AccumulateRow(const float* s, const Levels& lv, float log_x, size_t row_len
 
 // Adds the rows of frames 0..nf-1 (s[j], ln X_j = log_x[j]) to num/den, frame by frame in
 // order; returns the last frame holding bad values, or -1. Portable kernel.
-template <int NC>
-int AccumulateRows(const float* const* s, const float* log_x, int nf, const Levels& lv,
-                   size_t row_len, float* num, float* den) {
+template <int NC, typename T>
+int AccumulateRows(const T* const* s, const float* log_x, int nf, const Levels& lv, size_t row_len,
+                   float* num, float* den) {
   int bad = -1;
   for (int j = 0; j < nf; ++j) {
     if (AccumulateRow<NC>(s[j], lv, log_x[j], row_len, num, den)) bad = j;
@@ -126,10 +134,10 @@ int AccumulateRows(const float* const* s, const float* log_x, int nf, const Leve
 // the results are the same floats. Whole groups of 24 values (8 pixels of 3 channels, or 24 of
 // 1) go through the vector loop, the rest through the portable kernel. The weight is computed
 // as Levels::HatWeight does, only g is gathered.
-template <int NC, int F>
-__attribute__((target("avx2"))) int AccumulatePassAvx2(const float* const* s, const float* log_x,
-                                                       const Levels& lv, size_t row_len, float* num,
-                                                       float* den) {
+template <int NC, int F, typename T>
+__attribute__((target("avx2"))) int AccumulatePassAvx2(const T* const* s, const float* log_x,
+                                                       int j0, const Levels& lv, size_t row_len,
+                                                       float* num, float* den) {
   const __m256 steps = _mm256_set1_ps(kSteps), half = _mm256_set1_ps(0.5f);
   const __m256 inv_steps = _mm256_set1_ps(1.f / kSteps);
   const __m256 dark = _mm256_set1_ps(lv.dark), sat = _mm256_set1_ps(lv.sat);
@@ -137,6 +145,10 @@ __attribute__((target("avx2"))) int AccumulatePassAvx2(const float* const* s, co
   const __m256i last = _mm256_set1_epi32(kLast);
   __m256 lx[F];
   for (int f = 0; f < F; ++f) lx[f] = _mm256_set1_ps(log_x[f]);
+  const float* frame_g[F];
+  for (int f = 0; f < F; ++f) {
+    frame_g[f] = std::is_same_v<T, float> ? nullptr : lv.CodeTable(j0 + f);
+  }
   // Channel of each lane in the three vectors of a 24-value group (phases 0, 2, 1 of 3).
   const __m256i ch[3] = {
       NC == 3 ? _mm256_setr_epi32(0, 1, 2, 0, 1, 2, 0, 1) : _mm256_setzero_si256(),
@@ -152,19 +164,35 @@ __attribute__((target("avx2"))) int AccumulatePassAvx2(const float* const* s, co
       const size_t o = i + 8 * v;
       __m256 n = _mm256_loadu_ps(num + o), d = _mm256_loadu_ps(den + o);
       for (int f = 0; f < F; ++f) {
-        const __m256 z = _mm256_loadu_ps(s[f] + o);
-        const __m256i raw = _mm256_cvttps_epi32(_mm256_add_ps(_mm256_mul_ps(z, steps), half));
-        top[f] = _mm256_max_epu32(top[f], raw);
-        const __m256i k = _mm256_min_epu32(raw, last);
-        const __m256i idx =
-            NC == 3 ? _mm256_add_epi32(_mm256_add_epi32(_mm256_slli_epi32(k, 1), k), ch[v]) : k;
-        // g from the {w, g} entries: 8-byte stride, 4 bytes in.
-        const __m256 g = _mm256_i32gather_ps(&lv.e[0].g, idx, 8);
-        const __m256 zk = _mm256_mul_ps(_mm256_cvtepi32_ps(k), inv_steps);
-        const __m256 w =
-            _mm256_max_ps(_mm256_min_ps(_mm256_sub_ps(zk, dark), _mm256_sub_ps(sat, zk)), zero);
-        n = _mm256_add_ps(n, _mm256_mul_ps(w, _mm256_sub_ps(g, lx[f])));
-        d = _mm256_add_ps(d, w);
+        if constexpr (!std::is_same_v<T, float>) {
+          // 8-bit codes (always valid): z is the level's DN exactly, and the frame's own
+          // table holds g_c(z) - ln X_j, the float the float path computes.
+          const __m256i code =
+              _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(s[f] + o)));
+          const __m256i idx =
+              NC == 3 ? _mm256_add_epi32(_mm256_add_epi32(_mm256_slli_epi32(code, 1), code), ch[v])
+                      : code;
+          const __m256 gx = _mm256_i32gather_ps(frame_g[f], idx, 4);
+          const __m256 z = _mm256_cvtepi32_ps(code);
+          const __m256 w =
+              _mm256_max_ps(_mm256_min_ps(_mm256_sub_ps(z, dark), _mm256_sub_ps(sat, z)), zero);
+          n = _mm256_add_ps(n, _mm256_mul_ps(w, gx));
+          d = _mm256_add_ps(d, w);
+        } else {
+          const __m256 zf = _mm256_loadu_ps(s[f] + o);
+          const __m256i raw = _mm256_cvttps_epi32(_mm256_add_ps(_mm256_mul_ps(zf, steps), half));
+          top[f] = _mm256_max_epu32(top[f], raw);
+          const __m256i k = _mm256_min_epu32(raw, last);
+          const __m256i idx =
+              NC == 3 ? _mm256_add_epi32(_mm256_add_epi32(_mm256_slli_epi32(k, 1), k), ch[v]) : k;
+          // g from the {w, g} entries: 8-byte stride, 4 bytes in.
+          const __m256 g = _mm256_i32gather_ps(&lv.e[0].g, idx, 8);
+          const __m256 zk = _mm256_mul_ps(_mm256_cvtepi32_ps(k), inv_steps);
+          const __m256 w =
+              _mm256_max_ps(_mm256_min_ps(_mm256_sub_ps(zk, dark), _mm256_sub_ps(sat, zk)), zero);
+          n = _mm256_add_ps(n, _mm256_mul_ps(w, _mm256_sub_ps(g, lx[f])));
+          d = _mm256_add_ps(d, w);
+        }
       }
       _mm256_storeu_ps(num + o, n);
       _mm256_storeu_ps(den + o, d);
@@ -192,41 +220,127 @@ __attribute__((target("avx2"))) int AccumulatePassAvx2(const float* const* s, co
 // All frames, kAvx2Frames per pass and the remainder one by one; the result as
 // AccumulateRows.
 constexpr int kAvx2Frames = 4;
-template <int NC>
-__attribute__((target("avx2"))) int AccumulateRowsAvx2(const float* const* s, const float* log_x,
+template <int NC, typename T>
+__attribute__((target("avx2"))) int AccumulateRowsAvx2(const T* const* s, const float* log_x,
                                                        int nf, const Levels& lv, size_t row_len,
                                                        float* num, float* den) {
   int bad = -1;
   int j = 0;
   for (; j + kAvx2Frames <= nf; j += kAvx2Frames) {
-    const int b = AccumulatePassAvx2<NC, kAvx2Frames>(s + j, log_x + j, lv, row_len, num, den);
+    const int b =
+        AccumulatePassAvx2<NC, kAvx2Frames, T>(s + j, log_x + j, j, lv, row_len, num, den);
     if (b >= 0) bad = j + b;
   }
   for (; j < nf; ++j) {
-    if (AccumulatePassAvx2<NC, 1>(s + j, log_x + j, lv, row_len, num, den) >= 0) bad = j;
+    if (AccumulatePassAvx2<NC, 1, T>(s + j, log_x + j, j, lv, row_len, num, den) >= 0) bad = j;
   }
   return bad;
 }
 #endif
 
-using RowsKernel = int (*)(const float* const*, const float*, int, const Levels&, size_t, float*,
+template <typename T>
+using RowsKernel = int (*)(const T* const*, const float*, int, const Levels&, size_t, float*,
                            float*);
 
 // The AVX2 kernel where the CPU has it and `simd` allows it, else the portable one.
-RowsKernel ChooseKernel(int nc, bool simd) {
+template <typename T>
+RowsKernel<T> ChooseKernel(int nc, bool simd) {
 #ifdef ROUEN_HDR_AVX2
   if (simd && __builtin_cpu_supports("avx2")) {
-    return nc == 3 ? AccumulateRowsAvx2<3> : AccumulateRowsAvx2<1>;
+    return nc == 3 ? AccumulateRowsAvx2<3, T> : AccumulateRowsAvx2<1, T>;
   }
 #endif
   (void)simd;
-  return nc == 3 ? AccumulateRows<3> : AccumulateRows<1>;
+  return nc == 3 ? AccumulateRows<3, T> : AccumulateRows<1, T>;
+}
+
+// e^x for the merge's |ln L| <= kMaxLog (88), in float operations that a vector unit does
+// alike (ExpRowAvx2 gives the same floats): x = n ln 2 + r with |r| <= ln 2 / 2 (ln 2 in two
+// parts, Cody & Waite), e^r by Cephes' degree-7 polynomial for expf (relative error below
+// 2.4e-7, 2 float ulp, over that range), times 2^n applied as 2^(n/2) 2^(n - n/2) so both
+// factors stay normal floats for n in -127..127 (e^-88 is a denormal).
+constexpr float kLog2e = 1.44269504088896341f;
+constexpr float kLn2Hi = 0.693359375f, kLn2Lo = -2.12194440e-4f;
+constexpr float kExpP[6] = {1.9875691500e-4f, 1.3981999507e-3f, 8.3334519073e-3f,
+                            4.1665795894e-2f, 1.6666665459e-1f, 5.0000001201e-1f};
+
+inline float ExpPoly(float x) {
+  const float n = std::floor(x * kLog2e + 0.5f);
+  float r = x - n * kLn2Hi;
+  r = r - n * kLn2Lo;
+  const float r2 = r * r;
+  float p = kExpP[0];
+  for (int k = 1; k < 6; ++k) p = p * r + kExpP[k];
+  p = p * r2 + r;
+  p = p + 1.f;
+  const int ni = static_cast<int>(n);
+  const int a = ni >> 1, b = ni - a;
+  const float sa = std::bit_cast<float>((a + 127) << 23);
+  const float sb = std::bit_cast<float>((b + 127) << 23);
+  return p * sa * sb;
+}
+
+// Replaces each ln L of a row by L = e^ln L; returns true when some |ln L| exceeded kMaxLog
+// (or was NaN), whose entries are then set to 1.
+bool ExpRow(float* l, size_t n) {
+  bool over = false;
+  for (size_t i = 0; i < n; ++i) {
+    const bool ok = std::abs(l[i]) <= kMaxLog;
+    over |= !ok;
+    l[i] = ExpPoly(ok ? l[i] : 0.f);
+  }
+  return over;
+}
+
+using ExpRowFn = bool (*)(float*, size_t);
+
+#ifdef ROUEN_HDR_AVX2
+// ExpRow 8 values at a time with AVX2, the tail by ExpRow: the same operations.
+__attribute__((target("avx2"))) bool ExpRowAvx2(float* l, size_t n) {
+  const __m256 max_log = _mm256_set1_ps(static_cast<float>(kMaxLog));
+  const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
+  __m256 over = _mm256_setzero_ps();
+  const size_t vec = n - n % 8;
+  for (size_t i = 0; i < vec; i += 8) {
+    __m256 x = _mm256_loadu_ps(l + i);
+    const __m256 ok = _mm256_cmp_ps(_mm256_and_ps(x, abs_mask), max_log, _CMP_LE_OQ);
+    over = _mm256_or_ps(over, _mm256_xor_ps(ok, _mm256_castsi256_ps(_mm256_set1_epi32(-1))));
+    x = _mm256_and_ps(x, ok);
+    const __m256 nf = _mm256_floor_ps(
+        _mm256_add_ps(_mm256_mul_ps(x, _mm256_set1_ps(kLog2e)), _mm256_set1_ps(0.5f)));
+    __m256 r = _mm256_sub_ps(x, _mm256_mul_ps(nf, _mm256_set1_ps(kLn2Hi)));
+    r = _mm256_sub_ps(r, _mm256_mul_ps(nf, _mm256_set1_ps(kLn2Lo)));
+    const __m256 r2 = _mm256_mul_ps(r, r);
+    __m256 p = _mm256_set1_ps(kExpP[0]);
+    for (int k = 1; k < 6; ++k) p = _mm256_add_ps(_mm256_mul_ps(p, r), _mm256_set1_ps(kExpP[k]));
+    p = _mm256_add_ps(_mm256_mul_ps(p, r2), r);
+    p = _mm256_add_ps(p, _mm256_set1_ps(1.f));
+    const __m256i ni = _mm256_cvttps_epi32(nf);
+    const __m256i a = _mm256_srai_epi32(ni, 1), b = _mm256_sub_epi32(ni, a);
+    const __m256i bias = _mm256_set1_epi32(127);
+    const __m256 sa = _mm256_castsi256_ps(_mm256_slli_epi32(_mm256_add_epi32(a, bias), 23));
+    const __m256 sb = _mm256_castsi256_ps(_mm256_slli_epi32(_mm256_add_epi32(b, bias), 23));
+    _mm256_storeu_ps(l + i, _mm256_mul_ps(_mm256_mul_ps(p, sa), sb));
+  }
+  const bool any = _mm256_movemask_ps(over) != 0;
+  _mm256_zeroupper();
+  return ExpRow(l + vec, n - vec) || any;
+}
+#endif
+
+ExpRowFn ChooseExpRow(bool simd) {
+#ifdef ROUEN_HDR_AVX2
+  if (simd && __builtin_cpu_supports("avx2")) return ExpRowAvx2;
+#endif
+  (void)simd;
+  return ExpRow;
 }
 
 // Ghost removal over one row (see MergeOptions::ghost_removal): subtracts the contributions
 // of frames that disagree with the pixel's reference frame from num/den. Returns the number
 // of pixels where some frame was left out.
-int64_t RemoveGhosts(const std::vector<const float*>& src, const std::vector<int>& by_median,
+template <typename T>
+int64_t RemoveGhosts(const std::vector<const T*>& src, const std::vector<int>& by_median,
                      const Levels& lv, const std::vector<float>& log_x,
                      const std::vector<float>& slope, int w, const MergeOptions& o, float* num,
                      float* den, uint8_t* ghost_row) {
@@ -310,43 +424,16 @@ Image MergeHdr(const std::vector<const Image*>& frames, const std::vector<double
   return out;
 }
 
-void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<double>& exposures,
-                  const ResponseCurve& curve, const MergeOptions& options, Image* out_image,
-                  MergeSummary* summary, std::vector<uint8_t>* valid_mask,
-                  std::vector<uint8_t>* ghost_mask) {
-  const auto start = std::chrono::steady_clock::now();
-  options.Validate();
-  CheckCurve(curve);
-  if (frames.empty()) throw Error("hdr merge: no frames given");
-  if (frames.size() != exposures.size()) {
-    throw Error("hdr merge: " + std::to_string(frames.size()) + " frames but " +
-                std::to_string(exposures.size()) + " exposures");
-  }
-  for (size_t j = 0; j < frames.size(); ++j) {
-    if (frames[j] == nullptr) throw Error("hdr merge: frame " + std::to_string(j) + " is null");
-  }
-  const Image& f0 = *frames[0];
-  const int w = f0.width, h = f0.height, nc = f0.channels;
-  if (w <= 0 || h <= 0) throw Error("hdr merge: frame 0 is empty");
-  if (nc != 1 && nc != 3) {
-    throw Error("hdr merge: frames must have 1 or 3 channels, frame 0 has " + std::to_string(nc));
-  }
-  for (size_t j = 0; j < frames.size(); ++j) {
-    const Image& f = *frames[j];
-    const std::string fw = "hdr merge: frame " + std::to_string(j) + ": ";
-    if (f.units != PixelUnits::kDigital) throw Error(fw + "is not in digital numbers (kDigital)");
-    if (f.width != w || f.height != h || f.channels != nc) {
-      throw Error(fw + std::to_string(f.width) + "x" + std::to_string(f.height) + "x" +
-                  std::to_string(f.channels) + " differs from frame 0 (" + std::to_string(w) + "x" +
-                  std::to_string(h) + "x" + std::to_string(nc) + ")");
-    }
-    if (f.data.size() != static_cast<size_t>(w) * h * nc) {
-      throw Error(fw + "pixel buffer size does not match its dimensions");
-    }
-    if (!std::isfinite(exposures[j]) || exposures[j] <= 0) {
-      throw Error(fw + "exposure " + std::to_string(exposures[j]) + " must be positive and finite");
-    }
-  }
+namespace {
+
+// The merge proper, over frames' pixel data (w x h x nc values each) of type T: float for
+// Image frames, uint8_t for CodeImage frames; the checks are the callers'.
+template <typename T>
+void MergeFrames(const std::vector<const T*>& frames, int w, int h, int nc,
+                 const std::vector<double>& exposures, const ResponseCurve& curve,
+                 const MergeOptions& options, Image* out_image, MergeSummary* summary,
+                 std::vector<uint8_t>* valid_mask, std::vector<uint8_t>* ghost_mask,
+                 std::chrono::steady_clock::time_point start) {
   const int nf = static_cast<int>(frames.size());
   const int shortest =
       static_cast<int>(std::min_element(exposures.begin(), exposures.end()) - exposures.begin());
@@ -371,11 +458,21 @@ void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<dou
   }
   std::vector<float> log_x(nf);
   for (int j = 0; j < nf; ++j) log_x[j] = static_cast<float>(std::log(exposures[j]));
+  if constexpr (std::is_same_v<T, uint8_t>) {
+    lv.code_g.resize(static_cast<size_t>(nf) * 256 * nc);
+    for (int j = 0; j < nf; ++j) {
+      for (int z = 0; z < 256; ++z) {
+        for (int c = 0; c < nc; ++c) {
+          lv.code_g[(static_cast<size_t>(j) * 256 + z) * nc + c] = lv.G(z * kSteps, c) - log_x[j];
+        }
+      }
+    }
+  }
   const float sat_level = lv.sat;
   const float dark_level = lv.dark;
-  const RowsKernel accumulate = ChooseKernel(nc, options.use_simd);
+  const RowsKernel<T> accumulate = ChooseKernel<T>(nc, options.use_simd);
+  const ExpRowFn exp_row = ChooseExpRow(options.use_simd);
 
-  if (out_image == nullptr) throw Error("hdr merge: no output image given");
   Image& out = *out_image;
   if (out.width != w || out.height != h || out.channels != nc ||
       out.data.size() != static_cast<size_t>(w) * h * nc) {
@@ -420,10 +517,9 @@ void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<dou
     int64_t local_sat = 0, local_dark = 0, local_ghosts = 0;
     const size_t row_len = static_cast<size_t>(w) * nc;
     std::vector<float> num(row_len), den(row_len);
-    std::vector<const float*> src(nf);
+    std::vector<const T*> src(nf);
     for (int y = rows.begin(); y != rows.end(); ++y) {
-      for (int j = 0; j < nf; ++j)
-        src[j] = frames[j]->data.data() + static_cast<size_t>(y) * w * nc;
+      for (int j = 0; j < nf; ++j) src[j] = frames[j] + static_cast<size_t>(y) * w * nc;
       float* dst = out.data.data() + static_cast<size_t>(y) * w * nc;
       std::fill(num.begin(), num.end(), 0.f);
       std::fill(den.begin(), den.end(), 0.f);
@@ -434,53 +530,52 @@ void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<dou
             RemoveGhosts(src, by_median, lv, log_x, slope, w, options, num.data(), den.data(),
                          ghost_mask ? ghost_mask->data() + static_cast<size_t>(y) * w : nullptr);
       }
-      for (int x = 0; x < w; ++x) {
+      // ln L = num / den where some frame had weight (a loop that vectorises); pixels where
+      // a channel had none take the fallbacks below, one pixel at a time.
+      bool any_unweighted = false;
+      for (size_t i = 0; i < row_len; ++i) {
+        dst[i] = den[i] > 0 ? num[i] / den[i] : 0.f;
+        any_unweighted |= !(den[i] > 0);
+      }
+      for (int x = 0; x < w && any_unweighted; ++x) {
         bool pixel_sat = false, pixel_dark = false, pixel_invalid = false;
         for (int c = 0; c < nc; ++c) {
           const size_t off = static_cast<size_t>(x) * nc + c;
-          float log_l;
-          if (den[off] > 0) {
-            log_l = num[off] / den[off];
+          if (den[off] > 0) continue;
+          pixel_invalid = true;
+          float zmax = -1, zmin = 256;
+          for (int j = 0; j < nf; ++j) {
+            const float z = src[j][off];
+            if (!(z >= 0.f && z <= 255.f)) continue;
+            zmax = std::max(zmax, z);
+            zmin = std::min(zmin, z);
+          }
+          const float zs = src[shortest][off];
+          const float zl = src[longest][off];
+          if (zs >= sat_level || zmin >= sat_level) {
+            dst[off] = lv.G(kLast, c) - log_x[shortest];  // a lower bound
+            pixel_sat = true;
+          } else if (zl <= dark_level || zmax <= dark_level) {
+            dst[off] = lv.G(Level(zl), c) - log_x[longest];
+            pixel_dark = true;
           } else {
-            pixel_invalid = true;
-            float zmax = -1, zmin = 256;
+            // Saturated in long frames, dark in short ones, nothing in between: the
+            // middle of the bracketing bounds.
+            float lower = -1e30f, upper = 1e30f;
             for (int j = 0; j < nf; ++j) {
-              const float z = src[j][off];
-              if (!(z >= 0.f && z <= 255.f)) continue;
-              zmax = std::max(zmax, z);
-              zmin = std::min(zmin, z);
+              const float z = Clamp255(src[j][off]);
+              const float est = lv.G(Level(z), c) - log_x[j];
+              if (z >= sat_level) lower = std::max(lower, est);
+              if (z <= dark_level) upper = std::min(upper, est);
             }
-            const float zs = src[shortest][off];
-            const float zl = src[longest][off];
-            if (zs >= sat_level || zmin >= sat_level) {
-              log_l = lv.G(kLast, c) - log_x[shortest];  // a lower bound
-              pixel_sat = true;
-            } else if (zl <= dark_level || zmax <= dark_level) {
-              log_l = lv.G(Level(zl), c) - log_x[longest];
-              pixel_dark = true;
-            } else {
-              // Saturated in long frames, dark in short ones, nothing in between: the
-              // middle of the bracketing bounds.
-              float lower = -1e30f, upper = 1e30f;
-              for (int j = 0; j < nf; ++j) {
-                const float z = Clamp255(src[j][off]);
-                const float est = lv.G(Level(z), c) - log_x[j];
-                if (z >= sat_level) lower = std::max(lower, est);
-                if (z <= dark_level) upper = std::min(upper, est);
-              }
-              log_l = 0.5f * (lower + upper);
-            }
+            dst[off] = 0.5f * (lower + upper);
           }
-          if (!(std::abs(log_l) <= kMaxLog)) {
-            overflow.store(true);
-            log_l = 0;
-          }
-          dst[off] = std::exp(log_l);
         }
         local_sat += pixel_sat;
         local_dark += pixel_dark;
         if (valid_mask && pixel_invalid) (*valid_mask)[static_cast<size_t>(y) * w + x] = 0;
       }
+      if (exp_row(dst, row_len)) overflow.store(true);
     }
     saturated += local_sat;
     dark += local_dark;
@@ -502,6 +597,79 @@ void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<dou
     summary->seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
+}
+
+}  // namespace
+
+namespace {
+
+// The checks MergeHdrInto makes of its frames (Image or CodeImage) and exposures; returns the
+// frames' pixel data.
+template <typename Frame>
+auto CheckFrames(const std::vector<const Frame*>& frames, const std::vector<double>& exposures,
+                 const MergeOptions& options, const ResponseCurve& curve, Image* out_image) {
+  options.Validate();
+  CheckCurve(curve);
+  if (out_image == nullptr) throw Error("hdr merge: no output image given");
+  if (frames.empty()) throw Error("hdr merge: no frames given");
+  if (frames.size() != exposures.size()) {
+    throw Error("hdr merge: " + std::to_string(frames.size()) + " frames but " +
+                std::to_string(exposures.size()) + " exposures");
+  }
+  for (size_t j = 0; j < frames.size(); ++j) {
+    if (frames[j] == nullptr) throw Error("hdr merge: frame " + std::to_string(j) + " is null");
+  }
+  const Frame& f0 = *frames[0];
+  const int w = f0.width, h = f0.height, nc = f0.channels;
+  if (w <= 0 || h <= 0) throw Error("hdr merge: frame 0 is empty");
+  if (nc != 1 && nc != 3) {
+    throw Error("hdr merge: frames must have 1 or 3 channels, frame 0 has " + std::to_string(nc));
+  }
+  std::vector<const typename decltype(f0.data)::value_type*> data;
+  for (size_t j = 0; j < frames.size(); ++j) {
+    const Frame& f = *frames[j];
+    const std::string fw = "hdr merge: frame " + std::to_string(j) + ": ";
+    if constexpr (std::is_same_v<Frame, Image>) {
+      if (f.units != PixelUnits::kDigital) {
+        throw Error(fw + "is not in digital numbers (kDigital)");
+      }
+    }
+    if (f.width != w || f.height != h || f.channels != nc) {
+      throw Error(fw + std::to_string(f.width) + "x" + std::to_string(f.height) + "x" +
+                  std::to_string(f.channels) + " differs from frame 0 (" + std::to_string(w) + "x" +
+                  std::to_string(h) + "x" + std::to_string(nc) + ")");
+    }
+    if (f.data.size() != static_cast<size_t>(w) * h * nc) {
+      throw Error(fw + "pixel buffer size does not match its dimensions");
+    }
+    if (!std::isfinite(exposures[j]) || exposures[j] <= 0) {
+      throw Error(fw + "exposure " + std::to_string(exposures[j]) + " must be positive and finite");
+    }
+    data.push_back(f.data.data());
+  }
+  return data;
+}
+
+}  // namespace
+
+void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<double>& exposures,
+                  const ResponseCurve& curve, const MergeOptions& options, Image* out_image,
+                  MergeSummary* summary, std::vector<uint8_t>* valid_mask,
+                  std::vector<uint8_t>* ghost_mask) {
+  const auto start = std::chrono::steady_clock::now();
+  const auto data = CheckFrames(frames, exposures, options, curve, out_image);
+  MergeFrames(data, frames[0]->width, frames[0]->height, frames[0]->channels, exposures, curve,
+              options, out_image, summary, valid_mask, ghost_mask, start);
+}
+
+void MergeHdrInto(const std::vector<const CodeImage*>& frames, const std::vector<double>& exposures,
+                  const ResponseCurve& curve, const MergeOptions& options, Image* out_image,
+                  MergeSummary* summary, std::vector<uint8_t>* valid_mask,
+                  std::vector<uint8_t>* ghost_mask) {
+  const auto start = std::chrono::steady_clock::now();
+  const auto data = CheckFrames(frames, exposures, options, curve, out_image);
+  MergeFrames(data, frames[0]->width, frames[0]->height, frames[0]->channels, exposures, curve,
+              options, out_image, summary, valid_mask, ghost_mask, start);
 }
 
 }  // namespace rouen

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/code_image.h"
 #include "core/image.h"
 #include "core/response_curve.h"
 
@@ -60,6 +61,13 @@ Image MergeHdr(const std::vector<const Image*>& frames, const std::vector<double
 // allocation or page faults when merging brackets of one size repeatedly). `ghost_mask`, when
 // given, gets width x height entries: 1 where ghost removal left some frame out.
 void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<double>& exposures,
+                  const ResponseCurve& curve, const MergeOptions& options, Image* out,
+                  MergeSummary* summary = nullptr, std::vector<uint8_t>* valid_mask = nullptr,
+                  std::vector<uint8_t>* ghost_mask = nullptr);
+
+// MergeHdrInto over 8-bit frames: the same floats as over Image frames holding the same
+// numbers (one implementation: a code z reads as the level 16 z that the float z does).
+void MergeHdrInto(const std::vector<const CodeImage*>& frames, const std::vector<double>& exposures,
                   const ResponseCurve& curve, const MergeOptions& options, Image* out,
                   MergeSummary* summary = nullptr, std::vector<uint8_t>* valid_mask = nullptr,
                   std::vector<uint8_t>* ghost_mask = nullptr);

@@ -340,3 +340,149 @@ TEST(MergeHdr, BothKernelsRejectOutOfRangeValuesNamingTheFrame) {
 
 }  // namespace
 }  // namespace rouen
+
+namespace rouen {
+namespace {
+
+// 8-bit frames merge to the same floats as Image frames holding the same numbers, for every
+// code value in every frame (each row of frame j shifts the codes by a different amount, so
+// all 256 codes meet every exposure), exposures far apart and one stop apart, 1 and 3
+// channels, widths that leave a tail for the portable kernel, both kernels, ghost removal on
+// and off; masks and counts too.
+TEST(MergeHdr, CodeFramesMergeToTheSameFloatsAsFloatFrames) {
+  const std::vector<std::vector<double>> brackets = {
+      {1.0 / 1024, 1.0 / 64, 1.0 / 4, 1.0, 16.0, 250.0},
+      {1.0 / 8, 1.0 / 4, 1.0 / 2, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0}};
+  for (const std::vector<double>& exposures : brackets) {
+    for (int nc : {1, 3}) {
+      for (int w : {256, 301}) {
+        const int h = 7;
+        std::vector<Image> frames;
+        std::vector<CodeImage> codes;
+        for (size_t j = 0; j < exposures.size(); ++j) {
+          Image f(w, h, nc, PixelUnits::kDigital);
+          for (int y = 0; y < h; ++y) {
+            for (int x = 0; x < w; ++x) {
+              for (int c = 0; c < nc; ++c) {
+                f.at(x, y, c) = static_cast<float>((x + 37 * y + 11 * c + 53 * j) % 256);
+              }
+            }
+          }
+          codes.push_back(ToCodes(f));
+          frames.push_back(std::move(f));
+        }
+        std::vector<const Image*> fp;
+        for (const Image& f : frames) fp.push_back(&f);
+        std::vector<const CodeImage*> cp;
+        for (const CodeImage& c : codes) cp.push_back(&c);
+        for (bool simd : {true, false}) {
+          for (bool ghost : {false, true}) {
+            MergeOptions o;
+            o.use_simd = simd;
+            o.ghost_removal = ghost;
+            Image a, b;
+            MergeSummary sa, sb;
+            std::vector<uint8_t> va, vb, ga, gb;
+            MergeHdrInto(fp, exposures, TrueCurve(), o, &a, &sa, &va, &ga);
+            MergeHdrInto(cp, exposures, TrueCurve(), o, &b, &sb, &vb, &gb);
+            const std::string where = "frames " + std::to_string(exposures.size()) + " nc " +
+                                      std::to_string(nc) + " w " + std::to_string(w) + " simd " +
+                                      std::to_string(simd) + " ghost " + std::to_string(ghost);
+            EXPECT_EQ(a.data, b.data) << where;
+            EXPECT_EQ(b.units, PixelUnits::kRadiance);
+            EXPECT_EQ(va, vb) << where;
+            EXPECT_EQ(ga, gb) << where;
+            EXPECT_EQ(sa.saturated_pixels, sb.saturated_pixels) << where;
+            EXPECT_EQ(sa.dark_pixels, sb.dark_pixels) << where;
+            EXPECT_EQ(sa.ghost_pixels, sb.ghost_pixels) << where;
+          }
+        }
+      }
+    }
+  }
+}
+
+using Codes = std::vector<const CodeImage*>;
+
+// ToCodes keeps whole numbers 0..255 and refuses anything else by pixel; the 8-bit merge
+// checks its frames as the float one does.
+TEST(MergeHdr, CodeFramesAreCheckedAndConvertedExactly) {
+  Image f(4, 3, 3, PixelUnits::kDigital, 0.f);
+  for (size_t i = 0; i < f.data.size(); ++i) f.data[i] = static_cast<float>(i * 7 % 256);
+  f.data[5] = 255.f;
+  const CodeImage c = ToCodes(f);
+  ASSERT_EQ(c.width, 4);
+  ASSERT_EQ(c.height, 3);
+  ASSERT_EQ(c.channels, 3);
+  ASSERT_EQ(c.data.size(), f.data.size());
+  for (size_t i = 0; i < f.data.size(); ++i) EXPECT_EQ(c.data[i], f.data[i]);
+  for (float bad : {0.5f, -1.f, 256.f, std::nanf("")}) {
+    Image g = f;
+    g.at(2, 1, 1) = bad;
+    try {
+      ToCodes(g);
+      ADD_FAILURE() << "accepted " << bad;
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("pixel (2, 1) channel 1"), std::string::npos)
+          << e.what();
+    }
+  }
+  Image radiance = f;
+  radiance.units = PixelUnits::kRadiance;
+  EXPECT_THROW(ToCodes(radiance), Error);
+
+  const ResponseCurve curve = TrueCurve();
+  CodeImage a = c, b = c;
+  Image out;
+  EXPECT_NO_THROW(MergeHdrInto(Codes{&a, &b}, {1.0, 2.0}, curve, MergeOptions{}, &out));
+  CodeImage small = c;
+  small.width = 3;
+  small.data.resize(3 * 3 * 3);
+  EXPECT_THROW(MergeHdrInto(Codes{&a, &small}, {1.0, 2.0}, curve, MergeOptions{}, &out), Error);
+  CodeImage short_buffer = c;
+  short_buffer.data.pop_back();
+  EXPECT_THROW(MergeHdrInto(Codes{&a, &short_buffer}, {1.0, 2.0}, curve, MergeOptions{}, &out),
+               Error);
+  EXPECT_THROW(MergeHdrInto(Codes{&a, &b}, {1.0, -2.0}, curve, MergeOptions{}, &out), Error);
+  EXPECT_THROW(MergeHdrInto(Codes{&a, nullptr}, {1.0, 2.0}, curve, MergeOptions{}, &out), Error);
+  EXPECT_THROW(MergeHdrInto(Codes{&a, &b}, {1.0, 2.0}, curve, MergeOptions{}, nullptr), Error);
+}
+
+// The merge's e^x: one frame, so ln L = w (g(z) - ln X) / w in float, recomputed here; the
+// radiance is e^(that float) to within 2.4e-7 relative (the polynomial's bound, 2 float ulp)
+// plus the final rounding, for ln L from -87 to 87 (exposures e^-80..e^80 against the
+// curve's -5.3..+7.5 for z = 6..249), with both kernels.
+TEST(MergeHdr, RadianceIsTheExponentialOfTheLogMeanWithinTwoUlp) {
+  const ResponseCurve curve = TrueCurve();
+  const int lo = 6, hi = 249;  // hat weight > 0
+  CodeImage f;
+  f.width = hi - lo + 1;
+  f.height = 1;
+  f.channels = 1;
+  for (int z = lo; z <= hi; ++z) f.data.push_back(static_cast<uint8_t>(z));
+  double worst = 0;
+  for (bool simd : {true, false}) {
+    MergeOptions o;
+    o.use_simd = simd;
+    for (double k = -80; k <= 80; k += 2.5) {
+      const double x = std::exp(k);
+      Image out;
+      MergeHdrInto(Codes{&f}, {x}, curve, o, &out);
+      const float lx = static_cast<float>(std::log(x));
+      for (int z = lo; z <= hi; ++z) {
+        const float w = static_cast<float>(std::min(z - 5, 250 - z));
+        const float g = static_cast<float>(curve.g[1][z]);  // 1 channel: the green curve
+        const float l = (0.f + w * (g - lx)) / w;
+        if (std::abs(l) > 87) continue;
+        const double expected = std::exp(static_cast<double>(l));
+        const double rel = std::abs(out.data[z - lo] - expected) / expected;
+        worst = std::max(worst, rel);
+        EXPECT_LE(rel, 2.4e-7 + 6e-8) << "z " << z << " ln X " << k << " simd " << simd;
+      }
+    }
+  }
+  RecordProperty("worst_relative_error_x1e7", std::to_string(worst * 1e7));
+}
+
+}  // namespace
+}  // namespace rouen

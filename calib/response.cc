@@ -16,6 +16,11 @@
 #include <random>
 #include <string>
 #include <type_traits>
+#include <unordered_map>
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#include <immintrin.h>
+#endif
 
 #include "core/error.h"
 
@@ -38,13 +43,49 @@ struct Sample {
   size_t pixel;  // y * width + x
 };
 
+size_t FrameCount(const Bracket& b) { return b.frames.empty() ? b.codes.size() : b.frames.size(); }
+
+// The checks of one bracket's frames (Image or CodeImage); returns the channel count.
+template <typename Frame>
+int CheckFrames(const std::vector<Frame>& frames, const std::string& where) {
+  const Frame& f0 = frames[0];
+  if (f0.width <= 0 || f0.height <= 0) throw Error(where + "frame 0 is empty");
+  if (f0.channels != 1 && f0.channels != 3) {
+    throw Error(where + "frames must have 1 or 3 channels, frame 0 has " +
+                std::to_string(f0.channels));
+  }
+  for (size_t j = 0; j < frames.size(); ++j) {
+    const Frame& f = frames[j];
+    const std::string fw = where + "frame " + std::to_string(j) + ": ";
+    if constexpr (std::is_same_v<Frame, Image>) {
+      if (f.units != PixelUnits::kDigital) {
+        throw Error(fw + "is not in digital numbers (kDigital)");
+      }
+    }
+    if (f.width != f0.width || f.height != f0.height) {
+      throw Error(fw + "size " + std::to_string(f.width) + "x" + std::to_string(f.height) +
+                  " differs from frame 0 (" + std::to_string(f0.width) + "x" +
+                  std::to_string(f0.height) + ")");
+    }
+    if (f.channels != f0.channels) throw Error(fw + "channel count differs from frame 0");
+    if (f.data.size() != static_cast<size_t>(f.width) * f.height * f.channels) {
+      throw Error(fw + "pixel buffer size does not match its dimensions");
+    }
+  }
+  return f0.channels;
+}
+
 // Per-bracket validation; returns the channel count.
 int CheckBracket(const Bracket& b, size_t index) {
   const std::string where = "response: bracket " + std::to_string(index) + ": ";
-  if (b.frames.empty()) throw Error(where + "has no frames");
-  if (b.frames.size() != b.exposures.size()) {
-    throw Error(where + std::to_string(b.frames.size()) + " frames but " +
-                std::to_string(b.exposures.size()) + " exposures");
+  if (!b.frames.empty() && !b.codes.empty()) {
+    throw Error(where + "holds both frames and codes; give one of them");
+  }
+  const size_t n = FrameCount(b);
+  if (n == 0) throw Error(where + "has no frames");
+  if (n != b.exposures.size()) {
+    throw Error(where + std::to_string(n) + " frames but " + std::to_string(b.exposures.size()) +
+                " exposures");
   }
   for (size_t j = 0; j < b.exposures.size(); ++j) {
     if (!std::isfinite(b.exposures[j]) || b.exposures[j] <= 0) {
@@ -57,42 +98,164 @@ int CheckBracket(const Bracket& b, size_t index) {
     throw Error(where + "needs at least two distinct exposures (all are " + std::to_string(*lo) +
                 ")");
   }
-  const Image& f0 = b.frames[0];
-  if (f0.width <= 0 || f0.height <= 0) throw Error(where + "frame 0 is empty");
-  if (f0.channels != 1 && f0.channels != 3) {
-    throw Error(where + "frames must have 1 or 3 channels, frame 0 has " +
-                std::to_string(f0.channels));
-  }
-  for (size_t j = 0; j < b.frames.size(); ++j) {
-    const Image& f = b.frames[j];
-    const std::string fw = where + "frame " + std::to_string(j) + ": ";
-    if (f.units != PixelUnits::kDigital) throw Error(fw + "is not in digital numbers (kDigital)");
-    if (f.width != f0.width || f.height != f0.height) {
-      throw Error(fw + "size " + std::to_string(f.width) + "x" + std::to_string(f.height) +
-                  " differs from frame 0 (" + std::to_string(f0.width) + "x" +
-                  std::to_string(f0.height) + ")");
-    }
-    if (f.channels != f0.channels) throw Error(fw + "channel count differs from frame 0");
-    if (f.data.size() != static_cast<size_t>(f.width) * f.height * f.channels) {
-      throw Error(fw + "pixel buffer size does not match its dimensions");
-    }
-  }
-  if (!b.mask.empty() && b.mask.size() != static_cast<size_t>(f0.width) * f0.height) {
+  const int nc = b.frames.empty() ? CheckFrames(b.codes, where) : CheckFrames(b.frames, where);
+  const size_t np = b.frames.empty() ? static_cast<size_t>(b.codes[0].width) * b.codes[0].height
+                                     : static_cast<size_t>(b.frames[0].width) * b.frames[0].height;
+  if (!b.mask.empty() && b.mask.size() != np) {
     throw Error(where + "mask has " + std::to_string(b.mask.size()) + " entries, expected " +
-                std::to_string(static_cast<size_t>(f0.width) * f0.height));
+                std::to_string(np));
   }
-  return f0.channels;
+  return nc;
+}
+
+// One frame's pass over a grid row of the sample scan (SelectSamples): per grid point, the
+// frame's channel sum, scaled by `inv`, is added to acc; whether some channel fell more than
+// `tol` below its running maximum is or-ed into darkened; informative counts (up to 2) the
+// frames whose channel mean lies in 2..253 DN. `step` is the distance between grid points in
+// floats (NC when every pixel is a grid point). Returns nonzero when a value is outside
+// 0..255 or not finite.
+template <int NC, typename T>
+unsigned ScanFrameRow(const T* d, size_t step, int gw, float tol, float inv, float* run, float* acc,
+                      uint32_t* informative, uint32_t* darkened) {
+  unsigned bad = 0;
+  for (int i = 0; i < gw; ++i) {
+    const T* p = d + static_cast<size_t>(i) * step;
+    float sum = 0;
+    unsigned dark = 0;
+    for (int c = 0; c < NC; ++c) {
+      const float v = p[c];
+      bad |= !(v >= 0.f && v <= 255.f);
+      float& m = run[static_cast<size_t>(i) * NC + c];
+      dark |= v < m - tol;
+      m = std::max(m, v);
+      sum += v;
+    }
+    acc[i] += sum * inv;
+    const float mean = sum / NC;
+    informative[i] = std::min<uint32_t>(2, informative[i] + (mean >= 2.f && mean <= 253.f));
+    darkened[i] |= dark;
+  }
+  return bad;
+}
+
+template <typename T>
+using ScanFrameRowFn = unsigned (*)(const T*, size_t, int, float, float, float*, float*, uint32_t*,
+                                    uint32_t*);
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+// 24 interleaved RGB values (a, b, c) as R, G and B vectors of points 0..7: each channel's
+// lanes gathered by two blends, then put in point order by a permutation.
+__attribute__((target("avx2"), always_inline)) inline void SplitRgb(__m256 a, __m256 b, __m256 c,
+                                                                    __m256* r, __m256* g,
+                                                                    __m256* bl) {
+  *r = _mm256_permutevar8x32_ps(_mm256_blend_ps(_mm256_blend_ps(a, b, 0x92), c, 0x24),
+                                _mm256_setr_epi32(0, 3, 6, 1, 4, 7, 2, 5));
+  *g = _mm256_permutevar8x32_ps(_mm256_blend_ps(_mm256_blend_ps(a, b, 0x24), c, 0x49),
+                                _mm256_setr_epi32(1, 4, 7, 2, 5, 0, 3, 6));
+  *bl = _mm256_permutevar8x32_ps(_mm256_blend_ps(_mm256_blend_ps(a, b, 0x49), c, 0x92),
+                                 _mm256_setr_epi32(2, 5, 0, 3, 6, 1, 4, 7));
+}
+
+// One vector of values of the scan: or-s into *bad the lanes outside 0..255 or NaN, sets *dark
+// where a value lies more than tol below the running maximum m, and updates m.
+template <typename T>
+__attribute__((target("avx2"), always_inline)) inline __m256 ScanValues(const T* p, float* m,
+                                                                        __m256 tol, __m256* bad,
+                                                                        __m256* dark) {
+  __m256 v;
+  if constexpr (std::is_same_v<T, float>) {
+    v = _mm256_loadu_ps(p);
+  } else {
+    v = _mm256_cvtepi32_ps(
+        _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(p))));
+  }
+  const __m256 ok = _mm256_and_ps(_mm256_cmp_ps(v, _mm256_setzero_ps(), _CMP_GE_OQ),
+                                  _mm256_cmp_ps(v, _mm256_set1_ps(255.f), _CMP_LE_OQ));
+  *bad = _mm256_or_ps(*bad, _mm256_xor_ps(ok, _mm256_castsi256_ps(_mm256_set1_epi32(-1))));
+  const __m256 mv = _mm256_loadu_ps(m);
+  *dark = _mm256_cmp_ps(v, _mm256_sub_ps(mv, tol), _CMP_LT_OQ);
+  // std::max(m, v) is v when m < v, else m.
+  _mm256_storeu_ps(m, _mm256_blendv_ps(mv, v, _mm256_cmp_ps(mv, v, _CMP_LT_OQ)));
+  return v;
+}
+
+// ScanFrameRow for every pixel a grid point (step NC), 8 points at a time with AVX2 (checked
+// at run time), the rest by ScanFrameRow: the same operations in the same order, so the same
+// floats. RGB values are compared in their interleaved order, then gathered into R, G and B
+// vectors (two blends and a permutation each) for the per-point sums.
+template <int NC, typename T>
+__attribute__((target("avx2"))) unsigned ScanFrameRowAvx2(const T* d, size_t step, int gw,
+                                                          float tol, float inv, float* run,
+                                                          float* acc, uint32_t* informative,
+                                                          uint32_t* darkened) {
+  const __m256 zero = _mm256_setzero_ps();
+  const __m256 vtol = _mm256_set1_ps(tol), vinv = _mm256_set1_ps(inv);
+  const __m256 lo = _mm256_set1_ps(2.f), hi = _mm256_set1_ps(253.f);
+  const __m256 nc = _mm256_set1_ps(static_cast<float>(NC));
+  const __m256i two = _mm256_set1_epi32(2);
+  __m256 bad = _mm256_setzero_ps();
+  const int vec = gw - gw % 8;
+  for (int i = 0; i < vec; i += 8) {
+    const T* p = d + static_cast<size_t>(i) * NC;
+    float* m = run + static_cast<size_t>(i) * NC;
+    __m256 sum, dark;
+    if constexpr (NC == 3) {
+      __m256 da, db, dc;
+      const __m256 a = ScanValues(p, m, vtol, &bad, &da),
+                   b = ScanValues(p + 8, m + 8, vtol, &bad, &db),
+                   c = ScanValues(p + 16, m + 16, vtol, &bad, &dc);
+      __m256 r, g, bl, dr, dg, dbl;
+      SplitRgb(a, b, c, &r, &g, &bl);
+      SplitRgb(da, db, dc, &dr, &dg, &dbl);
+      sum = _mm256_add_ps(_mm256_add_ps(_mm256_add_ps(zero, r), g), bl);
+      dark = _mm256_or_ps(_mm256_or_ps(dr, dg), dbl);
+    } else {
+      sum = _mm256_add_ps(zero, ScanValues(p, m, vtol, &bad, &dark));
+    }
+    _mm256_storeu_ps(acc + i, _mm256_add_ps(_mm256_loadu_ps(acc + i), _mm256_mul_ps(sum, vinv)));
+    const __m256 mean = _mm256_div_ps(sum, nc);
+    const __m256i info = _mm256_castps_si256(
+        _mm256_and_ps(_mm256_cmp_ps(mean, lo, _CMP_GE_OQ), _mm256_cmp_ps(mean, hi, _CMP_LE_OQ)));
+    auto* in = reinterpret_cast<__m256i*>(informative + i);
+    _mm256_storeu_si256(in, _mm256_min_epu32(two, _mm256_sub_epi32(_mm256_loadu_si256(in), info)));
+    auto* dk = reinterpret_cast<__m256i*>(darkened + i);
+    _mm256_storeu_si256(
+        dk, _mm256_or_si256(_mm256_loadu_si256(dk),
+                            _mm256_and_si256(_mm256_castps_si256(dark), _mm256_set1_epi32(1))));
+  }
+  const bool any_bad = _mm256_movemask_ps(bad) != 0;
+  _mm256_zeroupper();
+  return ScanFrameRow<NC, T>(d + static_cast<size_t>(vec) * NC, step, gw - vec, tol, inv,
+                             run + static_cast<size_t>(vec) * NC, acc + vec, informative + vec,
+                             darkened + vec) |
+         any_bad;
+}
+#endif
+
+template <int NC, typename T>
+ScanFrameRowFn<T> ChooseScan(int stride, bool simd) {
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+  if (simd && stride == 1 && __builtin_cpu_supports("avx2")) return ScanFrameRowAvx2<NC, T>;
+#endif
+  (void)stride, (void)simd;
+  return ScanFrameRow<NC, T>;
 }
 
 // Stratified sampling over brightness (mean over frames and channels, monotone in radiance),
 // preferring pixels of low local gradient; rejects pixels that darken as exposure grows.
-// Large brackets are scanned on a grid of stride `*stride` (see ResponseOptions::scan_pixels);
-// the per-pixel scan runs in parallel over grid rows.
-std::vector<size_t> SelectSamples(const Bracket& b, size_t index, const ResponseOptions& o,
+// Large brackets are scanned on a grid of stride `*stride` (see ResponseOptions::scan_pixels).
+// The scan runs in parallel over grid rows, frame by frame through a row (AVX2 where the CPU
+// has it and o.use_simd allows), and keeps per grid point only its stratum; the random draw
+// from each stratum is made on per-row counts, so only the drawn points (and their
+// neighbours, for the gradient) are read again.
+// `frames` holds the bracket's pixel data (w x h x nc values each) as T: float for Image
+// frames, uint8_t for CodeImage ones.
+template <typename T>
+std::vector<size_t> SelectSamples(const Bracket& b, const std::vector<const T*>& frames, int w,
+                                  int h, int nc, size_t index, const ResponseOptions& o,
                                   int* stride) {
-  const int w = b.frames[0].width, h = b.frames[0].height, nc = b.frames[0].channels;
   const size_t np = static_cast<size_t>(w) * h;
-  std::vector<int> order(b.frames.size());
+  std::vector<int> order(frames.size());
   std::iota(order.begin(), order.end(), 0);
   std::stable_sort(order.begin(), order.end(),
                    [&](int i, int j) { return b.exposures[i] < b.exposures[j]; });
@@ -104,112 +267,205 @@ std::vector<size_t> SelectSamples(const Bracket& b, size_t index, const Response
   const int gw = (w + s - 1) / s, gh = (h + s - 1) / s;
   const size_t ng = static_cast<size_t>(gw) * gh;
 
-  // Per grid point: brightness key, and whether it is usable (never darkens by more than the
-  // tolerance as exposure grows, informative in at least two frames).
-  std::vector<float> key(ng, 0.f);
-  std::vector<uint8_t> ok(ng, 0);
-  std::atomic<int64_t> bad_pixel{-1};
-  std::atomic<int> bad_frame{-1};
+  // Per grid point: its stratum by brightness key (-1 unless an interior point that is usable:
+  // never darkens by more than the tolerance as exposure grows, informative in at least two
+  // frames, not masked). Per grid row: how many points each stratum has there.
+  std::vector<int8_t> bin_of(ng, -1);
+  std::vector<uint32_t> row_count(static_cast<size_t>(gh) * kBins, 0);
+  std::atomic<int> bad_row{-1};
   const float tol = static_cast<float>(o.monotone_tolerance);
-  const float inv = 1.f / static_cast<float>(b.frames.size() * nc);
-  // Frames' pixel data in order of exposure, hoisted out of the per-pixel loop (the compiler
-  // cannot, as the stores to key/ok might alias them).
-  std::vector<const float*> data_by_exposure;
-  for (int j : order) data_by_exposure.push_back(b.frames[j].data.data());
+  const float inv = 1.f / static_cast<float>(frames.size() * nc);
+  std::vector<const T*> data_by_exposure;
+  for (int j : order) data_by_exposure.push_back(frames[j]);
   const int nf = static_cast<int>(order.size());
-  // One grid row; NC is the channel count (a constant, so the channel loop unrolls).
-  auto scan_row = [&](auto channels, int k) {
-    constexpr int NC = decltype(channels)::value;
-    const float* const* fd = data_by_exposure.data();
+  // One grid row: the running maximum per channel, the count of informative frames and
+  // whether the point darkened are kept for the row, and the frames are added in order of
+  // exposure (the key's float sum in the same order as a per-point loop).
+  struct RowState {
+    std::vector<float> running, key;
+    std::vector<uint32_t> informative, darkened;
+  };
+  const ScanFrameRowFn<T> scan =
+      nc == 3 ? ChooseScan<3, T>(s, o.use_simd) : ChooseScan<1, T>(s, o.use_simd);
+  auto scan_row = [&](int k, RowState* st) {
+    float* run = st->running.data();
+    uint32_t* informative = st->informative.data();
+    uint32_t* darkened = st->darkened.data();
+    float* acc = st->key.data();
+    std::fill(acc, acc + gw, 0.f);
+    std::fill(run, run + static_cast<size_t>(gw) * nc, -1.f);
+    std::fill(informative, informative + gw, 0);
+    std::fill(darkened, darkened + gw, 0);
     const size_t row = static_cast<size_t>(k) * s * w;
-    for (int i = 0; i < gw; ++i) {
+    unsigned bad = 0;
+    for (int r = 0; r < nf; ++r) {
+      bad |= scan(data_by_exposure[r] + row * nc, static_cast<size_t>(s) * nc, gw, tol, inv, run,
+                  acc, informative, darkened);
+    }
+    if (bad) {
+      bad_row.store(k);
+      return;
+    }
+    if (k == 0 || k + 1 >= gh) return;  // only interior points are candidates
+    uint32_t* counts = row_count.data() + static_cast<size_t>(k) * kBins;
+    for (int i = 1; i + 1 < gw; ++i) {
       const size_t p = row + static_cast<size_t>(i) * s;
-      float running[NC];
-      for (int c = 0; c < NC; ++c) running[c] = -1.f;
-      float acc = 0.f;
-      bool usable = true;
-      int informative = 0;
-      for (int r = 0; r < nf; ++r) {
-        const float* d = fd[r] + p * NC;
-        float sum = 0;
-        for (int c = 0; c < NC; ++c) {
-          const float v = d[c];
-          if (!(v >= 0.f && v <= 255.f)) {
-            bad_pixel.store(static_cast<int64_t>(p));
-            bad_frame.store(order[r]);
-            usable = false;
-            continue;
-          }
-          if (v < running[c] - tol) usable = false;
-          running[c] = std::max(running[c], v);
-          sum += v;
-        }
-        acc += sum * inv;
-        const float mean = sum / NC;
-        if (mean >= 2.f && mean <= 253.f) ++informative;
-      }
-      const size_t g = static_cast<size_t>(k) * gw + i;
-      key[g] = acc;
-      ok[g] = usable && informative >= 2 && (b.mask.empty() || b.mask[p] != 0);
+      if (darkened[i] || informative[i] < 2 || (!b.mask.empty() && b.mask[p] == 0)) continue;
+      const int bin = std::min(kBins - 1, static_cast<int>(acc[i] * kBins / 256.f));
+      bin_of[static_cast<size_t>(k) * gw + i] = static_cast<int8_t>(bin);
+      ++counts[bin];
     }
   };
   tbb::parallel_for(tbb::blocked_range<int>(0, gh), [&](const tbb::blocked_range<int>& rows) {
-    for (int k = rows.begin(); k != rows.end(); ++k) {
-      if (nc == 3) {
-        scan_row(std::integral_constant<int, 3>(), k);
-      } else {
-        scan_row(std::integral_constant<int, 1>(), k);
+    RowState st;
+    st.running.resize(static_cast<size_t>(gw) * nc);
+    st.key.resize(gw);
+    st.informative.resize(gw);
+    st.darkened.resize(gw);
+    for (int k = rows.begin(); k != rows.end(); ++k) scan_row(k, &st);
+  });
+  if (bad_row.load() >= 0) {
+    // Name the first offending value of that row, in order of exposure.
+    const size_t row = static_cast<size_t>(bad_row.load()) * s * w;
+    for (int r = 0; r < nf; ++r) {
+      for (int i = 0; i < gw; ++i) {
+        const size_t p = row + static_cast<size_t>(i) * s;
+        for (int c = 0; c < nc; ++c) {
+          const float v = data_by_exposure[r][p * nc + c];
+          if (v >= 0.f && v <= 255.f) continue;
+          throw Error("response: bracket " + std::to_string(index) + " frame " +
+                      std::to_string(order[r]) + ": pixel (" + std::to_string(p % w) + ", " +
+                      std::to_string(p / w) + ") holds a value outside 0..255 or not finite");
+        }
       }
     }
-  });
-  if (bad_pixel.load() >= 0) {
-    const int64_t p = bad_pixel.load();
-    throw Error("response: bracket " + std::to_string(index) + " frame " +
-                std::to_string(bad_frame.load()) + ": pixel (" + std::to_string(p % w) + ", " +
-                std::to_string(p / w) + ") holds a value outside 0..255 or not finite");
   }
 
-  // Gradient between grid neighbours and brightness stratum, for interior grid points.
-  std::vector<float> grad(ng, 0.f);
-  std::vector<int8_t> bin_of(ng, -1);
-  tbb::parallel_for(
-      tbb::blocked_range<int>(1, std::max(1, gh - 1)), [&](const tbb::blocked_range<int>& rows) {
-        for (int k = rows.begin(); k != rows.end(); ++k) {
-          for (int i = 1; i + 1 < gw; ++i) {
-            const size_t g = static_cast<size_t>(k) * gw + i;
-            if (!ok[g]) continue;
-            grad[g] = std::abs(key[g + 1] - key[g - 1]) + std::abs(key[g + gw] - key[g - gw]);
-            bin_of[g] =
-                static_cast<int8_t>(std::min(kBins - 1, static_cast<int>(key[g] * kBins / 256.f)));
-          }
-        }
-      });
-  std::vector<std::vector<size_t>> bins(kBins);
-  for (size_t g = 0; g < ng; ++g) {
-    if (bin_of[g] >= 0) bins[bin_of[g]].push_back(g);
+  // How many points each stratum gives: strata take turns, one point each, until `wanted`
+  // are chosen or all are used.
+  std::array<size_t, kBins> count{};
+  for (int k = 0; k < gh; ++k) {
+    for (int bin = 0; bin < kBins; ++bin)
+      count[bin] += row_count[static_cast<size_t>(k) * kBins + bin];
   }
-  std::mt19937_64 rng(o.seed + 0x9E3779B97F4A7C15ull * (index + 1));
-  const int wanted = SamplesWanted(o);
+  const size_t wanted = static_cast<size_t>(SamplesWanted(o));
+  std::array<size_t, kBins> take{};
+  for (size_t total = 0, round = 0; total < wanted; ++round) {
+    bool any = false;
+    for (int bin = 0; bin < kBins && total < wanted; ++bin) {
+      if (count[bin] > round) ++take[bin], ++total, any = true;
+    }
+    if (!any) break;
+  }
+  // Each stratum's draw: the first entries of a Fisher-Yates shuffle of its points (ranks in
+  // scan order), as many as the pool of flat candidates (a few times the quota) and the
+  // points the stratum gives need; only the displaced entries are stored. Each stratum has
+  // its own random stream, so a larger sample count extends the draw of a smaller one.
   const size_t quota = (wanted + kBins - 1) / kBins;
-  for (auto& bin : bins) {
-    std::shuffle(bin.begin(), bin.end(), rng);
-    // A random pool a few times the quota, flattest first; the rest stays random after it.
+  std::array<std::vector<size_t>, kBins> draw;
+  for (int bin = 0; bin < kBins; ++bin) {
+    std::mt19937_64 rng(o.seed + 0x9E3779B97F4A7C15ull * (index + 1) +
+                        0xBF58476D1CE4E5B9ull * (bin + 1));
+    const size_t n = count[bin];
+    const size_t m = std::min(n, std::max(take[bin], 4 * quota));
+    std::unordered_map<size_t, size_t> moved;  // position -> rank, where not the identity
+    auto at = [&](size_t i) {
+      const auto it = moved.find(i);
+      return it == moved.end() ? i : it->second;
+    };
+    for (size_t i = 0; i < m; ++i) {
+      const size_t j = std::uniform_int_distribution<size_t>(i, n - 1)(rng);
+      const size_t vi = at(i), vj = at(j);
+      moved[j] = vi;
+      draw[bin].push_back(vj);
+    }
+  }
+  // Ranks to grid points: the row holding each rank from the per-row counts, then one pass
+  // over each such row.
+  struct Want {
+    int row, bin;
+    size_t rank_in_row, slot;
+  };
+  std::vector<Want> wants;
+  std::vector<size_t> before(gh);  // points of the stratum in rows above
+  for (int bin = 0; bin < kBins; ++bin) {
+    size_t acc = 0;
+    for (int k = 0; k < gh; ++k) {
+      before[k] = acc;
+      acc += row_count[static_cast<size_t>(k) * kBins + bin];
+    }
+    for (size_t slot = 0; slot < draw[bin].size(); ++slot) {
+      const size_t rank = draw[bin][slot];
+      const int k =
+          static_cast<int>(std::upper_bound(before.begin(), before.end(), rank) - before.begin()) -
+          1;
+      wants.push_back({k, bin, rank - before[k], slot});
+    }
+  }
+  std::sort(wants.begin(), wants.end(), [](const Want& a, const Want& c) {
+    return a.row != c.row   ? a.row < c.row
+           : a.bin != c.bin ? a.bin < c.bin
+                            : a.rank_in_row < c.rank_in_row;
+  });
+  std::array<std::vector<size_t>, kBins> points;
+  for (int bin = 0; bin < kBins; ++bin) points[bin].resize(draw[bin].size());
+  for (size_t q0 = 0; q0 < wants.size();) {
+    const int k = wants[q0].row;
+    size_t q1 = q0;
+    while (q1 < wants.size() && wants[q1].row == k) ++q1;
+    // This row's wants of each stratum are wants[next[bin]..end[bin]), by rank.
+    std::array<size_t, kBins> next{}, end{}, seen{};
+    for (size_t q = q1; q-- > q0;) next[wants[q].bin] = q;
+    for (size_t q = q0; q < q1; ++q) end[wants[q].bin] = q + 1;
+    const int8_t* bins_row = bin_of.data() + static_cast<size_t>(k) * gw;
+    size_t left = q1 - q0;
+    for (int i = 0; i < gw && left > 0; ++i) {
+      const int bin = bins_row[i];
+      if (bin < 0) continue;
+      if (next[bin] < end[bin] && wants[next[bin]].rank_in_row == seen[bin]) {
+        points[bin][wants[next[bin]].slot] = static_cast<size_t>(k) * gw + i;
+        ++next[bin];
+        --left;
+      }
+      ++seen[bin];
+    }
+    q0 = q1;
+  }
+  // The pool (flattest first, by the gradient between grid neighbours), then the rest of
+  // the draw in its random order; strata take turns.
+  // The key of a grid point again, the same float sum as the scan's.
+  auto key = [&](size_t g) {
+    const size_t p = (g / gw) * s * static_cast<size_t>(w) + (g % gw) * s;
+    float acc = 0;
+    for (int r = 0; r < nf; ++r) {
+      float sum = 0;
+      for (int c = 0; c < nc; ++c) sum += data_by_exposure[r][p * nc + c];
+      acc += sum * inv;
+    }
+    return acc;
+  };
+  auto grad = [&](size_t g) {
+    return std::abs(key(g + 1) - key(g - 1)) + std::abs(key(g + gw) - key(g - gw));
+  };
+  for (auto& bin : points) {
     const size_t pool = std::min(bin.size(), 4 * quota);
-    std::stable_sort(bin.begin(), bin.begin() + pool,
-                     [&](size_t a, size_t c) { return grad[a] < grad[c]; });
+    std::vector<std::pair<float, size_t>> by_grad(pool);
+    for (size_t j = 0; j < pool; ++j) by_grad[j] = {grad(bin[j]), bin[j]};
+    std::stable_sort(by_grad.begin(), by_grad.end(),
+                     [](const auto& a, const auto& c) { return a.first < c.first; });
+    for (size_t j = 0; j < pool; ++j) bin[j] = by_grad[j].second;
   }
   std::vector<size_t> chosen;
-  std::vector<size_t> next(kBins, 0);
-  bool any = true;
-  while (chosen.size() < static_cast<size_t>(wanted) && any) {
-    any = false;
-    for (int k = 0; k < kBins && chosen.size() < static_cast<size_t>(wanted); ++k) {
-      if (next[k] < bins[k].size()) {
-        const size_t g = bins[k][next[k]++];
+  for (size_t round = 0; chosen.size() < wanted; ++round) {
+    bool any = false;
+    for (int bin = 0; bin < kBins && chosen.size() < wanted; ++bin) {
+      if (round < take[bin]) {
+        const size_t g = points[bin][round];
         chosen.push_back((g / gw) * s * static_cast<size_t>(w) + (g % gw) * s);
         any = true;
       }
     }
+    if (!any) break;
   }
   return chosen;
 }
@@ -797,15 +1053,28 @@ ResponseCurve RecoverResponse(const std::vector<Bracket>& brackets, const Respon
   int stride = 1;
   for (size_t i = 0; i < brackets.size(); ++i) {
     int s = 1;
-    for (size_t p : SelectSamples(brackets[i], i, options, &s)) {
+    const Bracket& b = brackets[i];
+    std::vector<size_t> chosen;
+    if (b.frames.empty()) {
+      std::vector<const uint8_t*> data;
+      for (const CodeImage& f : b.codes) data.push_back(f.data.data());
+      chosen =
+          SelectSamples(b, data, b.codes[0].width, b.codes[0].height, channels, i, options, &s);
+    } else {
+      std::vector<const float*> data;
+      for (const Image& f : b.frames) data.push_back(f.data.data());
+      chosen =
+          SelectSamples(b, data, b.frames[0].width, b.frames[0].height, channels, i, options, &s);
+    }
+    for (size_t p : chosen) {
       samples.push_back({static_cast<int>(i), p});
     }
     stride = std::max(stride, s);
     if (i + 1 < brackets.size()) {
-      first_frame[i + 1] = first_frame[i] + static_cast<int>(brackets[i].frames.size());
+      first_frame[i + 1] = first_frame[i] + static_cast<int>(FrameCount(brackets[i]));
     }
   }
-  if (first_frame.back() + brackets.back().frames.size() > 32767) {
+  if (first_frame.back() + FrameCount(brackets.back()) > 32767) {
     throw Error("response: more than 32767 frames in all brackets");
   }
   if (samples.size() < static_cast<size_t>(kMinSamples)) {
@@ -818,8 +1087,9 @@ ResponseCurve RecoverResponse(const std::vector<Bracket>& brackets, const Respon
   for (int c = 0; c < channels; ++c) {
     for (size_t s = 0; s < samples.size(); ++s) {
       const Bracket& b = brackets[samples[s].bracket];
-      for (size_t j = 0; j < b.frames.size(); ++j) {
-        const float v = b.frames[j].data[samples[s].pixel * channels + c];
+      for (size_t j = 0; j < FrameCount(b); ++j) {
+        const size_t at = samples[s].pixel * channels + c;
+        const float v = b.frames.empty() ? b.codes[j].data[at] : b.frames[j].data[at];
         const int z = std::clamp(static_cast<int>(std::lround(v)), 0, 255);
         obs[c].push_back({static_cast<int>(s), static_cast<uint8_t>(z),
                           static_cast<int16_t>(first_frame[samples[s].bracket] + j),
