@@ -1,8 +1,6 @@
 #include "pipeline/texture_render.h"
 
-#include <algorithm>
-#include <map>
-#include <set>
+#include <cmath>
 
 #include "core/error.h"
 #include "core/limits.h"
