@@ -170,9 +170,10 @@ TEST_F(PhotoTextureTest, KeepsThePlainRenderWhereEq19CannotHold) {
   for (int y = 60; y < 70; ++y)
     for (int x = 90; x < 100; ++x)
       for (int c = 0; c < 3; ++c) photo.at(x, y, c) *= 10;
-  // An unexposed pixel.
+  // An unexposed pixel, and a non-finite one marked valid.
   std::vector<uint8_t> valid(static_cast<size_t>(k_.width) * k_.height, 1);
   valid[static_cast<size_t>(75) * k_.width + 50] = 0;
+  photo.at(60, 80, 1) = NAN;
   const World& w = *world_;
   const SlotIrradiance pi = ComputeIrradiance(w.coarse, w.coarse_cache, *w.rc, morning_);
   const SlotIrradiance ni = ComputeIrradiance(w.coarse, w.coarse_cache, *w.rc, evening_);
@@ -186,6 +187,7 @@ TEST_F(PhotoTextureTest, KeepsThePlainRenderWhereEq19CannotHold) {
     }
   }
   EXPECT_FALSE(r.textured_mask[static_cast<size_t>(75) * k_.width + 50]);
+  EXPECT_FALSE(r.textured_mask[static_cast<size_t>(80) * k_.width + 60]);
   // Off the building (coverage 0: the sky above the plaza's far edge) the plain render too.
   for (size_t p = 0; p < r.textured_mask.size(); ++p) {
     if (r.grid.data[p * 4 + 3] < 0.999) {
