@@ -16,9 +16,11 @@
 #include "core/image.h"
 #include "core/lens.h"
 #include "core/outputs.h"
+#include "core/session.h"
 #include "core/time.h"
 #include "pipeline/export.h"
 #include "pipeline/scene.h"
+#include "pipeline/texture_render.h"
 #include "pipeline/timelapse.h"
 #include "render/tonemap.h"
 
@@ -35,10 +37,75 @@ struct RenderArgs {
   std::vector<double> overcast_colour;
   double overcast_brightness = 1;
   double exposure = 0;
+  // --texture-from (§6.4): the photograph, its session, the grid render beside it, a photo to
+  // score both against.
+  std::string texture_from, session, grid_out, grid_png, compare;
+  PhotoTextureOptions texture;
 };
 
 // The longest sequence --from/--to/--step renders (a day at one frame a minute is 1440).
 constexpr int kMaxSequenceFrames = 5000;
+
+// The PNG of a radiance image: through the scene's response, else the sRGB encoding.
+void WritePng(const std::string& path, const Image& image, const ResponseCurve& response,
+              double exposure) {
+  WriteImage(
+      path,
+      response.valid() ? ToDigital(image, response, exposure) : ToSrgbDigital(image, exposure),
+      StoredType::kUint8);
+}
+
+void PrintMetrics(const std::string& what, const RenderMetrics& m) {
+  std::printf("  %-22s PSNR %6.2f dB, relative RMSE %.4f, median relative error %.4f (%lld px)\n",
+              what.c_str(), m.psnr_db, m.rel_rmse, m.median_rel_error,
+              static_cast<long long>(m.pixels));
+}
+
+// rouen render --texture-from: one image from the photograph's camera (arguments checked).
+void RunTextured(const RenderArgs& a, const RenderRequest& request) {
+  OutputSet outputs;
+  const std::string out = outputs.Add("--out", a.out, OutputKind::kRadiance);
+  const std::string png = a.png.empty() ? "" : outputs.Add("--png", a.png, OutputKind::kImage);
+  const std::string grid_out =
+      a.grid_out.empty() ? "" : outputs.Add("--grid-out", a.grid_out, OutputKind::kRadiance);
+  const std::string grid_png =
+      a.grid_png.empty() ? "" : outputs.Add("--grid-png", a.grid_png, OutputKind::kImage);
+  auto say = [](const std::string& s) { std::fprintf(stderr, "render: %s\n", s.c_str()); };
+  const Session session = Session::Load(a.session);
+  const LoadedScene scene = LoadScene(a.scene, say);
+  TextureRenderRequest tr;
+  tr.photo = a.texture_from;
+  tr.lighting = request;
+  tr.options = a.texture;
+  tr.compare = a.compare;
+  const TextureRender r = RenderSceneWithPhotoTexture(scene, session, tr, say);
+  WriteImage(out, r.textured.rgba, StoredType::kFloat, r.textured.attributes);
+  if (!grid_out.empty()) WriteImage(grid_out, r.grid.rgba, StoredType::kFloat, r.grid.attributes);
+  // One exposure for both PNGs (--exposure, else the textured render's), so they compare.
+  const ResponseCurve& response = scene.scene.response;
+  double exposure = a.exposure;
+  if (exposure <= 0 && !(png.empty() && grid_png.empty()))
+    exposure = response.valid() ? AutoExposure(r.textured.rgb, response)
+                                : AutoExposureSrgb(r.textured.rgb);
+  if (!png.empty()) WritePng(png, r.textured.rgb, response, exposure);
+  if (!grid_png.empty()) WritePng(grid_png, r.grid.rgb, response, exposure);
+  outputs.Commit();
+  std::printf(
+      "%s: radiance %dx%d from %s's viewpoint, per-pixel albedo (§6.4) on %lld of %lld "
+      "building pixels\n",
+      a.out.c_str(), r.textured.rgb.width, r.textured.rgb.height, a.texture_from.c_str(),
+      static_cast<long long>(r.textured_pixels), static_cast<long long>(r.building_pixels));
+  if (!grid_out.empty())
+    std::printf("%s: the grid-resolution render under the same lighting\n", a.grid_out.c_str());
+  if (!png.empty() || !grid_png.empty())
+    std::printf("PNGs through %s, exposure factor %.4g\n",
+                response.valid() ? "the recovered response" : "the sRGB encoding", exposure);
+  if (r.textured_metrics) {
+    std::printf("against %s (building pixels, eroded 1 px):\n", a.compare.c_str());
+    PrintMetrics("texture render", *r.textured_metrics);
+    PrintMetrics("grid render", *r.grid_metrics);
+  }
+}
 
 void Run(const RenderArgs& a) {
   namespace fs = std::filesystem;
@@ -54,6 +121,8 @@ void Run(const RenderArgs& a) {
     throw Error(
         "give exactly one of --slot (a captured time of day), --time (any other) or "
         "--from/--to/--step (a sequence)");
+  if (a.exposure > 0 && a.png.empty() && a.grid_png.empty())
+    throw Error("--exposure is the PNGs' exposure: it needs --png or --grid-png");
   if (!a.overcast_colour.empty() && a.overcast_colour.size() != 3)
     throw Error("--overcast-colour takes three numbers R,G,B");
   RenderRequest request;
@@ -78,6 +147,18 @@ void Run(const RenderArgs& a) {
   request.relight.overcast_brightness = a.overcast_brightness;
   request.use_held_out_lighting = a.prediction.use_held_out;
   const bool own_camera = CameraFromArgs(a.camera, &request.intrinsics, &request.pose);
+  if (!a.texture_from.empty()) {
+    if (sequence) throw Error("--texture-from renders one image: give --slot or --time");
+    if (own_camera || !a.camera.view.empty())
+      throw Error(
+          "--texture-from renders from the photograph's camera: drop --view, --lens/--pose "
+          "and --look-at");
+    if (a.session.empty())
+      throw Error("--texture-from " + a.texture_from +
+                  " needs --session, the session the photograph belongs to");
+    RunTextured(a, request);
+    return;
+  }
 
   // Outputs: one image (and PNG), or folders of frames named by their times (declared once
   // the scene has accepted every time, so a refused sequence creates no folder).
@@ -194,11 +275,26 @@ void RegisterRender(CLI::App& app) {
       "rouen:slot (the slot or 'predicted'), rouen:sun_azimuth_deg (from north through east) and\n"
       "rouen:sun_elevation_deg, rouen:camera (JSON: intrinsics and pose as the lens and pose\n"
       "files hold them) and rouen:site.\n"
+      "--texture-from PHOTO --session S (paper §6.4, eq. 19): the grid holds one albedo per grid\n"
+      "point, so a close view is blurred; a photograph of the session (a view of the scene,\n"
+      "e.g. slot0/architecture/view1) gives each building pixel its own. Its texture factor\n"
+      "t = rho / rho~ = (I - S) / D, per pixel and channel, with I the photograph merged to\n"
+      "radiance and D, S the diffuse and specular parts of the grid render under the lighting\n"
+      "measured at the photograph's slot; the image is t D' + S' from the photograph's\n"
+      "viewpoint under the --slot or --time lighting (D', S' its grid render): the photograph\n"
+      "itself at its own slot. Pixels off the building, unexposed in the photograph, or where\n"
+      "t exceeds --texture-max-gain or D is below --texture-min-diffuse of its median keep the\n"
+      "grid render. --grid-out/--grid-png write that grid render beside it; --compare PHOTO2\n"
+      "scores both against another photograph through the same camera (e.g. the same view at\n"
+      "a held-out slot).\n"
       "Example: rouen render s.scene --time 2026-08-25T19:40:00-07:00 --out sunset.exr "
       "--png sunset.png\n"
       "         rouen render s.scene --from 2026-08-25T08:00:00-07:00 --to "
       "2026-08-25T19:00:00-07:00"
-      " \\\n           --step 30min --look-at 0,0,10 --from-point 40,-30,5 --out day/ --png day/");
+      " \\\n           --step 30min --look-at 0,0,10 --from-point 40,-30,5 --out day/ --png day/\n"
+      "         rouen render s.scene --slot 3 --texture-from slot0/architecture/view1 --session s "
+      "\\\n           --out tex.exr --png tex.png --grid-png grid.png "
+      "--compare slot3/architecture/view1");
   c->add_option("scene", a->scene, "Scene folder (from rouen solve)")->required();
   CLI::Option* slot = c->add_option("--slot", a->slot,
                                     "Render under the lighting of this captured slot (0, 1, ...)")
@@ -222,13 +318,41 @@ void RegisterRender(CLI::App& app) {
   c->add_option("--out", a->out,
                 "Radiance to write (.exr, or .hdr, .pfm, .tif); with --from a folder of EXRs")
       ->required();
-  CLI::Option* png = c->add_option(
+  c->add_option(
       "--png", a->png,
       "Also write an 8-bit PNG through the recovered response (sRGB when the photos were HDR); "
       "with --from a folder of PNGs");
-  c->add_option("--exposure", a->exposure, "Exposure factor for --png (default: automatic)")
+  c->add_option("--exposure", a->exposure,
+                "Exposure factor for --png and --grid-png (default: automatic)")
+      ->check(Positive());
+  CLI::Option* texture =
+      c->add_option("--texture-from", a->texture_from,
+                    "Per-pixel albedo from this photograph of --session (a view, e.g. "
+                    "slot0/architecture/view1), rendered from its viewpoint (paper §6.4)");
+  c->add_option("--session", a->session, "The session the --texture-from photograph belongs to")
+      ->needs(texture);
+  c->add_option("--grid-out", a->grid_out,
+                "With --texture-from: also the grid-resolution render (radiance) for comparison")
+      ->needs(texture);
+  c->add_option("--grid-png", a->grid_png,
+                "With --texture-from: the grid-resolution render as a PNG at --png's exposure")
+      ->needs(texture);
+  c->add_option("--compare", a->compare,
+                "With --texture-from: score both renders against this photograph of the session "
+                "(same camera, e.g. the view at a held-out slot)")
+      ->needs(texture);
+  c->add_option("--texture-max-gain", a->texture.max_texture_gain,
+                "With --texture-from: pixels whose albedo would exceed the grid's by this factor "
+                "keep the grid render (the photo and the model disagree there)")
       ->check(Positive())
-      ->needs(png);
+      ->needs(texture)
+      ->capture_default_str();
+  c->add_option("--texture-min-diffuse", a->texture.min_diffuse_fraction,
+                "With --texture-from: pixels whose grid render under the photo's lighting is "
+                "below this fraction of its median keep the grid render")
+      ->check(Within(0, 0.99))
+      ->needs(texture)
+      ->capture_default_str();
   c->callback([a, slot] {
     a->have_slot = slot->count() > 0;
     Run(*a);
