@@ -130,8 +130,9 @@ int AccumulateRows(const T* const* s, const float* log_x, int nf, const Levels& 
 // F frames' rows at once, 8 values per instruction, for CPUs with AVX2 (checked at run time):
 // each value's sums are loaded once, the F frames' terms added in frame order, and stored
 // once. The operations are those of the portable kernel in the same order, without FMA
-// contraction (the target is "avx2" only and the build uses -ffp-contract=off, ISO C++), so
-// the results are the same floats. Whole groups of 24 values (8 pixels of 3 channels, or 24 of
+// contraction (the target is "avx2" only, without FMA, and the build is ISO C++ without GNU
+// extensions, so the compiler does not contract across statements), so the results are the
+// same floats. Whole groups of 24 values (8 pixels of 3 channels, or 24 of
 // 1) go through the vector loop, the rest through the portable kernel. The weight is computed
 // as Levels::HatWeight does, only g is gathered.
 template <int NC, int F, typename T>
