@@ -74,8 +74,9 @@ struct SkyFitOptions {
   // the horizon, the inner aureole) pull the rest of the fit less; p > 2 weighs the largest
   // residuals more, which helps only where the largest residuals are noise rather than sky
   // the model cannot follow. From the least-squares optimum and each starting
-  // shape: p < 2 by iteratively reweighted least squares (majorise-minimise, each step lowers
-  // the objective); p > 2 by LM on sign(r_i) sqrt(rho(r_i)). final_cost is then
+  // shape: p < 2 by LM on squares reweighted at every step (iteratively reweighted least
+  // squares, majorise-minimise: each kept step lowers the objective); p > 2 by LM on
+  // sign(r_i) sqrt(rho(r_i)). final_cost is then
   // half sum rho(r_i). Costs several times a least-squares fit.
   // In [1, 16]. Not used by kCie.
   double norm_p = 1;

@@ -52,29 +52,33 @@ inline double SkyModelAt(const double* p, const SkyPoint& q, double* grad) {
   return p[kLz] * g * f;
 }
 
-// Residual i = (y_i - Ls_i) / sigma_i with sigma_i = y_i / log y_i (eq. 10); one block of
-// seven parameters {Lz, a, b, c, d, e, h}. With `fixed_h` (Perez et al. 1993's five-parameter
-// form) the block has six parameters {Lz, a, b, c, d, e} and h = 1. With `norm_p` != 2 the
-// residual is sign(r_i) sqrt(rho(r_i)), rho(r) = (r^2 + eps^2)^(p/2) - eps^p (a smoothed
-// |r|^p, eps = `norm_eps`), so that half the sum of squares is half sum rho(r_i).
-class SkyCost : public ceres::CostFunction {
+// The p-norm of SkyFitOptions::norm_p as a transform of one residual: t(r) = sign(r) sqrt(rho(r)),
+// rho(r) = (r^2 + eps^2)^(p/2) - eps^p (a smoothed |r|^p, eps = `norm_eps`), so that half the sum
+// of t^2 is half sum rho(r_i); p = 2 is the identity (eq. 10's least squares).
+class SkyNormTransform {
  public:
-  explicit SkyCost(std::vector<SkyPoint> points, bool fixed_h = false, double norm_p = 2,
-                   double norm_eps = 1e-3)
-      : points_(std::move(points)),
-        n_(fixed_h ? kNumSkyParams - 1 : kNumSkyParams),
-        half_p_(0.5 * norm_p),
+  explicit SkyNormTransform(double norm_p = 2, double norm_eps = 1e-3)
+      : half_p_(0.5 * norm_p),
+        eps_(norm_eps),
         eps2_(norm_eps * norm_eps),
-        eps_p_(std::pow(norm_eps, norm_p)) {
-    set_num_residuals(static_cast<int>(points_.size()));
-    mutable_parameter_block_sizes()->push_back(n_);
-  }
+        eps_p_(std::pow(norm_eps, norm_p)) {}
 
-  // The transformed residual t(r) = sign(r) sqrt(rho(r)) and dt/dr.
+  bool identity() const { return half_p_ == 1; }
+
+  // t(r) and dt/dr.
   void Transform(double r, double* t, double* dt) const {
     if (half_p_ == 1) {
       *t = r;
       *dt = 1;
+      return;
+    }
+    if (half_p_ == 0.5) {
+      // p = 1 (the default) without pow: with root = sqrt(r^2 + eps^2), rho = root - eps =
+      // r^2 / (root + eps), so t = r / sqrt(root + eps) and dt/dr = sqrt(root + eps) / (2 root).
+      const double root = std::sqrt(r * r + eps2_);
+      const double s = std::sqrt(root + eps_);
+      *t = r / s;
+      *dt = s / (2 * root);
       return;
     }
     const double u = r * r / eps2_;
@@ -89,6 +93,31 @@ class SkyCost : public ceres::CostFunction {
                    : std::sqrt(half_p_) * std::pow(eps2_, 0.5 * (half_p_ - 1));
   }
 
+ private:
+  double half_p_, eps_, eps2_, eps_p_;
+};
+
+// Residual i = (y_i - Ls_i) / sigma_i with sigma_i = y_i / log y_i (eq. 10); one block of
+// seven parameters {Lz, a, b, c, d, e, h}. With `fixed_h` (Perez et al. 1993's five-parameter
+// form) the block has six parameters {Lz, a, b, c, d, e} and h = 1. With `norm_p` != 2 the
+// residual is SkyNormTransform's t(r_i), so that half the sum of squares is half sum rho(r_i).
+// FitSky's Levenberg-Marquardt (sky_fit.cc) evaluates it; a ceres::CostFunction so that Ceres's
+// gradient checker can test it.
+class SkyCost : public ceres::CostFunction {
+ public:
+  explicit SkyCost(std::vector<SkyPoint> points, bool fixed_h = false, double norm_p = 2,
+                   double norm_eps = 1e-3)
+      : points_(std::move(points)),
+        n_(fixed_h ? kNumSkyParams - 1 : kNumSkyParams),
+        norm_(norm_p, norm_eps) {
+    set_num_residuals(static_cast<int>(points_.size()));
+    mutable_parameter_block_sizes()->push_back(n_);
+  }
+
+  void Transform(double r, double* t, double* dt) const { norm_.Transform(r, t, dt); }
+  const std::vector<SkyPoint>& points() const { return points_; }
+  int num_params() const { return n_; }
+
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override {
     double p[kNumSkyParams] = {0, 0, 0, 0, 0, 0, 1};
@@ -99,7 +128,7 @@ class SkyCost : public ceres::CostFunction {
       const SkyPoint& q = points_[i];
       const double l = SkyModelAt(p, q, jac ? grad : nullptr);
       double dr = 1;  // d residual / d r
-      Transform(q.s * (q.y - l), &residuals[i], &dr);
+      norm_.Transform(q.s * (q.y - l), &residuals[i], &dr);
       if (!std::isfinite(residuals[i])) return false;
       if (jac) {
         for (int k = 0; k < n_; ++k) jac[i * n_ + k] = -dr * q.s * grad[k];
@@ -111,7 +140,7 @@ class SkyCost : public ceres::CostFunction {
  private:
   std::vector<SkyPoint> points_;
   int n_;
-  double half_p_, eps2_, eps_p_;
+  SkyNormTransform norm_;
 };
 
 }  // namespace rouen::internal
