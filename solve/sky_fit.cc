@@ -42,11 +42,16 @@ constexpr double kStarts[][6] = {
     {-1.0, -0.32, 10.0, -3.0, 0.45, 0.6},          // clear with a wider aureole
 };
 
-// Screening: every start on about this many samples, for this many iterations; the best
-// kRefined continue on all samples.
+// Screening: every start on about this many samples, for at most this many iterations, until
+// an iteration gains less than kScreenTolerance relative; the best kRefined distinct minima
+// (costs more than kSameMinimum apart, relative) continue on all samples, those after the
+// first only if their cost is within kRefineWithin of its (relative).
 constexpr size_t kScreenSamples = 2000;
 constexpr int kScreenIterations = 60;
+constexpr double kScreenTolerance = 1e-5;
 constexpr size_t kRefined = 2;
+constexpr double kSameMinimum = 1e-3;
+constexpr double kRefineWithin = 0.25;
 // Levenberg-Marquardt stops when a step is this small relative to the parameters.
 constexpr double kParameterTolerance = 1e-10;
 
@@ -118,10 +123,10 @@ double Objective(const SkyCost& cost, const SkyNormTransform* irls, const double
 // Levenberg-Marquardt from `start` within the box bounds (`a_lower` replaces the lower bound
 // of a): steps solve (H + mu diag H) delta = -g and are projected onto the box; a step is kept
 // when it lowers the objective. Stops when a kept step lowers it by less than
-// options.function_tolerance relative, when the projected gradient or the step vanishes, or
-// after max_iterations steps.
+// function_tolerance relative, when the projected gradient or the step vanishes, or after
+// max_iterations steps.
 StartResult Solve(const SkyCost& cost, const SkyNormTransform* irls, const double* start,
-                  double a_lower, int max_iterations, const SkyFitOptions& options) {
+                  double a_lower, int max_iterations, double function_tolerance) {
   StartResult res;
   double* x = res.params;
   std::copy(start, start + 7, x);
@@ -176,7 +181,7 @@ StartResult Solve(const SkyCost& cost, const SkyNormTransform* irls, const doubl
       f = ft;
       mu *= std::max(1.0 / 3, 1 - std::pow(2 * ratio - 1, 3));
       nu = 2;
-      if (gain <= options.function_tolerance * (f + gain)) break;
+      if (gain <= function_tolerance * (f + gain)) break;
     } else {
       mu *= nu;
       nu *= 2;
@@ -192,17 +197,33 @@ StartResult Solve(const SkyCost& cost, const SkyNormTransform* irls, const doubl
 // result whose zenith gradation is not positive is refitted with a >= -0.999 (then
 // exp(b / cos xi) < 1 keeps it positive everywhere).
 StartResult RunStart(const SkyCost& cost, const SkyNormTransform* irls, const double* start,
-                     int max_iterations, const SkyFitOptions& options) {
-  StartResult r = Solve(cost, irls, start, kLower[1], max_iterations, options);
+                     int max_iterations, double function_tolerance) {
+  StartResult r = Solve(cost, irls, start, kLower[1], max_iterations, function_tolerance);
   if (std::isfinite(r.final_cost) && ZenithGradation(r.params) < 1e-3) {
     const int used = r.iterations;
     const double initial = r.initial_cost;
-    r = Solve(cost, irls, r.params, -0.999, max_iterations, options);
+    r = Solve(cost, irls, r.params, -0.999, max_iterations, function_tolerance);
     r.iterations += used;
     r.initial_cost = initial;
   }
   if (ZenithGradation(r.params) <= 0) r.final_cost = std::numeric_limits<double>::infinity();
   return r;
+}
+
+// The results of the best `count` distinct minima, best first: a result whose cost is within
+// kSameMinimum (relative) of a better one's is taken for the same minimum; one whose cost is
+// more than kRefineWithin above the best's is left out.
+std::vector<StartResult> BestDistinct(std::vector<StartResult> results, size_t count) {
+  std::sort(results.begin(), results.end(),
+            [](const StartResult& x, const StartResult& y) { return x.final_cost < y.final_cost; });
+  std::vector<StartResult> out;
+  for (const StartResult& r : results) {
+    if (out.size() == count || !std::isfinite(r.final_cost)) break;
+    if (!out.empty() && r.final_cost > out.front().final_cost * (1 + kRefineWithin)) break;
+    if (!out.empty() && r.final_cost <= out.back().final_cost * (1 + kSameMinimum)) continue;
+    out.push_back(r);
+  }
+  return out;
 }
 
 // A start vector for a shape, with Lz in closed form (weighted linear least squares).
@@ -519,74 +540,63 @@ SkyFitSummary FitSky(const std::vector<SkySample>& samples, const Eigen::Vector3
       const auto t0 = std::chrono::steady_clock::now();
       const std::vector<SkyPoint>& pts = points[c];
       const bool fixed_h = options.model == SkyModelKind::kPerez5;
-      // Every start on an evenly thinned subset, then the best two on all samples.
+      // Every start on an evenly thinned subset, then the best distinct minima on all samples.
       const size_t stride = std::max<size_t>(1, pts.size() / kScreenSamples);
+      const bool screen = stride > 1;
       std::vector<SkyPoint> subset;
       for (size_t i = 0; i < pts.size(); i += stride) subset.push_back(pts[i]);
       const SkyCost full_ls(pts, fixed_h), subset_ls(subset, fixed_h);
+      // On the subset: kScreenIterations and kScreenTolerance; on all samples: the options'.
+      const int screen_iterations = screen ? kScreenIterations : options.max_iterations;
+      const double screen_tolerance = screen ? kScreenTolerance : options.function_tolerance;
       std::vector<StartResult> screened;
       for (int k = 0; k < n_starts; ++k) {
         double p0[7];
         MakeStart(subset, shapes[k].data(), p0);
         if (fixed_h) p0[6] = 1;
-        screened.push_back(stride > 1
-                               ? RunStart(subset_ls, nullptr, p0, kScreenIterations, options)
-                               : RunStart(full_ls, nullptr, p0, options.max_iterations, options));
+        screened.push_back(RunStart(screen ? subset_ls : full_ls, nullptr, p0, screen_iterations,
+                                    screen_tolerance));
       }
-      std::sort(screened.begin(), screened.end(), [](const StartResult& a, const StartResult& b) {
-        return a.final_cost < b.final_cost;
-      });
+      const std::vector<StartResult> ls = BestDistinct(std::move(screened), kRefined);
       StartResult b;
-      if (stride == 1) {
-        b = screened.front();
-      } else {
-        for (size_t k = 0; k < std::min<size_t>(kRefined, screened.size()); ++k) {
-          if (!std::isfinite(screened[k].final_cost)) break;
-          StartResult r =
-              RunStart(full_ls, nullptr, screened[k].params, options.max_iterations, options);
-          r.iterations += screened[k].iterations;
+      if (!ls.empty() && options.norm_p == 2) {
+        for (const StartResult& s : ls) {
+          StartResult r = screen ? RunStart(full_ls, nullptr, s.params, options.max_iterations,
+                                            options.function_tolerance)
+                                 : s;
+          if (screen) r.iterations += s.iterations;
           if (r.final_cost < b.final_cost) b = r;
         }
-      }
-      // The p-norm objective has its own local minima: it starts from the least-squares
-      // optimum and from every starting shape, each on the subset; the best kRefined continue
-      // on all samples.
-      if (options.norm_p != 2 && std::isfinite(b.final_cost)) {
-        // p < 2: the least-squares residuals reweighted (Objective's irls); p > 2: the
-        // transformed residuals.
+      } else if (!ls.empty()) {
+        // The p-norm objective has its own local minima: it starts from the subset's
+        // least-squares optimum and from every starting shape, each on the subset; the best
+        // distinct minima continue on all samples. p < 2: the least-squares residuals
+        // reweighted (Objective's irls); p > 2: the transformed residuals.
         const SkyNormTransform norm(options.norm_p, options.norm_eps);
         const bool irls = options.norm_p < 2;
         const SkyCost full_pn(irls ? std::vector<SkyPoint>{} : pts, fixed_h, options.norm_p,
                               options.norm_eps);
         const SkyCost subset_pn(irls ? std::vector<SkyPoint>{} : subset, fixed_h, options.norm_p,
                                 options.norm_eps);
-        auto solve_p = [&](bool on_subset, const double* from, bool screen) {
-          const SkyCost& cost =
-              irls ? (on_subset ? subset_ls : full_ls) : (on_subset ? subset_pn : full_pn);
-          return RunStart(cost, irls ? &norm : nullptr, from,
-                          screen ? kScreenIterations : options.max_iterations, options);
-        };
-        const bool on_subset = stride > 1;
+        const SkyCost& on_full = irls ? full_ls : full_pn;
+        const SkyCost& on_subset =
+            irls ? (screen ? subset_ls : full_ls) : (screen ? subset_pn : full_pn);
+        const SkyNormTransform* weights = irls ? &norm : nullptr;
         std::vector<StartResult> cands;
-        cands.push_back(solve_p(on_subset, b.params, on_subset));
+        cands.push_back(
+            RunStart(on_subset, weights, ls.front().params, screen_iterations, screen_tolerance));
         for (int k = 0; k < n_starts; ++k) {
           double p0[7];
           MakeStart(subset, shapes[k].data(), p0);
           if (fixed_h) p0[6] = 1;
-          cands.push_back(solve_p(on_subset, p0, on_subset));
+          cands.push_back(RunStart(on_subset, weights, p0, screen_iterations, screen_tolerance));
         }
-        std::sort(cands.begin(), cands.end(), [](const StartResult& x, const StartResult& y) {
-          return x.final_cost < y.final_cost;
-        });
-        StartResult bp;
-        for (size_t k = 0; k < std::min<size_t>(kRefined, cands.size()); ++k) {
-          if (!std::isfinite(cands[k].final_cost)) break;
-          StartResult r = on_subset ? solve_p(false, cands[k].params, false) : cands[k];
-          if (r.final_cost < bp.final_cost) bp = r;
-        }
-        if (std::isfinite(bp.final_cost)) {
-          bp.iterations += b.iterations;
-          b = bp;
+        for (const StartResult& s : BestDistinct(std::move(cands), kRefined)) {
+          StartResult r = screen ? RunStart(on_full, weights, s.params, options.max_iterations,
+                                            options.function_tolerance)
+                                 : s;
+          r.iterations += ls.front().iterations + (screen ? s.iterations : 0);
+          if (r.final_cost < b.final_cost) b = r;
         }
       }
       best[c] = b;
