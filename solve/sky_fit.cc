@@ -76,48 +76,21 @@ struct NormalEquations {
 
 // Half the sum of squares of `cost`'s residuals at x (eq. 10; its p-norm transform for p > 2);
 // with `irls`, half sum rho(r_i) of the p < 2 norm instead, its Gauss-Newton matrix being that of
-// the weighted squares w_i r_i^2 / 2, w_i = t dt / r (rho is concave in r^2: they majorise it,
-// so a step that lowers them lowers the objective, as iteratively reweighted least squares).
-// With `ne`, also the Gauss-Newton matrix and gradient. `r`, `jac`: workspace.
+// the weighted squares (rho is concave in r^2: they majorise it, so a step that lowers them
+// lowers the objective, as iteratively reweighted least squares). Also writes the normal
+// equations at x.
 double Objective(const SkyCost& cost, const SkyNormTransform* irls, const double* x,
-                 std::vector<double>* r, std::vector<double>* jac, NormalEquations* ne) {
+                 NormalEquations* ne) {
   const int n = cost.num_params();
-  const size_t m = cost.points().size();
-  r->resize(m);
-  if (ne) jac->resize(m * n);
-  const double* params[1] = {x};
-  double* jacs[1] = {ne ? jac->data() : nullptr};
-  if (!cost.Evaluate(params, r->data(), ne ? jacs : nullptr)) {
-    return std::numeric_limits<double>::infinity();
+  double h[49], g[7];
+  const double f = cost.NormalEquations(x, irls, h, g);
+  ne->h.setZero();
+  ne->g.setZero();
+  for (int k = 0; k < n; ++k) {
+    ne->g[k] = g[k];
+    for (int c = 0; c < n; ++c) ne->h(k, c) = h[k * n + c];
   }
-  double sum = 0;
-  if (irls == nullptr) {
-    for (double v : *r) sum += v * v;
-  } else {
-    for (size_t i = 0; i < m; ++i) {
-      double t = 0, dt = 0;
-      irls->Transform((*r)[i], &t, &dt);
-      sum += t * t;
-      if (ne) {
-        // Row i scaled by sqrt(w_i): then J^T J and J^T r are those of the weighted squares.
-        const double w = (*r)[i] != 0 ? t * dt / (*r)[i] : dt * dt;
-        const double sw = std::sqrt(w);
-        (*r)[i] *= sw;
-        for (int k = 0; k < n; ++k) (*jac)[i * n + k] *= sw;
-      }
-    }
-  }
-  if (!std::isfinite(sum)) return std::numeric_limits<double>::infinity();
-  if (ne) {
-    using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-    const Eigen::Map<const RowMajor> j(jac->data(), static_cast<Eigen::Index>(m), n);
-    const Eigen::Map<const Eigen::VectorXd> v(r->data(), static_cast<Eigen::Index>(m));
-    ne->h.setZero();
-    ne->g.setZero();
-    ne->h.topLeftCorner(n, n).noalias() = j.transpose() * j;
-    ne->g.head(n).noalias() = j.transpose() * v;
-  }
-  return 0.5 * sum;
+  return f;
 }
 
 // Levenberg-Marquardt from `start` within the box bounds (`a_lower` replaces the lower bound
@@ -138,9 +111,8 @@ StartResult Solve(const SkyCost& cost, const SkyNormTransform* irls, const doubl
     upper[k] = kUpper[k];
     x[k] = std::clamp(x[k], lower[k], upper[k]);
   }
-  std::vector<double> r, jac;
   NormalEquations ne, trial_ne;
-  double f = Objective(cost, irls, x, &r, &jac, &ne);
+  double f = Objective(cost, irls, x, &ne);
   res.initial_cost = f;
   res.final_cost = std::numeric_limits<double>::infinity();
   if (!std::isfinite(f)) return res;
@@ -172,7 +144,7 @@ StartResult Solve(const SkyCost& cost, const SkyNormTransform* irls, const doubl
     }
     const double predicted =
         -(ne.g.head(n).dot(step) + 0.5 * step.dot(ne.h.topLeftCorner(n, n) * step));
-    const double ft = Objective(cost, irls, trial, &r, &jac, &trial_ne);
+    const double ft = Objective(cost, irls, trial, &trial_ne);
     if (std::isfinite(ft) && ft < f) {
       const double gain = f - ft;
       const double ratio = predicted > 0 ? gain / predicted : 1;

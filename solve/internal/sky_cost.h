@@ -7,6 +7,7 @@
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <vector>
 
 namespace rouen::internal {
@@ -135,6 +136,52 @@ class SkyCost : public ceres::CostFunction {
       }
     }
     return true;
+  }
+
+  // The normal equations of Levenberg-Marquardt in one pass, without storing the Jacobian J
+  // (rows j_i = d residual_i / d params): returns half the sum of squared residuals (+inf where
+  // one is not finite) and writes the Gauss-Newton matrix `h` = sum a_i j_i j_i^T (num_params()
+  // squared, row-major) and the gradient `g` = sum t_i j_i (num_params()), a_i = 1. With `irls`
+  // (this cost's own norm_p being 2), the residuals r_i are first transformed by it, t_i =
+  // t(r_i), and a_i = t_i dt_i / r_i: the weights of iteratively reweighted least squares, so
+  // that h is that of the weighted squares a_i r_i^2 / 2 which majorise half rho(r_i) for p < 2.
+  double NormalEquations(const double* params, const SkyNormTransform* irls, double* h,
+                         double* g) const {
+    double p[kNumSkyParams] = {0, 0, 0, 0, 0, 0, 1};
+    std::copy(params, params + n_, p);
+    // Lower triangle of h and g over all seven parameters; h's column of a fixed h is dropped.
+    double hl[kNumSkyParams * (kNumSkyParams + 1) / 2] = {};
+    double gg[kNumSkyParams] = {};
+    double sum = 0;
+    for (const SkyPoint& q : points_) {
+      double grad[kNumSkyParams];
+      const double l = SkyModelAt(p, q, grad);
+      const double r = q.s * (q.y - l);
+      double t = 0, dt = 1, a = 1;
+      if (irls) {
+        irls->Transform(r, &t, &dt);
+        a = r != 0 ? t * dt / r : dt * dt;
+        dt = 1;  // the rows stay those of r
+      } else {
+        norm_.Transform(r, &t, &dt);
+      }
+      sum += t * t;
+      double j[kNumSkyParams];
+      for (int k = 0; k < kNumSkyParams; ++k) j[k] = -dt * q.s * grad[k];
+      const double b = irls ? a * r : t;  // g += b j
+      for (int k = 0, m = 0; k < kNumSkyParams; ++k) {
+        gg[k] += b * j[k];
+        const double ajk = a * j[k];
+        for (int c = 0; c <= k; ++c) hl[m++] += ajk * j[c];
+      }
+    }
+    for (int k = 0, m = 0; k < kNumSkyParams; ++k) {
+      for (int c = 0; c <= k; ++c, ++m) {
+        if (k < n_) h[k * n_ + c] = h[c * n_ + k] = hl[m];
+      }
+      if (k < n_) g[k] = gg[k];
+    }
+    return std::isfinite(sum) ? 0.5 * sum : std::numeric_limits<double>::infinity();
   }
 
  private:
