@@ -7,7 +7,8 @@
 // (eq. 10, relative, p-norms) for three atmospheres (visibility 35, 15, 80 km) with the tail
 // broken down by slot, elevation, sun distance and channel; then the sampling error of the
 // demo's own sky photo (noise-free render, sky pixels, ExtractSkySamples). ROUEN_SKY_BENCH_
-// RANDOM=1 adds a 64-random-start run (does LM reach the global minimum?).
+// RANDOM=1 adds a 64-random-start run (does LM reach the global minimum?). ROUEN_SKY_BENCH_
+// SCIPY_ONLY=1 runs the comparison with scipy alone (no accuracy table, no timing benchmarks).
 #include <benchmark/benchmark.h>
 
 #include <Eigen/Core>
@@ -598,6 +599,10 @@ BENCHMARK_CAPTURE(BM_FitSky20k, cie, SkyModelKind::kCie, SkyWeighting::kPaper, 2
 int main(int argc, char** argv) {
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  if (const char* d = std::getenv("ROUEN_SKY_BENCH_SCIPY_ONLY"); d && *d == '1') {
+    rouen::CompareWithScipy();
+    return 0;
+  }
   rouen::PrintAccuracy();
   rouen::CompareWithScipy();
   if (const char* d = std::getenv("ROUEN_SKY_BENCH_DIAG"); d && *d == '1') {

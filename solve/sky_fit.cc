@@ -1,6 +1,5 @@
 #include "solve/sky_fit.h"
 
-#include <ceres/ceres.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -22,6 +21,7 @@ namespace rouen {
 namespace {
 
 using internal::SkyCost;
+using internal::SkyNormTransform;
 using internal::SkyPoint;
 
 // Bounds per parameter {Lz, a, b, c, d, e, h}; Lz's upper bound is open.
@@ -42,14 +42,18 @@ constexpr double kStarts[][6] = {
     {-1.0, -0.32, 10.0, -3.0, 0.45, 0.6},          // clear with a wider aureole
 };
 
-// Screening: every start on about this many samples, for this many iterations; the best
-// kRefined continue on all samples.
+// Screening: every start on about this many samples, for at most this many iterations, until
+// an iteration gains less than kScreenTolerance relative; the best kRefined distinct minima
+// (costs more than kSameMinimum apart, relative) continue on all samples, those after the
+// first only if their cost is within kRefineWithin of its (relative).
 constexpr size_t kScreenSamples = 2000;
 constexpr int kScreenIterations = 60;
+constexpr double kScreenTolerance = 1e-5;
 constexpr size_t kRefined = 2;
-// Reweighting steps of the p < 2 objective (IrlsSolve): when screening, when refining.
-constexpr int kIrlsScreenOuter = 12;
-constexpr int kIrlsOuter = 60;
+constexpr double kSameMinimum = 1e-3;
+constexpr double kRefineWithin = 0.25;
+// Levenberg-Marquardt stops when a step is this small relative to the parameters.
+constexpr double kParameterTolerance = 1e-10;
 
 double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
@@ -64,57 +68,113 @@ struct StartResult {
 // Gradation factor 1 + a exp(b / cos xi) at the zenith, where it is smallest (b < 0).
 double ZenithGradation(const double* p) { return SkyGradationFactor(p[1], p[2], 1.0); }
 
-// Levenberg-Marquardt from `p` (modified in place), with the box bounds; `a_lower` replaces
-// the lower bound of a.
-StartResult Solve(const std::vector<SkyPoint>& points, const double* start, double a_lower,
-                  int max_iterations, const SkyFitOptions& options, double norm_p) {
-  StartResult r;
-  double* p = r.params;
-  std::copy(start, start + 7, p);
-  p[1] = std::max(p[1], a_lower);
-  const bool fixed_h = options.model == SkyModelKind::kPerez5;
-  if (fixed_h) p[6] = 1;
-  const int n = fixed_h ? 6 : 7;
-  ceres::Problem::Options po;
-  po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
-  ceres::Problem problem(po);
-  problem.AddResidualBlock(new SkyCost(points, fixed_h, norm_p, options.norm_eps), nullptr, p);
+// The Gauss-Newton matrix and gradient of an objective at a point (over the first n parameters).
+struct NormalEquations {
+  Eigen::Matrix<double, 7, 7> h = Eigen::Matrix<double, 7, 7>::Zero();
+  Eigen::Matrix<double, 7, 1> g = Eigen::Matrix<double, 7, 1>::Zero();
+};
+
+// Half the sum of squares of `cost`'s residuals at x (eq. 10; its p-norm transform for p > 2);
+// with `irls`, half sum rho(r_i) of the p < 2 norm instead, its Gauss-Newton matrix being that of
+// the weighted squares (rho is concave in r^2: they majorise it, so a step that lowers them
+// lowers the objective, as iteratively reweighted least squares). Also writes the normal
+// equations at x.
+double Objective(const SkyCost& cost, const SkyNormTransform* irls, const double* x,
+                 NormalEquations* ne) {
+  const int n = cost.num_params();
+  double h[49], g[7];
+  const double f = cost.NormalEquations(x, irls, h, g);
+  ne->h.setZero();
+  ne->g.setZero();
   for (int k = 0; k < n; ++k) {
-    problem.SetParameterLowerBound(p, k, k == 1 ? a_lower : kLower[k]);
-    if (std::isfinite(kUpper[k])) problem.SetParameterUpperBound(p, k, kUpper[k]);
+    ne->g[k] = g[k];
+    for (int c = 0; c < n; ++c) ne->h(k, c) = h[k * n + c];
   }
-  ceres::Solver::Options so;
-  so.minimizer_type = ceres::TRUST_REGION;
-  so.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
-  so.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
-  so.max_num_iterations = max_iterations;
-  so.function_tolerance = options.function_tolerance;
-  so.gradient_tolerance = 1e-12;
-  so.parameter_tolerance = 1e-10;
-  so.num_threads = 1;
-  so.logging_type = ceres::SILENT;
-  so.minimizer_progress_to_stdout = false;
-  ceres::Solver::Summary summary;
-  ceres::Solve(so, &problem, &summary);
-  r.initial_cost = summary.initial_cost;
-  r.final_cost = summary.final_cost;
-  r.iterations = std::max(0, static_cast<int>(summary.iterations.size()) - 1);
-  bool finite = std::isfinite(r.final_cost);
-  for (int k = 0; k < 7; ++k) finite = finite && std::isfinite(p[k]);
-  if (!finite) r.final_cost = std::numeric_limits<double>::infinity();
-  return r;
+  return f;
+}
+
+// Levenberg-Marquardt from `start` within the box bounds (`a_lower` replaces the lower bound
+// of a): steps solve (H + mu diag H) delta = -g and are projected onto the box; a step is kept
+// when it lowers the objective. Stops when a kept step lowers it by less than
+// function_tolerance relative, when the projected gradient or the step vanishes, or after
+// max_iterations steps.
+StartResult Solve(const SkyCost& cost, const SkyNormTransform* irls, const double* start,
+                  double a_lower, int max_iterations, double function_tolerance) {
+  StartResult res;
+  double* x = res.params;
+  std::copy(start, start + 7, x);
+  const int n = cost.num_params();
+  if (n < 7) x[6] = 1;  // Perez 5: h fixed
+  double lower[7], upper[7];
+  for (int k = 0; k < 7; ++k) {
+    lower[k] = k == 1 ? a_lower : kLower[k];
+    upper[k] = kUpper[k];
+    x[k] = std::clamp(x[k], lower[k], upper[k]);
+  }
+  NormalEquations ne, trial_ne;
+  double f = Objective(cost, irls, x, &ne);
+  res.initial_cost = f;
+  res.final_cost = std::numeric_limits<double>::infinity();
+  if (!std::isfinite(f)) return res;
+  double mu = 1e-4, nu = 2;  // damping, as Ceres's initial trust region radius 1e4
+  int it = 0;
+  while (it < max_iterations) {
+    ++it;
+    // Projected gradient: zero at a (box-constrained) stationary point.
+    double pg = 0;
+    for (int k = 0; k < n; ++k) {
+      pg = std::max(pg, std::abs(std::clamp(x[k] - ne.g[k], lower[k], upper[k]) - x[k]));
+    }
+    if (pg <= 1e-12) break;
+    Eigen::MatrixXd a = ne.h.topLeftCorner(n, n);
+    for (int k = 0; k < n; ++k) a(k, k) += mu * std::clamp(ne.h(k, k), 1e-6, 1e32);
+    const Eigen::VectorXd delta = a.ldlt().solve(-ne.g.head(n));
+    double trial[7];
+    std::copy(x, x + 7, trial);
+    Eigen::VectorXd step(n);
+    for (int k = 0; k < n; ++k) {
+      trial[k] = std::clamp(x[k] + delta[k], lower[k], upper[k]);
+      step[k] = trial[k] - x[k];
+    }
+    double x_norm = 0;
+    for (int k = 0; k < n; ++k) x_norm += x[k] * x[k];
+    if (!step.allFinite() ||
+        step.norm() <= kParameterTolerance * (std::sqrt(x_norm) + kParameterTolerance)) {
+      break;
+    }
+    const double predicted =
+        -(ne.g.head(n).dot(step) + 0.5 * step.dot(ne.h.topLeftCorner(n, n) * step));
+    const double ft = Objective(cost, irls, trial, &trial_ne);
+    if (std::isfinite(ft) && ft < f) {
+      const double gain = f - ft;
+      const double ratio = predicted > 0 ? gain / predicted : 1;
+      std::copy(trial, trial + 7, x);
+      std::swap(ne, trial_ne);
+      f = ft;
+      mu *= std::max(1.0 / 3, 1 - std::pow(2 * ratio - 1, 3));
+      nu = 2;
+      if (gain <= function_tolerance * (f + gain)) break;
+    } else {
+      mu *= nu;
+      nu *= 2;
+      if (mu > 1e32) break;
+    }
+  }
+  res.iterations = it;
+  res.final_cost = f;
+  return res;
 }
 
 // One start: a lower bound of -3 on a lets the zenith darken more than a = -1 allows, but a
 // result whose zenith gradation is not positive is refitted with a >= -0.999 (then
 // exp(b / cos xi) < 1 keeps it positive everywhere).
-StartResult RunStart(const std::vector<SkyPoint>& points, const double* start, int max_iterations,
-                     const SkyFitOptions& options, double norm_p = 2) {
-  StartResult r = Solve(points, start, kLower[1], max_iterations, options, norm_p);
+StartResult RunStart(const SkyCost& cost, const SkyNormTransform* irls, const double* start,
+                     int max_iterations, double function_tolerance) {
+  StartResult r = Solve(cost, irls, start, kLower[1], max_iterations, function_tolerance);
   if (std::isfinite(r.final_cost) && ZenithGradation(r.params) < 1e-3) {
     const int used = r.iterations;
     const double initial = r.initial_cost;
-    r = Solve(points, r.params, -0.999, max_iterations, options, norm_p);
+    r = Solve(cost, irls, r.params, -0.999, max_iterations, function_tolerance);
     r.iterations += used;
     r.initial_cost = initial;
   }
@@ -122,46 +182,20 @@ StartResult RunStart(const std::vector<SkyPoint>& points, const double* start, i
   return r;
 }
 
-// The smoothed p-norm objective sum rho(r_i) / 2 (SkyFitOptions::norm_p) at parameters p.
-double NormObjective(const std::vector<SkyPoint>& points, const double* p, double norm_p,
-                     double eps) {
-  double sum = 0;
-  for (const SkyPoint& q : points) {
-    const double r = q.s * (q.y - internal::SkyModelAt(p, q, nullptr));
-    sum += std::pow(eps, norm_p) * std::expm1(0.5 * norm_p * std::log1p(r * r / (eps * eps)));
+// The results of the best `count` distinct minima, best first: a result whose cost is within
+// kSameMinimum (relative) of a better one's is taken for the same minimum; one whose cost is
+// more than kRefineWithin above the best's is left out.
+std::vector<StartResult> BestDistinct(std::vector<StartResult> results, size_t count) {
+  std::sort(results.begin(), results.end(),
+            [](const StartResult& x, const StartResult& y) { return x.final_cost < y.final_cost; });
+  std::vector<StartResult> out;
+  for (const StartResult& r : results) {
+    if (out.size() == count || !std::isfinite(r.final_cost)) break;
+    if (!out.empty() && r.final_cost > out.front().final_cost * (1 + kRefineWithin)) break;
+    if (!out.empty() && r.final_cost <= out.back().final_cost * (1 + kSameMinimum)) continue;
+    out.push_back(r);
   }
-  return std::isfinite(sum) ? 0.5 * sum : std::numeric_limits<double>::infinity();
-}
-
-// p < 2: iteratively reweighted least squares, a majorise-minimise scheme (rho is concave in
-// r^2, so the weighted squares with weights rho'(r0^2) at the current residuals bound it from
-// above and each weighted fit lowers the objective). More reliable than LM on the transformed
-// residuals, whose curvature is poor where residuals cross eps.
-StartResult IrlsSolve(const std::vector<SkyPoint>& points, const double* start,
-                      const SkyFitOptions& options, int max_outer) {
-  constexpr double kRelTol = 1e-7;
-  const double p = options.norm_p, eps = options.norm_eps;
-  StartResult best;
-  std::copy(start, start + 7, best.params);
-  best.final_cost = best.initial_cost = NormObjective(points, best.params, p, eps);
-  std::vector<SkyPoint> weighted = points;
-  for (int it = 0; it < max_outer; ++it) {
-    for (size_t i = 0; i < points.size(); ++i) {
-      const SkyPoint& q = points[i];
-      const double r = q.s * (q.y - internal::SkyModelAt(best.params, q, nullptr));
-      weighted[i].s = q.s * std::pow(r * r + eps * eps, 0.25 * (p - 2));
-    }
-    StartResult r = RunStart(weighted, best.params, options.max_iterations, options);
-    if (!std::isfinite(r.final_cost)) break;
-    const double cost = NormObjective(points, r.params, p, eps);
-    best.iterations += r.iterations;
-    if (!(cost < best.final_cost)) break;
-    const double gain = best.final_cost - cost;
-    std::copy(r.params, r.params + 7, best.params);
-    best.final_cost = cost;
-    if (gain < kRelTol * cost) break;
-  }
-  return best;
+  return out;
 }
 
 // A start vector for a shape, with Lz in closed form (weighted linear least squares).
@@ -477,69 +511,64 @@ SkyFitSummary FitSky(const std::vector<SkySample>& samples, const Eigen::Vector3
     tbb::parallel_for(0, 3, [&](int c) {
       const auto t0 = std::chrono::steady_clock::now();
       const std::vector<SkyPoint>& pts = points[c];
-      // Every start on an evenly thinned subset, then the best two on all samples.
+      const bool fixed_h = options.model == SkyModelKind::kPerez5;
+      // Every start on an evenly thinned subset, then the best distinct minima on all samples.
       const size_t stride = std::max<size_t>(1, pts.size() / kScreenSamples);
+      const bool screen = stride > 1;
       std::vector<SkyPoint> subset;
       for (size_t i = 0; i < pts.size(); i += stride) subset.push_back(pts[i]);
+      const SkyCost full_ls(pts, fixed_h), subset_ls(subset, fixed_h);
+      // On the subset: kScreenIterations and kScreenTolerance; on all samples: the options'.
+      const int screen_iterations = screen ? kScreenIterations : options.max_iterations;
+      const double screen_tolerance = screen ? kScreenTolerance : options.function_tolerance;
       std::vector<StartResult> screened;
       for (int k = 0; k < n_starts; ++k) {
         double p0[7];
         MakeStart(subset, shapes[k].data(), p0);
-        if (options.model == SkyModelKind::kPerez5) p0[6] = 1;
-        screened.push_back(stride > 1 ? RunStart(subset, p0, kScreenIterations, options)
-                                      : RunStart(pts, p0, options.max_iterations, options));
+        if (fixed_h) p0[6] = 1;
+        screened.push_back(RunStart(screen ? subset_ls : full_ls, nullptr, p0, screen_iterations,
+                                    screen_tolerance));
       }
-      std::sort(screened.begin(), screened.end(), [](const StartResult& a, const StartResult& b) {
-        return a.final_cost < b.final_cost;
-      });
+      const std::vector<StartResult> ls = BestDistinct(std::move(screened), kRefined);
       StartResult b;
-      if (stride == 1) {
-        b = screened.front();
-      } else {
-        for (size_t k = 0; k < std::min<size_t>(kRefined, screened.size()); ++k) {
-          if (!std::isfinite(screened[k].final_cost)) break;
-          StartResult r = RunStart(pts, screened[k].params, options.max_iterations, options);
-          r.iterations += screened[k].iterations;
+      if (!ls.empty() && options.norm_p == 2) {
+        for (const StartResult& s : ls) {
+          StartResult r = screen ? RunStart(full_ls, nullptr, s.params, options.max_iterations,
+                                            options.function_tolerance)
+                                 : s;
+          if (screen) r.iterations += s.iterations;
           if (r.final_cost < b.final_cost) b = r;
         }
-      }
-      // The p-norm objective has its own local minima: it starts from the least-squares
-      // optimum and from every starting shape, each on the subset; the best kRefined continue
-      // on all samples.
-      if (options.norm_p != 2 && std::isfinite(b.final_cost)) {
-        // Screening: a few reweightings (or kScreenIterations) per start; refinement: up to
-        // kIrlsOuter reweightings (the objective change then stops them much earlier).
-        auto solve_p = [&](const std::vector<SkyPoint>& on, const double* from, bool screen) {
-          StartResult r =
-              options.norm_p < 2
-                  ? IrlsSolve(on, from, options, screen ? kIrlsScreenOuter : kIrlsOuter)
-                  : RunStart(on, from, screen ? kScreenIterations : options.max_iterations, options,
-                             options.norm_p);
-          if (std::isfinite(r.final_cost)) {
-            r.final_cost = NormObjective(on, r.params, options.norm_p, options.norm_eps);
-          }
-          return r;
-        };
+      } else if (!ls.empty()) {
+        // The p-norm objective has its own local minima: it starts from the subset's
+        // least-squares optimum and from every starting shape, each on the subset; the best
+        // distinct minima continue on all samples. p < 2: the least-squares residuals
+        // reweighted (Objective's irls); p > 2: the transformed residuals.
+        const SkyNormTransform norm(options.norm_p, options.norm_eps);
+        const bool irls = options.norm_p < 2;
+        const SkyCost full_pn(irls ? std::vector<SkyPoint>{} : pts, fixed_h, options.norm_p,
+                              options.norm_eps);
+        const SkyCost subset_pn(irls ? std::vector<SkyPoint>{} : subset, fixed_h, options.norm_p,
+                                options.norm_eps);
+        const SkyCost& on_full = irls ? full_ls : full_pn;
+        const SkyCost& on_subset =
+            irls ? (screen ? subset_ls : full_ls) : (screen ? subset_pn : full_pn);
+        const SkyNormTransform* weights = irls ? &norm : nullptr;
         std::vector<StartResult> cands;
-        cands.push_back(solve_p(subset, b.params, stride > 1));
+        cands.push_back(
+            RunStart(on_subset, weights, ls.front().params, screen_iterations, screen_tolerance));
         for (int k = 0; k < n_starts; ++k) {
           double p0[7];
           MakeStart(subset, shapes[k].data(), p0);
-          if (options.model == SkyModelKind::kPerez5) p0[6] = 1;
-          cands.push_back(solve_p(subset, p0, stride > 1));
+          if (fixed_h) p0[6] = 1;
+          cands.push_back(RunStart(on_subset, weights, p0, screen_iterations, screen_tolerance));
         }
-        std::sort(cands.begin(), cands.end(), [](const StartResult& x, const StartResult& y) {
-          return x.final_cost < y.final_cost;
-        });
-        StartResult bp;
-        for (size_t k = 0; k < std::min<size_t>(kRefined, cands.size()); ++k) {
-          if (!std::isfinite(cands[k].final_cost)) break;
-          StartResult r = stride > 1 ? solve_p(pts, cands[k].params, false) : cands[k];
-          if (r.final_cost < bp.final_cost) bp = r;
-        }
-        if (std::isfinite(bp.final_cost)) {
-          bp.iterations += b.iterations;
-          b = bp;
+        for (const StartResult& s : BestDistinct(std::move(cands), kRefined)) {
+          StartResult r = screen ? RunStart(on_full, weights, s.params, options.max_iterations,
+                                            options.function_tolerance)
+                                 : s;
+          r.iterations += ls.front().iterations + (screen ? s.iterations : 0);
+          if (r.final_cost < b.final_cost) b = r;
         }
       }
       best[c] = b;

@@ -73,14 +73,18 @@ struct SkyFitOptions {
   // eps unused). p < 2 is robust: sky regions the model cannot follow (the last degrees above
   // the horizon, the inner aureole) pull the rest of the fit less; p > 2 weighs the largest
   // residuals more, which helps only where the largest residuals are noise rather than sky
-  // the model cannot follow. From the least-squares optimum and each starting
-  // shape: p < 2 by iteratively reweighted least squares (majorise-minimise, each step lowers
-  // the objective); p > 2 by LM on sign(r_i) sqrt(rho(r_i)). final_cost is then
+  // the model cannot follow. From the screened least-squares optimum and each starting
+  // shape: p < 2 by LM on squares reweighted at every step (iteratively reweighted least
+  // squares, majorise-minimise: each kept step lowers the objective); p > 2 by LM on
+  // sign(r_i) sqrt(rho(r_i)). final_cost is then
   // half sum rho(r_i). Costs several times a least-squares fit.
   // In [1, 16]. Not used by kCie.
   double norm_p = 1;
   double norm_eps = 1e-3;
-  double function_tolerance = 1e-10;
+  // Levenberg-Marquardt stops when a step lowers the objective by less than this, relative.
+  // p < 2 converges linearly; 1e-7 leaves its minimum within a small fraction of the samples'
+  // noise.
+  double function_tolerance = 1e-7;
 
   void Validate() const;  // throws rouen::Error explaining the bad field
 };
@@ -111,12 +115,13 @@ struct SkyFitSummary {
 // are bounded so the model stays finite and positive: a in [-3, 30] with 1 + a e^b > 0 (the
 // zenith, where the gradation is smallest), b in [-10, -0.01], c in [0, 200],
 // d in [-20, -0.01], e in [-0.9, 20], h in [0.3, 3], Lz > 0. Eight starting shapes (CIE
-// general skies, Perez-like) are screened on ~2000 evenly thinned samples; the best two are
-// refined on all samples and the lower cost wins.
+// general skies, Perez-like) are screened on ~2000 evenly thinned samples; the best two
+// distinct minima (the second only if its cost is within 25 % of the best's) are refined on all
+// samples and the lower cost wins.
 // Throws rouen::Error for too few samples, non-positive or non-finite radiance, directions
 // that are not unit or below the horizon, or a bad sun direction.
-// With options.norm_p != 2 the least-squares optimum and every starting shape are then
-// refined under the p-norm objective (see SkyFitOptions::norm_p) and the lowest wins; the
+// With options.norm_p != 2 the screened least-squares optimum and every starting shape are
+// instead screened and refined so under the p-norm objective (see SkyFitOptions::norm_p); the
 // per-channel relative-error figures in the summary are of that final fit.
 // kPerez5 fits the same way with h fixed at 1. kCie tries the 15 CIE types, each with Lz per
 // channel in closed form (weighted linear least squares with the chosen weights), and keeps

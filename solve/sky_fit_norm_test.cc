@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "core/angles.h"
@@ -113,6 +114,67 @@ TEST(SkyFitNorm, JacobianMatchesCentralDifferences) {
     const internal::SkyCost cost(points, false, norm_p, 1e-3);
     testing::ExpectJacobianMatchesCentralDifferences(cost, n, p0, 1e-6, 1e-5,
                                                      "p " + std::to_string(norm_p) + " ");
+  }
+}
+
+// The one-pass normal equations of the fit's Levenberg-Marquardt: for least squares and the
+// transformed p > 2 residuals, J^T J and J^T r of Evaluate's Jacobian and residuals; with the
+// p < 2 reweighting, the gradient of half sum rho(r_i) (central differences of the returned
+// objective) and the weighted J^T W J, W = t dt / r.
+TEST(SkyFitNorm, NormalEquationsMatchTheJacobianAndTheObjectiveGradient) {
+  const Eigen::Vector3d sun = AzEl(80, 25);
+  std::vector<internal::SkyPoint> points;
+  for (const Eigen::Vector3d& d : UniformSky(40, sun, 4)) {
+    points.push_back(internal::MakeSkyPoint(d, sun, 2 + 10 * d.z(), /*relative=*/true));
+  }
+  const int n = static_cast<int>(points.size());
+  const double p0[7] = {5, 0.7, -0.9, 2, -1.5, 0.15, 1.7};
+  const internal::SkyNormTransform l1(1, 1e-3);
+  struct Case {
+    double norm_p;
+    const internal::SkyNormTransform* irls;
+  };
+  for (const Case& k : {Case{2, nullptr}, Case{4, nullptr}, Case{2, &l1}}) {
+    const std::string label = k.irls ? "irls p 1 " : "p " + std::to_string(k.norm_p) + " ";
+    const internal::SkyCost cost(points, false, k.norm_p, 1e-3);
+    double h[49], g[7];
+    const double f = cost.NormalEquations(p0, k.irls, h, g);
+    std::vector<double> r(n), jac(n * 7);
+    double* jacs[1] = {jac.data()};
+    const double* params[1] = {p0};
+    ASSERT_TRUE(cost.Evaluate(params, r.data(), jacs));
+    double want_f = 0, want_h[49] = {}, want_g[7] = {};
+    for (int i = 0; i < n; ++i) {
+      double t = r[i], dt = 1, w = 1;
+      if (k.irls) {
+        k.irls->Transform(r[i], &t, &dt);
+        w = t * dt / r[i];
+      }
+      want_f += 0.5 * t * t;
+      for (int a = 0; a < 7; ++a) {
+        want_g[a] += t * dt * jac[i * 7 + a];
+        for (int b = 0; b < 7; ++b) want_h[a * 7 + b] += w * jac[i * 7 + a] * jac[i * 7 + b];
+      }
+    }
+    EXPECT_NEAR(f, want_f, 1e-12 * want_f) << label;
+    for (int a = 0; a < 7; ++a) {
+      EXPECT_NEAR(g[a], want_g[a], 1e-10 * std::max(1.0, std::abs(want_g[a]))) << label << a;
+      for (int b = 0; b < 7; ++b) {
+        EXPECT_NEAR(h[a * 7 + b], want_h[a * 7 + b],
+                    1e-10 * std::max(1.0, std::abs(want_h[a * 7 + b])))
+            << label << a << "," << b;
+      }
+      // g is the gradient of f (step ~ cbrt(eps_machine) x the parameter's scale).
+      const double step = 1e-6 * std::max(1.0, std::abs(p0[a]));
+      double q[7], unused_h[49], unused_g[7];
+      std::copy(p0, p0 + 7, q);
+      q[a] = p0[a] + step;
+      const double fp = cost.NormalEquations(q, k.irls, unused_h, unused_g);
+      q[a] = p0[a] - step;
+      const double fm = cost.NormalEquations(q, k.irls, unused_h, unused_g);
+      EXPECT_NEAR(g[a], (fp - fm) / (2 * step), 1e-5 * std::max(1.0, std::abs(g[a])))
+          << label << "parameter " << a;
+    }
   }
 }
 

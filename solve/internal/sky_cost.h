@@ -7,6 +7,7 @@
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <vector>
 
 namespace rouen::internal {
@@ -52,29 +53,33 @@ inline double SkyModelAt(const double* p, const SkyPoint& q, double* grad) {
   return p[kLz] * g * f;
 }
 
-// Residual i = (y_i - Ls_i) / sigma_i with sigma_i = y_i / log y_i (eq. 10); one block of
-// seven parameters {Lz, a, b, c, d, e, h}. With `fixed_h` (Perez et al. 1993's five-parameter
-// form) the block has six parameters {Lz, a, b, c, d, e} and h = 1. With `norm_p` != 2 the
-// residual is sign(r_i) sqrt(rho(r_i)), rho(r) = (r^2 + eps^2)^(p/2) - eps^p (a smoothed
-// |r|^p, eps = `norm_eps`), so that half the sum of squares is half sum rho(r_i).
-class SkyCost : public ceres::CostFunction {
+// The p-norm of SkyFitOptions::norm_p as a transform of one residual: t(r) = sign(r) sqrt(rho(r)),
+// rho(r) = (r^2 + eps^2)^(p/2) - eps^p (a smoothed |r|^p, eps = `norm_eps`), so that half the sum
+// of t^2 is half sum rho(r_i); p = 2 is the identity (eq. 10's least squares).
+class SkyNormTransform {
  public:
-  explicit SkyCost(std::vector<SkyPoint> points, bool fixed_h = false, double norm_p = 2,
-                   double norm_eps = 1e-3)
-      : points_(std::move(points)),
-        n_(fixed_h ? kNumSkyParams - 1 : kNumSkyParams),
-        half_p_(0.5 * norm_p),
+  explicit SkyNormTransform(double norm_p = 2, double norm_eps = 1e-3)
+      : half_p_(0.5 * norm_p),
+        eps_(norm_eps),
         eps2_(norm_eps * norm_eps),
-        eps_p_(std::pow(norm_eps, norm_p)) {
-    set_num_residuals(static_cast<int>(points_.size()));
-    mutable_parameter_block_sizes()->push_back(n_);
-  }
+        eps_p_(std::pow(norm_eps, norm_p)) {}
 
-  // The transformed residual t(r) = sign(r) sqrt(rho(r)) and dt/dr.
+  bool identity() const { return half_p_ == 1; }
+
+  // t(r) and dt/dr.
   void Transform(double r, double* t, double* dt) const {
     if (half_p_ == 1) {
       *t = r;
       *dt = 1;
+      return;
+    }
+    if (half_p_ == 0.5) {
+      // p = 1 (the default) without pow: with root = sqrt(r^2 + eps^2), rho = root - eps =
+      // r^2 / (root + eps), so t = r / sqrt(root + eps) and dt/dr = sqrt(root + eps) / (2 root).
+      const double root = std::sqrt(r * r + eps2_);
+      const double s = std::sqrt(root + eps_);
+      *t = r / s;
+      *dt = s / (2 * root);
       return;
     }
     const double u = r * r / eps2_;
@@ -89,6 +94,31 @@ class SkyCost : public ceres::CostFunction {
                    : std::sqrt(half_p_) * std::pow(eps2_, 0.5 * (half_p_ - 1));
   }
 
+ private:
+  double half_p_, eps_, eps2_, eps_p_;
+};
+
+// Residual i = (y_i - Ls_i) / sigma_i with sigma_i = y_i / log y_i (eq. 10); one block of
+// seven parameters {Lz, a, b, c, d, e, h}. With `fixed_h` (Perez et al. 1993's five-parameter
+// form) the block has six parameters {Lz, a, b, c, d, e} and h = 1. With `norm_p` != 2 the
+// residual is SkyNormTransform's t(r_i), so that half the sum of squares is half sum rho(r_i).
+// FitSky's Levenberg-Marquardt (sky_fit.cc) evaluates it; a ceres::CostFunction so that Ceres's
+// gradient checker can test it.
+class SkyCost : public ceres::CostFunction {
+ public:
+  explicit SkyCost(std::vector<SkyPoint> points, bool fixed_h = false, double norm_p = 2,
+                   double norm_eps = 1e-3)
+      : points_(std::move(points)),
+        n_(fixed_h ? kNumSkyParams - 1 : kNumSkyParams),
+        norm_(norm_p, norm_eps) {
+    set_num_residuals(static_cast<int>(points_.size()));
+    mutable_parameter_block_sizes()->push_back(n_);
+  }
+
+  void Transform(double r, double* t, double* dt) const { norm_.Transform(r, t, dt); }
+  const std::vector<SkyPoint>& points() const { return points_; }
+  int num_params() const { return n_; }
+
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override {
     double p[kNumSkyParams] = {0, 0, 0, 0, 0, 0, 1};
@@ -99,7 +129,7 @@ class SkyCost : public ceres::CostFunction {
       const SkyPoint& q = points_[i];
       const double l = SkyModelAt(p, q, jac ? grad : nullptr);
       double dr = 1;  // d residual / d r
-      Transform(q.s * (q.y - l), &residuals[i], &dr);
+      norm_.Transform(q.s * (q.y - l), &residuals[i], &dr);
       if (!std::isfinite(residuals[i])) return false;
       if (jac) {
         for (int k = 0; k < n_; ++k) jac[i * n_ + k] = -dr * q.s * grad[k];
@@ -108,10 +138,56 @@ class SkyCost : public ceres::CostFunction {
     return true;
   }
 
+  // The normal equations of Levenberg-Marquardt in one pass, without storing the Jacobian J
+  // (rows j_i = d residual_i / d params): returns half the sum of squared residuals (+inf where
+  // one is not finite) and writes the Gauss-Newton matrix `h` = sum a_i j_i j_i^T (num_params()
+  // squared, row-major) and the gradient `g` = sum t_i j_i (num_params()), a_i = 1. With `irls`
+  // (this cost's own norm_p being 2), the residuals r_i are first transformed by it, t_i =
+  // t(r_i), and a_i = t_i dt_i / r_i: the weights of iteratively reweighted least squares, so
+  // that h is that of the weighted squares a_i r_i^2 / 2 which majorise half rho(r_i) for p < 2.
+  double NormalEquations(const double* params, const SkyNormTransform* irls, double* h,
+                         double* g) const {
+    double p[kNumSkyParams] = {0, 0, 0, 0, 0, 0, 1};
+    std::copy(params, params + n_, p);
+    // Lower triangle of h and g over all seven parameters; h's column of a fixed h is dropped.
+    double hl[kNumSkyParams * (kNumSkyParams + 1) / 2] = {};
+    double gg[kNumSkyParams] = {};
+    double sum = 0;
+    for (const SkyPoint& q : points_) {
+      double grad[kNumSkyParams];
+      const double l = SkyModelAt(p, q, grad);
+      const double r = q.s * (q.y - l);
+      double t = 0, dt = 1, a = 1;
+      if (irls) {
+        irls->Transform(r, &t, &dt);
+        a = r != 0 ? t * dt / r : dt * dt;
+        dt = 1;  // the rows stay those of r
+      } else {
+        norm_.Transform(r, &t, &dt);
+      }
+      sum += t * t;
+      double j[kNumSkyParams];
+      for (int k = 0; k < kNumSkyParams; ++k) j[k] = -dt * q.s * grad[k];
+      const double b = irls ? a * r : t;  // g += b j
+      for (int k = 0, m = 0; k < kNumSkyParams; ++k) {
+        gg[k] += b * j[k];
+        const double ajk = a * j[k];
+        for (int c = 0; c <= k; ++c) hl[m++] += ajk * j[c];
+      }
+    }
+    for (int k = 0, m = 0; k < kNumSkyParams; ++k) {
+      for (int c = 0; c <= k; ++c, ++m) {
+        if (k < n_) h[k * n_ + c] = h[c * n_ + k] = hl[m];
+      }
+      if (k < n_) g[k] = gg[k];
+    }
+    return std::isfinite(sum) ? 0.5 * sum : std::numeric_limits<double>::infinity();
+  }
+
  private:
   std::vector<SkyPoint> points_;
   int n_;
-  double half_p_, eps2_, eps_p_;
+  SkyNormTransform norm_;
 };
 
 }  // namespace rouen::internal
