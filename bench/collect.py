@@ -1,9 +1,11 @@
 #!/usr/bin/env python3
 """bench/run's last step: bench/results.json from the figures the benchmarks recorded
-(bench/results.h) and their Google Benchmark timings (bench/out/NAME.json), with the ratios
-that need two timings of one run, and the machine.
+(bench/results.h, one file per benchmark: bench/out/NAME.figures.json) and their Google
+Benchmark timings (bench/out/NAME.json), with the ratios that need two timings of one run, and
+the machine. Each figure names the benchmark it came from; a run of some benchmarks keeps the
+other benchmarks' figures from the previous results.json.
 
-usage: bench/collect.py FIGURES.json RESULTS.json SECONDS NAME...
+usage: bench/collect.py OUT_DIR RESULTS.json SECONDS NAME...
 """
 import json
 import os
@@ -29,15 +31,27 @@ FIELDS = {"name", "family_index", "per_family_instance_index", "run_name", "run_
 
 
 def main():
-    figures_path, results_path, seconds, names = sys.argv[1], sys.argv[2], int(sys.argv[3]), \
+    out_dir, results_path, seconds, names = sys.argv[1], sys.argv[2], int(sys.argv[3]), \
         sys.argv[4:]
-    figures = {}
-    if os.path.exists(figures_path):
-        with open(figures_path) as f:
-            figures = json.load(f)
+    figures, benchmarks = {}, list(names)
+    if os.path.exists(results_path):
+        with open(results_path) as f:
+            old = json.load(f)
+        # The figures of benchmarks not run this time (figures naming no benchmark are dropped).
+        for k, v in old.get("figures", {}).items():
+            if v.get("bench") and v["bench"] not in names:
+                figures[k] = v
+        benchmarks += [b for b in old.get("benchmarks", []) if b not in names and any(
+            v.get("bench") == b for v in figures.values())]
     timings = {}
     for n in names:
-        out = os.path.join(os.path.dirname(figures_path), n + ".json")
+        recorded = os.path.join(out_dir, n + ".figures.json")
+        if os.path.exists(recorded):
+            with open(recorded) as f:
+                for k, v in json.load(f).items():
+                    v["bench"] = n
+                    figures[k] = v
+        out = os.path.join(out_dir, n + ".json")
         if not os.path.exists(out):
             continue
         with open(out) as f:
@@ -46,7 +60,8 @@ def main():
             if b.get("error_occurred"):
                 continue
             key = "%s.%s" % (n, b["name"])
-            entry = {"value": b["real_time"], "cpu": b["cpu_time"], "unit": b["time_unit"]}
+            entry = {"value": b["real_time"], "cpu": b["cpu_time"], "unit": b["time_unit"],
+                     "bench": n}
             counters = {k: v for k, v in b.items() if k not in FIELDS}
             if counters:
                 entry["counters"] = counters
@@ -57,7 +72,7 @@ def main():
     for name, (num, den, peer) in DERIVED.items():
         if num in timings and den in timings and timings[num]["unit"] == timings[den]["unit"]:
             figures[name] = {"value": timings[num]["value"] / timings[den]["value"],
-                             "unit": "ratio", "peer": peer}
+                             "unit": "ratio", "peer": peer, "bench": timings[num]["bench"]}
     cpu = ""
     try:
         lines = subprocess.run(["lscpu"], capture_output=True, text=True).stdout.splitlines()
@@ -66,7 +81,7 @@ def main():
         pass
     doc = {"figures": dict(sorted(figures.items())),
            "machine": {"cpu": cpu, "cores": os.cpu_count(), "system": platform.platform()},
-           "benchmarks": names, "seconds": seconds}
+           "benchmarks": sorted(benchmarks), "seconds_of_this_run": seconds}
     with open(results_path + ".tmp", "w") as f:
         json.dump(doc, f, indent=1)
         f.write("\n")
