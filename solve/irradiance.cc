@@ -220,7 +220,8 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
       }
       if (vector_flux) {
         if (!faces) faces = std::make_unique<OccluderFaces>(*options.mesh);
-        ls.shadow_on_ground = GroundShadowOnPlane(*options.mesh, *faces, s, ground_z);
+        ls.shadow_on_ground = ShadowBeyondGroundFaces(
+            GroundShadowOnPlane(*options.mesh, *faces, s, ground_z), *faces, ground_z);
       }
     }
     if (!vector_flux) continue;

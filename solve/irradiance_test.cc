@@ -438,6 +438,60 @@ TEST(IrradianceVectorFluxTest, BlockShadowsEqualTheirFacesShadows) {
   }
 }
 
+// The ground under a plaza is never seen from above it: the shadow falling there is cut away,
+// and what is left changes each point's irradiance exactly as the whole shadow does.
+TEST(IrradianceVectorFluxTest, ShadowOnThePlazaIsCutAway) {
+  Mesh m;
+  testing::AddHorizontalRect(&m, -30, 30, -30, 30, 0, true, m.AddBlock("plaza"));
+  testing::AddBox(&m, {-5, -5, 0}, {5, 5, 40}, m.AddBlock("tower"));
+  const OccluderFaces faces(m);
+  auto area = [](const std::vector<std::vector<Eigen::Vector3d>>& polys) {
+    double a = 0;
+    for (const auto& p : polys) {
+      for (size_t i = 0; i < p.size(); ++i) {
+        const Eigen::Vector3d& u = p[i];
+        const Eigen::Vector3d& v = p[(i + 1) % p.size()];
+        a += 0.5 * (u.x() * v.y() - v.x() * u.y());
+      }
+    }
+    return std::abs(a);
+  };
+  // A high sun: the whole shadow falls on the plaza.
+  const Eigen::Vector3d high = Eigen::Vector3d(0.1, -0.15, 1).normalized();
+  EXPECT_TRUE(ShadowBeyondGroundFaces(GroundShadowOnPlane(m, faces, high, 0), faces, 0).empty());
+  // A low sun from the south-east: the shadow reaches 64 m north-west, past the plaza's edge.
+  const Eigen::Vector3d sun = Eigen::Vector3d(0.4, -0.7, 0.5).normalized();
+  const auto whole = GroundShadowOnPlane(m, faces, sun, 0);
+  const auto cut = ShadowBeyondGroundFaces(whole, faces, 0);
+  ASSERT_FALSE(cut.empty());
+  EXPECT_LT(area(cut), area(whole));
+  for (const auto& p : cut) {
+    double outside = 0;  // how far the piece reaches beyond the plaza
+    for (const auto& v : p) outside = std::max(outside, v.cwiseAbs().head<2>().maxCoeff() - 30);
+    EXPECT_GT(outside, 0);
+  }
+  Lighting l = VaryingEnvironment(true);
+  const EnvironmentRegions regions(l.env, VectorFluxOptions());
+  GridOptions go;
+  go.spacing_m = 6;
+  const SurfaceGrid grid = BuildSurfaceGrid(m, go);
+  const Eigen::Vector3d ratio(0.3, 0.4, 0.5);
+  int changed = 0;
+  EnvironmentView view;
+  for (const GridPoint& p : grid.points) {
+    const Eigen::Vector3d origin = p.position + 1e-4 * p.normal;
+    if (!(origin.z() > 0)) continue;
+    SeeEnvironment(PointVisibility(faces, origin, p.normal, p.triangle), regions, true, &view);
+    const Eigen::Vector3d a = GroundShadowChange(view, regions, l.env, origin.z(),
+                                                 GroundShadowPolygons(whole, origin), ratio);
+    const Eigen::Vector3d b = GroundShadowChange(view, regions, l.env, origin.z(),
+                                                 GroundShadowPolygons(cut, origin), ratio);
+    EXPECT_NEAR((a - b).norm(), 0, 1e-9 * (1 + a.norm())) << p.position.transpose();
+    changed += a.norm() > 1e-6;
+  }
+  EXPECT_GT(changed, 3);
+}
+
 TEST(IrradianceVectorFluxTest, RejectsMissingOrMismatchedMesh) {
   const BoxScene s;
   const HemisphereCache cache = BuildHemisphereCache(s.grid, *s.rc);

@@ -1245,6 +1245,85 @@ std::vector<std::vector<Eigen::Vector3d>> GroundShadowOnPlane(const Mesh& mesh,
   return out;
 }
 
+namespace {
+
+// Twice the signed area of a polygon in the plane (counter-clockwise seen from above: > 0).
+double Area2XY(const std::vector<Eigen::Vector3d>& p) {
+  double a = 0;
+  for (size_t i = 0; i < p.size(); ++i) {
+    const Eigen::Vector3d& u = p[i];
+    const Eigen::Vector3d& v = p[(i + 1) % p.size()];
+    a += u.x() * v.y() - v.x() * u.y();
+  }
+  return a;
+}
+
+// The part of a convex polygon (in a plane z = const) left of the directed line a -> b, seen
+// from above (Sutherland-Hodgman, one edge).
+std::vector<Eigen::Vector3d> LeftOf(const std::vector<Eigen::Vector3d>& p, const Eigen::Vector3d& a,
+                                    const Eigen::Vector3d& b) {
+  std::vector<Eigen::Vector3d> out;
+  const Eigen::Vector2d d = (b - a).head<2>();
+  auto side = [&](const Eigen::Vector3d& x) {
+    const Eigen::Vector2d r = (x - a).head<2>();
+    return d.x() * r.y() - d.y() * r.x();
+  };
+  for (size_t i = 0; i < p.size(); ++i) {
+    const Eigen::Vector3d& u = p[i];
+    const Eigen::Vector3d& v = p[(i + 1) % p.size()];
+    const double su = side(u), sv = side(v);
+    if (su >= 0) out.push_back(u);
+    if ((su >= 0) != (sv >= 0)) out.push_back(u + (su / (su - sv)) * (v - u));
+  }
+  return out;
+}
+
+}  // namespace
+
+std::vector<std::vector<Eigen::Vector3d>> ShadowBeyondGroundFaces(
+    const std::vector<std::vector<Eigen::Vector3d>>& shadow, const OccluderFaces& faces,
+    double ground_z) {
+  // The faces on the plane, facing up: counter-clockwise seen from above.
+  std::vector<const std::vector<Eigen::Vector3d>*> ground;
+  double extent = 1;
+  for (const auto& g : shadow) {
+    for (const auto& v : g) extent = std::max(extent, v.cwiseAbs().maxCoeff());
+  }
+  for (int f = 0; f < faces.size(); ++f) {
+    const std::vector<Eigen::Vector3d>& poly = faces.polygon(f);
+    bool flat = true;
+    for (const auto& v : poly) {
+      flat &= std::abs(v.z() - ground_z) <= 1e-9 * std::max(extent, std::abs(v.z()));
+    }
+    if (flat && Area2XY(poly) > 0) ground.push_back(&poly);
+  }
+  std::vector<std::vector<Eigen::Vector3d>> out, rest, next;
+  for (const auto& g : shadow) {
+    rest.assign(1, g);
+    if (Area2XY(g) < 0) std::reverse(rest[0].begin(), rest[0].end());
+    for (const auto* q : ground) {
+      next.clear();
+      for (const auto& p : rest) {
+        // p less q: the pieces right of each of q's edges, what is left going on to the next.
+        std::vector<Eigen::Vector3d> inner = p;
+        for (size_t e = 0; e < q->size() && inner.size() >= 3; ++e) {
+          const Eigen::Vector3d& a = (*q)[e];
+          const Eigen::Vector3d& b = (*q)[(e + 1) % q->size()];
+          std::vector<Eigen::Vector3d> outside = LeftOf(inner, b, a);
+          if (outside.size() >= 3 && Area2XY(outside) > 1e-12 * extent * extent) {
+            next.push_back(std::move(outside));
+          }
+          inner = LeftOf(inner, a, b);
+        }
+      }
+      rest.swap(next);
+      if (rest.empty()) break;
+    }
+    for (auto& p : rest) out.push_back(std::move(p));
+  }
+  return out;
+}
+
 std::vector<ConvexSpherical> GroundShadowPolygons(
     const std::vector<std::vector<Eigen::Vector3d>>& on_plane, const Eigen::Vector3d& origin) {
   std::vector<ConvexSpherical> out;

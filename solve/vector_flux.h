@@ -312,6 +312,13 @@ std::vector<std::vector<Eigen::Vector3d>> GroundShadowOnPlane(const Mesh& mesh,
                                                               const Eigen::Vector3d& sun,
                                                               double ground_z);
 
+// The parts of the shadow polygons (on the plane z = ground_z) outside every face of `faces`
+// that lies on that plane facing up (a plaza): the ground under such a face is never seen, so
+// its shadow changes nothing. Convex pieces; none when the whole shadow falls on such faces.
+std::vector<std::vector<Eigen::Vector3d>> ShadowBeyondGroundFaces(
+    const std::vector<std::vector<Eigen::Vector3d>>& shadow, const OccluderFaces& faces,
+    double ground_z);
+
 // Those polygons seen from `origin` (above the plane): convex spherical polygons.
 std::vector<ConvexSpherical> GroundShadowPolygons(
     const std::vector<std::vector<Eigen::Vector3d>>& on_plane, const Eigen::Vector3d& origin);
