@@ -651,26 +651,32 @@ auto CheckFrames(const std::vector<const Frame*>& frames, const std::vector<doub
   return data;
 }
 
-}  // namespace
-
-void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<double>& exposures,
-                  const ResponseCurve& curve, const MergeOptions& options, Image* out_image,
-                  MergeSummary* summary, std::vector<uint8_t>* valid_mask,
-                  std::vector<uint8_t>* ghost_mask) {
+// MergeHdrInto for either frame type: the checks, then the one merge.
+template <typename Frame>
+void CheckAndMerge(const std::vector<const Frame*>& frames, const std::vector<double>& exposures,
+                   const ResponseCurve& curve, const MergeOptions& options, Image* out_image,
+                   MergeSummary* summary, std::vector<uint8_t>* valid_mask,
+                   std::vector<uint8_t>* ghost_mask) {
   const auto start = std::chrono::steady_clock::now();
   const auto data = CheckFrames(frames, exposures, options, curve, out_image);
   MergeFrames(data, frames[0]->width, frames[0]->height, frames[0]->channels, exposures, curve,
               options, out_image, summary, valid_mask, ghost_mask, start);
 }
 
+}  // namespace
+
+void MergeHdrInto(const std::vector<const Image*>& frames, const std::vector<double>& exposures,
+                  const ResponseCurve& curve, const MergeOptions& options, Image* out_image,
+                  MergeSummary* summary, std::vector<uint8_t>* valid_mask,
+                  std::vector<uint8_t>* ghost_mask) {
+  CheckAndMerge(frames, exposures, curve, options, out_image, summary, valid_mask, ghost_mask);
+}
+
 void MergeHdrInto(const std::vector<const CodeImage*>& frames, const std::vector<double>& exposures,
                   const ResponseCurve& curve, const MergeOptions& options, Image* out_image,
                   MergeSummary* summary, std::vector<uint8_t>* valid_mask,
                   std::vector<uint8_t>* ghost_mask) {
-  const auto start = std::chrono::steady_clock::now();
-  const auto data = CheckFrames(frames, exposures, options, curve, out_image);
-  MergeFrames(data, frames[0]->width, frames[0]->height, frames[0]->channels, exposures, curve,
-              options, out_image, summary, valid_mask, ghost_mask, start);
+  CheckAndMerge(frames, exposures, curve, options, out_image, summary, valid_mask, ghost_mask);
 }
 
 }  // namespace rouen
