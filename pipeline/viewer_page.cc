@@ -104,6 +104,14 @@ float retroFactor(float retro, vec3 n, vec3 l, vec3 v) {
   float f1 = retro * (2.0 * cd * cd - 0.5);
   return max(0.0, (1.0 + f1 * pow(1.0 - cl, 5.0)) * (1.0 + f1 * pow(1.0 - cv, 5.0)));
 }
+// solve/retro.h AmbientRetroFactor.
+float ambientRetroFactor(float retro, vec3 n, vec3 v) {
+  if (retro == 0.0) return 1.0;
+  float c = clamp(dot(n, v), 0.0, 1.0), sv = pow(1.0 - c, 5.0);
+  float ea = retro * (2.0 * c / 3.0 + 0.5), easl = retro * (c / 84.0 + 1.0 / 42.0);
+  float ea2sl = retro * retro * (11.0 * (1.0 - c * c) / 504.0 + c * c / 252.0 + c / 84.0 + 1.0 / 84.0);
+  return max(0.0, 1.0 + easl + sv * (ea + ea2sl));
+}
 // solve/specular.h SpecularLobe::Shape (eq. 13, Cz = 1, Cxy = -kappa).
 float lobeShape(vec3 n, vec3 u, vec3 v, float kappa, float e) {
   float un = dot(u, n), vn = dot(v, n);
@@ -136,7 +144,7 @@ void main() {
     vec3 sun = mix(sunTerm(uSunDir0, uSunE0, vis0, n, v, rhoSun),
                    sunTerm(uSunDir1, uSunE1, vis1, n, v, rhoSun), uW);
     // Overcast (§6.3): pbs of the sunlight blocked; E_se between the clear and overcast bases.
-    L = (1.0 - uPbs) * sun + rhoSe * mix(se, seo, uPbs) / PI;
+    L = (1.0 - uPbs) * sun + ambientRetroFactor(vRetro, n, v) * rhoSe * mix(se, seo, uPbs) / PI;
   }
   if (uResponse) {
     // The camera's digital number for the exposure, from the table over ln exposure.

@@ -141,7 +141,10 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
       const SpecularLobe lobe = BlockLobe(albedo.sun_lobes, block);
       if (!lobe.IsZero()) specular += lobe.Eval(n, s, -dir).cwiseProduct(sun_e * cosi);
     }
-    return (rho_sun.cwiseProduct(e_sun) + rho_se.cwiseProduct(e_se)) / kPi + specular;
+    // The rough block's sky and environment light brightens towards oblique views as its sun
+    // does (solve/retro.h AmbientRetroFactor; 1 for Lambert).
+    const double se_factor = AmbientRetroFactor(BlockRetro(albedo.retro, block), n, -dir);
+    return (rho_sun.cwiseProduct(e_sun) + se_factor * rho_se.cwiseProduct(e_se)) / kPi + specular;
   };
 
   // What a ray through image point (x, y) sees, coarsely: the triangle it hits and whether the

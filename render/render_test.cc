@@ -158,6 +158,30 @@ TEST(RenderTest, TheSunTermFollowsTheBlocksRetro) {
   EXPECT_GT(rough.at(80, 100, 1), 1.02 * lambert.at(80, 100, 1));  // grazing: brighter (1.04)
 }
 
+TEST(RenderTest, TheSkyTermFollowsTheBlocksAmbientRetro) {
+  Fixture f = Make();
+  f.albedo.rho_sun.assign(f.grid.size(), Eigen::Vector3d::Zero());  // the sky's term alone
+  const Intrinsics k = Intrinsics::PinholeFov(160, 120, 60);
+  const Pose pose = Pose::LookAt({0, -15, 3}, {0, 0, 0});  // a grazing view of the plaza
+  RenderOptions o;
+  o.interpolate = false;
+  o.supersample = 1;
+  const Image lambert = RenderView(f.mesh, f.grid, *f.rc, f.albedo, f.lighting, f.irr, k, pose, o);
+  f.albedo.retro = {1.0};
+  const Image rough = RenderView(f.mesh, f.grid, *f.rc, f.albedo, f.lighting, f.irr, k, pose, o);
+  const Eigen::Vector2d px(80.5, 100.5);
+  const Eigen::Vector3d d = (pose.rotation * Unproject(k, px)).normalized();
+  const RayHit h = f.rc->Intersect(pose.position, d);
+  ASSERT_TRUE(h.hit);
+  ASSERT_EQ(f.mesh.triangle_block[h.triangle], 0);
+  const double want =
+      AmbientRetroFactor(1.0, Eigen::Vector3d::UnitZ(), -d) * lambert.at(80, 100, 1);
+  ASSERT_GT(lambert.at(80, 100, 1), 0);
+  EXPECT_NEAR(rough.at(80, 100, 1), want, 1e-5 * want);
+  // An oblique view of a rough plaza is brighter under sky light too (1.067 at this pixel).
+  EXPECT_GT(rough.at(80, 100, 1), 1.05 * lambert.at(80, 100, 1));
+}
+
 TEST(RenderTest, TheSunLobeAddsItsHighlight) {
   Fixture f = Make();
   const Intrinsics k = Intrinsics::PinholeFov(160, 120, 60);

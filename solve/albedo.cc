@@ -479,21 +479,28 @@ AlbedoResult SolveAlbedoFixedIrradiance(const SurfaceGrid& grid,
 
 namespace {
 
-// The factor on an observation's sun irradiance: its block's RetroFactor (1 without shading).
-double SunFactor(const SurfaceGrid& grid, const Observation& ob, const SunShading* shading) {
-  if (!shading) return 1;
+// The factors on an observation's sun irradiance and its sky + environment irradiance: its
+// block's RetroFactor and AmbientRetroFactor (both 1 without shading or for Lambert).
+struct ShadingFactors {
+  double sun = 1, se = 1;
+};
+ShadingFactors FactorsOf(const SurfaceGrid& grid, const Observation& ob,
+                         const SunShading* shading) {
+  if (!shading) return {};
   const GridPoint& gp = grid.points[ob.point];
   const double retro = BlockRetro(shading->retro, gp.block);
-  if (retro == 0) return 1;
-  return RetroFactor(retro, gp.normal, shading->sun_dirs[ob.slot], ob.view_dir.cast<double>());
+  if (retro == 0) return {};
+  const Eigen::Vector3d v = ob.view_dir.cast<double>();
+  return {RetroFactor(retro, gp.normal, shading->sun_dirs[ob.slot], v),
+          AmbientRetroFactor(retro, gp.normal, v)};
 }
 
 // pi I of an observation as the solution `res` predicts it in channel c (eqs. 11-12), with the
-// sun irradiance scaled by `sun_factor` (SunFactor).
+// irradiances scaled by the observation's factors `f` (FactorsOf).
 double Predicted(const AlbedoResult& res, const SlotIrradiance& irr, const Observation& ob,
-                 double sun_factor, int c) {
-  return res.rho_se[ob.point][c] * irr.se[ob.point][c] +
-         res.rho_sun[ob.point][c] * irr.sun[ob.point][c] * sun_factor;
+                 const ShadingFactors& f, int c) {
+  return res.rho_se[ob.point][c] * irr.se[ob.point][c] * f.se +
+         res.rho_sun[ob.point][c] * irr.sun[ob.point][c] * f.sun;
 }
 
 // Per-slot weights from the residuals of a solution: (median over all slots / slot's median
@@ -509,7 +516,7 @@ std::vector<double> SlotWeights(const SurfaceGrid& grid,
     if (res.flags[ob.point] & kAlbedoNoObservations) continue;
     const SlotIrradiance& irr = irradiance[ob.slot];
     const double y = kPi * ob.radiance[1];
-    const double pred = Predicted(res, irr, ob, SunFactor(grid, ob, shading), 1);
+    const double pred = Predicted(res, irr, ob, FactorsOf(grid, ob, shading), 1);
     if (!(y > 0)) continue;
     const double r = std::abs(y - pred) / y;
     per[ob.slot].push_back(r);
@@ -578,9 +585,9 @@ static AlbedoResult SolveWeighted(const SurfaceGrid& grid,
       const SlotIrradiance& irr = irradiance[ob.slot];
       // A point that receives no light in this slot tells nothing about its albedo.
       if (!((irr.se[ob.point] + irr.sun[ob.point]).maxCoeff() > 0)) continue;
-      eqs.push_back({kPi * ob.radiance.cast<double>(), irr.se[ob.point],
-                     irr.sun[ob.point] * SunFactor(grid, ob, shading),
-                     slot_weight.empty() ? 1.0 : slot_weight[ob.slot]});
+      const ShadingFactors f = FactorsOf(grid, ob, shading);
+      eqs.push_back({kPi * ob.radiance.cast<double>(), irr.se[ob.point] * f.se,
+                     irr.sun[ob.point] * f.sun, slot_weight.empty() ? 1.0 : slot_weight[ob.slot]});
     }
     return eqs;
   };
@@ -763,7 +770,7 @@ BlockCosts CostsPerBlock(const SurfaceGrid& grid, const std::vector<Observation>
     if (b < 0 || (res.flags[ob.point] & kAlbedoNoObservations)) continue;
     const SlotIrradiance& irr = irradiance[ob.slot];
     bc.sunlit[b] += IsSunlit(irr.sun[ob.point], irr.se[ob.point], options.sunlit_threshold);
-    const double f = SunFactor(grid, ob, &shading);
+    const ShadingFactors f = FactorsOf(grid, ob, &shading);
     for (int c = 0; c < 3; ++c) {
       const double y = kPi * ob.radiance[c];
       if (!(y > 0)) continue;
@@ -857,7 +864,7 @@ std::vector<SpecularLobe> FitSunLobes(const SurfaceGrid& grid,
     if (b < 0 || (res.flags[ob.point] & kAlbedoNoObservations)) continue;
     const double y = kPi * ob.radiance[1];
     if (!(y > 0)) continue;
-    const double pred = Predicted(res, irradiance[ob.slot], ob, SunFactor(grid, ob, &shading), 1);
+    const double pred = Predicted(res, irradiance[ob.slot], ob, FactorsOf(grid, ob, &shading), 1);
     rel[b].push_back(std::abs(y - pred) / y);
   }
   // Each block's robust scale of the diffuse fit's relative residuals (MAD), once per block.
@@ -871,7 +878,7 @@ std::vector<SpecularLobe> FitSunLobes(const SurfaceGrid& grid,
     const SlotIrradiance& irr = irradiance[ob.slot];
     if (!IsSunlit(irr.sun[ob.point], irr.se[ob.point], options.sunlit_threshold)) continue;
     const double scale = block_scale[gp.block];
-    const double f = SunFactor(grid, ob, &shading);
+    const ShadingFactors f = FactorsOf(grid, ob, &shading);
     LobeSample s;
     s.normal = gp.normal;
     s.to_light = shading.sun_dirs[ob.slot];
@@ -955,7 +962,7 @@ std::vector<SpecularLobe> FitSkyLobes(const SurfaceGrid& grid, const HemisphereC
       const double y = kPi * ob.radiance[1];
       if (y > 0)
         rel.push_back(std::abs(y - Predicted(res, irradiance[ob.slot], ob,
-                                             SunFactor(grid, ob, &shading), 1)) /
+                                             FactorsOf(grid, ob, &shading), 1)) /
                       y);
     }
     const double scale = std::max(options.min_scale, 1.4826 * Median(rel));
@@ -970,7 +977,7 @@ std::vector<SpecularLobe> FitSkyLobes(const SurfaceGrid& grid, const HemisphereC
       s.normal = gp.normal;
       s.to_viewer = ob.view_dir.cast<double>();
       s.pieces = Pieces(grid, cache, slots[ob.slot], irr, res, ob.point);
-      const double f = SunFactor(grid, ob, &shading);
+      const ShadingFactors f = FactorsOf(grid, ob, &shading);
       const Eigen::Vector3d sun_lobe = SunLobeLight(grid, res.sun_lobes, irr, shading, ob);
       for (int c = 0; c < 3; ++c) {
         s.residual[c] = ob.radiance[c] - Predicted(res, irr, ob, f, c) / kPi - sun_lobe[c];

@@ -19,4 +19,17 @@ double RetroFactor(double retro, const Eigen::Vector3d& n, const Eigen::Vector3d
   return std::max(0.0, (1 + f1 * sl) * (1 + f1 * sv));
 }
 
+double AmbientRetroFactor(double retro, const Eigen::Vector3d& n, const Eigen::Vector3d& v) {
+  if (retro == 0) return 1;
+  const double c = std::clamp(n.dot(v), 0.0, 1.0), sv = std::pow(1 - c, 5);
+  // D = 1 + a s_l + a s_v + a^2 s_l s_v with a = F - 1 = retro (l.v + 1/2), s_l = (1 - n.l)^5,
+  // averaged over l with density n.l / pi. The moments of that density (mu = n.l, c = n.v):
+  // E[l] = 2/3 n, E[(l.v)^2] = 1/4 + c^2 / 4, E[s_l] = 1/21, E[s_l l] = n / 84,
+  // E[s_l l l^T] = 1/252 along n and 11/504 across it.
+  const double e_a = retro * (2 * c / 3 + 0.5);
+  const double e_a_sl = retro * (c / 84 + 1.0 / 42);
+  const double e_a2_sl = retro * retro * (11 * (1 - c * c) / 504 + c * c / 252 + c / 84 + 1.0 / 84);
+  return std::max(0.0, 1 + e_a_sl + sv * (e_a + e_a2_sl));
+}
+
 }  // namespace rouen

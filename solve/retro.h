@@ -22,6 +22,14 @@ constexpr double kRetroMax = 1.5;
 double RetroFactor(double retro, const Eigen::Vector3d& n, const Eigen::Vector3d& l,
                    const Eigen::Vector3d& v);
 
+// The same surface under light of one radiance from the whole hemisphere above it: the mean of
+// D weighted by n.l / pi, in closed form (the moments of that weight). A rough surface
+// brightens towards oblique views under sky light as well as sunlight, which the sky and
+// environment irradiance E_se (one number per point, no direction) cannot show by itself;
+// the albedo solve and the renderer scale E_se by this. 1 for retro == 0; about 1.04 head-on
+// for retro 1.
+double AmbientRetroFactor(double retro, const Eigen::Vector3d& n, const Eigen::Vector3d& v);
+
 // The sun's side of the reflection model for the albedo solve and the renderer: the sun
 // direction per slot and the retro parameter per block (empty: Lambert everywhere).
 struct SunShading {
