@@ -37,6 +37,12 @@ void AddPredictionOptions(CLI::App* c, PredictionArgs* a, unsigned which, CLI::O
     added.push_back(c->add_option("--sky-interp", a->sky_interp, kSkyInterpHelp)
                         ->check(CLI::IsMember({"elevation", "angular"}))
                         ->capture_default_str());
+  if (which & kSkyInterpOption)
+    added.push_back(c->add_flag("--no-sky-residual", a->no_sky_residual,
+                                "The sky at a new time from the interpolated model alone, without "
+                                "the photographed sky's residual against it (default: the "
+                                "residual, taken relative to the sun, keeps what the model "
+                                "misses near the horizon and the sun)"));
   if (which & kPbsOption)
     added.push_back(
         c->add_option("--pbs", a->pbs, "Blocked sunlight fraction 0..1 (0 clear, 1 overcast)")
@@ -50,6 +56,7 @@ void AddPredictionOptions(CLI::App* c, PredictionArgs* a, unsigned which, CLI::O
 void ApplyPrediction(const PredictionArgs& a, RelightOptions* relight) {
   relight->pbs = a.pbs;
   relight->sky.mode = ParseSkyInterp(a.sky_interp);
+  relight->sky_residual = !a.no_sky_residual;
 }
 
 void AddCameraOptions(CLI::App* c, CameraArgs* a) {

@@ -11,11 +11,13 @@
 
 namespace rouen {
 
-// How lighting is predicted at a time no slot captured: --sky-interp, --pbs, --use-held-out.
+// How lighting is predicted at a time no slot captured: --sky-interp, --no-sky-residual, --pbs,
+// --use-held-out.
 struct PredictionArgs {
   std::string sky_interp = "elevation";
-  double pbs = 0;             // blocked sunlight fraction (§6.3)
-  bool use_held_out = false;  // predict also from held-out slots
+  bool no_sky_residual = false;  // the sky model alone, without the measured residual
+  double pbs = 0;                // blocked sunlight fraction (§6.3)
+  bool use_held_out = false;     // predict also from held-out slots
 };
 // Which of the prediction options a command takes.
 enum PredictionOption : unsigned { kSkyInterpOption = 1, kPbsOption = 2, kUseHeldOutOption = 4 };
@@ -23,7 +25,7 @@ enum PredictionOption : unsigned { kSkyInterpOption = 1, kPbsOption = 2, kUseHel
 // where nothing is predicted), each excludes it.
 void AddPredictionOptions(CLI::App* command, PredictionArgs* args, unsigned which,
                           CLI::Option* slot = nullptr);
-// Sets `relight`'s pbs and sky interpolation from the options; throws rouen::Error.
+// Sets `relight`'s pbs, sky interpolation and sky residual from the options; throws rouen::Error.
 void ApplyPrediction(const PredictionArgs& args, RelightOptions* relight);
 
 // The camera of a rendered image (rouen render, rouen timelapse): one of the scene's views

@@ -1,5 +1,6 @@
 #include "solve/relight.h"
 
+#include <array>
 #include <cmath>
 #include <cstdio>
 
@@ -14,6 +15,10 @@ void RelightOptions::Validate() const {
     throw Error("relight: the overcast colour must be three positive numbers");
   if (!(overcast_brightness > 0) || !std::isfinite(overcast_brightness))
     throw Error("relight: the overcast brightness must be positive");
+  if (!(sky_residual_max >= 1) || !std::isfinite(sky_residual_max))
+    throw Error("relight: sky_residual_max must be a number >= 1");
+  if (!(sky_residual_min_gain >= 0 && sky_residual_min_gain <= 1))
+    throw Error("relight: sky_residual_min_gain must be within 0..1");
   sky.Validate();
   env.Validate();
 }
@@ -50,6 +55,68 @@ std::vector<EnvObservation> EnvObservationsOf(const std::vector<Lighting>& measu
   return envs;
 }
 
+namespace {
+
+// Azimuth of a direction, radians from north eastwards, in [0, 2 pi).
+double AzimuthOf(const Eigen::Vector3d& d) {
+  const double az = std::atan2(d.x(), d.y());
+  return az < 0 ? az + 2 * kPi : az;
+}
+
+// The residual of one measured time at azimuth `az` in the band of region `region` of layer
+// `layer`: linear between the two sector centres around it, or the one of them that holds a
+// residual; false when neither does.
+bool SampleResidual(const std::vector<Eigen::Vector3d>& residual, const EnvironmentMap& map,
+                    int layer, int band, double az, Eigen::Vector3d* out) {
+  const double u = az / (2 * kPi / map.sectors) - 0.5;
+  const double k0 = std::floor(u), f = u - k0;
+  auto at = [&](double k) -> const Eigen::Vector3d& {
+    const int sector =
+        static_cast<int>(((static_cast<long>(k) % map.sectors) + map.sectors) % map.sectors);
+    return residual[static_cast<size_t>(layer) * map.num_regions() + band * map.sectors + sector];
+  };
+  const Eigen::Vector3d &a = at(k0), &b = at(k0 + 1);
+  const bool ok_a = a.minCoeff() > 0, ok_b = b.minCoeff() > 0;
+  if (ok_a && ok_b) {
+    *out = (1 - f) * a + f * b;
+  } else if (ok_a || ok_b) {
+    *out = ok_a ? a : b;
+  } else {
+    return false;
+  }
+  return true;
+}
+
+// The sky residual of region `gi` (layer x region index of `map`) for a sun at azimuth `az_sun`,
+// averaged over the measured times with weights[t] > 0, each sampled at the same azimuth from
+// its own sun (kSun) or at the same azimuth (kFixed); false when no time holds one there.
+bool CarryResidual(const std::vector<std::vector<Eigen::Vector3d>>& residual,
+                   const std::vector<double>& sun_az, const std::vector<double>& weights,
+                   const EnvironmentMap& map, size_t gi, double az_sun, ResidualFrame frame,
+                   Eigen::Vector3d* out) {
+  const int nreg = map.num_regions();
+  const int layer = static_cast<int>(gi / nreg), region = static_cast<int>(gi % nreg);
+  double el_lo, el_hi, az_lo, az_hi;
+  map.RegionBounds(region, &el_lo, &el_hi, &az_lo, &az_hi);
+  const double centre = 0.5 * (az_lo + az_hi);
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  double wsum = 0;
+  for (size_t t = 0; t < residual.size() && t < weights.size(); ++t) {
+    if (!(weights[t] > 0) || residual[t].size() != map.radiance.size()) continue;
+    double az = frame == ResidualFrame::kSun ? centre - az_sun + sun_az[t] : centre;
+    az = std::fmod(std::fmod(az, 2 * kPi) + 2 * kPi, 2 * kPi);
+    Eigen::Vector3d r;
+    if (!SampleResidual(residual[t], map, layer, region / map.sectors, az, &r)) continue;
+    sum += weights[t] * r;
+    wsum += weights[t];
+  }
+  if (!(wsum > 0)) return false;
+  *out = sum / wsum;
+  return true;
+}
+
+}  // namespace
+
 LightingPredictor::LightingPredictor(std::vector<Lighting> measured, const RelightOptions& options)
     : measured_(std::move(measured)), options_(options) {
   options_.Validate();
@@ -73,6 +140,142 @@ LightingPredictor::LightingPredictor(std::vector<Lighting> measured, const Relig
     }
   }
   env_ = SolveEnvStereo(EnvObservationsOf(measured_), options_.env);
+  if (options_.sky_residual) {
+    for (const Lighting& l : measured_) {
+      EnvOptions grid;
+      grid.bands_below = l.env.bands_below;
+      grid.bands_above = l.env.bands_above;
+      grid.sectors = l.env.sectors;
+      SkyModel sky = l.sky;
+      sky.sun_dir = l.sun_dir;
+      sky_means_.push_back(EnvironmentMap::FromSky(grid, sky, Eigen::Vector3d::Zero()));
+      sun_az_.push_back(AzimuthOf(l.sun_dir));
+      sky_residual_.emplace_back(l.env.radiance.size(), Eigen::Vector3d::Constant(-1));
+    }
+    for (size_t gi = 0; gi < env_.regions.size(); ++gi) {
+      if (env_.regions[gi].kind == EnvRegionKind::kSky) SetResidual(gi);
+    }
+    FindSkyByResidual();
+    ChooseResidualFrames();
+  }
+}
+
+// Region gi's residual at every time its panoramas saw it: observed / the fitted sky's mean.
+void LightingPredictor::SetResidual(size_t gi) {
+  for (size_t t = 0; t < measured_.size(); ++t) {
+    const EnvironmentMap& env = measured_[t].env;
+    if (gi >= env.radiance.size()) continue;
+    const Eigen::Vector3d& model = sky_means_[t].radiance[gi % env.num_regions()];
+    if (env.source[gi] != EnvRegionSource::kObserved || env.pixel_count[gi] <= 0 ||
+        !(model.minCoeff() > 0))
+      continue;
+    const Eigen::Vector3d ratio = env.radiance[gi].cwiseQuotient(model);
+    sky_residual_[t][gi] =
+        ratio.cwiseMax(1 / options_.sky_residual_max).cwiseMin(options_.sky_residual_max);
+  }
+}
+
+// Per measured time, the §5.1 weights of the other times for its sun (0 for itself).
+std::vector<std::vector<double>> LightingPredictor::LeaveOneOutWeights() const {
+  const size_t T = measured_.size();
+  std::vector<std::vector<double>> out(T, std::vector<double>(T, 0.0));
+  for (size_t t = 0; t < T && T > 1; ++t) {
+    std::vector<TimedSky> others;
+    std::vector<size_t> index;
+    for (size_t u = 0; u < T; ++u) {
+      if (u == t) continue;
+      others.push_back(skies_[u]);
+      index.push_back(u);
+    }
+    const std::vector<double> w = SkyInterpWeights(others, measured_[t].sun_dir, options_.sky);
+    for (size_t k = 0; k < index.size(); ++k) out[t][index[k]] = w[k];
+  }
+  return out;
+}
+
+// The stereo's sky detection compares a region with the smooth model, so the aureole next to a
+// time's sun (which the model misses) can make a region of sky look like landscape. Such a
+// region is sky after all when, at every time its panoramas saw it, it matches the model times
+// the other times' residual carried relative to the sun, within the stereo's sky tolerance (its
+// mean over the times of the worst channel's relative error).
+void LightingPredictor::FindSkyByResidual() {
+  const size_t T = measured_.size();
+  if (T < 2) return;
+  const std::vector<std::vector<double>> loo = LeaveOneOutWeights();
+  const EnvironmentMap& m0 = measured_.front().env;
+  const int nreg = m0.num_regions(), first_above = m0.bands_below * m0.sectors;
+  std::vector<size_t> found;
+  for (size_t gi = 0; gi < env_.regions.size(); ++gi) {
+    const EnvRegionKind kind = env_.regions[gi].kind;
+    if (static_cast<int>(gi % nreg) < first_above ||
+        (kind != EnvRegionKind::kLandscape && kind != EnvRegionKind::kSkyOnly))
+      continue;
+    double err_sum = 0;
+    int n = 0;
+    bool carried_everywhere = true;
+    for (size_t t = 0; t < T && carried_everywhere; ++t) {
+      const EnvironmentMap& env = measured_[t].env;
+      const Eigen::Vector3d& model = sky_means_[t].radiance[gi % nreg];
+      if (env.source[gi] != EnvRegionSource::kObserved || env.pixel_count[gi] <= 0 ||
+          !(model.minCoeff() > 0))
+        continue;
+      Eigen::Vector3d carried;
+      carried_everywhere = CarryResidual(sky_residual_, sun_az_, loo[t], m0, gi, sun_az_[t],
+                                         ResidualFrame::kSun, &carried);
+      if (!carried_everywhere) break;
+      const Eigen::Vector3d expected = model.cwiseProduct(carried);
+      err_sum += ((env.radiance[gi] - expected).cwiseAbs().cwiseQuotient(expected)).maxCoeff();
+      ++n;
+    }
+    if (carried_everywhere && n > 0 && err_sum / n <= options_.env.sky_match_tolerance)
+      found.push_back(gi);
+  }
+  for (size_t gi : found) {
+    EnvRegionFit& fit = env_.regions[gi];
+    fit = EnvRegionFit();
+    fit.kind = EnvRegionKind::kSky;
+    fit.sky_fraction = 1;
+    SetResidual(gi);
+  }
+  sky_by_residual_ = static_cast<int>(found.size());
+}
+
+// Per band of every layer, how its residual carries to a new time: each measured time's residual
+// is predicted from the other times (their §5.1 weights for its sun) relative to the sun, at the
+// same azimuth, or not at all (1), and the band takes the way with the least squared log error,
+// when it removes at least sky_residual_min_gain of the error of not carrying it.
+// Sky structure that follows the sun (the aureole, the horizon brightening towards it) carries
+// relative to the sun; a distant skyline the sky detection let through stays where it is; noise
+// carries not at all.
+void LightingPredictor::ChooseResidualFrames() {
+  const EnvironmentMap& m0 = measured_.front().env;
+  const int nb = m0.num_bands(), nreg = m0.num_regions();
+  const size_t T = measured_.size();
+  std::vector<std::array<double, 3>> err(static_cast<size_t>(m0.num_layers()) * nb, {0, 0, 0});
+  const std::vector<std::vector<double>> loo = LeaveOneOutWeights();
+  for (size_t t = 0; t < T && T > 1; ++t) {
+    const std::vector<double>& w = loo[t];
+    for (size_t gi = 0; gi < sky_residual_[t].size(); ++gi) {
+      const Eigen::Vector3d& r = sky_residual_[t][gi];
+      if (!(r.minCoeff() > 0)) continue;
+      const size_t lb = (gi / nreg) * nb + (gi % nreg) / m0.sectors;
+      const Eigen::Vector3d log_r = r.array().log().matrix();
+      err[lb][0] += log_r.squaredNorm();
+      for (const ResidualFrame f : {ResidualFrame::kSun, ResidualFrame::kFixed}) {
+        Eigen::Vector3d pred = Eigen::Vector3d::Ones();
+        CarryResidual(sky_residual_, sun_az_, w, m0, gi, sun_az_[t], f, &pred);
+        err[lb][static_cast<int>(f)] += (log_r - pred.array().log().matrix()).squaredNorm();
+      }
+    }
+  }
+  residual_frame_.assign(err.size(), ResidualFrame::kNone);
+  for (size_t lb = 0; lb < err.size(); ++lb) {
+    int best = 0;
+    const double most = (1 - options_.sky_residual_min_gain) * err[lb][0];
+    for (int f = 1; f < 3; ++f)
+      if (err[lb][f] <= most && err[lb][f] < err[lb][best]) best = f;
+    residual_frame_[lb] = static_cast<ResidualFrame>(best);
+  }
 }
 
 Lighting LightingPredictor::At(UtcTime utc, const Site& site, RelightSummary* summary) const {
@@ -135,6 +338,25 @@ Lighting LightingPredictor::At(UtcTime utc, const Site& site, RelightSummary* su
   el.sun_solid_angle_sr = out.sun_solid_angle_sr;
   el.sky = out.sky;
   out.env = PredictEnvironment(env_, el);
+  if (!sky_residual_.empty()) {
+    // The measured sky's residual carried to the new sun as its band carries best, weighted as
+    // the sky's parts (§5.1's weights); under a cloud layer it fades with the blocked sunlight
+    // (§6.3).
+    const EnvironmentMap& m = out.env;
+    const int nreg = m.num_regions(), nb = m.num_bands();
+    const double az_sun = AzimuthOf(sun_dir);
+    for (size_t gi = 0; gi < m.radiance.size() && gi < env_.regions.size(); ++gi) {
+      if (env_.regions[gi].kind != EnvRegionKind::kSky) continue;
+      const ResidualFrame frame = residual_frame_[(gi / nreg) * nb + (gi % nreg) / m.sectors];
+      Eigen::Vector3d r;
+      if (frame == ResidualFrame::kNone ||
+          !CarryResidual(sky_residual_, sun_az_, is.weights, m, gi, az_sun, frame, &r))
+        continue;
+      const Eigen::Vector3d residual =
+          Eigen::Vector3d::Ones() + (1 - options_.pbs) * (r - Eigen::Vector3d::Ones());
+      out.env.radiance[gi] = out.env.radiance[gi].cwiseProduct(residual);
+    }
+  }
   out.use_env = true;
   if (!out.sun_radiance.allFinite() || out.sun_radiance.minCoeff() < 0)
     throw Error("relight: the predicted sun radiance is not finite");

@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
+#include <vector>
 
 #include "core/angles.h"
 #include "core/error.h"
@@ -128,6 +130,78 @@ TEST(RelightTest, BlockedSunlightBlendsTowardsOvercast) {
         LightingPredictor p(day, bad);
       },
       Error);
+}
+
+// Azimuth of a direction, radians from north eastwards.
+double Azimuth(const Eigen::Vector3d& d) { return std::atan2(d.x(), d.y()); }
+
+// The day's lighting with every region above the horizon observed: the fitted sky's mean over
+// the region times residual(region centre azimuth, sun azimuth, band above the horizon).
+std::vector<Lighting> ObservedDay(const std::function<double(double, double, int)>& residual) {
+  std::vector<Lighting> day = Day({0.1, 0.12, 0.15}, {1e4, 1e4, 1e4});
+  for (Lighting& l : day) {
+    EnvironmentMap& m = l.env;
+    for (int r = m.bands_below * m.sectors; r < m.num_regions(); ++r) {
+      double el_lo, el_hi, az_lo, az_hi;
+      m.RegionBounds(r, &el_lo, &el_hi, &az_lo, &az_hi);
+      m.radiance[r] *=
+          residual(0.5 * (az_lo + az_hi), Azimuth(l.sun_dir), r / m.sectors - m.bands_below);
+      m.source[r] = EnvRegionSource::kObserved;
+      m.pixel_count[r] = 100;
+    }
+  }
+  return day;
+}
+
+// Each sky region of `l`'s map above the horizon over the predicted sky's own mean there.
+std::vector<double> OverModel(const Lighting& l, int band_above) {
+  const EnvironmentMap model =
+      EnvironmentMap::FromSky(EnvOptions{}, l.sky, Eigen::Vector3d::Zero());
+  std::vector<double> out;
+  const int first = (l.env.bands_below + band_above) * l.env.sectors;
+  for (int r = first; r < first + l.env.sectors; ++r)
+    out.push_back(l.env.radiance[r][1] / model.radiance[r][1]);
+  return out;
+}
+
+TEST(RelightTest, TheSkysResidualFollowsTheSunOrStaysWhereItIs) {
+  const UtcTime t = ParseIso8601("2026-08-25T16:00:00-07:00");
+  const double az_new = Azimuth(ComputeSunPosition(t, kSite).DirectionEnu());
+  // The horizon band brightens towards the sun by up to 10% and dims opposite it, as it did at
+  // every measured time: the prediction carries the same pattern around the new sun. Linear
+  // interpolation between 15-degree sector centres of a 0.1 amplitude cosine errs by at most
+  // 0.1 (15 deg)^2 / 8 = 8.6e-4.
+  {
+    const auto towards_sun = [](double az, double az_sun, int band) {
+      return band == 0 ? 1 + 0.1 * std::cos(az - az_sun) : 1.0;
+    };
+    LightingPredictor p(ObservedDay(towards_sun), RelightOptions{});
+    ASSERT_EQ(p.residual_frames().size(), 18u);
+    EXPECT_EQ(p.residual_frames()[9], ResidualFrame::kSun);
+    for (int b = 10; b < 18; ++b) EXPECT_EQ(p.residual_frames()[b], ResidualFrame::kNone) << b;
+    const Lighting l = p.At(t, kSite);
+    const std::vector<double> ratio = OverModel(l, 0);
+    for (int k = 0; k < 24; ++k) {
+      const double az = (k + 0.5) * 2 * kPi / 24;
+      EXPECT_NEAR(ratio[k], towards_sun(az, az_new, 0), 9e-4) << k;
+    }
+    for (double r : OverModel(l, 3)) EXPECT_NEAR(r, 1, 1e-12);
+    // Without it: the model alone.
+    RelightOptions off;
+    off.sky_residual = false;
+    for (double r : OverModel(LightingPredictor(ObservedDay(towards_sun), off).At(t, kSite), 0))
+      EXPECT_NEAR(r, 1, 1e-12);
+  }
+  // A skyline three sectors wide, 12% darker than the sky at every time: it stays where it is.
+  {
+    const auto skyline = [](double az, double, int band) {
+      return band == 0 && az > 3 * 2 * kPi / 24 && az < 6 * 2 * kPi / 24 ? 0.88 : 1.0;
+    };
+    LightingPredictor p(ObservedDay(skyline), RelightOptions{});
+    EXPECT_EQ(p.residual_frames()[9], ResidualFrame::kFixed);
+    const std::vector<double> ratio = OverModel(p.At(t, kSite), 0);
+    for (int k = 0; k < 24; ++k) EXPECT_NEAR(ratio[k], k >= 3 && k < 6 ? 0.88 : 1.0, 1e-9) << k;
+  }
 }
 
 TEST(RelightTest, RefusesNightAndNoData) {

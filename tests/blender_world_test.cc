@@ -115,18 +115,19 @@ TEST(BlenderWorldTest, ImportStatusSolveRenderValidate) {
   EXPECT_LT(v["predicted"]["rel_rmse"].get<double>(), 0.25) << r.out;
   EXPECT_LT(v["measured"]["rel_rmse"].get<double>(), 0.25) << r.out;
   // What a user of a relit model expects (the fidelity issue's bar): every view of the
-  // held-out time at 32 dB or better on the building under either lighting, the measured
-  // lighting within 3% median relative error, and the lighting measured at that time not worse
+  // held-out time at 32 dB or better on the building under either lighting, within 3% median
+  // relative error under either lighting, and the lighting measured at that time not worse
   // than the lighting predicted from the other times (once it was: 23 against 29 dB). rouen
-  // scored 38-42 dB and 1.7-2.7% measured, 35-42 dB predicted (README.md), the two within 3%
-  // of each other's rel. RMSE; the Lambertian model of the paper scored 23-29 dB. The 5% margin
-  // on "not worse" is the measured lighting's own fit error (its sky fit's p90 is 1.8%), which
-  // can leave it a little behind a prediction that lands closer by chance.
+  // scored 39-43 dB and 0.7-1.6% measured, 39-43 dB and 0.9-2.4% predicted (README.md), the
+  // two within 3% of each other's rel. RMSE; the Lambertian model of the paper scored 23-29
+  // dB. The 5% margin on "not worse" is the measured lighting's own fit error (its sky fit's
+  // p90 is 1.8%), which can leave it a little behind a prediction that lands closer by chance.
   for (const nlohmann::json& p : v["photos"]) {
     const std::string name = p["view"].get<std::string>();
     EXPECT_GE(p["measured"]["psnr_db"].get<double>(), 32) << name;
     EXPECT_GE(p["predicted"]["psnr_db"].get<double>(), 32) << name;
     EXPECT_LE(p["measured"]["median_rel_error"].get<double>(), 0.03) << name;
+    EXPECT_LE(p["predicted"]["median_rel_error"].get<double>(), 0.03) << name;
     EXPECT_LE(p["measured"]["rel_rmse"].get<double>(),
               1.05 * p["predicted"]["rel_rmse"].get<double>())
         << name;
@@ -170,6 +171,12 @@ TEST(BlenderWorldTest, ImportStatusSolveRenderValidate) {
       // scaled by 2) gave medians of half the base colour.
       if (!glossy) {
         EXPECT_NEAR(Median(vals) / want, 1.0, 0.05) << block << " channel " << c;
+        // The sky + environment albedo is the same colour seen under sky light: with the rough
+        // block's ambient factor (solve/retro.h) the tower's came within 1% and the annex's
+        // within 5% (without it the tower's was 5-7% high: the sky light brightening towards
+        // oblique views was read as albedo). 6%: the sky fit's p90 (1.8%) plus the ground's
+        // prediction and the interreflection's.
+        EXPECT_NEAR(Median(se) / want, 1.0, 0.06) << block << " channel " << c;
       }
     }
     // §4.2.2: the glossy block (Principled specular 0.5, roughness 0.35) gets a sun lobe; the
