@@ -17,6 +17,8 @@ void RelightOptions::Validate() const {
     throw Error("relight: the overcast brightness must be positive");
   if (!(sky_residual_max >= 1) || !std::isfinite(sky_residual_max))
     throw Error("relight: sky_residual_max must be a number >= 1");
+  if (!(sky_residual_tolerance >= 0) || !std::isfinite(sky_residual_tolerance))
+    throw Error("relight: sky_residual_tolerance must be a number >= 0");
   if (!(sky_residual_min_gain >= 0 && sky_residual_min_gain <= 1))
     throw Error("relight: sky_residual_min_gain must be within 0..1");
   sky.Validate();
@@ -155,7 +157,9 @@ LightingPredictor::LightingPredictor(std::vector<Lighting> measured, const Relig
     for (size_t gi = 0; gi < env_.regions.size(); ++gi) {
       if (env_.regions[gi].kind == EnvRegionKind::kSky) SetResidual(gi);
     }
-    FindSkyByResidual();
+    // Each region found lends its residual to the next: until none is found.
+    for (int pass = 0; pass < 8 && FindSkyByResidual() > 0; ++pass) {
+    }
     ChooseResidualFrames();
   }
 }
@@ -196,11 +200,11 @@ std::vector<std::vector<double>> LightingPredictor::LeaveOneOutWeights() const {
 // The stereo's sky detection compares a region with the smooth model, so the aureole next to a
 // time's sun (which the model misses) can make a region of sky look like landscape. Such a
 // region is sky after all when, at every time its panoramas saw it, it matches the model times
-// the other times' residual carried relative to the sun, within the stereo's sky tolerance (its
-// mean over the times of the worst channel's relative error).
-void LightingPredictor::FindSkyByResidual() {
+// the other times' residual carried relative to the sun, within sky_residual_tolerance (the
+// mean over the times of the worst channel's relative error). Returns how many it found.
+int LightingPredictor::FindSkyByResidual() {
   const size_t T = measured_.size();
-  if (T < 2) return;
+  if (T < 2) return 0;
   const std::vector<std::vector<double>> loo = LeaveOneOutWeights();
   const EnvironmentMap& m0 = measured_.front().env;
   const int nreg = m0.num_regions(), first_above = m0.bands_below * m0.sectors;
@@ -227,7 +231,7 @@ void LightingPredictor::FindSkyByResidual() {
       err_sum += ((env.radiance[gi] - expected).cwiseAbs().cwiseQuotient(expected)).maxCoeff();
       ++n;
     }
-    if (carried_everywhere && n > 0 && err_sum / n <= options_.env.sky_match_tolerance)
+    if (carried_everywhere && n > 0 && err_sum / n <= options_.sky_residual_tolerance)
       found.push_back(gi);
   }
   for (size_t gi : found) {
@@ -237,7 +241,8 @@ void LightingPredictor::FindSkyByResidual() {
     fit.sky_fraction = 1;
     SetResidual(gi);
   }
-  sky_by_residual_ = static_cast<int>(found.size());
+  sky_by_residual_ += static_cast<int>(found.size());
+  return static_cast<int>(found.size());
 }
 
 // Per band of every layer, how its residual carries to a new time: each measured time's residual

@@ -204,6 +204,34 @@ TEST(RelightTest, TheSkysResidualFollowsTheSunOrStaysWhereItIs) {
   }
 }
 
+TEST(RelightTest, RegionsTheResidualExplainsAreSky) {
+  // A bright aureole on the horizon under each time's sun (up to 1.8x the model): the stereo's
+  // comparison with the model alone takes the regions under the suns for landscape; the
+  // residual carried from the other times explains them, so they are sky and follow the sun.
+  const auto aureole = [](double az, double az_sun, int band) {
+    return band == 0 ? 1 + 0.8 * std::pow(std::max(0.0, std::cos(az - az_sun)), 16) : 1.0;
+  };
+  RelightOptions o;
+  LightingPredictor p(ObservedDay(aureole), o);
+  EXPECT_GT(p.sky_regions_by_residual(), 0);
+  for (size_t gi = 9 * 24; gi < 10 * 24; ++gi)
+    EXPECT_EQ(p.environment().regions[gi].kind, EnvRegionKind::kSky) << gi;
+  const UtcTime t = ParseIso8601("2026-08-25T16:00:00-07:00");
+  const double az_new = Azimuth(ComputeSunPosition(t, kSite).DirectionEnu());
+  const std::vector<double> ratio = OverModel(p.At(t, kSite), 0);
+  // Regions average the peak over 15 degrees and the map is interpolated linearly between
+  // sector centres: with f'' = -12.8 / rad^2 at the peak, h^2 / 8 |f''| = 0.11 and h^2 / 24
+  // |f''| = 0.04 (h = 15 deg). Within 0.15 of it, and the sector nearest the new sun the
+  // brightest.
+  int brightest = 0;
+  for (int k = 0; k < 24; ++k) {
+    EXPECT_NEAR(ratio[k], aureole((k + 0.5) * 2 * kPi / 24, az_new, 0), 0.15) << k;
+    if (ratio[k] > ratio[brightest]) brightest = k;
+  }
+  const double sector = 2 * kPi / 24;
+  EXPECT_LE(std::abs(std::remainder((brightest + 0.5) * sector - az_new, 2 * kPi)), sector);
+}
+
 TEST(RelightTest, RefusesNightAndNoData) {
   LightingPredictor predictor(Day({0.1, 0.1, 0.1}, {1e4, 1e4, 1e4}), RelightOptions{});
   try {
