@@ -560,14 +560,18 @@ BENCHMARK(BM_MonteCarlo)->Arg(16)->Unit(benchmark::kMicrosecond);
 
 int main(int argc, char** argv) {
   benchmark::Initialize(&argc, argv);
-  // --demo_grid_only: the whole-grid timing alone (no accuracy study, no Google Benchmarks).
-  bool demo_grid_only = false;
-  for (int i = 1; i < argc; ++i) demo_grid_only |= std::string(argv[i]) == "--demo_grid_only";
-  if (!demo_grid_only) {
+  // --demo_grid_only: the whole-grid timing alone; --benchmarks_only: the Google Benchmarks
+  // alone (no accuracy study, no whole-grid timing).
+  bool demo_grid_only = false, benchmarks_only = false;
+  for (int i = 1; i < argc; ++i) {
+    demo_grid_only |= std::string(argv[i]) == "--demo_grid_only";
+    benchmarks_only |= std::string(argv[i]) == "--benchmarks_only";
+  }
+  if (!demo_grid_only && !benchmarks_only) {
     rouen::Study(true);
     rouen::Study(false);
   }
-  rouen::DemoGridTiming();
+  if (!benchmarks_only) rouen::DemoGridTiming();
   if (demo_grid_only) return 0;
   std::fflush(stdout);
   benchmark::RunSpecifiedBenchmarks();
