@@ -220,8 +220,11 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
       }
       if (vector_flux) {
         if (!faces) faces = std::make_unique<OccluderFaces>(*options.mesh);
-        ls.shadow_on_ground = ShadowBeyondGroundFaces(
-            GroundShadowOnPlane(*options.mesh, *faces, s, ground_z), *faces, ground_z);
+        // Merged into fewer polygons where their union is convex, before the cut (less to
+        // cut) and after it (the cut's pieces of neighbouring polygons join again).
+        ls.shadow_on_ground = MergeGroundShadow(ShadowBeyondGroundFaces(
+            MergeGroundShadow(GroundShadowOnPlane(*options.mesh, *faces, s, ground_z)), *faces,
+            ground_z));
       }
     }
     if (!vector_flux) continue;
@@ -294,7 +297,7 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
           }
           const EnvironmentView& view = views[ls.layout];
           Eigen::Vector3d e = EnvironmentIrradiance(view, ls.lighting->env, p.position.z());
-          if (ls.ground_shadow && origin.z() > ground_z) {
+          if (ls.ground_shadow && origin.z() > ground_z && !view.pieces.empty()) {
             e += GroundShadowChange(view, *layouts[ls.layout], ls.lighting->env, p.position.z(),
                                     GroundShadowPolygons(ls.shadow_on_ground, origin),
                                     ls.shadow_ratio);

@@ -492,6 +492,96 @@ TEST(IrradianceVectorFluxTest, ShadowOnThePlazaIsCutAway) {
   EXPECT_GT(changed, 3);
 }
 
+// MergeGroundShadow keeps the union: fewer polygons, the same shadowed ground seen from every
+// point, the sunlit ground inside an open tube's shadow left out.
+TEST(IrradianceVectorFluxTest, MergedGroundShadowIsTheSameUnion) {
+  const Eigen::Vector3d sun = Eigen::Vector3d(0.4, -0.7, 0.5).normalized();
+  auto area = [](const std::vector<std::vector<Eigen::Vector3d>>& polys) {
+    double a = 0;
+    for (const auto& p : polys) {
+      for (size_t i = 0; i < p.size(); ++i) {
+        a += 0.5 * (p[i].x() * p[(i + 1) % p.size()].y() - p[(i + 1) % p.size()].x() * p[i].y());
+      }
+    }
+    return a;
+  };
+  auto apart = [](Mesh m) {  // every triangle a block of its own: every face casts a shadow
+    for (size_t t = 0; t < m.triangles.size(); ++t) {
+      m.triangle_block[t] = m.AddBlock("face" + std::to_string(t));
+    }
+    return m;
+  };
+  // A closed box's ten triangles cast shadows whose union is the box's: one polygon.
+  Mesh box;
+  testing::AddBox(&box, {-5, -5, 0}, {5, 5, 40}, box.AddBlock("tower"));
+  const auto hull = GroundShadowOnPlane(box, OccluderFaces(box), sun, 0);
+  ASSERT_EQ(hull.size(), 1u);
+  const Mesh box_apart = apart(box);
+  const auto box_faces = GroundShadowOnPlane(box_apart, OccluderFaces(box_apart), sun, 0);
+  const auto box_merged = MergeGroundShadow(box_faces);
+  EXPECT_EQ(box_faces.size(), 10u);
+  ASSERT_EQ(box_merged.size(), 1u);
+  EXPECT_NEAR(area(box_merged), area(hull), 1e-9 * area(hull));
+
+  // An open tube (walls, no roof, 20 m wide, 4 m tall: the sun reaches the ground inside it)
+  // and a mast.
+  Mesh m;
+  const int tube = m.AddBlock("tube");
+  const double w = 10, h = 4;
+  m.AddPolygon({{-w, -w, 0}, {w, -w, 0}, {w, -w, h}, {-w, -w, h}}, tube);
+  m.AddPolygon({{w, -w, 0}, {w, w, 0}, {w, w, h}, {w, -w, h}}, tube);
+  m.AddPolygon({{w, w, 0}, {-w, w, 0}, {-w, w, h}, {w, w, h}}, tube);
+  m.AddPolygon({{-w, w, 0}, {-w, -w, 0}, {-w, -w, h}, {-w, w, h}}, tube);
+  testing::AddBox(&m, {-14, 12, 0}, {-12, 14, 30}, m.AddBlock("mast"));
+  const Mesh ma = apart(m);
+  const OccluderFaces faces(ma);
+  const auto whole = GroundShadowOnPlane(ma, faces, sun, 0);
+  const auto merged = MergeGroundShadow(whole);
+  EXPECT_LT(merged.size(), whole.size());
+  // The tube's centre is sunlit (its ray to the sun leaves through the open top): in no
+  // polygon of either set.
+  auto inside_any = [](const std::vector<std::vector<Eigen::Vector3d>>& polys, double x, double y) {
+    for (const auto& p : polys) {
+      double sign = 0;
+      bool in = true;
+      for (size_t i = 0; i < p.size() && in; ++i) {
+        const Eigen::Vector3d& a = p[i];
+        const Eigen::Vector3d& b = p[(i + 1) % p.size()];
+        const double c = (b.x() - a.x()) * (y - a.y()) - (b.y() - a.y()) * (x - a.x());
+        if (sign == 0) sign = c;
+        in = c * sign > 0;
+      }
+      if (in) return true;
+    }
+    return false;
+  };
+  EXPECT_FALSE(inside_any(whole, 0, 0));
+  EXPECT_FALSE(inside_any(merged, 0, 0));
+  EXPECT_TRUE(inside_any(merged, 0, -9));  // inside the south wall, in its shadow
+  // Every point sees the same shadowed ground through either set: exact clippings of one union,
+  // equal to rounding.
+  Lighting l = VaryingEnvironment(true);
+  const EnvironmentRegions regions(l.env, VectorFluxOptions());
+  GridOptions go;
+  go.spacing_m = 3;
+  const SurfaceGrid grid = BuildSurfaceGrid(m, go);
+  const Eigen::Vector3d ratio(0.3, 0.4, 0.5);
+  int changed = 0;
+  EnvironmentView view;
+  for (const GridPoint& p : grid.points) {
+    const Eigen::Vector3d origin = p.position + 1e-4 * p.normal;
+    if (!(origin.z() > 0)) continue;
+    SeeEnvironment(PointVisibility(faces, origin, p.normal, p.triangle), regions, true, &view);
+    const Eigen::Vector3d a = GroundShadowChange(view, regions, l.env, origin.z(),
+                                                 GroundShadowPolygons(whole, origin), ratio);
+    const Eigen::Vector3d b = GroundShadowChange(view, regions, l.env, origin.z(),
+                                                 GroundShadowPolygons(merged, origin), ratio);
+    EXPECT_NEAR((a - b).norm(), 0, 1e-9 * (1 + a.norm())) << p.position.transpose();
+    changed += a.norm() > 1e-6;
+  }
+  EXPECT_GT(changed, 3);
+}
+
 TEST(IrradianceVectorFluxTest, RejectsMissingOrMismatchedMesh) {
   const BoxScene s;
   const HemisphereCache cache = BuildHemisphereCache(s.grid, *s.rc);

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <string>
 #include <tuple>
 #include <unordered_map>
@@ -18,16 +19,51 @@ namespace {
 // Plane-side tolerance for unit vectors (about 2e-7 degrees).
 constexpr double kSideEps = 1e-12;
 
-// Removes consecutive (and first/last) vertices closer than ~1e-13 rad.
+// Removes consecutive (and first/last) vertices closer than ~1e-13 rad (in place: no
+// allocation).
 void DropDuplicates(SphericalPolygon* p) {
   if (p->size() < 2) return;
-  SphericalPolygon q;
-  q.reserve(p->size());
-  for (const auto& v : *p) {
-    if (q.empty() || (v - q.back()).squaredNorm() > 1e-26) q.push_back(v);
+  SphericalPolygon& q = *p;
+  size_t w = 0;
+  for (size_t r = 0; r < q.size(); ++r) {
+    if (w == 0 || (q[r] - q[w - 1]).squaredNorm() > 1e-26) q[w++] = q[r];
   }
-  while (q.size() > 1 && (q.front() - q.back()).squaredNorm() <= 1e-26) q.pop_back();
-  p->swap(q);
+  while (w > 1 && (q[0] - q[w - 1]).squaredNorm() <= 1e-26) --w;
+  q.resize(w);
+}
+
+// The cut of ClipToHalfSpace given the vertices' signed distances d[i] = m.v_i / |m|: with
+// sign = 1 the part with m.x >= 0, with sign = -1 the part with m.x <= 0 (the same arithmetic
+// as cutting by -m: negation is exact, so the vertices are bitwise those of
+// ClipToHalfSpace(poly, -m)). Replaces `out` (its storage is reused).
+void CutInto(const SphericalPolygon& poly, const std::vector<double>& d, double sign,
+             SphericalPolygon* out) {
+  out->clear();
+  const size_t n = poly.size();
+  for (size_t i = 0; i < n; ++i) {
+    const size_t j = i + 1 == n ? 0 : i + 1;
+    const Eigen::Vector3d& a = poly[i];
+    const Eigen::Vector3d& b = poly[j];
+    const double da = sign * d[i], db = sign * d[j];
+    const bool ina = da >= -kSideEps, inb = db >= -kSideEps;
+    if (ina) out->push_back(a);
+    if (ina != inb && std::abs(da - db) > 0) {
+      // The chord meets the plane where the great arc does (both lie in the plane of O, a, b).
+      const double t = da / (da - db);
+      const Eigen::Vector3d x = a + t * (b - a);
+      const double len = x.norm();
+      if (len > 0) out->push_back(x / len);
+    }
+  }
+  DropDuplicates(out);
+  if (out->size() < 3) out->clear();
+}
+
+// d[i] = m.v_i / |m| for the vertices of `poly`.
+void SignedDistances(const SphericalPolygon& poly, const Eigen::Vector3d& m, double scale,
+                     std::vector<double>* d) {
+  d->resize(poly.size());
+  for (size_t i = 0; i < poly.size(); ++i) (*d)[i] = m.dot(poly[i]) / scale;
 }
 
 Eigen::Vector3d Direction(double el, double az) {
@@ -86,27 +122,13 @@ double SolidAngle(const SphericalPolygon& poly) {
 
 SphericalPolygon ClipToHalfSpace(const SphericalPolygon& poly, const Eigen::Vector3d& m) {
   SphericalPolygon out;
-  const size_t n = poly.size();
-  if (n < 3) return out;
-  out.reserve(n + 2);
+  if (poly.size() < 3) return out;
   const double scale = m.norm();
   if (!(scale > 0)) return out;
-  for (size_t i = 0; i < n; ++i) {
-    const Eigen::Vector3d& a = poly[i];
-    const Eigen::Vector3d& b = poly[(i + 1) % n];
-    const double da = m.dot(a) / scale, db = m.dot(b) / scale;
-    const bool ina = da >= -kSideEps, inb = db >= -kSideEps;
-    if (ina) out.push_back(a);
-    if (ina != inb && std::abs(da - db) > 0) {
-      // The chord meets the plane where the great arc does (both lie in the plane of O, a, b).
-      const double t = da / (da - db);
-      const Eigen::Vector3d x = a + t * (b - a);
-      const double len = x.norm();
-      if (len > 0) out.push_back(x / len);
-    }
-  }
-  DropDuplicates(&out);
-  if (out.size() < 3) out.clear();
+  std::vector<double> d;
+  SignedDistances(poly, m, scale, &d);
+  out.reserve(poly.size() + 2);
+  CutInto(poly, d, 1.0, &out);
   return out;
 }
 
@@ -198,21 +220,97 @@ bool Inside(const SphericalPolygon& p, const ConvexSpherical& q) {
 
 }  // namespace
 
-void SubtractConvex(const SphericalPolygon& p, const ConvexSpherical& q,
-                    std::vector<SphericalPolygon>* outside, std::vector<SphericalPolygon>* inside) {
+namespace {
+
+// A list of polygons whose storage is kept between uses (clear() keeps every polygon's
+// capacity), so that clipping in a loop allocates nothing once warm.
+class PolygonList {
+ public:
+  void clear() { count_ = 0; }
+  bool empty() const { return count_ == 0; }
+  size_t size() const { return count_; }
+  SphericalPolygon& operator[](size_t k) { return items_[k]; }
+  const SphericalPolygon& operator[](size_t k) const { return items_[k]; }
+  // A new, empty polygon at the end.
+  SphericalPolygon& Add() {
+    if (count_ == items_.size()) items_.emplace_back();
+    SphericalPolygon& p = items_[count_++];
+    p.clear();
+    return p;
+  }
+  void Add(const SphericalPolygon& p) {
+    SphericalPolygon& q = Add();
+    q.assign(p.begin(), p.end());
+  }
+  void PopBack() { --count_; }
+  void swap(PolygonList& o) {
+    items_.swap(o.items_);
+    std::swap(count_, o.count_);
+  }
+
+ private:
+  std::vector<SphericalPolygon> items_;
+  size_t count_ = 0;
+};
+
+// Buffers of SubtractInto.
+struct SubtractScratch {
+  std::vector<double> d;
+  SphericalPolygon rest, cut;
+};
+
+// SubtractConvex into reused storage: the parts of `p` outside `q` appended to `outside`,
+// the part inside to `inside` (when not null); the same pieces, bitwise, as cutting by -m and
+// m with ClipToHalfSpace for each edge normal m of q, with each vertex's distance to the
+// edge's plane computed once for both cuts, and a cut that leaves every vertex on one side
+// done without clipping.
+void SubtractInto(const SphericalPolygon& p, const ConvexSpherical& q, PolygonList* outside,
+                  PolygonList* inside, SubtractScratch* s) {
   if (p.size() < 3) return;
   if (Disjoint(p, SphericalCap(p), q, false)) {
-    outside->push_back(p);
+    outside->Add(p);
     return;
   }
-  SphericalPolygon rest = p;
+  SphericalPolygon& rest = s->rest;
+  rest.assign(p.begin(), p.end());
   for (const auto& m : q.edge_normal) {
-    SphericalPolygon out = ClipToHalfSpace(rest, -m);
-    if (!out.empty()) outside->push_back(std::move(out));
-    rest = ClipToHalfSpace(rest, m);
+    const double scale = m.norm();
+    if (rest.size() < 3 || !(scale > 0)) return;  // (ClipToHalfSpace: nothing on either side)
+    SignedDistances(rest, m, scale, &s->d);
+    bool all_in = true, none_out = true;  // m.x >= 0 everywhere; no vertex with -m.x >= 0
+    for (const double di : s->d) {
+      all_in &= di >= -kSideEps;
+      none_out &= -di < -kSideEps;
+    }
+    if (!none_out) {
+      SphericalPolygon& out = outside->Add();
+      CutInto(rest, s->d, -1.0, &out);
+      if (out.empty()) outside->PopBack();
+    }
+    if (all_in) {
+      // Every vertex kept and no crossing: the cut only drops duplicate vertices.
+      DropDuplicates(&rest);
+      if (rest.size() < 3) rest.clear();
+    } else {
+      CutInto(rest, s->d, 1.0, &s->cut);
+      rest.swap(s->cut);
+    }
     if (rest.empty()) return;
   }
-  if (inside != nullptr) inside->push_back(std::move(rest));
+  if (inside != nullptr) inside->Add(rest);
+}
+
+}  // namespace
+
+void SubtractConvex(const SphericalPolygon& p, const ConvexSpherical& q,
+                    std::vector<SphericalPolygon>* outside, std::vector<SphericalPolygon>* inside) {
+  thread_local PolygonList out, in;
+  thread_local SubtractScratch scratch;
+  out.clear();
+  in.clear();
+  SubtractInto(p, q, &out, inside ? &in : nullptr, &scratch);
+  for (size_t k = 0; k < out.size(); ++k) outside->push_back(out[k]);
+  for (size_t k = 0; k < in.size(); ++k) inside->push_back(in[k]);
 }
 
 bool ProjectPolygon(const std::vector<Eigen::Vector3d>& points, const Eigen::Vector3d& origin,
@@ -637,32 +735,55 @@ PointVisibility::PointVisibility(const OccluderFaces& faces, const Eigen::Vector
   Finish(&found);
 }
 
+namespace {
+
+// Buffers of VisibleParts.
+struct ClipScratch {
+  PolygonList pieces, next;
+  std::vector<double> d;
+  SubtractScratch subtract;
+};
+
+// App. A's visibility clipping into reused storage: `s->pieces` receives the part of `patch`
+// in front of the tangent plane less the occluders vis.occluder(ids[k]), k < count (the same
+// pieces as PointVisibility::Clip / ClipWith).
+void VisibleParts(const PointVisibility& vis, const SphericalPolygon& patch, const int* ids,
+                  size_t count, ClipScratch* s) {
+  s->pieces.clear();
+  const double scale = vis.normal().norm();
+  if (patch.size() < 3 || !(scale > 0)) return;
+  SignedDistances(patch, vis.normal(), scale, &s->d);
+  SphericalPolygon& front = s->pieces.Add();
+  CutInto(patch, s->d, 1.0, &front);
+  if (front.empty()) {
+    s->pieces.PopBack();
+    return;
+  }
+  for (size_t k = 0; k < count; ++k) {
+    const ConvexSpherical& occ = vis.occluder(ids == nullptr ? static_cast<int>(k) : ids[k]);
+    s->next.clear();
+    for (size_t j = 0; j < s->pieces.size(); ++j) {
+      SubtractInto(s->pieces[j], occ, &s->next, nullptr, &s->subtract);
+    }
+    s->pieces.swap(s->next);
+    if (s->pieces.empty()) return;
+  }
+}
+
+}  // namespace
+
 void PointVisibility::Clip(const SphericalPolygon& patch,
                            std::vector<SphericalPolygon>* out) const {
-  SphericalPolygon front = ClipToHalfSpace(patch, normal_);
-  if (front.empty()) return;
-  std::vector<SphericalPolygon> pieces = {std::move(front)}, next;
-  for (const auto& occ : occluders_) {
-    next.clear();
-    for (const auto& p : pieces) SubtractConvex(p, occ, &next);
-    pieces.swap(next);
-    if (pieces.empty()) return;
-  }
-  for (auto& p : pieces) out->push_back(std::move(p));
+  thread_local ClipScratch s;
+  VisibleParts(*this, patch, nullptr, occluders_.size(), &s);
+  for (size_t k = 0; k < s.pieces.size(); ++k) out->push_back(s.pieces[k]);
 }
 
 void PointVisibility::ClipWith(const SphericalPolygon& patch, const std::vector<int>& subset,
                                std::vector<SphericalPolygon>* out) const {
-  SphericalPolygon front = ClipToHalfSpace(patch, normal_);
-  if (front.empty()) return;
-  std::vector<SphericalPolygon> pieces = {std::move(front)}, next;
-  for (int k : subset) {
-    next.clear();
-    for (const auto& p : pieces) SubtractConvex(p, occluders_[k], &next);
-    pieces.swap(next);
-    if (pieces.empty()) return;
-  }
-  for (auto& p : pieces) out->push_back(std::move(p));
+  thread_local ClipScratch s;
+  VisibleParts(*this, patch, subset.data(), subset.size(), &s);
+  for (size_t k = 0; k < s.pieces.size(); ++k) out->push_back(s.pieces[k]);
 }
 
 PointVisibility::Cover PointVisibility::Classify(const SphericalPolygon& patch,
@@ -922,21 +1043,25 @@ void SeeEnvironment(const PointVisibility& vis, const EnvironmentRegions& region
   view->normal = vis.normal();
   if (stats) stats->occluders = vis.num_occluders();
   const int nreg = regions.size();
+  // Per-thread buffers, kept between points.
+  thread_local std::vector<int> start, near, first_near, fill, list, subset, overlap;
+  thread_local ClipScratch clip;
   // The occluders that may overlap each region (compressed rows, occluders in order).
-  std::vector<int> start(nreg + 1, 0), near, first_near(vis.num_occluders() + 1, 0);
+  start.assign(nreg + 1, 0);
+  near.clear();
+  first_near.assign(vis.num_occluders() + 1, 0);
   for (int k = 0; k < vis.num_occluders(); ++k) {
     regions.Near(vis.occluder(k), &near);
     first_near[k + 1] = static_cast<int>(near.size());
   }
   for (int r : near) ++start[r + 1];
   for (int r = 0; r < nreg; ++r) start[r + 1] += start[r];
-  std::vector<int> fill(start.begin(), start.end() - 1), list(near.size());
+  fill.assign(start.begin(), start.end() - 1);
+  list.resize(near.size());
   for (int k = 0; k < vis.num_occluders(); ++k) {
     for (int m = first_near[k]; m < first_near[k + 1]; ++m) list[fill[near[m]]++] = k;
   }
   const Eigen::Vector3d& n = vis.normal();
-  std::vector<int> subset, overlap;
-  std::vector<SphericalPolygon> visible;
   for (int r = 0; r < nreg; ++r) {
     subset.assign(list.begin() + start[r], list.begin() + start[r + 1]);
     const SphericalPolygon& poly = regions.polygon(r);
@@ -944,25 +1069,29 @@ void SeeEnvironment(const PointVisibility& vis, const EnvironmentRegions& region
     const PointVisibility::Cover cover =
         vis.Classify(poly, regions.cap(r), &subset, false, &overlap);
     if (cover == PointVisibility::Cover::kHidden) continue;
-    visible.clear();
     Eigen::Vector3d phi = Eigen::Vector3d::Zero();
+    const bool keep = keep_ground_pieces && regions.below_horizon(r);
     if (cover == PointVisibility::Cover::kFull) {
-      visible.push_back(poly);
       phi = regions.flux(r);
-    } else {
-      vis.ClipWith(poly, overlap, &visible);
-      for (const auto& p : visible) phi += VectorFlux(p);
-    }
-    if (visible.empty()) continue;
-    if (stats) stats->patches += static_cast<int>(visible.size());
-    view->region.push_back(r);
-    view->weight.push_back(n.dot(phi));
-    if (keep_ground_pieces && regions.below_horizon(r)) {
-      for (auto& p : visible) {
+      if (stats) ++stats->patches;
+      if (keep) {
         view->piece_region.push_back(r);
-        view->pieces.push_back(std::move(p));
+        view->pieces.push_back(poly);
+      }
+    } else {
+      VisibleParts(vis, poly, overlap.data(), overlap.size(), &clip);
+      if (clip.pieces.empty()) continue;
+      for (size_t k = 0; k < clip.pieces.size(); ++k) phi += VectorFlux(clip.pieces[k]);
+      if (stats) stats->patches += static_cast<int>(clip.pieces.size());
+      if (keep) {
+        for (size_t k = 0; k < clip.pieces.size(); ++k) {
+          view->piece_region.push_back(r);
+          view->pieces.push_back(clip.pieces[k]);
+        }
       }
     }
+    view->region.push_back(r);
+    view->weight.push_back(n.dot(phi));
   }
 }
 
@@ -1022,23 +1151,28 @@ Eigen::Vector3d GroundShadowChange(const EnvironmentView& view, const Environmen
   Eigen::Vector3d e = Eigen::Vector3d::Zero();
   if (ground_shadow.empty() || view.pieces.empty()) return e;
   const LayerBlend blend(env, z);
+  // Per-thread buffers, kept between points.
+  thread_local std::vector<int> near, owner;
+  thread_local std::vector<std::pair<int, int>> by_region;  // (region, shadow)
+  thread_local PolygonList rest, next, inside;
+  thread_local SubtractScratch scratch;
   // The shadows that may meet each region, in order.
-  std::vector<int> near, owner;
+  near.clear();
+  owner.clear();
   for (int k = 0; k < static_cast<int>(ground_shadow.size()); ++k) {
     regions.Near(ground_shadow[k], &near);
     owner.resize(near.size(), k);
   }
-  std::vector<std::pair<int, int>> by_region(near.size());  // (region, shadow)
+  by_region.resize(near.size());
   for (size_t m = 0; m < near.size(); ++m) by_region[m] = {near[m], owner[m]};
   std::sort(by_region.begin(), by_region.end());
-  std::vector<SphericalPolygon> rest, next, inside;
   size_t k = 0;
   while (k < view.pieces.size()) {
     // The pieces of one region.
     const int r = view.piece_region[k];
     CheckRegion(env, r);
     rest.clear();
-    for (; k < view.pieces.size() && view.piece_region[k] == r; ++k) rest.push_back(view.pieces[k]);
+    for (; k < view.pieces.size() && view.piece_region[k] == r; ++k) rest.Add(view.pieces[k]);
     // Shadowed ground: the union of the (overlapping) shadow polygons, taken apart piece by
     // piece so no direction counts twice; shadows clear of the whole region are skipped.
     Eigen::Vector3d phi = Eigen::Vector3d::Zero();
@@ -1048,8 +1182,8 @@ Eigen::Vector3d GroundShadowChange(const EnvironmentView& view, const Environmen
       if (Disjoint(regions.polygon(r), regions.cap(r), s, false)) continue;
       next.clear();
       inside.clear();
-      for (const auto& p : rest) SubtractConvex(p, s, &next, &inside);
-      for (const auto& p : inside) phi += VectorFlux(p);
+      for (size_t j = 0; j < rest.size(); ++j) SubtractInto(rest[j], s, &next, &inside, &scratch);
+      for (size_t j = 0; j < inside.size(); ++j) phi += VectorFlux(inside[j]);
       rest.swap(next);
       if (rest.empty()) break;
     }
@@ -1322,6 +1456,115 @@ std::vector<std::vector<Eigen::Vector3d>> ShadowBeyondGroundFaces(
     for (auto& p : rest) out.push_back(std::move(p));
   }
   return out;
+}
+
+namespace {
+
+struct BoxXY {
+  Eigen::Vector2d lo, hi;
+  explicit BoxXY(const std::vector<Eigen::Vector3d>& p) : lo(p[0].head<2>()), hi(lo) {
+    for (const auto& v : p) {
+      lo = lo.cwiseMin(v.head<2>());
+      hi = hi.cwiseMax(v.head<2>());
+    }
+  }
+  bool Apart(const BoxXY& o) const {
+    return (lo.array() > o.hi.array()).any() || (o.lo.array() > hi.array()).any();
+  }
+};
+
+// Twice the area of the convex `h` (counter-clockwise) outside every polygon of `polys` but
+// polys[skip] (convex, counter-clockwise): h less each of them piece by piece.
+double UncoveredArea2(const std::vector<Eigen::Vector3d>& h,
+                      const std::vector<std::vector<Eigen::Vector3d>>& polys,
+                      const std::vector<BoxXY>& boxes, size_t skip) {
+  const BoxXY hbox(h);
+  std::vector<std::vector<Eigen::Vector3d>> rest = {h}, next;
+  for (size_t k = 0; k < polys.size() && !rest.empty(); ++k) {
+    if (k == skip || hbox.Apart(boxes[k])) continue;
+    const std::vector<Eigen::Vector3d>& q = polys[k];
+    next.clear();
+    for (const auto& p : rest) {
+      std::vector<Eigen::Vector3d> inner = p;
+      for (size_t e = 0; e < q.size() && inner.size() >= 3; ++e) {
+        const Eigen::Vector3d& a = q[e];
+        const Eigen::Vector3d& b = q[(e + 1) % q.size()];
+        std::vector<Eigen::Vector3d> outside = LeftOf(inner, b, a);
+        if (outside.size() >= 3) next.push_back(std::move(outside));
+        inner = LeftOf(inner, a, b);
+      }
+    }
+    rest.swap(next);
+  }
+  double area2 = 0;
+  for (const auto& p : rest) area2 += Area2XY(p);
+  return area2;
+}
+
+}  // namespace
+
+std::vector<std::vector<Eigen::Vector3d>> MergeGroundShadow(
+    const std::vector<std::vector<Eigen::Vector3d>>& shadow) {
+  std::vector<std::vector<Eigen::Vector3d>> polys;
+  double extent = 1;
+  size_t corners = 0;
+  for (const auto& g : shadow) {
+    if (g.size() < 3) continue;
+    polys.push_back(g);
+    if (Area2XY(polys.back()) < 0) std::reverse(polys.back().begin(), polys.back().end());
+    for (const auto& v : g) extent = std::max(extent, v.head<2>().cwiseAbs().maxCoeff());
+    corners += g.size();
+  }
+  // Largest first: the small ones are the likeliest to lie under the others.
+  std::stable_sort(polys.begin(), polys.end(),
+                   [](const auto& a, const auto& b) { return Area2XY(a) > Area2XY(b); });
+  std::vector<BoxXY> boxes;
+  for (const auto& p : polys) boxes.emplace_back(p);
+  // An uncovered area is a sum of twice-areas, each a sum of cross products of coordinates
+  // below `extent`, rounded, over the corners of the pieces (the cut's new corners rounded
+  // too): within about 4 eps extent^2 per corner. The pieces' corners are taken as at most 4x
+  // the polygons' (plus the hull's), and 16x that as the tolerance.
+  const double tol =
+      64.0 * (4 * corners + 64) * std::numeric_limits<double>::epsilon() * extent * extent;
+  auto erase = [&](size_t k) {
+    polys.erase(polys.begin() + k);
+    boxes.erase(boxes.begin() + k);
+  };
+  // Polygons under the union of the others add nothing.
+  for (size_t k = polys.size(); k-- > 0;) {
+    if (UncoveredArea2(polys[k], polys, boxes, k) <= tol) erase(k);
+  }
+  // A pair whose hull lies under the union of all is replaced by the hull; polygons then
+  // under the hull are dropped.
+  std::vector<Eigen::Vector3d> both;
+  for (size_t i = 0; i < polys.size(); ++i) {
+    for (size_t j = i + 1; j < polys.size();) {
+      if (boxes[i].Apart(boxes[j])) {
+        ++j;
+        continue;
+      }
+      both = polys[i];
+      both.insert(both.end(), polys[j].begin(), polys[j].end());
+      std::vector<Eigen::Vector3d> hull = HullXY(both);
+      if (hull.size() < 3 || UncoveredArea2(hull, polys, boxes, polys.size()) > tol) {
+        ++j;
+        continue;
+      }
+      polys[i] = std::move(hull);
+      boxes[i] = BoxXY(polys[i]);
+      erase(j);
+      const std::vector<std::vector<Eigen::Vector3d>> grown = {polys[i]};
+      const std::vector<BoxXY> grown_box = {boxes[i]};
+      for (size_t k = polys.size(); k-- > 0;) {
+        if (k != i && UncoveredArea2(polys[k], grown, grown_box, 1) <= tol) {
+          erase(k);
+          if (k < i) --i;
+        }
+      }
+      j = i + 1;  // the grown polygon may now merge with one passed over
+    }
+  }
+  return polys;
 }
 
 std::vector<ConvexSpherical> GroundShadowPolygons(

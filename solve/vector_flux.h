@@ -319,6 +319,14 @@ std::vector<std::vector<Eigen::Vector3d>> ShadowBeyondGroundFaces(
     const std::vector<std::vector<Eigen::Vector3d>>& shadow, const OccluderFaces& faces,
     double ground_z);
 
+// The same union of shadow polygons on the plane (as GroundShadowOnPlane's) as fewer, larger
+// convex polygons, counter-clockwise seen from above: polygons lying under the union of the
+// others are dropped, and a pair whose convex hull lies under the union of all is replaced by
+// the hull (a box's faces' shadows become one), until no pair is left. Built once per lighting;
+// each point then sees fewer polygons (GroundShadowPolygons).
+std::vector<std::vector<Eigen::Vector3d>> MergeGroundShadow(
+    const std::vector<std::vector<Eigen::Vector3d>>& shadow);
+
 // Those polygons seen from `origin` (above the plane): convex spherical polygons.
 std::vector<ConvexSpherical> GroundShadowPolygons(
     const std::vector<std::vector<Eigen::Vector3d>>& on_plane, const Eigen::Vector3d& origin);

@@ -116,6 +116,60 @@ TEST(VectorFluxTest, SubtractConvexPartitions) {
   EXPECT_FALSE(q.Set({c, c, c}));
 }
 
+// SubtractConvex computes each vertex's distance to an edge's plane once for both sides and
+// skips cuts that leave every vertex on one side: the pieces are bitwise those of cutting by
+// -m and m with ClipToHalfSpace for every edge normal m (the same arithmetic), including
+// polygons sharing corners and edges with q (vertices on the planes) and lying inside it.
+TEST(VectorFluxTest, SubtractConvexEqualsClippingEdgeByEdge) {
+  auto convex = [](const Eigen::Vector3d& centre, double radius, int n, double turn) {
+    const Eigen::Vector3d c = centre.normalized();
+    const Eigen::Vector3d t = c.unitOrthogonal(), b = c.cross(t);
+    SphericalPolygon p;
+    for (int k = 0; k < n; ++k) {
+      const double a = turn + 2 * kPi * k / n;
+      p.push_back((c + radius * (std::cos(a) * t + std::sin(a) * b)).normalized());
+    }
+    return p;  // counter-clockwise seen from outside
+  };
+  ConvexSpherical q;
+  const SphericalPolygon qv = convex({0.2, 0.1, 1}, 0.3, 5, 0.1);
+  ASSERT_TRUE(q.Set(qv));
+  std::vector<SphericalPolygon> cases = {
+      qv,                                  // q itself: every vertex on its planes
+      convex({0.2, 0.1, 1}, 0.1, 7, 0.0),  // inside q
+      convex({0.2, 0.1, 1}, 0.6, 4, 0.3),  // holding q
+      {qv[0], qv[1], (qv[0] + qv[1]).normalized() + 0.2 * Eigen::Vector3d(0.2, 0.1, 1),
+       qv[3]},  // two corners and an edge of q
+  };
+  cases.back()[2].normalize();
+  for (int k = 0; k < 24; ++k) {  // overlapping q's interior from every side
+    const double a = 2 * kPi * k / 24;
+    cases.push_back(
+        convex(Eigen::Vector3d(0.2, 0.1, 1).normalized() * 3 +
+                   Eigen::Vector3d(std::cos(a), std::sin(a), 0) * (0.3 + 0.05 * (k % 5)),
+               0.2 + 0.02 * (k % 7), 3 + k % 6, 0.37 * k));
+  }
+  int cut = 0;
+  for (size_t c = 0; c < cases.size(); ++c) {
+    const SphericalPolygon& p = cases[c];
+    std::vector<SphericalPolygon> out, in;
+    SubtractConvex(p, q, &out, &in);
+    std::vector<SphericalPolygon> ref_out, ref_in;
+    SphericalPolygon rest = p;
+    for (const auto& m : q.edge_normal) {
+      SphericalPolygon o = ClipToHalfSpace(rest, -m);
+      if (!o.empty()) ref_out.push_back(std::move(o));
+      rest = ClipToHalfSpace(rest, m);
+      if (rest.empty()) break;
+    }
+    if (!rest.empty()) ref_in.push_back(rest);
+    EXPECT_EQ(out, ref_out) << "case " << c;
+    EXPECT_EQ(in, ref_in) << "case " << c;
+    cut += !out.empty() && !in.empty();
+  }
+  EXPECT_GT(cut, 10);
+}
+
 TEST(VectorFluxTest, CeilingRectangleMatchesFormFactor) {
   // A ceiling [0, a] x [0, b] at height h above the point, corner overhead: the classic
   // parallel-rectangle form factor F; unoccluded uniform sky L gives pi L (1 - F).
