@@ -220,56 +220,65 @@ void Run(const DemoArgs& a) {
   for (const auto& [name, v] : scene.scene.views)
     if (v.slot == heldout && v.target == "architecture") heldout_views.push_back(name);
   if (heldout_views.empty()) throw Error("demo: the held-out time has no architecture photo");
+  // 5 first. The held-out photographs themselves, as `rouen validate` compares them (no
+  // truth). Its renders of every held-out view under the measured and the predicted lighting
+  // are the ones scored against the truth below (one prediction fit, one irradiance per
+  // lighting).
+  say("validating the held-out photographs; predicting the held-out time's lighting from the "
+      "other times");
+  ValidateOptions vo;
+  vo.exclude_blocks = {"plaza"};
+  const Validation validation = ValidateSlot(scene, session, heldout, vo, say);
+  if (!validation.predicted_lighting) throw Error("demo: the validation predicted no lighting");
+  const Lighting& predicted = *validation.predicted_lighting;
+
   MetricsOptions mo;
   mo.response = &response;
-  auto score_heldout = [&](const Lighting& lighting, const std::string& prefix) {
-    const SlotIrradiance irr = IrradianceFor(solved, lighting);
-    MetricsAccumulator acc(mo);
-    world->SetTime(rig.plan.slots.at(heldout));
-    for (size_t v = 0; v < heldout_views.size(); ++v) {
-      const SceneView& view = scene.scene.views.at(heldout_views[v]);
-      const Image rendered = RenderView(solved.mesh, solved.grid, *solved.caster, solved.albedo,
-                                        lighting, irr, view.intrinsics, view.pose, RenderOptions{});
-      Image truth = world->RenderRadiance(view.intrinsics, view.pose);
-      for (size_t k = 0; k < truth.data.size(); ++k) truth.data[k] /= to_truth[k % 3];
-      const Image ids = world->RenderBlockIds(view.intrinsics, view.pose);
-      std::vector<uint8_t> building(static_cast<size_t>(ids.width) * ids.height, 0);
-      std::vector<double> green;
-      for (int y = 0; y < ids.height; ++y)
-        for (int x = 0; x < ids.width; ++x) {
-          const int id = static_cast<int>(ids.at(x, y, 0));
-          if (id < 0 || solved.mesh.block_names[id] == "plaza") continue;
-          building[static_cast<size_t>(y) * ids.width + x] = 1;
-          green.push_back(truth.at(x, y, 1));
-        }
-      acc.Add(rendered, truth, building);
-      if (v == 0) {
-        // 8-bit images through the recovered response, exposed as the metrics expose them.
-        const double exposure =
-            std::exp(response.LogExposure(1, mo.target_dn)) / Quantile(green, mo.percentile);
-        WriteImage((out / (prefix + ".png")).string(), ToDigital(rendered, response, exposure),
-                   StoredType::kUint8);
-        WriteImage((out / (prefix + ".exr")).string(), rendered, StoredType::kFloat);
-        if (prefix == "heldout")
-          WriteImage((out / "heldout_truth.png").string(), ToDigital(truth, response, exposure),
-                     StoredType::kUint8);
+  MetricsAccumulator acc_measured(mo), acc_predicted(mo);
+  world->SetTime(rig.plan.slots.at(heldout));
+  for (size_t v = 0; v < heldout_views.size(); ++v) {
+    const SceneView& view = scene.scene.views.at(heldout_views[v]);
+    auto photo = std::find_if(validation.photos.begin(), validation.photos.end(),
+                              [&](const PhotoValidation& p) { return p.view == heldout_views[v]; });
+    if (photo == validation.photos.end())
+      throw Error("demo: the validation did not render " + heldout_views[v]);
+    const Image& rendered = photo->rendered_measured;
+    const Image& rendered_predicted = photo->rendered_predicted;
+    Image truth = world->RenderRadiance(view.intrinsics, view.pose);
+    for (size_t k = 0; k < truth.data.size(); ++k) truth.data[k] /= to_truth[k % 3];
+    const Image ids = world->RenderBlockIds(view.intrinsics, view.pose);
+    std::vector<uint8_t> building(static_cast<size_t>(ids.width) * ids.height, 0);
+    std::vector<double> green;
+    for (int y = 0; y < ids.height; ++y)
+      for (int x = 0; x < ids.width; ++x) {
+        const int id = static_cast<int>(ids.at(x, y, 0));
+        if (id < 0 || solved.mesh.block_names[id] == "plaza") continue;
+        building[static_cast<size_t>(y) * ids.width + x] = 1;
+        green.push_back(truth.at(x, y, 1));
       }
+    acc_measured.Add(rendered, truth, building);
+    acc_predicted.Add(rendered_predicted, truth, building);
+    if (v == 0) {
+      // 8-bit images through the recovered response, exposed as the metrics expose them.
+      const double exposure =
+          std::exp(response.LogExposure(1, mo.target_dn)) / Quantile(green, mo.percentile);
+      for (const auto& [prefix, image] :
+           {std::pair<std::string, const Image*>{"heldout", &rendered},
+            std::pair<std::string, const Image*>{"heldout_predicted", &rendered_predicted}}) {
+        WriteImage((out / (prefix + ".png")).string(), ToDigital(*image, response, exposure),
+                   StoredType::kUint8);
+        WriteImage((out / (prefix + ".exr")).string(), *image, StoredType::kFloat);
+      }
+      WriteImage((out / "heldout_truth.png").string(), ToDigital(truth, response, exposure),
+                 StoredType::kUint8);
     }
-    return acc.Result();
-  };
-  const RenderMetrics measured = score_heldout(solved.slots.at(heldout).lighting, "heldout");
+  }
+  const RenderMetrics measured = acc_measured.Result();
   m["heldout_render_rel_rmse"] = measured.rel_rmse;
   m["heldout_render_psnr_db"] = measured.psnr_db;
   m["heldout_render_median_rel_error"] = measured.median_rel_error;
   const int64_t npx = measured.pixels;
-
-  say("predicting the held-out time's lighting from the other times");
-  RenderRequest request;
-  request.time = solved.slots.at(heldout).utc;
-  request.predict_without_slots = {heldout};
-  request.intrinsics = scene.scene.views.at(heldout_views.front()).intrinsics;
-  const Lighting predicted = RequestedLighting(scene, request, say);
-  const RenderMetrics pred = score_heldout(predicted, "heldout_predicted");
+  const RenderMetrics pred = acc_predicted.Result();
   m["heldout_predicted_render_rel_rmse"] = pred.rel_rmse;
   m["heldout_predicted_render_psnr_db"] = pred.psnr_db;
   m["heldout_predicted_render_median_rel_error"] = pred.median_rel_error;
@@ -290,11 +299,6 @@ void Run(const DemoArgs& a) {
     m["heldout_predicted_sky_rel_error_median"] = Quantile(err, 0.5);
     m["heldout_predicted_sky_rel_error_p90"] = Quantile(err, 0.9);
   }
-
-  // 5. The held-out photographs themselves, as `rouen validate` compares them (no truth).
-  ValidateOptions vo;
-  vo.exclude_blocks = {"plaza"};
-  const Validation validation = ValidateSlot(scene, session, heldout, vo, say);
   m["validate_measured_rel_rmse"] = validation.measured.rel_rmse;
   m["validate_measured_psnr_db"] = validation.measured.psnr_db;
   m["validate_measured_median_rel_error"] = validation.measured.median_rel_error;

@@ -169,6 +169,9 @@ Eigen::Vector3d Unproject(const Intrinsics& k, const Eigen::Vector2d& pixel) {
   switch (k.projection) {
     case Projection::kPinhole: {
       const Eigen::Vector2d target((pixel.x() - k.cx) / k.fx, (pixel.y() - k.cy) / k.fy);
+      // Without distortion the guess below is the answer: no Newton step to take.
+      if (k.k1 == 0 && k.k2 == 0 && k.k3 == 0 && k.p1 == 0 && k.p2 == 0)
+        return Eigen::Vector3d(target.x(), target.y(), 1.0).normalized();
       Eigen::Vector2d p = target;
       // Newton on Distort(p) = target; the undistorted guess is exact without distortion.
       for (int it = 0; it < 50; ++it) {
@@ -187,7 +190,8 @@ Eigen::Vector3d Unproject(const Intrinsics& k, const Eigen::Vector2d& pixel) {
       const double r = std::hypot(xn, yn);
       if (r == 0) return Eigen::Vector3d(0, 0, 1);
       double theta = std::min(r, kPi);
-      for (int it = 0; it < 50; ++it) {
+      const bool equidistant = k.k1 == 0 && k.k2 == 0 && k.k3 == 0 && k.k4 == 0;
+      for (int it = 0; it < 50 && !equidistant; ++it) {
         double dr = 0;
         const double f = FisheyeR(k, theta, &dr) - r;
         if (std::abs(f) < 1e-14) break;

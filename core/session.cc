@@ -607,7 +607,16 @@ Image Session::LoadFrame(const FrameRecord& f) const {
 // ---------------------------------------------------------------------------------------
 // SessionWriter
 
-SessionWriter SessionWriter::Create(const fs::path& dir, const SessionInfo& info) {
+void SessionWriterOptions::Validate() const {
+  if (png_compression < 0 || png_compression > 9) {
+    throw Error("session writer: png_compression " + std::to_string(png_compression) +
+                " is not a zlib level (0: the default, 1 fastest .. 9 smallest)");
+  }
+}
+
+SessionWriter SessionWriter::Create(const fs::path& dir, const SessionInfo& info,
+                                    const SessionWriterOptions& options) {
+  options.Validate();
   std::error_code ec;
   if (fs::exists(dir, ec) && !fs::is_directory(dir)) {
     throw Error(dir.string() + ": exists and is not a directory");
@@ -615,6 +624,7 @@ SessionWriter SessionWriter::Create(const fs::path& dir, const SessionInfo& info
   fs::create_directories(dir, ec);
   if (ec) throw Error(dir.string() + ": cannot create the session folder: " + ec.message());
   SessionWriter w;
+  w.options_ = options;
   w.lock_fd_ = LockSession(dir);
   {
     // A folder left by a crash before its session.json was written holds no data: only an
@@ -651,11 +661,13 @@ SessionWriter SessionWriter::Create(const fs::path& dir, const SessionInfo& info
   return w;
 }
 
-SessionWriter SessionWriter::Resume(const fs::path& dir) {
+SessionWriter SessionWriter::Resume(const fs::path& dir, const SessionWriterOptions& options) {
+  options.Validate();
   if (!fs::is_regular_file(dir / "session.json")) {
     throw Error(dir.string() + ": cannot resume: no session.json");
   }
   SessionWriter w;
+  w.options_ = options;
   w.lock_fd_ = LockSession(dir);
   // A journal line cut short by a crash: keep it if it is complete but for the newline,
   // otherwise truncate it away.
@@ -721,6 +733,7 @@ void SessionWriter::Close() {
 
 SessionWriter::SessionWriter(SessionWriter&& o) noexcept
     : dir_(std::move(o.dir_)),
+      options_(o.options_),
       info_(std::move(o.info_)),
       frames_(std::move(o.frames_)),
       journal_fd_(o.journal_fd_),
@@ -733,6 +746,7 @@ SessionWriter& SessionWriter::operator=(SessionWriter&& o) noexcept {
   if (this != &o) {
     Close();
     dir_ = std::move(o.dir_);
+    options_ = o.options_;
     info_ = std::move(o.info_);
     frames_ = std::move(o.frames_);
     journal_fd_ = o.journal_fd_;
@@ -765,7 +779,10 @@ FrameRecord SessionWriter::Append(FrameRecord meta, const Image& pixels) {
   }
   // The frame enters the journal only once its whole file is on disk: encoded and decoded
   // back in memory, every write checked, fsynced, its size checked, renamed into place.
-  const std::string bytes = EncodeImage(path.string(), pixels, type);
+  std::vector<ImageAttribute> encoding;
+  if (!meta.hdr && options_.png_compression > 0)
+    encoding.push_back({"png:compressionLevel", options_.png_compression});
+  const std::string bytes = EncodeImage(path.string(), pixels, type, encoding);
   meta.sha256 = Sha256Hex(bytes);
   const std::string line = json(meta).dump() + "\n";
   const std::string journal = JournalPath(dir_);

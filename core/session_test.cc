@@ -316,6 +316,33 @@ TEST_F(SessionTest, CreateRefusesNonEmptyFolder) {
   EXPECT_TRUE(Session::Load(empty).frames().empty());
 }
 
+TEST_F(SessionTest, PngCompressionLevelChangesTheFileNotThePixels) {
+  // A noisy 64x48 frame (hash noise: what a sensor gives), stored at zlib levels 1, 6 and 9.
+  Image noisy(64, 48, 3, PixelUnits::kDigital);
+  for (size_t i = 0; i < noisy.data.size(); ++i)
+    noisy.data[i] = static_cast<float>(((i * 2654435761u) >> 7) % 97 + 80);
+  std::vector<uintmax_t> sizes;
+  for (int level : {1, 6, 9}) {
+    const fs::path dir = root_ / ("level" + std::to_string(level));
+    SessionWriterOptions options;
+    options.png_compression = level;
+    {
+      SessionWriter w = SessionWriter::Create(dir, Info(), options);
+      w.Append(Meta(Target::kArchitecture, false, 1.0 / 250), noisy);
+    }
+    const Session s = Session::Load(dir);
+    ASSERT_EQ(s.frames().size(), 1u);
+    EXPECT_EQ(s.LoadFrame(s.frames()[0]).data, noisy.data) << "level " << level;
+    sizes.push_back(fs::file_size(dir / s.frames()[0].file));
+  }
+  // zlib's levels trade time for size: 9 is never larger than 1.
+  EXPECT_LE(sizes[2], sizes[0]);
+  SessionWriterOptions bad;
+  bad.png_compression = 10;
+  EXPECT_THROW(SessionWriter::Create(root_ / "bad", Info(), bad), Error);
+  EXPECT_THROW(SessionWriter::Resume(root_ / "level1", bad), Error);
+}
+
 TEST_F(SessionTest, CrashLeftoversBeforeSessionJsonDoNotBlockCreateOrResume) {
   // Killed after the folder and frames/ were made, while session.json was being written.
   fs::create_directories(dir_ / "frames");

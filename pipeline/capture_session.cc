@@ -85,7 +85,7 @@ CaptureSessionSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
   if (!opts.from_session.empty()) src.emplace(Session::Load(opts.from_session));
   std::optional<SessionWriter> writer;
   if ((opts.resume || opts.new_slot) && fs::exists(out / "session.json")) {
-    writer.emplace(SessionWriter::Resume(out));
+    writer.emplace(SessionWriter::Resume(out, opts.writer));
     if (field) {
       // A field run is one slot: --resume continues the session's last slot, --new-slot
       // starts the next one now.
@@ -128,7 +128,7 @@ CaptureSessionSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
       info.vignetting = src->info().vignetting;
       if (!src->info().solve_config.empty()) info.solve_config = src->info().solve_config;
     }
-    writer.emplace(SessionWriter::Create(out, info));
+    writer.emplace(SessionWriter::Create(out, info, opts.writer));
   }
   // A lens file's vignetting model travels with the session too, keyed by the frames' device
   // and target (pipeline/session_solve.cc divides it out); one already there (e.g. from

@@ -29,6 +29,7 @@ struct CaptureSessionOptions {
   // Checked before every frame: once true, the capture stops after the frame in flight and
   // everything journalled stays. Null: the capture runs to the end of its plan.
   const std::atomic<bool>* stop = nullptr;
+  SessionWriterOptions writer;  // how frames are stored (PNG compression level)
 };
 
 struct CaptureSessionSummary {

@@ -134,6 +134,8 @@ Validation ValidateSlot(const LoadedScene& scene, const Session& session, int sl
   }
   out.measured = all_measured.Result();
   if (predicted) out.predicted = all_predicted.Result();
+  out.measured_lighting = measured;
+  out.predicted_lighting = std::move(predicted);
   return out;
 }
 

@@ -46,6 +46,10 @@ struct Validation {
   std::vector<PhotoValidation> photos;
   RenderMetrics measured;  // pooled over every photo
   std::optional<RenderMetrics> predicted;
+  // The lighting the photos were rendered under: the slot's measured one and, with the
+  // prediction, the one predicted from the other slots (§5).
+  Lighting measured_lighting;
+  std::optional<Lighting> predicted_lighting;
 };
 
 // Validates slot `slot` of `scene` against the architecture photos of `session` (the session

@@ -160,8 +160,7 @@ void EnvironmentMap::RegionBounds(int region, double* el_lo, double* el_hi, doub
   *az_hi = (sector + 1) * 2 * kPi / sectors;
 }
 
-Eigen::Vector3d EnvironmentMap::Radiance(const Eigen::Vector3d& dir, double z) const {
-  const int r = Region(dir);
+Eigen::Vector3d EnvironmentMap::RegionRadiance(int r, double z) const {
   const int L = num_layers();
   if (L == 1 || z <= layer_z.front()) return radiance[r];
   const int nreg = num_regions();

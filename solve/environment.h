@@ -59,7 +59,14 @@ struct EnvironmentMap {
   // The lowest layer (the lowest panorama's height).
   Eigen::Vector3d Radiance(const Eigen::Vector3d& dir) const { return radiance[Region(dir)]; }
   // Seen from height z: linear between the layers, clamped at the ends.
-  Eigen::Vector3d Radiance(const Eigen::Vector3d& dir, double z) const;
+  Eigen::Vector3d Radiance(const Eigen::Vector3d& dir, double z) const {
+    return RegionRadiance(Region(dir), z);
+  }
+  // The same for a region found once (Region) and looked up under several maps of one layout.
+  Eigen::Vector3d RegionRadiance(int region, double z) const;
+  bool SameLayout(const EnvironmentMap& o) const {
+    return bands_below == o.bands_below && bands_above == o.bands_above && sectors == o.sectors;
+  }
   // Region bounds in radians: elevation [lo, hi], azimuth [lo, hi].
   void RegionBounds(int region, double* el_lo, double* el_hi, double* az_lo, double* az_hi) const;
   // Fraction of regions of the lowest layer that were observed.

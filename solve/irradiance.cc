@@ -259,6 +259,11 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
   tbb::parallel_for(tbb::blocked_range<int>(0, n, 32), [&](const tbb::blocked_range<int>& range) {
     std::vector<EnvironmentView> views(layouts.size());
     PointFluxCache sky_cache;
+    // Monte Carlo: the point's escaping directions, and their environment regions, found once
+    // for every lighting (the same values, in the same order, as found per lighting).
+    std::vector<Eigen::Vector3d> escaped;
+    std::vector<int> regions;
+    const EnvironmentMap* regions_of = nullptr;
     for (int i = range.begin(); i < range.end(); ++i) {
       const GridPoint& p = grid.points[i];
       const Eigen::Vector3d origin = p.position + offset * p.normal;
@@ -306,14 +311,26 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
         }
         continue;
       }
+      escaped.clear();
+      for (int k = 0; k < K; ++k)
+        if (cache.Hit(i, k) == -1) escaped.push_back(cache.Direction(p, i, k));
+      regions_of = nullptr;
       for (int li = 0; li < nl; ++li) {
         const LightingSetup& ls = setup[li];
         const Eigen::Vector3d& s = ls.lighting->sun_dir;
+        const EnvironmentMap& env = ls.lighting->env;
+        if (ls.lighting->use_env && !(regions_of && regions_of->SameLayout(env))) {
+          regions.resize(escaped.size());
+          for (size_t k = 0; k < escaped.size(); ++k) regions[k] = env.Region(escaped[k]);
+          regions_of = &env;
+        }
         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-        for (int k = 0; k < K; ++k) {
-          if (cache.Hit(i, k) != -1) continue;
-          const Eigen::Vector3d d = cache.Direction(p, i, k);
-          Eigen::Vector3d l = ls.lighting->EscapedRadiance(d, p.position.z());
+        for (size_t k = 0; k < escaped.size(); ++k) {
+          const Eigen::Vector3d& d = escaped[k];
+          // Lighting::EscapedRadiance, with the region found above.
+          Eigen::Vector3d l = ls.lighting->use_env
+                                  ? env.RegionRadiance(regions[k], p.position.z())
+                                  : ls.lighting->EscapedRadiance(d, p.position.z());
           if (ls.ground_shadow && d.z() < -1e-3 && origin.z() > ground_z) {
             const Eigen::Vector3d q = origin + ((origin.z() - ground_z) / -d.z()) * d;
             if (model.Occluded(q + Eigen::Vector3d(0, 0, offset), s, 0.0)) {

@@ -27,13 +27,18 @@ void SensorParams::Validate() const {
   }
 }
 
-SimSensor::SimSensor(const SensorParams& params) : p_(params) { p_.Validate(); }
+SimSensor::SimSensor(const SensorParams& params) : p_(params) {
+  p_.Validate();
+  for (int c = 0; c < 3; ++c) {
+    black_pow_[c] = std::pow(p_.black[c], p_.gamma[c]);
+    curve_scale_[c] = std::pow(1.0 + p_.black[c], p_.gamma[c]) - black_pow_[c];
+  }
+}
 
 double SimSensor::Curve(int c, double x) const {
   x = std::clamp(x, 0.0, 1.0);
   const double b = p_.black[c], g = p_.gamma[c];
-  const double b_g = std::pow(b, g);
-  const double u = (std::pow(x + b, g) - b_g) / (std::pow(1.0 + b, g) - b_g);
+  const double u = (std::pow(x + b, g) - black_pow_[c]) / curve_scale_[c];
   const double s = p_.shoulder[c];
   const double y1 = u * (1.0 + s) / (u + s);
   const double smooth = y1 * y1 * (3.0 - 2.0 * y1);
@@ -117,11 +122,16 @@ Image SimSensor::Capture(const Image& radiance, double exposure_s, double gain, 
                          uint64_t seed) const {
   Image out = CaptureLinear(radiance, exposure_s, gain, nd_density, seed);
   out.units = PixelUnits::kDigital;
-  for (size_t i = 0; i < out.data.size(); ++i) {
-    const int c = static_cast<int>(i % 3);
-    out.data[i] =
-        static_cast<float>(std::clamp(std::floor(Curve(c, out.data[i]) + 0.5), 0.0, 255.0));
-  }
+  // The response and quantisation, pixel by pixel (rows in parallel, as the noise above).
+  const size_t row = static_cast<size_t>(out.width) * 3;
+  tbb::parallel_for(
+      tbb::blocked_range<int>(0, out.height, 8), [&](const tbb::blocked_range<int>& r) {
+        for (size_t i = r.begin() * row; i < r.end() * row; ++i) {
+          const int c = static_cast<int>(i % 3);
+          out.data[i] =
+              static_cast<float>(std::clamp(std::floor(Curve(c, out.data[i]) + 0.5), 0.0, 255.0));
+        }
+      });
   return out;
 }
 

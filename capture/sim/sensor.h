@@ -59,6 +59,8 @@ class SimSensor {
 
  private:
   SensorParams p_;
+  // Per channel, from p_: b^gamma and (1 + b)^gamma - b^gamma (the curve's toe and scale).
+  std::array<double, 3> black_pow_{}, curve_scale_{};
 };
 
 }  // namespace rouen

@@ -94,6 +94,9 @@ struct SimWorld::Impl {
   std::vector<uint8_t> cv_mode;    // 1: sky = unoccluded - occluded part
   std::vector<int64_t> rec_begin;  // n_texels + 1
   std::vector<uint32_t> records;
+  // Bit r: record r is a hit whose sample direction rises (d.z() > 0), the only hits whose
+  // direction the sky estimate needs (time independent, so found once by Setup).
+  std::vector<uint64_t> rec_rising;
 
   std::map<int64_t, std::shared_ptr<const State>> cache;
   std::shared_ptr<const State> cur;
@@ -409,6 +412,7 @@ void SimWorld::Impl::Setup() {
   // The time-independent gather structure: for each texel, which hemisphere samples hit
   // which texel, and which escaped below the horizon (far ground) or above it (sky).
   std::vector<std::vector<uint32_t>> per(n_texels);
+  std::vector<std::vector<uint8_t>> per_rising(n_texels);  // per record of per[i]
   std::vector<uint8_t> valid(n_texels, 1);
   cv_mode.assign(n_texels, 1);
   tbb::parallel_for(
@@ -418,6 +422,7 @@ void SimWorld::Impl::Setup() {
           const sim::Patch& p = scene.patches[texel_patch[i]];
           const Eigen::Vector3d o = texel_pos[i] + p.n * kEps;
           std::vector<uint32_t>& out = per[i];
+          std::vector<uint8_t>& rising = per_rising[i];
           sky.clear();
           int back = 0, occluded_sky = 0;
           for (int k = 0; k < n_samples; ++k) {
@@ -429,11 +434,13 @@ void SimWorld::Impl::Setup() {
               const Eigen::Vector2d st = hp.Local(o + h.t * d);
               out.push_back(static_cast<uint32_t>(hp.TexelAt(st.x(), st.y())) << kSampleBits |
                             static_cast<uint32_t>(k));
+              rising.push_back(d.z() > 0);
               if (d.z() > 0) ++occluded_sky;
             } else if (d.z() > 0) {
               sky.push_back(kTargetSky << kSampleBits | static_cast<uint32_t>(k));
             } else {
               out.push_back(kTargetFar << kSampleBits | static_cast<uint32_t>(k));
+              rising.push_back(0);
             }
           }
           valid[i] = back * 4 < n_samples;
@@ -441,16 +448,24 @@ void SimWorld::Impl::Setup() {
           if (occluded_sky > static_cast<int>(sky.size())) {
             cv_mode[i] = 0;
             out.insert(out.end(), sky.begin(), sky.end());
+            rising.resize(out.size(), 0);
           }
           out.shrink_to_fit();
+          rising.shrink_to_fit();
         }
       });
   rec_begin.assign(n_texels + 1, 0);
   for (int i = 0; i < n_texels; ++i) rec_begin[i + 1] = rec_begin[i] + per[i].size();
   records.resize(rec_begin[n_texels]);
+  rec_rising.assign((records.size() + 63) / 64, 0);
   for (int i = 0; i < n_texels; ++i) {
     std::copy(per[i].begin(), per[i].end(), records.begin() + rec_begin[i]);
+    for (size_t j = 0; j < per_rising[i].size(); ++j) {
+      const uint64_t r = static_cast<uint64_t>(rec_begin[i]) + j;
+      if (per_rising[i][j]) rec_rising[r / 64] |= uint64_t{1} << (r % 64);
+    }
     std::vector<uint32_t>().swap(per[i]);
+    std::vector<uint8_t>().swap(per_rising[i]);
   }
 
   // Texels inside solids (plaza under the tower, ground under blocks) take the values of
@@ -573,9 +588,9 @@ std::shared_ptr<const State> SimWorld::Impl::Compute(UtcTime t) const {
           }
         } else if (target == kTargetSky) {
           open += s.sky.Radiance(SampleDir(i, k));
-        } else {
-          const Eigen::Vector3d d = SampleDir(i, k);
-          if (d.z() > 0) occluded += s.sky.Radiance(d);
+        } else if (rec_rising[r2 / 64] >> (r2 % 64) & 1) {
+          // A hit: the sky behind it counts only above the horizon.
+          occluded += s.sky.Radiance(SampleDir(i, k));
         }
       }
       e_sky[i] = cv_mode[i] ? Clamp0(unoccluded[texel_patch[i]] - w * occluded) : w * open;
