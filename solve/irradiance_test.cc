@@ -438,6 +438,34 @@ TEST(IrradianceVectorFluxTest, BlockShadowsEqualTheirFacesShadows) {
   }
 }
 
+// Every grid point of `m` (spacing in metres) sees the same change of the environment's
+// ground through the shadow polygons `a` as through `b`, to rounding; returns how many points
+// see any change.
+int ExpectSameShadowChange(const Mesh& m, const OccluderFaces& faces,
+                           const std::vector<std::vector<Eigen::Vector3d>>& a,
+                           const std::vector<std::vector<Eigen::Vector3d>>& b, double spacing_m) {
+  Lighting l = VaryingEnvironment(true);
+  const EnvironmentRegions regions(l.env, VectorFluxOptions());
+  GridOptions go;
+  go.spacing_m = spacing_m;
+  const SurfaceGrid grid = BuildSurfaceGrid(m, go);
+  const Eigen::Vector3d ratio(0.3, 0.4, 0.5);
+  int changed = 0;
+  EnvironmentView view;
+  for (const GridPoint& p : grid.points) {
+    const Eigen::Vector3d origin = p.position + 1e-4 * p.normal;
+    if (!(origin.z() > 0)) continue;
+    SeeEnvironment(PointVisibility(faces, origin, p.normal, p.triangle), regions, true, &view);
+    const Eigen::Vector3d ea = GroundShadowChange(view, regions, l.env, origin.z(),
+                                                  GroundShadowPolygons(a, origin), ratio);
+    const Eigen::Vector3d eb = GroundShadowChange(view, regions, l.env, origin.z(),
+                                                  GroundShadowPolygons(b, origin), ratio);
+    EXPECT_NEAR((ea - eb).norm(), 0, 1e-9 * (1 + ea.norm())) << p.position.transpose();
+    changed += ea.norm() > 1e-6;
+  }
+  return changed;
+}
+
 // The ground under a plaza is never seen from above it: the shadow falling there is cut away,
 // and what is left changes each point's irradiance exactly as the whole shadow does.
 TEST(IrradianceVectorFluxTest, ShadowOnThePlazaIsCutAway) {
@@ -470,26 +498,7 @@ TEST(IrradianceVectorFluxTest, ShadowOnThePlazaIsCutAway) {
     for (const auto& v : p) outside = std::max(outside, v.cwiseAbs().head<2>().maxCoeff() - 30);
     EXPECT_GT(outside, 0);
   }
-  Lighting l = VaryingEnvironment(true);
-  const EnvironmentRegions regions(l.env, VectorFluxOptions());
-  GridOptions go;
-  go.spacing_m = 6;
-  const SurfaceGrid grid = BuildSurfaceGrid(m, go);
-  const Eigen::Vector3d ratio(0.3, 0.4, 0.5);
-  int changed = 0;
-  EnvironmentView view;
-  for (const GridPoint& p : grid.points) {
-    const Eigen::Vector3d origin = p.position + 1e-4 * p.normal;
-    if (!(origin.z() > 0)) continue;
-    SeeEnvironment(PointVisibility(faces, origin, p.normal, p.triangle), regions, true, &view);
-    const Eigen::Vector3d a = GroundShadowChange(view, regions, l.env, origin.z(),
-                                                 GroundShadowPolygons(whole, origin), ratio);
-    const Eigen::Vector3d b = GroundShadowChange(view, regions, l.env, origin.z(),
-                                                 GroundShadowPolygons(cut, origin), ratio);
-    EXPECT_NEAR((a - b).norm(), 0, 1e-9 * (1 + a.norm())) << p.position.transpose();
-    changed += a.norm() > 1e-6;
-  }
-  EXPECT_GT(changed, 3);
+  EXPECT_GT(ExpectSameShadowChange(m, faces, whole, cut, 6), 3);
 }
 
 // MergeGroundShadow keeps the union: fewer polygons, the same shadowed ground seen from every
@@ -560,26 +569,7 @@ TEST(IrradianceVectorFluxTest, MergedGroundShadowIsTheSameUnion) {
   EXPECT_TRUE(inside_any(merged, 0, -9));  // inside the south wall, in its shadow
   // Every point sees the same shadowed ground through either set: exact clippings of one union,
   // equal to rounding.
-  Lighting l = VaryingEnvironment(true);
-  const EnvironmentRegions regions(l.env, VectorFluxOptions());
-  GridOptions go;
-  go.spacing_m = 3;
-  const SurfaceGrid grid = BuildSurfaceGrid(m, go);
-  const Eigen::Vector3d ratio(0.3, 0.4, 0.5);
-  int changed = 0;
-  EnvironmentView view;
-  for (const GridPoint& p : grid.points) {
-    const Eigen::Vector3d origin = p.position + 1e-4 * p.normal;
-    if (!(origin.z() > 0)) continue;
-    SeeEnvironment(PointVisibility(faces, origin, p.normal, p.triangle), regions, true, &view);
-    const Eigen::Vector3d a = GroundShadowChange(view, regions, l.env, origin.z(),
-                                                 GroundShadowPolygons(whole, origin), ratio);
-    const Eigen::Vector3d b = GroundShadowChange(view, regions, l.env, origin.z(),
-                                                 GroundShadowPolygons(merged, origin), ratio);
-    EXPECT_NEAR((a - b).norm(), 0, 1e-9 * (1 + a.norm())) << p.position.transpose();
-    changed += a.norm() > 1e-6;
-  }
-  EXPECT_GT(changed, 3);
+  EXPECT_GT(ExpectSameShadowChange(m, faces, whole, merged, 3), 3);
 }
 
 TEST(IrradianceVectorFluxTest, RejectsMissingOrMismatchedMesh) {
