@@ -136,50 +136,50 @@ TEST(RenderTest, AdaptiveSupersamplingAgreesWithFullAndCastsFewerRays) {
   EXPECT_LT(s_adaptive.rays, s_full.rays / 4);
 }
 
-TEST(RenderTest, TheSunTermFollowsTheBlocksRetro) {
-  Fixture f = Make();
-  f.albedo.rho_se.assign(f.grid.size(), Eigen::Vector3d::Zero());  // the sun's term alone
+// Pixel (80, 100) of a grazing view of the plaza (block 0), green, rendered Lambertian and with
+// the plaza's retro 1 (the slab has no entry: Lambertian), and the ray to it.
+struct RetroPixel {
+  double lambert = 0, rough = 0;
+  Eigen::Vector3d dir;
+};
+RetroPixel RenderPlazaPixel(Fixture* f) {
   const Intrinsics k = Intrinsics::PinholeFov(160, 120, 60);
-  const Pose pose = Pose::LookAt({0, -15, 3}, {0, 0, 0});  // a grazing view of the plaza
+  const Pose pose = Pose::LookAt({0, -15, 3}, {0, 0, 0});
   RenderOptions o;
   o.interpolate = false;
   o.supersample = 1;
-  const Image lambert = RenderView(f.mesh, f.grid, *f.rc, f.albedo, f.lighting, f.irr, k, pose, o);
-  f.albedo.retro = {1.0};  // the plaza (block 0); the slab has no entry: Lambertian
-  const Image rough = RenderView(f.mesh, f.grid, *f.rc, f.albedo, f.lighting, f.irr, k, pose, o);
-  const Eigen::Vector2d px(80.5, 100.5);
-  const Eigen::Vector3d d = (pose.rotation * Unproject(k, px)).normalized();
-  const RayHit h = f.rc->Intersect(pose.position, d);
-  ASSERT_TRUE(h.hit);
-  ASSERT_EQ(f.mesh.triangle_block[h.triangle], 0);
+  RetroPixel out;
+  f->albedo.retro.clear();
+  out.lambert = RenderView(f->mesh, f->grid, *f->rc, f->albedo, f->lighting, f->irr, k, pose, o)
+                    .at(80, 100, 1);
+  f->albedo.retro = {1.0};
+  out.rough = RenderView(f->mesh, f->grid, *f->rc, f->albedo, f->lighting, f->irr, k, pose, o)
+                  .at(80, 100, 1);
+  out.dir = (pose.rotation * Unproject(k, Eigen::Vector2d(80.5, 100.5))).normalized();
+  const RayHit h = f->rc->Intersect(pose.position, out.dir);
+  EXPECT_TRUE(h.hit && f->mesh.triangle_block[h.triangle] == 0);
+  return out;
+}
+
+TEST(RenderTest, TheSunTermFollowsTheBlocksRetro) {
+  Fixture f = Make();
+  f.albedo.rho_se.assign(f.grid.size(), Eigen::Vector3d::Zero());  // the sun's term alone
+  const RetroPixel px = RenderPlazaPixel(&f);
   const double want =
-      RetroFactor(1.0, Eigen::Vector3d::UnitZ(), f.lighting.sun_dir, -d) * lambert.at(80, 100, 1);
-  EXPECT_NEAR(rough.at(80, 100, 1), want, 1e-5 * want);
-  EXPECT_GT(rough.at(80, 100, 1), 1.02 * lambert.at(80, 100, 1));  // grazing: brighter (1.04)
+      RetroFactor(1.0, Eigen::Vector3d::UnitZ(), f.lighting.sun_dir, -px.dir) * px.lambert;
+  EXPECT_NEAR(px.rough, want, 1e-5 * want);
+  EXPECT_GT(px.rough, 1.02 * px.lambert);  // grazing: brighter (1.04)
 }
 
 TEST(RenderTest, TheSkyTermFollowsTheBlocksAmbientRetro) {
   Fixture f = Make();
   f.albedo.rho_sun.assign(f.grid.size(), Eigen::Vector3d::Zero());  // the sky's term alone
-  const Intrinsics k = Intrinsics::PinholeFov(160, 120, 60);
-  const Pose pose = Pose::LookAt({0, -15, 3}, {0, 0, 0});  // a grazing view of the plaza
-  RenderOptions o;
-  o.interpolate = false;
-  o.supersample = 1;
-  const Image lambert = RenderView(f.mesh, f.grid, *f.rc, f.albedo, f.lighting, f.irr, k, pose, o);
-  f.albedo.retro = {1.0};
-  const Image rough = RenderView(f.mesh, f.grid, *f.rc, f.albedo, f.lighting, f.irr, k, pose, o);
-  const Eigen::Vector2d px(80.5, 100.5);
-  const Eigen::Vector3d d = (pose.rotation * Unproject(k, px)).normalized();
-  const RayHit h = f.rc->Intersect(pose.position, d);
-  ASSERT_TRUE(h.hit);
-  ASSERT_EQ(f.mesh.triangle_block[h.triangle], 0);
-  const double want =
-      AmbientRetroFactor(1.0, Eigen::Vector3d::UnitZ(), -d) * lambert.at(80, 100, 1);
-  ASSERT_GT(lambert.at(80, 100, 1), 0);
-  EXPECT_NEAR(rough.at(80, 100, 1), want, 1e-5 * want);
+  const RetroPixel px = RenderPlazaPixel(&f);
+  ASSERT_GT(px.lambert, 0);
+  const double want = AmbientRetroFactor(1.0, Eigen::Vector3d::UnitZ(), -px.dir) * px.lambert;
+  EXPECT_NEAR(px.rough, want, 1e-5 * want);
   // An oblique view of a rough plaza is brighter under sky light too (1.067 at this pixel).
-  EXPECT_GT(rough.at(80, 100, 1), 1.05 * lambert.at(80, 100, 1));
+  EXPECT_GT(px.rough, 1.05 * px.lambert);
 }
 
 TEST(RenderTest, TheSunLobeAddsItsHighlight) {
