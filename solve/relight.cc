@@ -157,23 +157,28 @@ LightingPredictor::LightingPredictor(std::vector<Lighting> measured, const Relig
     for (size_t gi = 0; gi < env_.regions.size(); ++gi) {
       if (env_.regions[gi].kind == EnvRegionKind::kSky) SetResidual(gi);
     }
+    const std::vector<std::vector<double>> loo = LeaveOneOutWeights();
     // Each region found lends its residual to the next: until none is found.
-    for (int pass = 0; pass < 8 && FindSkyByResidual() > 0; ++pass) {
+    for (int pass = 0; pass < 8 && FindSkyByResidual(loo) > 0; ++pass) {
     }
-    ChooseResidualFrames();
+    ChooseResidualFrames(loo);
   }
+}
+
+// Whether time t's panoramas saw region gi and its fitted sky there is positive.
+bool LightingPredictor::SeenAgainstModel(size_t t, size_t gi) const {
+  const EnvironmentMap& env = measured_[t].env;
+  return gi < env.radiance.size() && env.source[gi] == EnvRegionSource::kObserved &&
+         env.pixel_count[gi] > 0 && sky_means_[t].radiance[gi % env.num_regions()].minCoeff() > 0;
 }
 
 // Region gi's residual at every time its panoramas saw it: observed / the fitted sky's mean.
 void LightingPredictor::SetResidual(size_t gi) {
   for (size_t t = 0; t < measured_.size(); ++t) {
+    if (!SeenAgainstModel(t, gi)) continue;
     const EnvironmentMap& env = measured_[t].env;
-    if (gi >= env.radiance.size()) continue;
-    const Eigen::Vector3d& model = sky_means_[t].radiance[gi % env.num_regions()];
-    if (env.source[gi] != EnvRegionSource::kObserved || env.pixel_count[gi] <= 0 ||
-        !(model.minCoeff() > 0))
-      continue;
-    const Eigen::Vector3d ratio = env.radiance[gi].cwiseQuotient(model);
+    const Eigen::Vector3d ratio =
+        env.radiance[gi].cwiseQuotient(sky_means_[t].radiance[gi % env.num_regions()]);
     sky_residual_[t][gi] =
         ratio.cwiseMax(1 / options_.sky_residual_max).cwiseMin(options_.sky_residual_max);
   }
@@ -202,10 +207,9 @@ std::vector<std::vector<double>> LightingPredictor::LeaveOneOutWeights() const {
 // region is sky after all when, at every time its panoramas saw it, it matches the model times
 // the other times' residual carried relative to the sun, within sky_residual_tolerance (the
 // mean over the times of the worst channel's relative error). Returns how many it found.
-int LightingPredictor::FindSkyByResidual() {
+int LightingPredictor::FindSkyByResidual(const std::vector<std::vector<double>>& loo) {
   const size_t T = measured_.size();
   if (T < 2) return 0;
-  const std::vector<std::vector<double>> loo = LeaveOneOutWeights();
   const EnvironmentMap& m0 = measured_.front().env;
   const int nreg = m0.num_regions(), first_above = m0.bands_below * m0.sectors;
   std::vector<size_t> found;
@@ -218,17 +222,15 @@ int LightingPredictor::FindSkyByResidual() {
     int n = 0;
     bool carried_everywhere = true;
     for (size_t t = 0; t < T && carried_everywhere; ++t) {
-      const EnvironmentMap& env = measured_[t].env;
+      if (!SeenAgainstModel(t, gi)) continue;
       const Eigen::Vector3d& model = sky_means_[t].radiance[gi % nreg];
-      if (env.source[gi] != EnvRegionSource::kObserved || env.pixel_count[gi] <= 0 ||
-          !(model.minCoeff() > 0))
-        continue;
       Eigen::Vector3d carried;
       carried_everywhere = CarryResidual(sky_residual_, sun_az_, loo[t], m0, gi, sun_az_[t],
                                          ResidualFrame::kSun, &carried);
       if (!carried_everywhere) break;
       const Eigen::Vector3d expected = model.cwiseProduct(carried);
-      err_sum += ((env.radiance[gi] - expected).cwiseAbs().cwiseQuotient(expected)).maxCoeff();
+      const Eigen::Vector3d& observed = measured_[t].env.radiance[gi];
+      err_sum += ((observed - expected).cwiseAbs().cwiseQuotient(expected)).maxCoeff();
       ++n;
     }
     if (carried_everywhere && n > 0 && err_sum / n <= options_.sky_residual_tolerance)
@@ -252,12 +254,11 @@ int LightingPredictor::FindSkyByResidual() {
 // Sky structure that follows the sun (the aureole, the horizon brightening towards it) carries
 // relative to the sun; a distant skyline the sky detection let through stays where it is; noise
 // carries not at all.
-void LightingPredictor::ChooseResidualFrames() {
+void LightingPredictor::ChooseResidualFrames(const std::vector<std::vector<double>>& loo) {
   const EnvironmentMap& m0 = measured_.front().env;
   const int nb = m0.num_bands(), nreg = m0.num_regions();
   const size_t T = measured_.size();
   std::vector<std::array<double, 3>> err(static_cast<size_t>(m0.num_layers()) * nb, {0, 0, 0});
-  const std::vector<std::vector<double>> loo = LeaveOneOutWeights();
   for (size_t t = 0; t < T && T > 1; ++t) {
     const std::vector<double>& w = loo[t];
     for (size_t gi = 0; gi < sky_residual_[t].size(); ++gi) {

@@ -119,10 +119,12 @@ class LightingPredictor {
   std::vector<double> sun_az_;             // per measured time, radians from north eastwards
   std::vector<ResidualFrame> residual_frame_;
   int sky_by_residual_ = 0;
+  bool SeenAgainstModel(size_t time, size_t region) const;
   void SetResidual(size_t region);
+  // Per measured time, the other times' §5.1 weights for its sun (0 for itself).
   std::vector<std::vector<double>> LeaveOneOutWeights() const;
-  int FindSkyByResidual();
-  void ChooseResidualFrames();
+  int FindSkyByResidual(const std::vector<std::vector<double>>& loo);
+  void ChooseResidualFrames(const std::vector<std::vector<double>>& loo);
 };
 
 }  // namespace rouen
