@@ -618,9 +618,10 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
     ss.sky_summary = FitSky(samples, sun_dir, options.config.sky_fit, &sky);
     // §3.3: the environment from the landscape panoramas, one layer per height (e.g. from the
     // ground and from a mast at the top of the building).
+    const EnvSun env_sun{sun_dir, ss.sun.angular_radius_deg * kPi / 180,
+                         ss.sun_measured.radiance * ss.sun.SolidAngleSr()};
     EnvironmentMap env =
-        BuildEnvironmentMap(panoramas, *r.caster, sun_dir, ss.sun.angular_radius_deg * kPi / 180,
-                            sky, options.config.environment);
+        BuildEnvironmentMap(panoramas, *r.caster, env_sun, sky, options.config.environment);
     ss.lighting.utc = ss.utc;
     ss.lighting.sun_dir = sun_dir;
     ss.lighting.sun_radiance = ss.sun_measured.radiance;
@@ -670,8 +671,9 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   std::vector<Lighting> lighting;
   for (const SlotSolve& ss : r.slots) lighting.push_back(ss.lighting);
   r.albedo_options = options.config.albedo;
-  r.albedo =
-      SolveAlbedo(r.grid, r.hemisphere, *r.caster, lighting, obs, r.albedo_options, &r.irradiance);
+  AlbedoOptions with_model = r.albedo_options;  // the vector-flux irradiance projects its faces
+  with_model.irradiance.mesh = &r.mesh;
+  r.albedo = SolveAlbedo(r.grid, r.hemisphere, *r.caster, lighting, obs, with_model, &r.irradiance);
   Log(options, "pseudo-albedos: " + r.albedo.summary.BriefReport());
   if (r.albedo_options.fit_retro) {
     std::ostringstream line;

@@ -188,6 +188,7 @@ json SolveConfigJson(const SolveConfig& c) {
             {"min_region_pixels", c.environment.min_region_pixels},
             {"sky_fill_samples", c.environment.sky_fill_samples},
             {"layer_merge_m", c.environment.layer_merge_m},
+            {"lit_ground", c.environment.lit_ground},
             {"fit_ground_retro", c.fit_ground_retro}}},
           {"albedo",
            {{"loss", NameOf(a.loss, kLosses)},
@@ -286,6 +287,7 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
     f.Int("min_region_pixels", &e.min_region_pixels, 1, 1000000);
     f.Int("sky_fill_samples", &e.sky_fill_samples, 1, 1000);
     f.Number("layer_merge_m", &e.layer_merge_m, 0, 1000);
+    f.Bool("lit_ground", &e.lit_ground);
     f.Bool("fit_ground_retro", &c.fit_ground_retro);
     f.Finish();
   }

@@ -21,11 +21,12 @@ struct UsedPixel {
   Eigen::Vector3d dir;
   double weight;  // solid angle, sr
   Eigen::Vector3d radiance;
+  bool ground_shadow;  // its ray meets the ground in the model's shadow
 };
 
 struct Chunk {
   std::vector<UsedPixel> pixels;
-  int model = 0, sun = 0, invalid = 0;
+  int model = 0, sun = 0, invalid = 0, ground_shadow = 0;
 };
 
 Eigen::Vector3d SkyMean(const SkyModel& sky, const EnvironmentMap& m, int region, int samples) {
@@ -190,6 +191,16 @@ Eigen::Vector3d EnvironmentMap::HorizontalSkyIrradiance() const {
   return e;
 }
 
+Eigen::Vector3d EnvironmentMap::GroundShadowRatio(const Eigen::Vector3d& sun_horizontal) const {
+  const Eigen::Vector3d e_sky = HorizontalSkyIrradiance();
+  Eigen::Vector3d ratio = Eigen::Vector3d::Ones();
+  for (int c = 0; c < 3; ++c) {
+    const double e_total = e_sky[c] + std::max(0.0, sun_horizontal[c]);
+    if (e_total > 0) ratio[c] = e_sky[c] / e_total;
+  }
+  return ratio;
+}
+
 void EnvironmentMap::Validate() const {
   if (bands_below < 1 || bands_above < 1 || sectors < 1) {
     throw Error("environment map: bands and sectors must be >= 1");
@@ -300,12 +311,16 @@ void CheckPanorama(const EnvPanorama& p, int index) {
 }
 
 // The panorama's usable pixels (fixed chunks of rows, concatenated in order: deterministic).
+// With `ground_shadow`, each pixel whose ray meets the ground at `ground_z` is marked when the
+// model shades that ground from the sun.
 void CollectPixels(const EnvPanorama& p, const RayCaster& model, const Eigen::Vector3d& sun,
-                   double cos_excl, int stride, std::vector<UsedPixel>* used, EnvSummary* s) {
+                   double cos_excl, int stride, bool ground_shadow, double ground_z,
+                   std::vector<UsedPixel>* used, EnvSummary* s) {
   const Image& pano = *p.radiance;
   const Intrinsics& intrinsics = p.intrinsics;
   const Eigen::Vector3d c = p.pose.position;
   const double offset = model.surface_offset();
+  ground_shadow = ground_shadow && c.z() > ground_z && sun.z() > 0;
   const int rows = (pano.height + stride - 1) / stride;
   const int chunk_rows = 8;
   const int nchunks = (rows + chunk_rows - 1) / chunk_rows;
@@ -346,7 +361,14 @@ void CollectPixels(const EnvPanorama& p, const RayCaster& model, const Eigen::Ve
                                    Unproject(intrinsics, px - Eigen::Vector2d(0, 0.5 * stride));
         double w = dx.cross(dy).norm();
         if (!std::isfinite(w) || w <= 0) w = 1e-12;
-        ch.pixels.push_back({d, w, rad});
+        bool shaded = false;
+        if (ground_shadow && d.z() < -1e-3) {
+          // As the irradiance's ground shadow tests it (solve/irradiance.cc).
+          const Eigen::Vector3d q = c + ((c.z() - ground_z) / -d.z()) * d;
+          shaded = model.Occluded(q + Eigen::Vector3d(0, 0, offset), sun, 0.0);
+          ch.ground_shadow += shaded;
+        }
+        ch.pixels.push_back({d, w, rad, shaded});
       }
     }
   });
@@ -356,6 +378,7 @@ void CollectPixels(const EnvPanorama& p, const RayCaster& model, const Eigen::Ve
     s->pixels_model += ch.model;
     s->pixels_sun += ch.sun;
     s->pixels_invalid += ch.invalid;
+    s->pixels_ground_shadow += ch.ground_shadow;
   }
 }
 
@@ -363,19 +386,24 @@ void CollectPixels(const EnvPanorama& p, const RayCaster& model, const Eigen::Ve
 
 // §3.3: average the panoramas' pixels over coarse lat-long regions, one layer per height.
 EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
-                                   const RayCaster& model, const Eigen::Vector3d& sun_dir,
-                                   double sun_angular_radius_rad, const SkyModel& sky,
-                                   const EnvOptions& options, EnvSummary* summary) {
+                                   const RayCaster& model, const EnvSun& sun_at,
+                                   const SkyModel& sky, const EnvOptions& options,
+                                   EnvSummary* summary) {
   const auto start = std::chrono::steady_clock::now();
   options.Validate();
   if (panoramas.empty()) throw Error("environment map: no landscape panorama given");
   for (size_t i = 0; i < panoramas.size(); ++i) CheckPanorama(panoramas[i], static_cast<int>(i));
-  if (!sun_dir.allFinite() || sun_dir.norm() < 0.5) {
+  if (!sun_at.dir.allFinite() || sun_at.dir.norm() < 0.5) {
     throw Error("environment map: sun direction is not a unit vector");
   }
-  const Eigen::Vector3d sun = sun_dir.normalized();
+  if (!sun_at.irradiance.allFinite() || sun_at.irradiance.minCoeff() < 0) {
+    throw Error("environment map: the sun's irradiance is negative or not finite");
+  }
+  const Eigen::Vector3d sun = sun_at.dir.normalized();
   const double cos_excl =
-      std::cos(std::max(options.sun_exclusion_deg * kPi / 180.0, sun_angular_radius_rad));
+      std::cos(std::max(options.sun_exclusion_deg * kPi / 180.0, sun_at.angular_radius_rad));
+  const bool lit_ground = options.lit_ground && sun_at.irradiance.maxCoeff() > 0 && sun.z() > 0;
+  const double ground_z = GroundLevel(model);
 
   // Layers: the panoramas by height; those within layer_merge_m of the layer's lowest join it.
   std::vector<int> order(panoramas.size());
@@ -397,32 +425,50 @@ EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
   InitMap(options, layers, &m);
   const int nreg = m.num_regions();
   EnvSummary s;
+  // Per region of every layer: the weighted radiance of the pixels on sunlit and on shaded
+  // ground (the rest counts as sunlit), and the weight.
+  std::vector<Eigen::Vector3d> lit(m.radiance.size(), Eigen::Vector3d::Zero());
+  std::vector<Eigen::Vector3d> shaded(m.radiance.size(), Eigen::Vector3d::Zero());
+  std::vector<double> wsum(m.radiance.size(), 0.0);
   for (int k = 0; k < layers; ++k) {
     double zsum = 0;
     std::vector<UsedPixel> used;
     for (int i : layer_panos[k]) {
       zsum += panoramas[i].pose.position.z();
-      CollectPixels(panoramas[i], model, sun, cos_excl, options.pixel_stride, &used, &s);
+      CollectPixels(panoramas[i], model, sun, cos_excl, options.pixel_stride, lit_ground, ground_z,
+                    &used, &s);
     }
     m.layer_z[k] = zsum / layer_panos[k].size();
     const size_t base = static_cast<size_t>(k) * nreg;
-    std::vector<Eigen::Vector3d> sum(nreg, Eigen::Vector3d::Zero());
-    std::vector<double> wsum(nreg, 0.0);
     std::vector<int> count(nreg, 0);
     for (const UsedPixel& u : used) {
-      const int r = m.Region(u.dir);
-      sum[r] += u.weight * u.radiance;
+      const size_t r = base + m.Region(u.dir);
+      (u.ground_shadow ? shaded : lit)[r] += u.weight * u.radiance;
       wsum[r] += u.weight;
-      count[r] += 1;
+      count[r - base] += 1;
     }
     for (int r = 0; r < nreg; ++r) {
-      if (count[r] >= options.min_region_pixels && wsum[r] > 0) {
-        m.radiance[base + r] = sum[r] / wsum[r];
+      if (count[r] >= options.min_region_pixels && wsum[base + r] > 0) {
+        m.radiance[base + r] = (lit[base + r] + shaded[base + r]) / wsum[base + r];
         m.pixel_count[base + r] = count[r];
         m.source[base + r] = EnvRegionSource::kObserved;
       }
     }
     FillLayer(sky, options.sky_fill_samples, static_cast<int>(base), &m);
+  }
+  if (s.pixels_ground_shadow > 0) {
+    // The ratio from the finished map's sky (the lowest layer), as the irradiance takes it; the
+    // regions below the horizon filled from observed ones are filled again.
+    const Eigen::Vector3d lit_over_shaded =
+        m.GroundShadowRatio(sun_at.irradiance * sun.z()).unaryExpr([](double r) {
+          return r > 0 ? 1 / r : 1;
+        });
+    for (size_t r = 0; r < m.radiance.size(); ++r) {
+      if (m.source[r] == EnvRegionSource::kObserved && shaded[r].maxCoeff() > 0) {
+        m.radiance[r] = (lit[r] + shaded[r].cwiseProduct(lit_over_shaded)) / wsum[r];
+      }
+    }
+    for (int k = 0; k < layers; ++k) FillLayer(sky, options.sky_fill_samples, k * nreg, &m);
   }
   for (size_t r = 0; r < m.source.size(); ++r) {
     s.regions_observed += m.source[r] == EnvRegionSource::kObserved;
@@ -433,6 +479,10 @@ EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
   if (summary) *summary = s;
   m.Validate();
   return m;
+}
+
+double GroundLevel(const RayCaster& model) {
+  return model.bounds().isEmpty() ? 0.0 : model.bounds().min().z();
 }
 
 }  // namespace rouen

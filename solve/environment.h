@@ -31,8 +31,23 @@ struct EnvOptions {
   // Panoramas taken less than this far apart in height share one layer (their pixels are
   // pooled; the layer sits at their mean height), metres.
   double layer_merge_m = 2.0;
+  // Beyond the paper: a panorama pixel whose ray meets the ground (the model's lowest level)
+  // where the model casts its shadow is read as that ground sunlit, its radiance scaled by the
+  // ground's sunlit/shadowed ratio (E_sky + E_sun sin(el)) / E_sky. The map then holds the
+  // ground as lit by sun and sky, and the irradiance puts the model's shadow back where each
+  // grid point sees it (IrradianceOptions::ground_shadow): a wall whose ground is sunlit no
+  // longer sees the shadow that lay in front of the panorama. Needs EnvSun::irradiance.
+  bool lit_ground = true;
 
   void Validate() const;  // throws rouen::Error
+};
+
+// The sun at the panoramas' time.
+struct EnvSun {
+  Eigen::Vector3d dir = Eigen::Vector3d::UnitZ();  // unit ENU, towards the sun
+  double angular_radius_rad = 0;                   // pixels within the disc are skipped
+  // Radiance x solid angle (RGB), for EnvOptions::lit_ground; zero leaves the ground as seen.
+  Eigen::Vector3d irradiance = Eigen::Vector3d::Zero();
 };
 
 enum class EnvRegionSource : uint8_t {
@@ -74,6 +89,10 @@ struct EnvironmentMap {
   // Irradiance on an unoccluded horizontal plane from the regions above the horizon (lowest
   // layer): sum of radiance x projected solid angle.
   Eigen::Vector3d HorizontalSkyIrradiance() const;
+  // The shadowed/sunlit radiance ratio of horizontal Lambertian ground under the whole sky of
+  // the lowest layer and a sun of horizontal irradiance `sun_horizontal` (RGB):
+  // E_sky / (E_sky + sun_horizontal), per channel.
+  Eigen::Vector3d GroundShadowRatio(const Eigen::Vector3d& sun_horizontal) const;
   // Throws rouen::Error when the sizes disagree or a radiance is negative or not finite.
   void Validate() const;
 
@@ -90,9 +109,10 @@ void from_json(const nlohmann::json& j, EnvironmentMap& m);  // validates
 
 struct EnvSummary {
   int pixels_used = 0;
-  int pixels_model = 0;    // rays that hit the model (building, plaza): skipped
-  int pixels_sun = 0;      // within sun_exclusion_deg of the sun: skipped
-  int pixels_invalid = 0;  // non-finite or negative: skipped
+  int pixels_model = 0;          // rays that hit the model (building, plaza): skipped
+  int pixels_sun = 0;            // within sun_exclusion_deg of the sun: skipped
+  int pixels_invalid = 0;        // non-finite or negative: skipped
+  int pixels_ground_shadow = 0;  // on the ground in the model's shadow: read as sunlit
   // Regions of all layers by source.
   int regions_observed = 0, regions_sky = 0, regions_neighbour = 0;
   double seconds = 0;
@@ -107,13 +127,17 @@ struct EnvPanorama {
 
 // §3.3: averages HDR panoramas over the regions, one layer per panorama height (see
 // EnvOptions::layer_merge_m). Pixels whose ray from the panorama position hits the model are
-// skipped (the model is lit by interreflection), as are pixels near the sun and invalid ones.
+// skipped (the model is lit by interreflection), as are pixels near the sun and invalid ones;
+// ground in the model's shadow is read as sunlit (EnvOptions::lit_ground).
 // In each layer, unobserved regions above the horizon take the sky model's mean over the
 // region; below, the nearest observed region in the same band, else the nearest band with
 // observations (towards the horizon first). Throws rouen::Error for no panorama or bad input.
 EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
-                                   const RayCaster& model, const Eigen::Vector3d& sun_dir,
-                                   double sun_angular_radius_rad, const SkyModel& sky,
+                                   const RayCaster& model, const EnvSun& sun, const SkyModel& sky,
                                    const EnvOptions& options, EnvSummary* summary = nullptr);
+
+// The level of the ground around the model (ENU z): its lowest vertex. The environment's lit
+// ground and the irradiance's ground shadow both take the ground there.
+double GroundLevel(const RayCaster& model);
 
 }  // namespace rouen

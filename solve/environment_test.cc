@@ -76,7 +76,7 @@ TEST(BuildEnvironmentMapTest, AveragesSkipsModelAndSunAndFills) {
   for (auto& ch : sky.channel) ch.Lz = 7;
   EnvSummary s;
   const EnvironmentMap env =
-      BuildEnvironmentMap({{&pano, k, pose}}, rc, sun, 0.0047, sky, EnvOptions(), &s);
+      BuildEnvironmentMap({{&pano, k, pose}}, rc, {sun, 0.0047}, sky, EnvOptions(), &s);
   EXPECT_EQ(s.pixels_invalid, 2);
   EXPECT_GT(s.pixels_sun, 0);
   EXPECT_GT(s.pixels_model, 0);
@@ -129,6 +129,70 @@ Image GroundPanorama(const Intrinsics& k, const Pose& pose) {
   return pano;
 }
 
+// A tower north-east of the panorama casts its shadow (sun from the north, 30 deg high) on
+// Lambertian ground that the panorama sees: rho/pi (E_sky + E_sun sin 30) where sunlit,
+// rho/pi E_sky in the shadow, under a uniform sky. With the sun's irradiance the map reads
+// every ground region as sunlit; without it (or with lit_ground off) the regions over the
+// shadow keep it.
+TEST(BuildEnvironmentMapTest, GroundInTheModelsShadowIsReadAsSunlit) {
+  const Intrinsics k = Intrinsics::Equirect(720, 360);
+  const Pose pose = Pose::Level({0, 0, 1.6}, 0, 0);
+  Mesh m;
+  testing::AddBox(&m, {8, -2, 0}, {12, 2, 20}, m.AddBlock("tower"));
+  const RayCaster rc(m);
+  const Eigen::Vector3d sun = Dir(0, 30), sky_l(1, 2, 4), sun_e(30, 20, 10);
+  const double rho_over_pi = 0.1;
+  const Eigen::Vector3d e_sky = kPi * sky_l;  // a uniform sky on a horizontal plane
+  const Eigen::Vector3d lit = rho_over_pi * (e_sky + 0.5 * sun_e), shaded = rho_over_pi * e_sky;
+  Image pano(k.width, k.height, 3, PixelUnits::kRadiance);
+  int shaded_pixels = 0;
+  for (int y = 0; y < k.height; ++y) {
+    for (int x = 0; x < k.width; ++x) {
+      const Eigen::Vector3d d = pose.rotation * Unproject(k, {x + 0.5, y + 0.5});
+      Eigen::Vector3d v = sky_l;
+      if (d.z() < 0) {
+        const Eigen::Vector3d q = pose.position + (pose.position.z() / -d.z()) * d;
+        const bool in_shadow =
+            !rc.Occluded(pose.position, d, 1e-9) &&
+            rc.Occluded(q + Eigen::Vector3d(0, 0, rc.surface_offset()), sun, 0.0);
+        shaded_pixels += in_shadow;
+        v = in_shadow ? shaded : lit;
+      }
+      for (int c = 0; c < 3; ++c) pano.at(x, y, c) = static_cast<float>(v[c]);
+    }
+  }
+  ASSERT_GT(shaded_pixels, 500);
+  SkyModel sky;
+  for (int c = 0; c < 3; ++c) sky.channel[c] = SkyParams{sky_l[c], 0, 0, 0, 0, 0, 1};
+  EnvOptions o;
+  o.sun_exclusion_deg = 0;
+  EnvSummary s;
+  const EnvironmentMap env =
+      BuildEnvironmentMap({{&pano, k, pose}}, rc, {sun, 0, sun_e}, sky, o, &s);
+  EXPECT_EQ(s.pixels_ground_shadow, shaded_pixels);
+  EXPECT_EQ(GroundLevel(rc), 0);
+  // The shadow from the panorama: towards the south-east, a few degrees below the horizon.
+  const int over_shadow = env.Region(Eigen::Vector3d(10, -15, -1.6));
+  int ground_regions = 0;
+  for (int r = 0; r < env.bands_below * env.sectors; ++r) {
+    if (env.source[r] != EnvRegionSource::kObserved) continue;
+    ++ground_regions;
+    // Float pixels: relative rounding 6e-8.
+    EXPECT_NEAR((env.radiance[r] - lit).norm() / lit.norm(), 0, 1e-6) << r;
+  }
+  EXPECT_GT(ground_regions, 150);
+  // As seen: the region over the shadow is darker (its pixels' share of the shaded value).
+  o.lit_ground = false;
+  for (const EnvironmentMap& seen :
+       {BuildEnvironmentMap({{&pano, k, pose}}, rc, {sun, 0, sun_e}, sky, o, &s),
+        BuildEnvironmentMap({{&pano, k, pose}}, rc, {sun, 0}, sky, EnvOptions(), &s)}) {
+    EXPECT_EQ(s.pixels_ground_shadow, 0);
+    ASSERT_EQ(seen.source[over_shadow], EnvRegionSource::kObserved);
+    EXPECT_LT(seen.radiance[over_shadow][0], 0.95 * lit[0]);
+    EXPECT_GT(seen.radiance[over_shadow][0], shaded[0] - 1e-6);
+  }
+}
+
 TEST(BuildEnvironmentMapTest, OneLayerPerPanoramaHeight) {
   const Intrinsics k = Intrinsics::Equirect(720, 360);
   const Pose low = Pose::Level({0, 0, 1.6}, 0, 0), high = Pose::Level({0, 0, 50}, 0, 0);
@@ -145,7 +209,7 @@ TEST(BuildEnvironmentMapTest, OneLayerPerPanoramaHeight) {
   // Given in any order: sorted by height.
   EnvSummary s;
   const EnvironmentMap env = BuildEnvironmentMap({{&pano_high, k, high}, {&pano_low, k, low}}, rc,
-                                                 Dir(90, 45), 0.0047, sky, EnvOptions(), &s);
+                                                 {Dir(90, 45), 0.0047}, sky, EnvOptions(), &s);
   ASSERT_EQ(env.num_layers(), 2);
   EXPECT_NEAR(env.layer_z[0], 1.6, 1e-12);
   EXPECT_NEAR(env.layer_z[1], 50, 1e-12);
@@ -174,7 +238,7 @@ TEST(BuildEnvironmentMapTest, OneLayerPerPanoramaHeight) {
   // height, pooling their pixels; a third one high up makes a second layer.
   const EnvironmentMap merged =
       BuildEnvironmentMap({{&pano_low, k, low}, {&pano_high, k, high}, {&pano_low2, k, low2}}, rc,
-                          Dir(90, 45), 0.0047, sky, EnvOptions());
+                          {Dir(90, 45), 0.0047}, sky, EnvOptions());
   ASSERT_EQ(merged.num_layers(), 2);
   EXPECT_NEAR(merged.layer_z[0], 0.5 * (1.6 + 2.1), 1e-12);
   EXPECT_NEAR(merged.layer_z[1], 50, 1e-12);
@@ -183,8 +247,8 @@ TEST(BuildEnvironmentMapTest, OneLayerPerPanoramaHeight) {
   // With a smaller merge distance they stay apart.
   EnvOptions apart;
   apart.layer_merge_m = 0.25;
-  EXPECT_EQ(BuildEnvironmentMap({{&pano_low, k, low}, {&pano_low2, k, low2}}, rc, Dir(90, 45),
-                                0.0047, sky, apart)
+  EXPECT_EQ(BuildEnvironmentMap({{&pano_low, k, low}, {&pano_low2, k, low2}}, rc,
+                                {Dir(90, 45), 0.0047}, sky, apart)
                 .num_layers(),
             2);
 }
@@ -196,23 +260,24 @@ TEST(BuildEnvironmentMapTest, BadInputThrows) {
   const SkyModel sky;
   const Eigen::Vector3d up(0, 0, 1);
   Image small(32, 32, 3, PixelUnits::kRadiance);
-  EXPECT_THROW(BuildEnvironmentMap({{&small, k, pose}}, rc, up, 0.005, sky, EnvOptions()), Error);
+  EXPECT_THROW(BuildEnvironmentMap({{&small, k, pose}}, rc, {up, 0.005}, sky, EnvOptions()), Error);
   Image ldr(64, 32, 3, PixelUnits::kDigital);
-  EXPECT_THROW(BuildEnvironmentMap({{&ldr, k, pose}}, rc, up, 0.005, sky, EnvOptions()), Error);
+  EXPECT_THROW(BuildEnvironmentMap({{&ldr, k, pose}}, rc, {up, 0.005}, sky, EnvOptions()), Error);
   Image ok(64, 32, 3, PixelUnits::kRadiance, 1.f);
   EnvOptions bad;
   bad.sectors = 0;
-  EXPECT_THROW(BuildEnvironmentMap({{&ok, k, pose}}, rc, up, 0.005, sky, bad), Error);
+  EXPECT_THROW(BuildEnvironmentMap({{&ok, k, pose}}, rc, {up, 0.005}, sky, bad), Error);
   EnvOptions bad_merge;
   bad_merge.layer_merge_m = 0;
-  EXPECT_THROW(BuildEnvironmentMap({{&ok, k, pose}}, rc, up, 0.005, sky, bad_merge), Error);
-  EXPECT_THROW(BuildEnvironmentMap({{&ok, k, pose}}, rc, {0, 0, 0}, 0.005, sky, EnvOptions()),
+  EXPECT_THROW(BuildEnvironmentMap({{&ok, k, pose}}, rc, {up, 0.005}, sky, bad_merge), Error);
+  EXPECT_THROW(BuildEnvironmentMap({{&ok, k, pose}}, rc, {{0, 0, 0}, 0.005}, sky, EnvOptions()),
                Error);
   // No panorama, a missing image, one bad panorama among good ones.
-  EXPECT_THROW(BuildEnvironmentMap({}, rc, up, 0.005, sky, EnvOptions()), Error);
-  EXPECT_THROW(BuildEnvironmentMap({{nullptr, k, pose}}, rc, up, 0.005, sky, EnvOptions()), Error);
+  EXPECT_THROW(BuildEnvironmentMap({}, rc, {up, 0.005}, sky, EnvOptions()), Error);
+  EXPECT_THROW(BuildEnvironmentMap({{nullptr, k, pose}}, rc, {up, 0.005}, sky, EnvOptions()),
+               Error);
   EXPECT_THROW(
-      BuildEnvironmentMap({{&ok, k, pose}, {&ldr, k, pose}}, rc, up, 0.005, sky, EnvOptions()),
+      BuildEnvironmentMap({{&ok, k, pose}, {&ldr, k, pose}}, rc, {up, 0.005}, sky, EnvOptions()),
       Error);
 }
 

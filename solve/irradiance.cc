@@ -176,9 +176,7 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
                 " triangles but the ray-casting model " + std::to_string(model.num_triangles()) +
                 " (not the same model)");
   }
-  // The ground's level: the lowest grid point.
-  double ground_z = n > 0 ? grid.points[0].position.z() : 0;
-  for (const auto& p : grid.points) ground_z = std::min(ground_z, p.position.z());
+  const double ground_z = GroundLevel(model);
 
   const int nl = static_cast<int>(lightings.size());
   std::vector<LightingSetup> setup(nl);
@@ -212,12 +210,8 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
     ls.ground_shadow =
         options.ground_shadow && lighting.use_env && s.z() > 0 && n > 0 && ls.sun_e.maxCoeff() > 0;
     if (ls.ground_shadow) {
-      // The shadowed/sunlit radiance ratio of horizontal Lambertian ground.
-      const Eigen::Vector3d e_sky = lighting.env.HorizontalSkyIrradiance();
-      const Eigen::Vector3d e_total = e_sky + ls.sun_e * s.z();
-      for (int c = 0; c < 3; ++c) {
-        ls.shadow_ratio[c] = e_total[c] > 0 ? e_sky[c] / e_total[c] : 1.0;
-      }
+      // The ground's shadowed/sunlit radiance ratio (as photographed where the map measured it).
+      ls.shadow_ratio = lighting.env.GroundShadowRatio(ls.sun_e * s.z());
       if (vector_flux) {
         if (!faces) faces = std::make_unique<OccluderFaces>(*options.mesh);
         // Merged into fewer polygons where their union is convex, before the cut (less to

@@ -130,8 +130,9 @@ class EnvStereoSimTest : public ::testing::Test {
       std::vector<EnvPanorama> ep;
       for (size_t i = 0; i < views.size(); ++i)
         ep.push_back({&panos[i], views[i].intrinsics, views[i].pose});
-      s.obs.env = BuildEnvironmentMap(ep, *caster_, l.sun_dir,
-                                      std::sqrt(l.sun_solid_angle_sr / kPi), l.sky, EnvOptions());
+      const EnvSun sun{l.sun_dir, std::sqrt(l.sun_solid_angle_sr / kPi),
+                       l.sun_radiance * l.sun_solid_angle_sr};
+      s.obs.env = BuildEnvironmentMap(ep, *caster_, sun, l.sky, EnvOptions());
       slots_->push_back(std::move(s));
     }
     setup_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
