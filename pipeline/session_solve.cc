@@ -539,6 +539,9 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
     return it == calib.groups.end() ? nullptr : &it->second;
   };
 
+  // Per slot: its landscape panoramas and sun, to read the environment again (below).
+  std::vector<std::vector<EnvPanorama>> slot_panoramas;
+  std::vector<EnvSun> slot_env_sun;
   for (int s = 0; s < nslots; ++s) {
     SlotSolve ss;
     ss.slot = s;
@@ -622,6 +625,8 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
                          ss.sun_measured.radiance * ss.sun.SolidAngleSr()};
     EnvironmentMap env =
         BuildEnvironmentMap(panoramas, *r.caster, env_sun, sky, options.config.environment);
+    slot_panoramas.push_back(panoramas);
+    slot_env_sun.push_back(env_sun);
     ss.lighting.utc = ss.utc;
     ss.lighting.sun_dir = sun_dir;
     ss.lighting.sun_radiance = ss.sun_measured.radiance;
@@ -635,6 +640,36 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
     r.slots.push_back(std::move(ss));
     clock.Lap("slot " + std::to_string(s) + " lighting (sun, sky, environment)");
   }
+
+  // Beyond §5.2: how roughly the ground reflects the sun, from the slots the albedos use, for
+  // the environment at novel times (too few slots: the photometric stereo cannot tell). With
+  // it the ground in the model's shadow is read as sunlit again (EnvOptions::lit_ground): a
+  // rough ground seen with the sun behind is brighter sunlit than Lambert's, its shadow darker.
+  std::vector<Lighting> env_slots;
+  for (const SlotSolve& ss : r.slots) {
+    if (std::find(options.exclude_albedo_slots.begin(), options.exclude_albedo_slots.end(),
+                  ss.slot) == options.exclude_albedo_slots.end())
+      env_slots.push_back(ss.lighting);
+  }
+  const EnvStereoOptions env_options = RelightOptions{}.env;
+  if (options.config.fit_ground_retro &&
+      static_cast<int>(env_slots.size()) >= env_options.min_times) {
+    const GroundRetroFit g = FitGroundRetro(EnvObservationsOf(env_slots), env_options);
+    r.env_ground_retro = g.retro;
+    std::ostringstream line;
+    line << std::fixed << std::setprecision(3) << "environment: ground retro " << g.retro
+         << " (median region residual " << 100 * g.cost_lambert << "% -> " << 100 * g.cost << "%)";
+    Log(options, line.str());
+    if (g.retro != 0 && options.config.environment.lit_ground) {
+      for (size_t k = 0; k < r.slots.size(); ++k) {
+        slot_env_sun[k].ground_retro = g.retro;
+        r.slots[k].lighting.env =
+            BuildEnvironmentMap(slot_panoramas[k], *r.caster, slot_env_sun[k],
+                                r.slots[k].lighting.sky, options.config.environment);
+      }
+    }
+  }
+  clock.Lap("environment ground reflection");
 
   // Surface grid and geometry-only visibility, computed once.
   r.grid = BuildSurfaceGrid(r.mesh, options.config.grid);
@@ -723,25 +758,6 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
               as.sky_lobe_cost_fitted);
   }
   clock.Lap("irradiance and pseudo-albedos");
-  // Beyond §5.2: how roughly the ground reflects the sun, from the slots the albedos used, for
-  // the environment at novel times (too few slots: the photometric stereo cannot tell).
-  std::vector<Lighting> env_slots;
-  for (const SlotSolve& ss : r.slots) {
-    if (std::find(options.exclude_albedo_slots.begin(), options.exclude_albedo_slots.end(),
-                  ss.slot) == options.exclude_albedo_slots.end())
-      env_slots.push_back(ss.lighting);
-  }
-  const EnvStereoOptions env_options = RelightOptions{}.env;
-  if (options.config.fit_ground_retro &&
-      static_cast<int>(env_slots.size()) >= env_options.min_times) {
-    const GroundRetroFit g = FitGroundRetro(EnvObservationsOf(env_slots), env_options);
-    r.env_ground_retro = g.retro;
-    std::ostringstream line;
-    line << std::fixed << std::setprecision(3) << "environment: ground retro " << g.retro
-         << " (median region residual " << 100 * g.cost_lambert << "% -> " << 100 * g.cost << "%)";
-    Log(options, line.str());
-  }
-  clock.Lap("environment ground reflection");
   return r;
 }
 

@@ -11,6 +11,7 @@
 
 #include "core/angles.h"
 #include "core/error.h"
+#include "solve/retro.h"
 
 namespace rouen {
 
@@ -191,21 +192,15 @@ Eigen::Vector3d EnvironmentMap::HorizontalSkyIrradiance() const {
   return e;
 }
 
-Eigen::Vector3d EnvironmentMap::GroundShadowRatio(const Eigen::Vector3d& sun_horizontal) const {
-  const Eigen::Vector3d e_sky = HorizontalSkyIrradiance();
-  Eigen::Vector3d ratio = Eigen::Vector3d::Ones();
-  for (int c = 0; c < 3; ++c) {
-    const double e_total = e_sky[c] + std::max(0.0, sun_horizontal[c]);
-    if (e_total > 0) ratio[c] = e_sky[c] / e_total;
-  }
-  return ratio;
-}
-
 void EnvironmentMap::Validate() const {
   if (bands_below < 1 || bands_above < 1 || sectors < 1) {
     throw Error("environment map: bands and sectors must be >= 1");
   }
   if (layer_z.empty()) throw Error("environment map: no layers");
+  if (!(ground_retro >= kRetroMin && ground_retro <= kRetroMax)) {
+    throw Error("environment map: ground_retro must be within [" + std::to_string(kRetroMin) +
+                ", " + std::to_string(kRetroMax) + "]");
+  }
   for (size_t k = 0; k < layer_z.size(); ++k) {
     if (!std::isfinite(layer_z[k]) || (k > 0 && !(layer_z[k] > layer_z[k - 1]))) {
       throw Error("environment map: layer heights must be finite and increasing");
@@ -260,7 +255,8 @@ void to_json(nlohmann::json& j, const EnvironmentMap& m) {
                      {"layer_z", m.layer_z},
                      {"radiance", rad},
                      {"pixel_count", cnt},
-                     {"source", src}};
+                     {"source", src},
+                     {"ground_retro", m.ground_retro}};
 }
 
 void from_json(const nlohmann::json& j, EnvironmentMap& m) {
@@ -270,6 +266,7 @@ void from_json(const nlohmann::json& j, EnvironmentMap& m) {
     m.bands_above = j.at("bands_above").get<int>();
     m.sectors = j.at("sectors").get<int>();
     if (j.contains("layer_z")) m.layer_z = j.at("layer_z").get<std::vector<double>>();
+    m.ground_retro = j.value("ground_retro", 0.0);
     for (const auto& r : j.at("radiance")) {
       if (r.size() != 3) throw Error("environment map: a radiance is not 3 numbers");
       m.radiance.emplace_back(r[0].get<double>(), r[1].get<double>(), r[2].get<double>());
@@ -425,11 +422,13 @@ EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
   InitMap(options, layers, &m);
   const int nreg = m.num_regions();
   EnvSummary s;
-  // Per region of every layer: the weighted radiance of the pixels on sunlit and on shaded
-  // ground (the rest counts as sunlit), and the weight.
-  std::vector<Eigen::Vector3d> lit(m.radiance.size(), Eigen::Vector3d::Zero());
-  std::vector<Eigen::Vector3d> shaded(m.radiance.size(), Eigen::Vector3d::Zero());
+  // Per region of every layer: the weighted radiance of its pixels and their weight; the
+  // pixels on ground in the model's shadow also apart, to be read as sunlit once the sky is
+  // known.
+  std::vector<Eigen::Vector3d> sum(m.radiance.size(), Eigen::Vector3d::Zero());
   std::vector<double> wsum(m.radiance.size(), 0.0);
+  std::vector<std::pair<size_t, UsedPixel>> shaded;
+  m.ground_retro = sun_at.ground_retro;
   for (int k = 0; k < layers; ++k) {
     double zsum = 0;
     std::vector<UsedPixel> used;
@@ -443,30 +442,32 @@ EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
     std::vector<int> count(nreg, 0);
     for (const UsedPixel& u : used) {
       const size_t r = base + m.Region(u.dir);
-      (u.ground_shadow ? shaded : lit)[r] += u.weight * u.radiance;
+      sum[r] += u.weight * u.radiance;
       wsum[r] += u.weight;
       count[r - base] += 1;
+      if (u.ground_shadow) shaded.emplace_back(r, u);
     }
     for (int r = 0; r < nreg; ++r) {
       if (count[r] >= options.min_region_pixels && wsum[base + r] > 0) {
-        m.radiance[base + r] = (lit[base + r] + shaded[base + r]) / wsum[base + r];
+        m.radiance[base + r] = sum[base + r] / wsum[base + r];
         m.pixel_count[base + r] = count[r];
         m.source[base + r] = EnvRegionSource::kObserved;
       }
     }
     FillLayer(sky, options.sky_fill_samples, static_cast<int>(base), &m);
   }
-  if (s.pixels_ground_shadow > 0) {
-    // The ratio from the finished map's sky (the lowest layer), as the irradiance takes it; the
+  if (!shaded.empty()) {
+    // Each shaded pixel as the same ground sunlit, by the ratio from the finished map's sky (the
+    // lowest layer) seen along the pixel's ray, as the irradiance puts the shadow back; the
     // regions below the horizon filled from observed ones are filled again.
-    const Eigen::Vector3d lit_over_shaded =
-        m.GroundShadowRatio(sun_at.irradiance * sun.z()).unaryExpr([](double r) {
-          return r > 0 ? 1 / r : 1;
-        });
-    for (size_t r = 0; r < m.radiance.size(); ++r) {
-      if (m.source[r] == EnvRegionSource::kObserved && shaded[r].maxCoeff() > 0) {
-        m.radiance[r] = (lit[r] + shaded[r].cwiseProduct(lit_over_shaded)) / wsum[r];
-      }
+    const Eigen::Vector3d e_sky = m.HorizontalSkyIrradiance();
+    for (const auto& [r, u] : shaded) {
+      if (m.source[r] != EnvRegionSource::kObserved) continue;
+      const Eigen::Vector3d ratio =
+          GroundShadowRatio(m.ground_retro, e_sky, sun_at.irradiance, sun, -u.dir);
+      const Eigen::Vector3d lit =
+          u.radiance.binaryExpr(ratio, [](double l, double q) { return q > 0 ? l / q : l; });
+      m.radiance[r] += (u.weight / wsum[r]) * (lit - u.radiance);
     }
     for (int k = 0; k < layers; ++k) FillLayer(sky, options.sky_fill_samples, k * nreg, &m);
   }
@@ -479,6 +480,21 @@ EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
   if (summary) *summary = s;
   m.Validate();
   return m;
+}
+
+Eigen::Vector3d GroundShadowRatio(double ground_retro, const Eigen::Vector3d& e_sky,
+                                  const Eigen::Vector3d& sun_e, const Eigen::Vector3d& sun_dir,
+                                  const Eigen::Vector3d& view) {
+  const Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
+  const Eigen::Vector3d sky = e_sky * AmbientRetroFactor(ground_retro, up, view);
+  const Eigen::Vector3d sun =
+      sun_e * (std::max(0.0, sun_dir.z()) * RetroFactor(ground_retro, up, sun_dir, view));
+  Eigen::Vector3d ratio = Eigen::Vector3d::Ones();
+  for (int c = 0; c < 3; ++c) {
+    const double total = sky[c] + std::max(0.0, sun[c]);
+    if (total > 0) ratio[c] = sky[c] / total;
+  }
+  return ratio;
 }
 
 double GroundLevel(const RayCaster& model) {

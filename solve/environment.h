@@ -48,6 +48,8 @@ struct EnvSun {
   double angular_radius_rad = 0;                   // pixels within the disc are skipped
   // Radiance x solid angle (RGB), for EnvOptions::lit_ground; zero leaves the ground as seen.
   Eigen::Vector3d irradiance = Eigen::Vector3d::Zero();
+  // How roughly the ground reflects it (EnvironmentMap::ground_retro).
+  double ground_retro = 0;
 };
 
 enum class EnvRegionSource : uint8_t {
@@ -66,6 +68,9 @@ struct EnvironmentMap {
   std::vector<Eigen::Vector3d> radiance;  // relative radiance, RGB
   std::vector<int> pixel_count;           // panorama pixels averaged (0 when filled)
   std::vector<EnvRegionSource> source;
+  // How roughly the ground reflects (solve/retro.h; 0: Lambert), with which its shadow was read
+  // as sunlit (EnvOptions::lit_ground) and is put back (GroundShadowRatio, the irradiance).
+  double ground_retro = 0;
 
   int num_bands() const { return bands_below + bands_above; }
   int num_regions() const { return num_bands() * sectors; }
@@ -89,10 +94,6 @@ struct EnvironmentMap {
   // Irradiance on an unoccluded horizontal plane from the regions above the horizon (lowest
   // layer): sum of radiance x projected solid angle.
   Eigen::Vector3d HorizontalSkyIrradiance() const;
-  // The shadowed/sunlit radiance ratio of horizontal Lambertian ground under the whole sky of
-  // the lowest layer and a sun of horizontal irradiance `sun_horizontal` (RGB):
-  // E_sky / (E_sky + sun_horizontal), per channel.
-  Eigen::Vector3d GroundShadowRatio(const Eigen::Vector3d& sun_horizontal) const;
   // Throws rouen::Error when the sizes disagree or a radiance is negative or not finite.
   void Validate() const;
 
@@ -135,6 +136,17 @@ struct EnvPanorama {
 EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
                                    const RayCaster& model, const EnvSun& sun, const SkyModel& sky,
                                    const EnvOptions& options, EnvSummary* summary = nullptr);
+
+// The shadowed/sunlit radiance ratio of horizontal ground of roughness `ground_retro`
+// (solve/retro.h; 0: Lambert) under a sky of horizontal irradiance `e_sky`
+// (EnvironmentMap::HorizontalSkyIrradiance) and a sun of irradiance `sun_e` (radiance x solid
+// angle) from unit `sun_dir`, seen from unit direction `view` (ground to viewer), per channel:
+//   e_sky A(view) / (e_sky A(view) + sun_e sin(el) D(sun, view)),
+// D and A the sun's and sky's factors (RetroFactor, AmbientRetroFactor; 1 for Lambert). A
+// rough ground seen with the sun behind is brighter sunlit, so its shadow is darker beside it.
+Eigen::Vector3d GroundShadowRatio(double ground_retro, const Eigen::Vector3d& e_sky,
+                                  const Eigen::Vector3d& sun_e, const Eigen::Vector3d& sun_dir,
+                                  const Eigen::Vector3d& view);
 
 // The level of the ground around the model (ENU z): its lowest vertex. The environment's lit
 // ground and the irradiance's ground shadow both take the ground there.

@@ -7,6 +7,7 @@
 
 #include "core/angles.h"
 #include "core/error.h"
+#include "solve/retro.h"
 #include "solve/test_scenes.h"
 
 namespace rouen {
@@ -130,67 +131,81 @@ Image GroundPanorama(const Intrinsics& k, const Pose& pose) {
 }
 
 // A tower north-east of the panorama casts its shadow (sun from the north, 30 deg high) on
-// Lambertian ground that the panorama sees: rho/pi (E_sky + E_sun sin 30) where sunlit,
-// rho/pi E_sky in the shadow, under a uniform sky. With the sun's irradiance the map reads
-// every ground region as sunlit; without it (or with lit_ground off) the regions over the
-// shadow keep it.
+// rough ground that the panorama sees: sunlit, rho/pi (E_sky A(v) + E_sun sin 30 D(s, v)), in
+// the shadow rho/pi E_sky A(v), under a uniform sky (A, D: solve/retro.h, 1 for Lambert). With
+// the sun's irradiance and the ground's retro the map reads the panorama as the map of the same
+// ground all sunlit; without them (or with lit_ground off) the regions over the shadow keep it.
 TEST(BuildEnvironmentMapTest, GroundInTheModelsShadowIsReadAsSunlit) {
   const Intrinsics k = Intrinsics::Equirect(720, 360);
   const Pose pose = Pose::Level({0, 0, 1.6}, 0, 0);
   Mesh m;
   testing::AddBox(&m, {8, -2, 0}, {12, 2, 20}, m.AddBlock("tower"));
   const RayCaster rc(m);
-  const Eigen::Vector3d sun = Dir(0, 30), sky_l(1, 2, 4), sun_e(30, 20, 10);
-  const double rho_over_pi = 0.1;
-  const Eigen::Vector3d e_sky = kPi * sky_l;  // a uniform sky on a horizontal plane
-  const Eigen::Vector3d lit = rho_over_pi * (e_sky + 0.5 * sun_e), shaded = rho_over_pi * e_sky;
-  Image pano(k.width, k.height, 3, PixelUnits::kRadiance);
-  int shaded_pixels = 0;
-  for (int y = 0; y < k.height; ++y) {
-    for (int x = 0; x < k.width; ++x) {
-      const Eigen::Vector3d d = pose.rotation * Unproject(k, {x + 0.5, y + 0.5});
-      Eigen::Vector3d v = sky_l;
-      if (d.z() < 0) {
-        const Eigen::Vector3d q = pose.position + (pose.position.z() / -d.z()) * d;
-        const bool in_shadow =
-            !rc.Occluded(pose.position, d, 1e-9) &&
-            rc.Occluded(q + Eigen::Vector3d(0, 0, rc.surface_offset()), sun, 0.0);
-        shaded_pixels += in_shadow;
-        v = in_shadow ? shaded : lit;
-      }
-      for (int c = 0; c < 3; ++c) pano.at(x, y, c) = static_cast<float>(v[c]);
-    }
-  }
-  ASSERT_GT(shaded_pixels, 500);
+  EXPECT_EQ(GroundLevel(rc), 0);
+  const Eigen::Vector3d sun = Dir(0, 30), sky_l(1, 2, 4), sun_e(30, 20, 10), up(0, 0, 1);
   SkyModel sky;
   for (int c = 0; c < 3; ++c) sky.channel[c] = SkyParams{sky_l[c], 0, 0, 0, 0, 0, 1};
-  EnvOptions o;
-  o.sun_exclusion_deg = 0;
-  EnvSummary s;
-  const EnvironmentMap env =
-      BuildEnvironmentMap({{&pano, k, pose}}, rc, {sun, 0, sun_e}, sky, o, &s);
-  EXPECT_EQ(s.pixels_ground_shadow, shaded_pixels);
-  EXPECT_EQ(GroundLevel(rc), 0);
-  // The shadow from the panorama: towards the south-east, a few degrees below the horizon.
-  const int over_shadow = env.Region(Eigen::Vector3d(10, -15, -1.6));
-  int ground_regions = 0;
-  for (int r = 0; r < env.bands_below * env.sectors; ++r) {
-    if (env.source[r] != EnvRegionSource::kObserved) continue;
-    ++ground_regions;
-    // Float pixels: relative rounding 6e-8.
-    EXPECT_NEAR((env.radiance[r] - lit).norm() / lit.norm(), 0, 1e-6) << r;
+  const Eigen::Vector3d e_sky = kPi * sky_l;  // a uniform sky on a horizontal plane
+  for (const double retro : {0.0, 1.0}) {
+    SCOPED_TRACE(retro);
+    // The panorama with the shadow, and the same ground all sunlit.
+    Image pano(k.width, k.height, 3, PixelUnits::kRadiance), all_lit = pano;
+    int shaded_pixels = 0;
+    for (int y = 0; y < k.height; ++y) {
+      for (int x = 0; x < k.width; ++x) {
+        const Eigen::Vector3d d = pose.rotation * Unproject(k, {x + 0.5, y + 0.5});
+        Eigen::Vector3d v = sky_l, lit = sky_l;
+        if (d.z() < 0) {
+          const Eigen::Vector3d q = pose.position + (pose.position.z() / -d.z()) * d;
+          const Eigen::Vector3d shaded = 0.1 * e_sky * AmbientRetroFactor(retro, up, -d);
+          lit = shaded + 0.1 * sun_e * (0.5 * RetroFactor(retro, up, sun, -d));
+          const bool in_shadow =
+              !rc.Occluded(pose.position, d, 1e-9) &&
+              rc.Occluded(q + Eigen::Vector3d(0, 0, rc.surface_offset()), sun, 0.0);
+          shaded_pixels += in_shadow;
+          v = in_shadow ? shaded : lit;
+        }
+        for (int c = 0; c < 3; ++c) {
+          pano.at(x, y, c) = static_cast<float>(v[c]);
+          all_lit.at(x, y, c) = static_cast<float>(lit[c]);
+        }
+      }
+    }
+    ASSERT_GT(shaded_pixels, 500);
+    EnvOptions o;
+    o.sun_exclusion_deg = 0;
+    const EnvSun with_sun{sun, 0, sun_e, retro};
+    EnvSummary s;
+    const EnvironmentMap env = BuildEnvironmentMap({{&pano, k, pose}}, rc, with_sun, sky, o, &s);
+    EXPECT_EQ(s.pixels_ground_shadow, shaded_pixels);
+    EXPECT_EQ(env.ground_retro, retro);
+    // (Read as it is: it has no shadow to read.)
+    const EnvironmentMap want = BuildEnvironmentMap({{&all_lit, k, pose}}, rc, {sun, 0}, sky, o);
+    int ground_regions = 0;
+    for (int r = 0; r < env.bands_below * env.sectors; ++r) {
+      ASSERT_EQ(env.source[r], want.source[r]);
+      ground_regions += env.source[r] == EnvRegionSource::kObserved;
+      // Float pixels: relative rounding 6e-8, summed over a region's pixels.
+      EXPECT_NEAR((env.radiance[r] - want.radiance[r]).norm() / want.radiance[r].norm(), 0, 1e-6)
+          << r;
+    }
+    EXPECT_GT(ground_regions, 150);
+    // As seen: the region over the shadow (south-east, a few degrees below the horizon) is
+    // darker, at least by its pixels' share of the shadow.
+    const int over_shadow = env.Region(Eigen::Vector3d(10, -15, -1.6));
+    o.lit_ground = false;
+    for (const EnvironmentMap& seen :
+         {BuildEnvironmentMap({{&pano, k, pose}}, rc, with_sun, sky, o, &s),
+          BuildEnvironmentMap({{&pano, k, pose}}, rc, {sun, 0}, sky, EnvOptions(), &s)}) {
+      EXPECT_EQ(s.pixels_ground_shadow, 0);
+      ASSERT_EQ(seen.source[over_shadow], EnvRegionSource::kObserved);
+      EXPECT_LT(seen.radiance[over_shadow][0], 0.95 * want.radiance[over_shadow][0]);
+    }
   }
-  EXPECT_GT(ground_regions, 150);
-  // As seen: the region over the shadow is darker (its pixels' share of the shaded value).
-  o.lit_ground = false;
-  for (const EnvironmentMap& seen :
-       {BuildEnvironmentMap({{&pano, k, pose}}, rc, {sun, 0, sun_e}, sky, o, &s),
-        BuildEnvironmentMap({{&pano, k, pose}}, rc, {sun, 0}, sky, EnvOptions(), &s)}) {
-    EXPECT_EQ(s.pixels_ground_shadow, 0);
-    ASSERT_EQ(seen.source[over_shadow], EnvRegionSource::kObserved);
-    EXPECT_LT(seen.radiance[over_shadow][0], 0.95 * lit[0]);
-    EXPECT_GT(seen.radiance[over_shadow][0], shaded[0] - 1e-6);
-  }
+  // The ratio: Lambert's E_sky / (E_sky + E_sun sin(el)) for retro 0, whatever the view.
+  const Eigen::Vector3d lambert = GroundShadowRatio(0, e_sky, sun_e, sun, Dir(200, 10));
+  for (int c = 0; c < 3; ++c)
+    EXPECT_NEAR(lambert[c], e_sky[c] / (e_sky[c] + 0.5 * sun_e[c]), 1e-15);
 }
 
 TEST(BuildEnvironmentMapTest, OneLayerPerPanoramaHeight) {

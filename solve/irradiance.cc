@@ -127,11 +127,18 @@ struct LightingSetup {
   const Lighting* lighting = nullptr;
   Eigen::Vector3d sun_e = Eigen::Vector3d::Zero();  // radiance x solid angle
   std::vector<Eigen::Vector3d> disc;                // shadow-ray directions over the sun disc
-  // Ground beyond the model (IrradianceOptions::ground_shadow): its shadowed/sunlit radiance
-  // ratio, and (vector flux) the model's shadow on it.
+  // Ground beyond the model (IrradianceOptions::ground_shadow): its sky irradiance for the
+  // shadowed/sunlit radiance ratio (GroundShadowRatio), and (vector flux) the model's shadow on
+  // it and that shadow's middle.
   bool ground_shadow = false;
-  Eigen::Vector3d shadow_ratio = Eigen::Vector3d::Ones();
+  Eigen::Vector3d ground_e_sky = Eigen::Vector3d::Zero();
   std::vector<std::vector<Eigen::Vector3d>> shadow_on_ground;
+  Eigen::Vector3d shadow_centre = Eigen::Vector3d::Zero();
+  // The ratio seen from `view` (ground to viewer).
+  Eigen::Vector3d ShadowRatio(const Eigen::Vector3d& view) const {
+    return GroundShadowRatio(lighting->env.ground_retro, ground_e_sky, sun_e, lighting->sun_dir,
+                             view);
+  }
   int layout = -1;                            // vector flux, environment: index into the layouts
   std::unique_ptr<SkyTreeRadiance> sky_tree;  // vector flux, sky model
 };
@@ -210,8 +217,7 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
     ls.ground_shadow =
         options.ground_shadow && lighting.use_env && s.z() > 0 && n > 0 && ls.sun_e.maxCoeff() > 0;
     if (ls.ground_shadow) {
-      // The ground's shadowed/sunlit radiance ratio (as photographed where the map measured it).
-      ls.shadow_ratio = lighting.env.GroundShadowRatio(ls.sun_e * s.z());
+      ls.ground_e_sky = lighting.env.HorizontalSkyIrradiance();
       if (vector_flux) {
         if (!faces) faces = std::make_unique<OccluderFaces>(*options.mesh);
         // Merged into fewer polygons where their union is convex, before the cut (less to
@@ -219,6 +225,12 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
         ls.shadow_on_ground = MergeGroundShadow(ShadowBeyondGroundFaces(
             MergeGroundShadow(GroundShadowOnPlane(*options.mesh, *faces, s, ground_z)), *faces,
             ground_z));
+        int vertices = 0;
+        for (const auto& poly : ls.shadow_on_ground) {
+          for (const Eigen::Vector3d& v : poly) ls.shadow_centre += v;
+          vertices += static_cast<int>(poly.size());
+        }
+        if (vertices > 0) ls.shadow_centre /= vertices;
       }
     }
     if (!vector_flux) continue;
@@ -297,9 +309,10 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
           const EnvironmentView& view = views[ls.layout];
           Eigen::Vector3d e = EnvironmentIrradiance(view, ls.lighting->env, p.position.z());
           if (ls.ground_shadow && origin.z() > ground_z && !view.pieces.empty()) {
+            // One ratio per point: seen from the point towards the shadow's middle.
             e += GroundShadowChange(view, *layouts[ls.layout], ls.lighting->env, p.position.z(),
                                     GroundShadowPolygons(ls.shadow_on_ground, origin),
-                                    ls.shadow_ratio);
+                                    ls.ShadowRatio((origin - ls.shadow_centre).normalized()));
           }
           out[li].direct_se[i] = e;
         }
@@ -328,7 +341,7 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
           if (ls.ground_shadow && d.z() < -1e-3 && origin.z() > ground_z) {
             const Eigen::Vector3d q = origin + ((origin.z() - ground_z) / -d.z()) * d;
             if (model.Occluded(q + Eigen::Vector3d(0, 0, offset), s, 0.0)) {
-              l = l.cwiseProduct(ls.shadow_ratio);
+              l = l.cwiseProduct(ls.ShadowRatio(-d));
             }
           }
           sum += l;

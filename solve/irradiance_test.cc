@@ -236,6 +236,24 @@ TEST(IrradianceTest, GroundShadowDarkensTheEnvironmentBehindTheTower) {
     }
   }
   EXPECT_GT(darker, 5);
+  // A rough ground (EnvironmentMap::ground_retro) seen from the north face has the sun behind
+  // its viewer: sunlit it is brighter than Lambert's, so its shadow is darker beside it
+  // (GroundShadowRatio) and the north face sees less light; the south face still none of it.
+  Lighting rough = l;
+  rough.env.ground_retro = 1;
+  const SlotIrradiance c = ComputeIrradiance(g, cache, rc, rough, on);
+  int darker_rough = 0;
+  for (int i = 0; i < g.size(); ++i) {
+    const GridPoint& p = g.points[i];
+    if (p.block != tower || std::abs(p.normal.z()) > 0.5) continue;
+    if (p.normal.y() < -0.9) EXPECT_NEAR(c.direct_se[i].x(), b.direct_se[i].x(), 1e-12);
+    if (p.normal.y() > 0.9 && p.position.z() > 10) {
+      EXPECT_LE(c.direct_se[i].x(), a.direct_se[i].x() + 1e-12);
+      EXPECT_GE(c.direct_se[i].x(), b.direct_se[i].x() - kPi / 2 - 1e-9);
+      darker_rough += c.direct_se[i].x() < a.direct_se[i].x() - 1e-9;
+    }
+  }
+  EXPECT_GT(darker_rough, 5);
 }
 
 TEST(IrradianceTest, BadInputThrows) {

@@ -344,6 +344,7 @@ Lighting LightingPredictor::At(UtcTime utc, const Site& site, RelightSummary* su
   el.sun_solid_angle_sr = out.sun_solid_angle_sr;
   el.sky = out.sky;
   out.env = PredictEnvironment(env_, el);
+  out.env.ground_retro = options_.env.ground_retro;  // as the shadow on it is put back
   if (!sky_residual_.empty()) {
     // The measured sky's residual carried to the new sun as its band carries best, weighted as
     // the sky's parts (§5.1's weights); under a cloud layer it fades with the blocked sunlight

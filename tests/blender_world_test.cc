@@ -118,7 +118,7 @@ TEST(BlenderWorldTest, ImportStatusSolveRenderValidate) {
   // held-out time at 32 dB or better on the building under either lighting, within 3% median
   // relative error under either lighting, and the lighting measured at that time not worse
   // than the lighting predicted from the other times (once it was: 23 against 29 dB). rouen
-  // scored 41-43 dB and 0.7-1.3% measured, 39-43 dB and 0.8-1.8% predicted (README.md), the
+  // scored 41-43 dB and 0.7-1.1% measured, 40-43 dB and 0.8-1.5% predicted (README.md), the
   // two within 3% of each other's rel. RMSE; the Lambertian model of the paper scored 23-29
   // dB. The 5% margin on "not worse" is the measured lighting's own fit error (its sky fit's
   // p90 is 1.8%), which can leave it a little behind a prediction that lands closer by chance.
@@ -175,13 +175,12 @@ TEST(BlenderWorldTest, ImportStatusSolveRenderValidate) {
         // block's ambient factor (solve/retro.h) the tower's came within 1% and the annex's
         // within 5.6% (without it the tower's was 5-7% high: the sky light brightening towards
         // oblique views was read as albedo). With the ground read sunlit where the model's
-        // shadow lay in front of the panorama (EnvOptions::lit_ground), the tower's came 2.4%
-        // and the annex's 6.1% low in red, 1% and 4.7% in blue: the shadow is put back where
-        // a wall sees it with the Lambertian ratio E_sky / (E_sky + E_sun sin(el)), 0.11 in
-        // red at 09:00, where the rough ground was photographed at about 0.07 (its sunlit side
-        // brighter seen with the sun behind, and the tower hiding its sky), so walls that see
-        // that shadow get too much of it. 7%: the sky fit's p90 (1.8%), the interreflection's
-        // (1%) and that ratio's share of the light on the walls that see the shadow (up to 4%).
+        // shadow lay in front of the panorama (EnvOptions::lit_ground), the tower's came 2.9%
+        // and the annex's 6.1% low in red, 1% and 4% in blue: the shadow is put back where a
+        // wall sees it as ground lit by the whole sky, where the tower hides part of that sky
+        // from its shadow, so walls that see that shadow get too much of it. 7%: the sky fit's
+        // p90 (1.8%), the interreflection's (1%) and that sky's share of the light on the
+        // walls that see the shadow (up to 4%).
         EXPECT_NEAR(Median(se) / want, 1.0, 0.07) << block << " channel " << c;
       }
     }
