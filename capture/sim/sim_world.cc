@@ -94,8 +94,9 @@ struct SimWorld::Impl {
   std::vector<uint8_t> cv_mode;    // 1: sky = unoccluded - occluded part
   std::vector<int64_t> rec_begin;  // n_texels + 1
   std::vector<uint32_t> records;
-  // Bit r: record r is a hit whose sample direction rises (d.z() > 0), the only hits whose
-  // direction the sky estimate needs (time independent, so found once by Setup).
+  // Bit r: record r is a hit whose sample direction rises (d.z() > 0) in a texel whose sky is
+  // estimated as unoccluded minus occluded (cv_mode 1), the only hits whose direction the sky
+  // estimate needs (time independent, so found once by Setup).
   std::vector<uint64_t> rec_rising;
 
   std::map<int64_t, std::shared_ptr<const State>> cache;
@@ -444,11 +445,12 @@ void SimWorld::Impl::Setup() {
             }
           }
           valid[i] = back * 4 < n_samples;
-          // Estimate the sky from the smaller of the occluded and the open parts.
+          // Estimate the sky from the smaller of the occluded and the open parts (the open
+          // part alone: no hit's direction is needed).
           if (occluded_sky > static_cast<int>(sky.size())) {
             cv_mode[i] = 0;
             out.insert(out.end(), sky.begin(), sky.end());
-            rising.resize(out.size(), 0);
+            rising.assign(out.size(), 0);
           }
           out.shrink_to_fit();
           rising.shrink_to_fit();
