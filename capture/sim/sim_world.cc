@@ -1,6 +1,5 @@
 #include "capture/sim/sim_world.h"
 
-#include <embree3/rtcore.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -11,6 +10,7 @@
 #include <map>
 #include <string>
 
+#include "capture/sim/ray_scene.h"
 #include "capture/sim/sim_scene.h"
 #include "core/angles.h"
 #include "core/error.h"
@@ -82,9 +82,7 @@ struct SimWorld::Impl {
   SimWorldOptions opt;
   sim::SceneGeometry scene;
   std::unique_ptr<Atmosphere> atmosphere;
-  RTCDevice device = nullptr;
-  RTCScene rtc = nullptr;
-  std::vector<int> tri_patch;
+  std::unique_ptr<sim::RayScene> rays;
 
   int n_texels = 0, strata = 0, n_samples = 0, sun_strata = 0, bounces = 0;
   std::vector<int> texel_patch;
@@ -103,63 +101,15 @@ struct SimWorld::Impl {
   std::shared_ptr<const State> cur;
   SimWorldStats stats;
 
-  ~Impl() {
-    if (rtc) rtcReleaseScene(rtc);
-    if (device) rtcReleaseDevice(device);
-  }
-
   const State& S() const {
     if (!cur) throw Error("SimWorld: SetTime() has not been called");
     return *cur;
   }
 
-  // --- ray casting ---
-  struct Hit {
-    int patch = -1;
-    double t = kInf;
-  };
-  Hit Trace(const Eigen::Vector3d& o, const Eigen::Vector3d& d) const {
-    RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    RTCRayHit rh;
-    rh.ray.org_x = static_cast<float>(o.x());
-    rh.ray.org_y = static_cast<float>(o.y());
-    rh.ray.org_z = static_cast<float>(o.z());
-    rh.ray.dir_x = static_cast<float>(d.x());
-    rh.ray.dir_y = static_cast<float>(d.y());
-    rh.ray.dir_z = static_cast<float>(d.z());
-    rh.ray.tnear = 0.0f;
-    rh.ray.tfar = std::numeric_limits<float>::infinity();
-    rh.ray.mask = ~0u;
-    rh.ray.flags = 0;
-    rh.ray.time = 0.0f;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(rtc, &ctx, &rh);
-    Hit h;
-    if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) {
-      h.patch = tri_patch[rh.hit.primID];
-      h.t = rh.ray.tfar;
-    }
-    return h;
-  }
+  using Hit = sim::RayHit;
+  Hit Trace(const Eigen::Vector3d& o, const Eigen::Vector3d& d) const { return rays->Trace(o, d); }
   bool Occluded(const Eigen::Vector3d& o, const Eigen::Vector3d& d) const {
-    RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    RTCRay ray;
-    ray.org_x = static_cast<float>(o.x());
-    ray.org_y = static_cast<float>(o.y());
-    ray.org_z = static_cast<float>(o.z());
-    ray.dir_x = static_cast<float>(d.x());
-    ray.dir_y = static_cast<float>(d.y());
-    ray.dir_z = static_cast<float>(d.z());
-    ray.tnear = 0.0f;
-    ray.tfar = std::numeric_limits<float>::infinity();
-    ray.mask = ~0u;
-    ray.flags = 0;
-    ray.time = 0.0f;
-    rtcOccluded1(rtc, &ctx, &ray);
-    return ray.tfar < 0;
+    return rays->Occluded(o, d);
   }
 
   // Cosine-weighted, stratified direction k of texel i (reproducible from (i, k)).
@@ -348,49 +298,7 @@ void SimWorld::Impl::Setup() {
   scene = sim::BuildScene(sizes);
   atmosphere = std::make_unique<Atmosphere>(opt.atmosphere);
 
-  // Embree scene: every patch as one or two triangles.
-  device = rtcNewDevice(nullptr);
-  if (!device) throw Error("SimWorld: cannot create an Embree device");
-  rtc = rtcNewScene(device);
-  rtcSetSceneFlags(rtc, RTC_SCENE_FLAG_ROBUST);
-  rtcSetSceneBuildQuality(rtc, RTC_BUILD_QUALITY_HIGH);
-  std::vector<Eigen::Vector3f> verts;
-  std::vector<Eigen::Vector3i> tris;
-  for (size_t i = 0; i < scene.patches.size(); ++i) {
-    const sim::Patch& p = scene.patches[i];
-    const int b = static_cast<int>(verts.size());
-    if (p.triangle) {
-      verts.push_back(p.o.cast<float>());
-      verts.push_back(p.Point(p.su, 0).cast<float>());
-      verts.push_back(p.Point(p.apex_s, p.sv).cast<float>());
-      tris.emplace_back(b, b + 1, b + 2);
-      tri_patch.push_back(static_cast<int>(i));
-    } else {
-      verts.push_back(p.o.cast<float>());
-      verts.push_back(p.Point(p.su, 0).cast<float>());
-      verts.push_back(p.Point(p.su, p.sv).cast<float>());
-      verts.push_back(p.Point(0, p.sv).cast<float>());
-      tris.emplace_back(b, b + 1, b + 2);
-      tris.emplace_back(b, b + 2, b + 3);
-      tri_patch.push_back(static_cast<int>(i));
-      tri_patch.push_back(static_cast<int>(i));
-    }
-  }
-  RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-  auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(
-      geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), verts.size()));
-  auto* ib = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
-      geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), tris.size()));
-  for (size_t i = 0; i < verts.size(); ++i) {
-    for (int c = 0; c < 3; ++c) vb[3 * i + c] = verts[i][c];
-  }
-  for (size_t i = 0; i < tris.size(); ++i) {
-    for (int c = 0; c < 3; ++c) ib[3 * i + c] = static_cast<unsigned>(tris[i][c]);
-  }
-  rtcCommitGeometry(geom);
-  rtcAttachGeometry(rtc, geom);
-  rtcReleaseGeometry(geom);
-  rtcCommitScene(rtc);
+  rays = std::make_unique<sim::RayScene>(scene.patches);
 
   // Lighting texels.
   for (const sim::Patch& p : scene.patches) n_texels += p.nu * p.nv;
@@ -426,9 +334,17 @@ void SimWorld::Impl::Setup() {
           std::vector<uint8_t>& rising = per_rising[i];
           sky.clear();
           int back = 0, occluded_sky = 0;
+          Eigen::Vector3d dirs[sim::RayScene::kPacket];
+          Hit hits[sim::RayScene::kPacket];
           for (int k = 0; k < n_samples; ++k) {
-            const Eigen::Vector3d d = SampleDir(i, k);
-            const Hit h = Trace(o, d);
+            const int lane = k % sim::RayScene::kPacket;
+            if (lane == 0) {
+              const int m = std::min(sim::RayScene::kPacket, n_samples - k);
+              for (int j = 0; j < m; ++j) dirs[j] = SampleDir(i, k + j);
+              rays->TracePacket(o, dirs, m, hits);
+            }
+            const Eigen::Vector3d& d = dirs[lane];
+            const Hit& h = hits[lane];
             if (h.patch >= 0) {
               const sim::Patch& hp = scene.patches[h.patch];
               if (d.dot(hp.n) > 0) ++back;
@@ -779,7 +695,7 @@ Image SimWorld::RenderBlockIds(const Intrinsics& k, const Pose& pose) const {
       for (int x = 0; x < k.width; ++x) {
         if (!InsideImage(k, x + 0.5, y + 0.5)) continue;
         const Eigen::Vector3d d = pose.rotation * Unproject(k, Eigen::Vector2d(x + 0.5, y + 0.5));
-        const Impl::Hit h = im.Trace(pose.position, d);
+        const sim::RayHit h = im.Trace(pose.position, d);
         int id = -1;
         if (h.patch >= 0) {
           const sim::Patch& p = im.scene.patches[h.patch];
