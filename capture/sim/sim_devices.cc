@@ -81,39 +81,51 @@ int SimCamera::ViewCount(Target target) const {
   }
 }
 
-void SimCamera::Aim(Target target, int view) {
+void SimCamera::CheckView(Target target, int view) const {
   if (view < 0 || view >= ViewCount(target)) {
     throw DeviceError(std::string("sim0: target ") + TargetName(target) + " has no view " +
                       std::to_string(view));
   }
+}
+
+void SimCamera::Aim(Target target, int view) {
+  CheckView(target, view);
   target_ = target;
   view_ = view;
 }
 
 SimView SimCamera::CurrentView() {
   world_->SetTime(clock_->SlotTime());
-  switch (target_) {
+  return ViewAt(target_, view_);
+}
+
+SimView SimCamera::ViewAt(Target target, int view) {
+  switch (target) {
     case Target::kSun:
       return world_->SunView();
     case Target::kAureole:
     case Target::kSky:
       return world_->SkyView();
     case Target::kLandscape:
-      return world_->LandscapeViews()[view_];
+      return world_->LandscapeViews()[view];
     case Target::kArchitecture:
-      return world_->ArchitectureViews(quick_)[view_];
+      return world_->ArchitectureViews(quick_)[view];
     case Target::kCalibration:
       return world_->ArchitectureViews(quick_)[0];
   }
   return world_->ArchitectureViews(quick_)[0];
 }
 
-const Image& SimCamera::CurrentRadiance() {
-  const SimView v = CurrentView();
+const Image& SimCamera::CurrentRadiance() { return Radiance(target_, view_, clock_->SlotTime()); }
+
+const Image& SimCamera::Radiance(Target target, int view, UtcTime slot) {
+  CheckView(target, view);
+  world_->SetTime(slot);
+  const SimView v = ViewAt(target, view);
   // Aureole frames show the same sky as sky frames.
   const int t =
-      target_ == Target::kAureole ? static_cast<int>(Target::kSky) : static_cast<int>(target_);
-  const auto key = std::make_tuple(t, view_, clock_->SlotTime().ns);
+      target == Target::kAureole ? static_cast<int>(Target::kSky) : static_cast<int>(target);
+  const auto key = std::make_tuple(t, view, slot.ns);
   auto it = cache_.find(key);
   if (it == cache_.end()) {
     it = cache_.emplace(key, world_->RenderRadiance(v.intrinsics, v.pose)).first;

@@ -59,6 +59,9 @@ class SimCamera : public Camera {
   SimView CurrentView();
   // The true radiance the next Grab() exposes (cached).
   const Image& CurrentRadiance();
+  // The true radiance a view of a target shows at a slot's instant, as the frames aimed there
+  // expose it (cached: rendered once per target, view and slot). Makes `slot` the world's time.
+  const Image& Radiance(Target target, int view, UtcTime slot);
 
   static constexpr double kMinExposure = 1.0 / 8000, kMaxExposure = 30.0;
   static constexpr double kMinGain = 1.0, kMaxGain = 16.0;
@@ -73,6 +76,8 @@ class SimCamera : public Camera {
   Target target_ = Target::kArchitecture;
   int view_ = 0;
   uint64_t frames_ = 0;
+  void CheckView(Target target, int view) const;  // throws DeviceError for no such view
+  SimView ViewAt(Target target, int view);        // at the world's current time
   std::map<std::tuple<int, int, int64_t>, Image> cache_;
 };
 
