@@ -96,6 +96,14 @@ struct SimWorld::Impl {
   // estimated as unoccluded minus occluded (cv_mode 1), the only hits whose direction the sky
   // estimate needs (time independent, so found once by Setup).
   std::vector<uint64_t> rec_rising;
+  // What each new time needs of a record, found once: the sky angles of the records whose sky
+  // the estimate sums (sky records, rising hits of bit set), and the ground point (x, y) of
+  // far records (x NaN: the sample sees the horizon's sky instead), each in record order from
+  // its texel's begin. Per texel, the sum of the ground's albedo over its far ground points.
+  std::vector<int64_t> sky_begin, far_begin;  // n_texels + 1
+  std::vector<SkyAngles> sky_angles;
+  std::vector<Eigen::Vector2f> far_points;
+  std::vector<Eigen::Vector3d> far_albedo;
 
   std::map<int64_t, std::shared_ptr<const State>> cache;
   std::shared_ptr<const State> cur;
@@ -136,14 +144,15 @@ struct SimWorld::Impl {
   // shadow ray where a building's shadow can reach).
   Eigen::Vector3d FarGround(const State& s, const Eigen::Vector3d& p) const {
     Eigen::Vector3d e = s.sky_h;
-    if (s.sun_dir.z() > 0) {
-      bool lit = true;
-      if (std::hypot(p.x(), p.y()) < s.shadow_reach_m) {
-        lit = !Occluded(Eigen::Vector3d(p.x(), p.y(), kEps), s.sun_dir);
-      }
-      if (lit) e += s.sun_irr * s.sun_dir.z();
-    }
+    if (GroundSunlit(s, p.x(), p.y())) e += s.sun_irr * s.sun_dir.z();
     return sim::MaterialAlbedo(sim::kGround, p).cwiseProduct(e) / kPi;
+  }
+  // Whether the sun is up and lights the ground at (x, y) (a shadow ray only where a
+  // building's shadow can reach).
+  bool GroundSunlit(const State& s, double x, double y) const {
+    if (s.sun_dir.z() <= 0) return false;
+    return std::hypot(x, y) >= s.shadow_reach_m ||
+           !Occluded(Eigen::Vector3d(x, y, kEps), s.sun_dir);
   }
 
   Eigen::Vector3d IndirectAt(const State& s, const sim::Patch& p, double u, double v) const {
@@ -386,6 +395,47 @@ void SimWorld::Impl::Setup() {
     std::vector<uint8_t>().swap(per_rising[i]);
   }
 
+  sky_begin.assign(n_texels + 1, 0);
+  far_begin.assign(n_texels + 1, 0);
+  for (int i = 0; i < n_texels; ++i) {
+    int64_t sky = 0, far = 0;
+    for (int64_t r = rec_begin[i]; r < rec_begin[i + 1]; ++r) {
+      const uint32_t target = records[r] >> kSampleBits;
+      if (target == kTargetFar) ++far;
+      if (target == kTargetSky || (target < kTargetSky && (rec_rising[r / 64] >> (r % 64) & 1)))
+        ++sky;
+    }
+    sky_begin[i + 1] = sky_begin[i] + sky;
+    far_begin[i + 1] = far_begin[i] + far;
+  }
+  sky_angles.resize(sky_begin[n_texels]);
+  far_points.resize(far_begin[n_texels]);
+  far_albedo.assign(n_texels, Eigen::Vector3d::Zero());
+  tbb::parallel_for(
+      tbb::blocked_range<int>(0, n_texels, 256), [&](const tbb::blocked_range<int>& r) {
+        for (int i = r.begin(); i != r.end(); ++i) {
+          const Eigen::Vector3d o = texel_pos[i] + scene.patches[texel_patch[i]].n * kEps;
+          int64_t sk = sky_begin[i], fk = far_begin[i];
+          for (int64_t r2 = rec_begin[i]; r2 < rec_begin[i + 1]; ++r2) {
+            const uint32_t target = records[r2] >> kSampleBits;
+            const bool sky = target == kTargetSky || (rec_rising[r2 / 64] >> (r2 % 64) & 1);
+            if (target != kTargetFar && !sky) continue;
+            const Eigen::Vector3d d = SampleDir(i, static_cast<int>(records[r2] & kSampleMask));
+            if (target == kTargetFar) {
+              Eigen::Vector2f& g = far_points[fk++];
+              g = Eigen::Vector2f::Constant(std::numeric_limits<float>::quiet_NaN());
+              if (d.z() < -1e-9 && o.z() > 0) {
+                const Eigen::Vector3d p = o + (-o.z() / d.z()) * d;
+                g = Eigen::Vector2f(static_cast<float>(p.x()), static_cast<float>(p.y()));
+                far_albedo[i] += sim::MaterialAlbedo(sim::kGround, p);
+              }
+            } else {
+              sky_angles[sk++] = SkyAngles::Of(d);
+            }
+          }
+        }
+      });
+
   // Texels inside solids (plaza under the tower, ground under blocks) take the values of
   // the nearest valid texel of their patch.
   proxy.resize(n_texels);
@@ -462,6 +512,9 @@ std::shared_ptr<const State> SimWorld::Impl::Compute(UtcTime t) const {
 
   const int n = n_texels;
   const double w = kPi / n_samples;  // cosine-weighted estimator weight
+  const bool sun_up = s.sun_dir.z() > 0;
+  const Eigen::Vector3d sun_h = sun_up ? Eigen::Vector3d(s.sun_irr * s.sun_dir.z())
+                                       : Eigen::Vector3d::Zero();  // on the ground
   s.e_direct.assign(n, Eigen::Vector3f::Zero());
   std::vector<Eigen::Vector3d> e_sky(n), e_far(n), e_bounce(n, Eigen::Vector3d::Zero());
   tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& r) {
@@ -489,28 +542,29 @@ std::shared_ptr<const State> SimWorld::Impl::Compute(UtcTime t) const {
         }
         if (outside > 0) s.e_direct[i] = (s.sun_irr * (c * visible / outside)).cast<float>();
       }
-      // Sky (with occlusion) and the analytic far ground.
+      // Sky (with occlusion) and the analytic far ground: its albedo over the sky's and the
+      // sun's irradiance, less the sun on the points in a building's shadow.
       Eigen::Vector3d occluded = Eigen::Vector3d::Zero(), open = Eigen::Vector3d::Zero(),
-                      far = Eigen::Vector3d::Zero();
+                      far = Eigen::Vector3d::Zero(), shadowed = Eigen::Vector3d::Zero();
+      int64_t sk = sky_begin[i], fk = far_begin[i];
       for (int64_t r2 = rec_begin[i]; r2 < rec_begin[i + 1]; ++r2) {
         const uint32_t rec = records[r2];
         const uint32_t target = rec >> kSampleBits;
-        const int k = static_cast<int>(rec & kSampleMask);
         if (target == kTargetFar) {
-          const Eigen::Vector3d d = SampleDir(i, k);
-          const Eigen::Vector3d o = texel_pos[i] + p.n * kEps;
-          if (d.z() < -1e-9 && o.z() > 0) {
-            far += FarGround(s, o + (-o.z() / d.z()) * d);
-          } else {
-            far += s.sky.Radiance(d);
+          const Eigen::Vector2f& g = far_points[fk++];
+          if (std::isnan(g.x())) {
+            far += s.sky.Radiance(SampleDir(i, static_cast<int>(rec & kSampleMask)));
+          } else if (sun_up && !GroundSunlit(s, g.x(), g.y())) {
+            shadowed += sim::MaterialAlbedo(sim::kGround, Eigen::Vector3d(g.x(), g.y(), 0));
           }
         } else if (target == kTargetSky) {
-          open += s.sky.Radiance(SampleDir(i, k));
+          open += s.sky.Radiance(sky_angles[sk++]);
         } else if (rec_rising[r2 / 64] >> (r2 % 64) & 1) {
           // A hit: the sky behind it counts only above the horizon.
-          occluded += s.sky.Radiance(SampleDir(i, k));
+          occluded += s.sky.Radiance(sky_angles[sk++]);
         }
       }
+      far += (far_albedo[i].cwiseProduct(s.sky_h + sun_h) - shadowed.cwiseProduct(sun_h)) / kPi;
       e_sky[i] = cv_mode[i] ? Clamp0(unoccluded[texel_patch[i]] - w * occluded) : w * open;
       e_far[i] = w * far;
     }
