@@ -113,6 +113,12 @@ TEST(SimCameraTest, RadianceOfAViewIsWhatItsFramesExpose) {
   const SimView v = SimTestWorld().ArchitectureViews(true)[1];
   EXPECT_EQ(noon.data, SimTestWorld().RenderRadiance(v.intrinsics, v.pose).data);
   EXPECT_EQ(SimTestWorld().Time(), SimTestNoon());
+  // The target's other views, rendered meanwhile on other threads, are the world's renders too.
+  for (int other : {0, 2, 3}) {
+    const SimView ov = SimTestWorld().ArchitectureViews(true)[other];
+    EXPECT_EQ(cam.Radiance(Target::kArchitecture, other, SimTestNoon()).data,
+              SimTestWorld().RenderRadiance(ov.intrinsics, ov.pose).data);
+  }
   // The camera's own frames of that view and slot expose the same image.
   clock.JumpTo(SimTestNoon());
   cam.Aim(Target::kArchitecture, 1);

@@ -625,6 +625,8 @@ const Site& SimWorld::site() const { return impl_->opt.site; }
 const SimWorldStats& SimWorld::stats() const { return impl_->stats; }
 
 void SimWorld::SetTime(UtcTime t) {
+  // Already current: nothing written (renders of this time may be running on other threads).
+  if (impl_->cur && impl_->cur->t == t) return;
   auto it = impl_->cache.find(t.ns);
   if (it != impl_->cache.end()) {
     impl_->cur = it->second;
