@@ -396,15 +396,17 @@ void SimWorld::Impl::Setup() {
     std::vector<uint8_t>().swap(per_rising[i]);
   }
 
+  // Whether the sky estimate sums record r's sky (far records have no rising bit).
+  auto sums_sky = [&](int64_t r) {
+    return (records[r] >> kSampleBits) == kTargetSky || (rec_rising[r / 64] >> (r % 64) & 1);
+  };
   sky_begin.assign(n_texels + 1, 0);
   far_begin.assign(n_texels + 1, 0);
   for (int i = 0; i < n_texels; ++i) {
     int64_t sky = 0, far = 0;
     for (int64_t r = rec_begin[i]; r < rec_begin[i + 1]; ++r) {
-      const uint32_t target = records[r] >> kSampleBits;
-      if (target == kTargetFar) ++far;
-      if (target == kTargetSky || (target < kTargetSky && (rec_rising[r / 64] >> (r % 64) & 1)))
-        ++sky;
+      if ((records[r] >> kSampleBits) == kTargetFar) ++far;
+      if (sums_sky(r)) ++sky;
     }
     sky_begin[i + 1] = sky_begin[i] + sky;
     far_begin[i + 1] = far_begin[i] + far;
@@ -419,8 +421,7 @@ void SimWorld::Impl::Setup() {
           int64_t sk = sky_begin[i], fk = far_begin[i];
           for (int64_t r2 = rec_begin[i]; r2 < rec_begin[i + 1]; ++r2) {
             const uint32_t target = records[r2] >> kSampleBits;
-            const bool sky = target == kTargetSky || (rec_rising[r2 / 64] >> (r2 % 64) & 1);
-            if (target != kTargetFar && !sky) continue;
+            if (target != kTargetFar && !sums_sky(r2)) continue;
             const Eigen::Vector3d d = SampleDir(i, static_cast<int>(records[r2] & kSampleMask));
             if (target == kTargetFar) {
               Eigen::Vector2f& g = far_points[fk++];
