@@ -18,6 +18,7 @@
 #include "core/angles.h"
 #include "core/error.h"
 #include "core/files.h"
+#include "core/session.h"
 #include "core/stats.h"
 #include "core/temporaries.h"
 #include "pipeline/capture_session.h"
@@ -244,7 +245,9 @@ void Run(const DemoArgs& a) {
       throw Error("demo: the validation did not render " + heldout_views[v]);
     const Image& rendered = photo->rendered_measured;
     const Image& rendered_predicted = photo->rendered_predicted;
-    Image truth = world->RenderRadiance(view.intrinsics, view.pose);
+    // The simulator's radiance of the photographed view (rendered for its frames).
+    Image truth = sim_cam->Radiance(Target::kArchitecture, ParseBracketName(heldout_views[v]).view,
+                                    rig.plan.slots.at(heldout));
     for (size_t k = 0; k < truth.data.size(); ++k) truth.data[k] /= to_truth[k % 3];
     const Image ids = world->RenderBlockIds(view.intrinsics, view.pose);
     std::vector<uint8_t> building(static_cast<size_t>(ids.width) * ids.height, 0);

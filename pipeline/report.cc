@@ -1,5 +1,7 @@
 #include "pipeline/report.h"
 
+#include <tbb/task_group.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -827,7 +829,53 @@ Image LatLong(const EnvironmentMap& env, int layer, F value) {
   return img;
 }
 
-void Environment(Page& p, const Inputs& in) {
+// The environment's photometric stereo from the slots the albedos used (held-out slots left
+// out), as rouen render fits it to predict a novel time; nothing when every slot is held out.
+std::optional<EnvStereoResult> FitStereo(const Inputs& in) {
+  std::vector<Lighting> measured;
+  for (size_t k = 0; k < in.slots.size(); ++k) {
+    if (in.holdout.count(static_cast<int>(k))) continue;
+    Lighting l;
+    l.utc = in.slots[k].utc;
+    l.sun_dir = in.slots[k].sun_dir;
+    l.sun_radiance = in.slots[k].sun_radiance;
+    l.sun_solid_angle_sr = in.slots[k].sun_solid_angle_sr;
+    l.sky = in.slots[k].sky;
+    l.sky.sun_dir = l.sun_dir;
+    l.env = in.slots[k].env;
+    measured.push_back(std::move(l));
+  }
+  if (measured.empty()) return std::nullopt;
+  EnvStereoOptions eo = RelightOptions{}.env;
+  if (in.scene.contains("environment") && in.scene["environment"].is_object())
+    eo.ground_retro = in.scene["environment"].value("ground_retro", 0.0);
+  return SolveEnvStereo(EnvObservationsOf(measured), eo);
+}
+
+// FitStereo run beside the report's first sections: its result or its error once Wait returns.
+class StereoFit {
+ public:
+  explicit StereoFit(const Inputs& in) {
+    group_.run([this, &in] {
+      try {
+        result_ = FitStereo(in);
+      } catch (const std::exception& e) {
+        error_ = e.what();
+      }
+    });
+  }
+  ~StereoFit() { group_.wait(); }
+  void Wait() { group_.wait(); }
+  const std::optional<EnvStereoResult>& result() const { return result_; }
+  const std::string& error() const { return error_; }
+
+ private:
+  tbb::task_group group_;
+  std::optional<EnvStereoResult> result_;
+  std::string error_;
+};
+
+void Environment(Page& p, const Inputs& in, StereoFit* stereo_fit) {
   p.Section("environment", "Environment");
   if (in.slots.empty()) {
     p.Absent("No slot could be read from scene.json: no environment map to show. " +
@@ -868,33 +916,16 @@ void Environment(Page& p, const Inputs& in) {
   p.html().EndRow();
 
   p.html().Heading("Photometric-stereo normals of the environment (§5.2)");
-  std::vector<Lighting> measured;
-  for (size_t k = 0; k < in.slots.size(); ++k) {
-    if (in.holdout.count(static_cast<int>(k))) continue;
-    Lighting l;
-    l.utc = in.slots[k].utc;
-    l.sun_dir = in.slots[k].sun_dir;
-    l.sun_radiance = in.slots[k].sun_radiance;
-    l.sun_solid_angle_sr = in.slots[k].sun_solid_angle_sr;
-    l.sky = in.slots[k].sky;
-    l.sky.sun_dir = l.sun_dir;
-    l.env = in.slots[k].env;
-    measured.push_back(std::move(l));
+  stereo_fit->Wait();
+  if (!stereo_fit->error().empty()) {
+    p.Absent("The environment's photometric stereo failed: " + stereo_fit->error());
+    return;
   }
-  if (measured.empty()) {
+  if (!stereo_fit->result()) {
     p.Absent("Every slot is held out: no environment normals to fit.");
     return;
   }
-  EnvStereoResult stereo;
-  try {
-    EnvStereoOptions eo = RelightOptions{}.env;
-    if (in.scene.contains("environment") && in.scene["environment"].is_object())
-      eo.ground_retro = in.scene["environment"].value("ground_retro", 0.0);
-    stereo = SolveEnvStereo(EnvObservationsOf(measured), eo);
-  } catch (const std::exception& e) {
-    p.Absent(std::string("The environment's photometric stereo failed: ") + e.what());
-    return;
-  }
+  const EnvStereoResult& stereo = *stereo_fit->result();
   p.html().Paragraph(
       "Not stored in the scene: fitted here from the environment maps of the slots the albedos "
       "used (held-out slots left out), as rouen render fits them to predict a novel time. " +
@@ -1267,6 +1298,9 @@ std::string BuildReport(const ReportRequest& request, ReportSummary* summary) {
   if (!in.slots.empty())
     subtitle +=
         ", captured " + in.slots.front().utc.Iso8601(0) + " to " + in.slots.back().utc.Iso8601(0);
+  // The environment's photometric stereo, the report's longest computation, fitted while the
+  // sections before it are written.
+  StereoFit stereo_fit(in);
   HtmlReport html("rouen scene report", subtitle);
   Page page(&html, &sum);
   // Each section on its own: one that fails says so and the others still come.
@@ -1285,7 +1319,7 @@ std::string BuildReport(const ReportRequest& request, ReportSummary* summary) {
   section("sunpath", "Sun path and capture times", [&] { SunPath(page, in); });
   section("response", "Camera response", [&] { Response(page, in); });
   section("sky", "Sky fits", [&] { Sky(page, request, in); });
-  section("environment", "Environment", [&] { Environment(page, in); });
+  section("environment", "Environment", [&] { Environment(page, in, &stereo_fit); });
   section("albedo", "Albedos", [&] { Albedo(page, in); });
   section("validation", "Validation", [&] { Validations(page, request, in); });
   section("timings", "Timings", [&] { Timings(page, in); });

@@ -30,6 +30,12 @@ double MiePhase(double c, double g) {
   return 3.0 / (8.0 * kPi) * (1.0 - g2) * (1.0 + c * c) / denom;
 }
 
+// A direction's elevation (rad, clamped to [0, pi/2]) and azimuth (rad from north through east).
+Eigen::Vector2d ElevationAzimuth(const Eigen::Vector3d& dir) {
+  return Eigen::Vector2d(std::asin(std::clamp(dir.z() / dir.norm(), 0.0, 1.0)),
+                         std::atan2(dir.x(), dir.y()));
+}
+
 double HorizonMu(double r, double earth_radius) {
   const double q = earth_radius / r;
   return -std::sqrt(std::max(0.0, 1.0 - q * q));
@@ -326,14 +332,25 @@ Eigen::Vector3d SkyTable::Lookup(const std::vector<Eigen::Vector3f>& t, double e
          a * ((1 - b) * at(i0 + 1, j0) + b * at(i0 + 1, j0 + 1));
 }
 
-Eigen::Vector3d SkyTable::Radiance(const Eigen::Vector3d& dir) const {
+SkyAngles SkyAngles::Of(const Eigen::Vector3d& dir) {
+  const Eigen::Vector2d a = ElevationAzimuth(dir);
+  return {static_cast<float>(a[0]), static_cast<float>(a[1])};
+}
+
+Eigen::Vector3d SkyTable::RadianceAt(double el, double az) const {
   if (radiance_.empty()) return Eigen::Vector3d::Zero();
-  const double n = dir.norm();
-  if (!(n > 0)) return Eigen::Vector3d::Zero();
-  const double el = std::asin(std::clamp(dir.z() / n, 0.0, 1.0));
-  const double az = std::atan2(dir.x(), dir.y());
   const double dphi = std::abs(std::remainder(az - sun_az_, 2 * kPi));
   return Lookup(radiance_, el, dphi);
+}
+
+Eigen::Vector3d SkyTable::Radiance(const Eigen::Vector3d& dir) const {
+  if (!(dir.norm() > 0)) return Eigen::Vector3d::Zero();
+  const Eigen::Vector2d a = ElevationAzimuth(dir);
+  return RadianceAt(a[0], a[1]);
+}
+
+Eigen::Vector3d SkyTable::Radiance(const SkyAngles& angles) const {
+  return RadianceAt(angles.elevation, angles.azimuth);
 }
 
 Eigen::Vector3d SkyTable::PlaneIrradiance(const Eigen::Vector3d& n) const {

@@ -76,6 +76,14 @@ class Atmosphere {
   std::vector<Eigen::Vector2f> table_;  // density integrals (Rayleigh, Mie), metres
 };
 
+// Where SkyTable looks a unit ENU direction up: its elevation (rad, 0 for directions below the
+// horizon) and azimuth (rad from north through east), rounded to float. The same for every sun,
+// so a direction's angles can be found once for many skies.
+struct SkyAngles {
+  float elevation = 0, azimuth = 0;
+  static SkyAngles Of(const Eigen::Vector3d& dir);
+};
+
 // The clear sky for one sun position: single + approximate multiple scattering tabulated over
 // view elevation (dense near the horizon) and azimuth relative to the sun, bilinear between.
 class SkyTable {
@@ -88,12 +96,15 @@ class SkyTable {
   // Radiance (W m^-2 sr^-1 per band) towards a unit ENU direction. Directions below the
   // horizon return the horizon value (the world puts ground there).
   Eigen::Vector3d Radiance(const Eigen::Vector3d& dir) const;
+  // The same for a direction's angles (equal to Radiance(dir) up to their float rounding).
+  Eigen::Vector3d Radiance(const SkyAngles& angles) const;
   // Irradiance on a plane with unit normal n from the unoccluded sky above the horizon.
   Eigen::Vector3d PlaneIrradiance(const Eigen::Vector3d& n) const;
   Eigen::Vector3d HorizontalIrradiance() const { return horizontal_; }
 
  private:
   Eigen::Vector3d Lookup(const std::vector<Eigen::Vector3f>& t, double el, double dphi) const;
+  Eigen::Vector3d RadianceAt(double el, double az) const;
   int ne_ = 0, na_ = 0;
   Eigen::Vector3d sun_dir_ = Eigen::Vector3d::UnitZ();
   double sun_az_ = 0;

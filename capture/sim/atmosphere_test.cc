@@ -92,6 +92,22 @@ TEST(AtmosphereTest, SkyIsBluerThanSunAndBrightensTowardsTheSun) {
   EXPECT_LT(horizon[2] / horizon[0], zenith[2] / zenith[0]);
 }
 
+// Looked up by a direction's float angles, the sky differs from the lookup by the direction
+// only by that rounding: at most 2^-24 pi rad of azimuth (a 1e-5 fraction of the table's 1 deg
+// cells) and a 2^-24 fraction of the elevation (a smaller one of its cells), so by at most
+// 2e-5 of the difference between neighbouring table values, here bounded by the radiance.
+TEST(AtmosphereTest, LookupByAnglesIsTheLookupByDirection) {
+  const SkyTable sky(Atm(), 60, Dir(200, 8), Atm().params().solar_toa);
+  for (double el = -5; el <= 90; el += 0.37) {
+    for (double az = 0; az < 360; az += 0.53) {
+      const Eigen::Vector3d d = Dir(az, el);
+      const Eigen::Vector3d by_dir = sky.Radiance(d), by_angles = sky.Radiance(SkyAngles::Of(d));
+      for (int c = 0; c < 3; ++c)
+        ASSERT_NEAR(by_angles[c], by_dir[c], 2e-5 * by_dir[c]) << "az " << az << " el " << el;
+    }
+  }
+}
+
 TEST(AtmosphereTest, PlaneIrradianceMatchesIndependentQuadrature) {
   const SkyTable sky(Atm(), 60, Dir(140, 35), Atm().params().solar_toa);
   // Cosine-weighted stratified quadrature for a tilted plane: directions below its horizon

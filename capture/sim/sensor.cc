@@ -4,7 +4,9 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include "core/angles.h"
@@ -33,6 +35,26 @@ SimSensor::SimSensor(const SensorParams& params) : p_(params) {
     black_pow_[c] = std::pow(p_.black[c], p_.gamma[c]);
     curve_scale_[c] = std::pow(1.0 + p_.black[c], p_.gamma[c]) - black_pow_[c];
   }
+  // Bisection over the floats of [0, 1], ordered as their bit patterns.
+  const uint32_t one = std::bit_cast<uint32_t>(1.0f);
+  for (int c = 0; c < 3; ++c) {
+    for (int k = 1; k <= 255; ++k) {
+      uint32_t lo = 0, hi = one + 1;  // the answer is in [lo, hi]; hi: none reaches k
+      while (lo < hi) {
+        const uint32_t mid = lo + (hi - lo) / 2;
+        if (Quantised(c, std::bit_cast<float>(mid)) >= k)
+          hi = mid;
+        else
+          lo = mid + 1;
+      }
+      dn_threshold_[c].push_back(lo > one ? std::numeric_limits<float>::infinity()
+                                          : std::bit_cast<float>(lo));
+    }
+  }
+}
+
+double SimSensor::Quantised(int c, float x) const {
+  return std::clamp(std::floor(Curve(c, x) + 0.5), 0.0, 255.0);
 }
 
 double SimSensor::Curve(int c, double x) const {
@@ -122,14 +144,15 @@ Image SimSensor::Capture(const Image& radiance, double exposure_s, double gain, 
                          uint64_t seed) const {
   Image out = CaptureLinear(radiance, exposure_s, gain, nd_density, seed);
   out.units = PixelUnits::kDigital;
-  // The response and quantisation, pixel by pixel (rows in parallel, as the noise above).
+  // The response and quantisation, pixel by pixel (rows in parallel, as the noise above):
+  // Quantised(c, x), found among the thresholds.
   const size_t row = static_cast<size_t>(out.width) * 3;
   tbb::parallel_for(
       tbb::blocked_range<int>(0, out.height, 8), [&](const tbb::blocked_range<int>& r) {
         for (size_t i = r.begin() * row; i < r.end() * row; ++i) {
-          const int c = static_cast<int>(i % 3);
+          const std::vector<float>& t = dn_threshold_[i % 3];
           out.data[i] =
-              static_cast<float>(std::clamp(std::floor(Curve(c, out.data[i]) + 0.5), 0.0, 255.0));
+              static_cast<float>(std::upper_bound(t.begin(), t.end(), out.data[i]) - t.begin());
         }
       });
   return out;

@@ -5,6 +5,7 @@
 
 #include <array>
 #include <cstdint>
+#include <vector>
 
 #include "core/image.h"
 #include "core/response_curve.h"
@@ -61,6 +62,11 @@ class SimSensor {
   SensorParams p_;
   // Per channel, from p_: b^gamma and (1 + b)^gamma - b^gamma (the curve's toe and scale).
   std::array<double, 3> black_pow_{}, curve_scale_{};
+  // Per channel, element k - 1: the least float signal whose digital value (the curve rounded
+  // to an integer) is at least k, k = 1..255; the curve rises, so a signal's digital value is
+  // the number of these it reaches.
+  std::array<std::vector<float>, 3> dn_threshold_;
+  double Quantised(int c, float x) const;  // the curve rounded to 0..255
 };
 
 }  // namespace rouen

@@ -2,7 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include "core/error.h"
 
@@ -35,6 +37,31 @@ TEST(SensorTest, CurveIsMonotoneFromBlackToWhiteAndNotAGamma) {
   }
   // Channels differ slightly.
   EXPECT_NE(s.Curve(0, 0.1), s.Curve(1, 0.1));
+}
+
+// Capture quantises through thresholds found once; the reference is the curve at each noisy
+// signal rounded to an integer. The curve rises strictly from one float signal to the next, so
+// the two agree exactly, at every digital value (a ramp from black to beyond saturation).
+TEST(SensorTest, QuantisationIsTheRoundedCurve) {
+  const SimSensor s;
+  Image ramp(1024, 64, 3, PixelUnits::kRadiance);
+  for (int y = 0; y < ramp.height; ++y)
+    for (int x = 0; x < ramp.width; ++x)
+      for (int c = 0; c < 3; ++c)
+        ramp.at(x, y, c) = static_cast<float>(300.0 * std::pow((x + 0.5) / ramp.width, 3.0) *
+                                              (1 + 0.01 * y) * (1 + 0.1 * c));
+  for (uint64_t seed : {1, 2, 3}) {
+    const Image linear = s.CaptureLinear(ramp, 0.002, 1.0, 0.0, seed);
+    const Image digital = s.Capture(ramp, 0.002, 1.0, 0.0, seed);
+    std::vector<int> seen(256, 0);
+    for (size_t i = 0; i < digital.data.size(); ++i) {
+      const double expected = std::clamp(
+          std::floor(s.Curve(static_cast<int>(i % 3), linear.data[i]) + 0.5), 0.0, 255.0);
+      ASSERT_EQ(digital.data[i], expected) << "value " << i << ", signal " << linear.data[i];
+      ++seen[static_cast<int>(expected)];
+    }
+    for (int dn = 0; dn < 256; ++dn) EXPECT_GT(seen[dn], 0) << "digital value " << dn;
+  }
 }
 
 TEST(SensorTest, TrueLogExposureInvertsTheNoiseFreeResponse) {

@@ -1,5 +1,7 @@
 #include "capture/sim/sim_devices.h"
 
+#include <tbb/task_group.h>
+
 #include <algorithm>
 #include <cmath>
 #include <string>
@@ -36,10 +38,47 @@ void SimClock::Advance(double seconds) {
   now_ = now_.PlusSeconds(seconds);
 }
 
+struct SimCamera::Pending {
+  std::map<std::tuple<int, int, int64_t>, Image>* cache;
+  std::map<std::tuple<int, int, int64_t>, std::unique_ptr<tbb::task_group>> renders;
+  // Waits for the render of `key` if one is running; on its error, drops its cache entry and
+  // rethrows.
+  void Wait(const std::tuple<int, int, int64_t>& key) {
+    const auto it = renders.find(key);
+    if (it == renders.end()) return;
+    const std::unique_ptr<tbb::task_group> group = std::move(it->second);
+    renders.erase(it);
+    try {
+      group->wait();
+    } catch (...) {
+      cache->erase(key);
+      throw;
+    }
+  }
+  void WaitAll() {
+    while (!renders.empty()) Wait(renders.begin()->first);
+  }
+};
+
 SimCamera::SimCamera(std::shared_ptr<SimWorld> world, SimClock* clock, bool quick, uint64_t seed,
                      const SensorParams& sensor)
-    : world_(std::move(world)), clock_(clock), quick_(quick), seed_(seed), sensor_(sensor) {
+    : world_(std::move(world)),
+      clock_(clock),
+      quick_(quick),
+      seed_(seed),
+      sensor_(sensor),
+      pending_(std::make_unique<Pending>(Pending{&cache_, {}})) {
   if (!world_ || !clock_) throw Error("sim camera: needs a world and a clock");
+}
+
+SimCamera::~SimCamera() {
+  for (auto& [key, group] : pending_->renders) {
+    try {
+      group->wait();
+    } catch (...) {
+      // An image no frame will use.
+    }
+  }
 }
 
 std::vector<ControlInfo> SimCamera::Controls() const {
@@ -81,42 +120,65 @@ int SimCamera::ViewCount(Target target) const {
   }
 }
 
-void SimCamera::Aim(Target target, int view) {
+void SimCamera::CheckView(Target target, int view) const {
   if (view < 0 || view >= ViewCount(target)) {
     throw DeviceError(std::string("sim0: target ") + TargetName(target) + " has no view " +
                       std::to_string(view));
   }
+}
+
+void SimCamera::Aim(Target target, int view) {
+  CheckView(target, view);
   target_ = target;
   view_ = view;
 }
 
 SimView SimCamera::CurrentView() {
   world_->SetTime(clock_->SlotTime());
-  switch (target_) {
+  return ViewAt(target_, view_);
+}
+
+SimView SimCamera::ViewAt(Target target, int view) {
+  switch (target) {
     case Target::kSun:
       return world_->SunView();
     case Target::kAureole:
     case Target::kSky:
       return world_->SkyView();
     case Target::kLandscape:
-      return world_->LandscapeViews()[view_];
+      return world_->LandscapeViews()[view];
     case Target::kArchitecture:
-      return world_->ArchitectureViews(quick_)[view_];
+      return world_->ArchitectureViews(quick_)[view];
     case Target::kCalibration:
       return world_->ArchitectureViews(quick_)[0];
   }
   return world_->ArchitectureViews(quick_)[0];
 }
 
-const Image& SimCamera::CurrentRadiance() {
-  const SimView v = CurrentView();
+const Image& SimCamera::CurrentRadiance() { return Radiance(target_, view_, clock_->SlotTime()); }
+
+const Image& SimCamera::Radiance(Target target, int view, UtcTime slot) {
+  CheckView(target, view);
   // Aureole frames show the same sky as sky frames.
   const int t =
-      target_ == Target::kAureole ? static_cast<int>(Target::kSky) : static_cast<int>(target_);
-  const auto key = std::make_tuple(t, view_, clock_->SlotTime().ns);
+      target == Target::kAureole ? static_cast<int>(Target::kSky) : static_cast<int>(target);
+  const auto key = std::make_tuple(t, view, slot.ns);
+  pending_->Wait(key);
   auto it = cache_.find(key);
-  if (it == cache_.end()) {
-    it = cache_.emplace(key, world_->RenderRadiance(v.intrinsics, v.pose)).first;
+  if (it != cache_.end()) return it->second;
+  // The renders running use the world's current time: they end before it changes.
+  if (!world_->HasTime() || !(world_->Time() == slot)) pending_->WaitAll();
+  world_->SetTime(slot);
+  const SimView v = ViewAt(target, view);
+  it = cache_.emplace(key, world_->RenderRadiance(v.intrinsics, v.pose)).first;
+  for (int other = 0; other < ViewCount(target); ++other) {
+    const auto other_key = std::make_tuple(t, other, slot.ns);
+    if (cache_.count(other_key)) continue;
+    Image* out = &cache_[other_key];
+    const SimView ov = ViewAt(target, other);
+    auto group = std::make_unique<tbb::task_group>();
+    group->run([this, out, ov] { *out = world_->RenderRadiance(ov.intrinsics, ov.pose); });
+    pending_->renders.emplace(other_key, std::move(group));
   }
   return it->second;
 }

@@ -39,6 +39,7 @@ class SimCamera : public Camera {
   // `clock` must outlive the camera. `quick`: 320x240 architecture views.
   SimCamera(std::shared_ptr<SimWorld> world, SimClock* clock, bool quick, uint64_t seed,
             const SensorParams& sensor = {});
+  ~SimCamera() override;
 
   std::string Id() const override { return "sim0"; }
   std::vector<ControlInfo> Controls() const override;
@@ -59,6 +60,11 @@ class SimCamera : public Camera {
   SimView CurrentView();
   // The true radiance the next Grab() exposes (cached).
   const Image& CurrentRadiance();
+  // The true radiance a view of a target shows at a slot's instant, as the frames aimed there
+  // expose it (cached: rendered once per target, view and slot). Makes `slot` the world's time.
+  // The target's other views at that slot are rendered meanwhile on other threads, for the
+  // frames that follow (a capture takes every view of a target).
+  const Image& Radiance(Target target, int view, UtcTime slot);
 
   static constexpr double kMinExposure = 1.0 / 8000, kMaxExposure = 30.0;
   static constexpr double kMinGain = 1.0, kMaxGain = 16.0;
@@ -73,7 +79,11 @@ class SimCamera : public Camera {
   Target target_ = Target::kArchitecture;
   int view_ = 0;
   uint64_t frames_ = 0;
+  void CheckView(Target target, int view) const;  // throws DeviceError for no such view
+  SimView ViewAt(Target target, int view);        // at the world's current time
   std::map<std::tuple<int, int, int64_t>, Image> cache_;
+  struct Pending;  // the renders running for entries of cache_
+  std::unique_ptr<Pending> pending_;
 };
 
 // Fixes at the world's site with Gaussian noise (sigma per horizontal axis ~1.8 m, so about

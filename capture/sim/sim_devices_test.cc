@@ -104,6 +104,28 @@ TEST(SimCameraTest, GrabsFramesOfEachTargetAtTheSlotTime) {
   EXPECT_EQ(SimTestWorld().stats().times_computed, computed);
 }
 
+TEST(SimCameraTest, RadianceOfAViewIsWhatItsFramesExpose) {
+  SimClock clock(SimTestNoon());
+  SimCamera cam(World(), &clock, true, 1);
+  clock.JumpTo(SimTestEvening());
+  // Asked for another slot's view: the world's render of that view at that slot's instant.
+  const Image& noon = cam.Radiance(Target::kArchitecture, 1, SimTestNoon());
+  const SimView v = SimTestWorld().ArchitectureViews(true)[1];
+  EXPECT_EQ(noon.data, SimTestWorld().RenderRadiance(v.intrinsics, v.pose).data);
+  EXPECT_EQ(SimTestWorld().Time(), SimTestNoon());
+  // The target's other views, rendered meanwhile on other threads, are the world's renders too.
+  for (int other : {0, 2, 3}) {
+    const SimView ov = SimTestWorld().ArchitectureViews(true)[other];
+    EXPECT_EQ(cam.Radiance(Target::kArchitecture, other, SimTestNoon()).data,
+              SimTestWorld().RenderRadiance(ov.intrinsics, ov.pose).data);
+  }
+  // The camera's own frames of that view and slot expose the same image.
+  clock.JumpTo(SimTestNoon());
+  cam.Aim(Target::kArchitecture, 1);
+  EXPECT_EQ(&cam.CurrentRadiance(), &noon);
+  EXPECT_THROW(cam.Radiance(Target::kArchitecture, 4, SimTestNoon()), DeviceError);
+}
+
 TEST(SimCameraTest, SunFramesThroughNdAreUnsaturatedAndArchitectureIsMidRange) {
   SimClock clock(SimTestNoon());
   SimCamera cam(World(), &clock, true, 3);

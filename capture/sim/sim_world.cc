@@ -1,6 +1,6 @@
 #include "capture/sim/sim_world.h"
 
-#include <embree3/rtcore.h>
+#include <malloc.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -11,6 +11,7 @@
 #include <map>
 #include <string>
 
+#include "capture/sim/ray_scene.h"
 #include "capture/sim/sim_scene.h"
 #include "core/angles.h"
 #include "core/error.h"
@@ -82,9 +83,7 @@ struct SimWorld::Impl {
   SimWorldOptions opt;
   sim::SceneGeometry scene;
   std::unique_ptr<Atmosphere> atmosphere;
-  RTCDevice device = nullptr;
-  RTCScene rtc = nullptr;
-  std::vector<int> tri_patch;
+  std::unique_ptr<sim::RayScene> rays;
 
   int n_texels = 0, strata = 0, n_samples = 0, sun_strata = 0, bounces = 0;
   std::vector<int> texel_patch;
@@ -94,71 +93,32 @@ struct SimWorld::Impl {
   std::vector<uint8_t> cv_mode;    // 1: sky = unoccluded - occluded part
   std::vector<int64_t> rec_begin;  // n_texels + 1
   std::vector<uint32_t> records;
-  // Bit r: record r is a hit whose sample direction rises (d.z() > 0), the only hits whose
-  // direction the sky estimate needs (time independent, so found once by Setup).
+  // Bit r: record r is a hit whose sample direction rises (d.z() > 0) in a texel whose sky is
+  // estimated as unoccluded minus occluded (cv_mode 1), the only hits whose direction the sky
+  // estimate needs (time independent, so found once by Setup).
   std::vector<uint64_t> rec_rising;
+  // What each new time needs of a record, found once: the sky angles of the records whose sky
+  // the estimate sums (sky records, rising hits of bit set), and the ground point (x, y) of
+  // far records (x NaN: the sample sees the horizon's sky instead), each in record order from
+  // its texel's begin. Per texel, the sum of the ground's albedo over its far ground points.
+  std::vector<int64_t> sky_begin, far_begin;  // n_texels + 1
+  std::vector<SkyAngles> sky_angles;
+  std::vector<Eigen::Vector2f> far_points;
+  std::vector<Eigen::Vector3d> far_albedo;
 
   std::map<int64_t, std::shared_ptr<const State>> cache;
   std::shared_ptr<const State> cur;
   SimWorldStats stats;
-
-  ~Impl() {
-    if (rtc) rtcReleaseScene(rtc);
-    if (device) rtcReleaseDevice(device);
-  }
 
   const State& S() const {
     if (!cur) throw Error("SimWorld: SetTime() has not been called");
     return *cur;
   }
 
-  // --- ray casting ---
-  struct Hit {
-    int patch = -1;
-    double t = kInf;
-  };
-  Hit Trace(const Eigen::Vector3d& o, const Eigen::Vector3d& d) const {
-    RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    RTCRayHit rh;
-    rh.ray.org_x = static_cast<float>(o.x());
-    rh.ray.org_y = static_cast<float>(o.y());
-    rh.ray.org_z = static_cast<float>(o.z());
-    rh.ray.dir_x = static_cast<float>(d.x());
-    rh.ray.dir_y = static_cast<float>(d.y());
-    rh.ray.dir_z = static_cast<float>(d.z());
-    rh.ray.tnear = 0.0f;
-    rh.ray.tfar = std::numeric_limits<float>::infinity();
-    rh.ray.mask = ~0u;
-    rh.ray.flags = 0;
-    rh.ray.time = 0.0f;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(rtc, &ctx, &rh);
-    Hit h;
-    if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) {
-      h.patch = tri_patch[rh.hit.primID];
-      h.t = rh.ray.tfar;
-    }
-    return h;
-  }
+  using Hit = sim::RayHit;
+  Hit Trace(const Eigen::Vector3d& o, const Eigen::Vector3d& d) const { return rays->Trace(o, d); }
   bool Occluded(const Eigen::Vector3d& o, const Eigen::Vector3d& d) const {
-    RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    RTCRay ray;
-    ray.org_x = static_cast<float>(o.x());
-    ray.org_y = static_cast<float>(o.y());
-    ray.org_z = static_cast<float>(o.z());
-    ray.dir_x = static_cast<float>(d.x());
-    ray.dir_y = static_cast<float>(d.y());
-    ray.dir_z = static_cast<float>(d.z());
-    ray.tnear = 0.0f;
-    ray.tfar = std::numeric_limits<float>::infinity();
-    ray.mask = ~0u;
-    ray.flags = 0;
-    ray.time = 0.0f;
-    rtcOccluded1(rtc, &ctx, &ray);
-    return ray.tfar < 0;
+    return rays->Occluded(o, d);
   }
 
   // Cosine-weighted, stratified direction k of texel i (reproducible from (i, k)).
@@ -185,14 +145,15 @@ struct SimWorld::Impl {
   // shadow ray where a building's shadow can reach).
   Eigen::Vector3d FarGround(const State& s, const Eigen::Vector3d& p) const {
     Eigen::Vector3d e = s.sky_h;
-    if (s.sun_dir.z() > 0) {
-      bool lit = true;
-      if (std::hypot(p.x(), p.y()) < s.shadow_reach_m) {
-        lit = !Occluded(Eigen::Vector3d(p.x(), p.y(), kEps), s.sun_dir);
-      }
-      if (lit) e += s.sun_irr * s.sun_dir.z();
-    }
+    if (GroundSunlit(s, p.x(), p.y())) e += s.sun_irr * s.sun_dir.z();
     return sim::MaterialAlbedo(sim::kGround, p).cwiseProduct(e) / kPi;
+  }
+  // Whether the sun is up and lights the ground at (x, y) (a shadow ray only where a
+  // building's shadow can reach).
+  bool GroundSunlit(const State& s, double x, double y) const {
+    if (s.sun_dir.z() <= 0) return false;
+    return std::hypot(x, y) >= s.shadow_reach_m ||
+           !Occluded(Eigen::Vector3d(x, y, kEps), s.sun_dir);
   }
 
   Eigen::Vector3d IndirectAt(const State& s, const sim::Patch& p, double u, double v) const {
@@ -347,49 +308,7 @@ void SimWorld::Impl::Setup() {
   scene = sim::BuildScene(sizes);
   atmosphere = std::make_unique<Atmosphere>(opt.atmosphere);
 
-  // Embree scene: every patch as one or two triangles.
-  device = rtcNewDevice(nullptr);
-  if (!device) throw Error("SimWorld: cannot create an Embree device");
-  rtc = rtcNewScene(device);
-  rtcSetSceneFlags(rtc, RTC_SCENE_FLAG_ROBUST);
-  rtcSetSceneBuildQuality(rtc, RTC_BUILD_QUALITY_HIGH);
-  std::vector<Eigen::Vector3f> verts;
-  std::vector<Eigen::Vector3i> tris;
-  for (size_t i = 0; i < scene.patches.size(); ++i) {
-    const sim::Patch& p = scene.patches[i];
-    const int b = static_cast<int>(verts.size());
-    if (p.triangle) {
-      verts.push_back(p.o.cast<float>());
-      verts.push_back(p.Point(p.su, 0).cast<float>());
-      verts.push_back(p.Point(p.apex_s, p.sv).cast<float>());
-      tris.emplace_back(b, b + 1, b + 2);
-      tri_patch.push_back(static_cast<int>(i));
-    } else {
-      verts.push_back(p.o.cast<float>());
-      verts.push_back(p.Point(p.su, 0).cast<float>());
-      verts.push_back(p.Point(p.su, p.sv).cast<float>());
-      verts.push_back(p.Point(0, p.sv).cast<float>());
-      tris.emplace_back(b, b + 1, b + 2);
-      tris.emplace_back(b, b + 2, b + 3);
-      tri_patch.push_back(static_cast<int>(i));
-      tri_patch.push_back(static_cast<int>(i));
-    }
-  }
-  RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-  auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(
-      geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), verts.size()));
-  auto* ib = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
-      geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), tris.size()));
-  for (size_t i = 0; i < verts.size(); ++i) {
-    for (int c = 0; c < 3; ++c) vb[3 * i + c] = verts[i][c];
-  }
-  for (size_t i = 0; i < tris.size(); ++i) {
-    for (int c = 0; c < 3; ++c) ib[3 * i + c] = static_cast<unsigned>(tris[i][c]);
-  }
-  rtcCommitGeometry(geom);
-  rtcAttachGeometry(rtc, geom);
-  rtcReleaseGeometry(geom);
-  rtcCommitScene(rtc);
+  rays = std::make_unique<sim::RayScene>(scene.patches);
 
   // Lighting texels.
   for (const sim::Patch& p : scene.patches) n_texels += p.nu * p.nv;
@@ -425,9 +344,17 @@ void SimWorld::Impl::Setup() {
           std::vector<uint8_t>& rising = per_rising[i];
           sky.clear();
           int back = 0, occluded_sky = 0;
+          Eigen::Vector3d dirs[sim::RayScene::kPacket];
+          Hit hits[sim::RayScene::kPacket];
           for (int k = 0; k < n_samples; ++k) {
-            const Eigen::Vector3d d = SampleDir(i, k);
-            const Hit h = Trace(o, d);
+            const int lane = k % sim::RayScene::kPacket;
+            if (lane == 0) {
+              const int m = std::min(sim::RayScene::kPacket, n_samples - k);
+              for (int j = 0; j < m; ++j) dirs[j] = SampleDir(i, k + j);
+              rays->TracePacket(o, dirs, m, hits);
+            }
+            const Eigen::Vector3d& d = dirs[lane];
+            const Hit& h = hits[lane];
             if (h.patch >= 0) {
               const sim::Patch& hp = scene.patches[h.patch];
               if (d.dot(hp.n) > 0) ++back;
@@ -444,11 +371,12 @@ void SimWorld::Impl::Setup() {
             }
           }
           valid[i] = back * 4 < n_samples;
-          // Estimate the sky from the smaller of the occluded and the open parts.
+          // Estimate the sky from the smaller of the occluded and the open parts (the open
+          // part alone: no hit's direction is needed).
           if (occluded_sky > static_cast<int>(sky.size())) {
             cv_mode[i] = 0;
             out.insert(out.end(), sky.begin(), sky.end());
-            rising.resize(out.size(), 0);
+            rising.assign(out.size(), 0);
           }
           out.shrink_to_fit();
           rising.shrink_to_fit();
@@ -467,6 +395,48 @@ void SimWorld::Impl::Setup() {
     std::vector<uint32_t>().swap(per[i]);
     std::vector<uint8_t>().swap(per_rising[i]);
   }
+
+  // Whether the sky estimate sums record r's sky (far records have no rising bit).
+  auto sums_sky = [&](int64_t r) {
+    return (records[r] >> kSampleBits) == kTargetSky || (rec_rising[r / 64] >> (r % 64) & 1);
+  };
+  sky_begin.assign(n_texels + 1, 0);
+  far_begin.assign(n_texels + 1, 0);
+  for (int i = 0; i < n_texels; ++i) {
+    int64_t sky = 0, far = 0;
+    for (int64_t r = rec_begin[i]; r < rec_begin[i + 1]; ++r) {
+      if ((records[r] >> kSampleBits) == kTargetFar) ++far;
+      if (sums_sky(r)) ++sky;
+    }
+    sky_begin[i + 1] = sky_begin[i] + sky;
+    far_begin[i + 1] = far_begin[i] + far;
+  }
+  sky_angles.resize(sky_begin[n_texels]);
+  far_points.resize(far_begin[n_texels]);
+  far_albedo.assign(n_texels, Eigen::Vector3d::Zero());
+  tbb::parallel_for(
+      tbb::blocked_range<int>(0, n_texels, 256), [&](const tbb::blocked_range<int>& r) {
+        for (int i = r.begin(); i != r.end(); ++i) {
+          const Eigen::Vector3d o = texel_pos[i] + scene.patches[texel_patch[i]].n * kEps;
+          int64_t sk = sky_begin[i], fk = far_begin[i];
+          for (int64_t r2 = rec_begin[i]; r2 < rec_begin[i + 1]; ++r2) {
+            const uint32_t target = records[r2] >> kSampleBits;
+            if (target != kTargetFar && !sums_sky(r2)) continue;
+            const Eigen::Vector3d d = SampleDir(i, static_cast<int>(records[r2] & kSampleMask));
+            if (target == kTargetFar) {
+              Eigen::Vector2f& g = far_points[fk++];
+              g = Eigen::Vector2f::Constant(std::numeric_limits<float>::quiet_NaN());
+              if (d.z() < -1e-9 && o.z() > 0) {
+                const Eigen::Vector3d p = o + (-o.z() / d.z()) * d;
+                g = Eigen::Vector2f(static_cast<float>(p.x()), static_cast<float>(p.y()));
+                far_albedo[i] += sim::MaterialAlbedo(sim::kGround, p);
+              }
+            } else {
+              sky_angles[sk++] = SkyAngles::Of(d);
+            }
+          }
+        }
+      });
 
   // Texels inside solids (plaza under the tower, ground under blocks) take the values of
   // the nearest valid texel of their patch.
@@ -493,6 +463,9 @@ void SimWorld::Impl::Setup() {
       }
     }
   }
+  // The per-texel buffers above, freed, stay in the allocator's arenas (80 MB for the demo's
+  // world); give the memory back.
+  malloc_trim(0);
   stats.texels = n_texels;
   stats.invalid_texels = invalid;
   stats.gather_records = static_cast<int64_t>(records.size());
@@ -544,6 +517,9 @@ std::shared_ptr<const State> SimWorld::Impl::Compute(UtcTime t) const {
 
   const int n = n_texels;
   const double w = kPi / n_samples;  // cosine-weighted estimator weight
+  const bool sun_up = s.sun_dir.z() > 0;
+  const Eigen::Vector3d sun_h = sun_up ? Eigen::Vector3d(s.sun_irr * s.sun_dir.z())
+                                       : Eigen::Vector3d::Zero();  // on the ground
   s.e_direct.assign(n, Eigen::Vector3f::Zero());
   std::vector<Eigen::Vector3d> e_sky(n), e_far(n), e_bounce(n, Eigen::Vector3d::Zero());
   tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& r) {
@@ -571,28 +547,29 @@ std::shared_ptr<const State> SimWorld::Impl::Compute(UtcTime t) const {
         }
         if (outside > 0) s.e_direct[i] = (s.sun_irr * (c * visible / outside)).cast<float>();
       }
-      // Sky (with occlusion) and the analytic far ground.
+      // Sky (with occlusion) and the analytic far ground: its albedo over the sky's and the
+      // sun's irradiance, less the sun on the points in a building's shadow.
       Eigen::Vector3d occluded = Eigen::Vector3d::Zero(), open = Eigen::Vector3d::Zero(),
-                      far = Eigen::Vector3d::Zero();
+                      far = Eigen::Vector3d::Zero(), shadowed = Eigen::Vector3d::Zero();
+      int64_t sk = sky_begin[i], fk = far_begin[i];
       for (int64_t r2 = rec_begin[i]; r2 < rec_begin[i + 1]; ++r2) {
         const uint32_t rec = records[r2];
         const uint32_t target = rec >> kSampleBits;
-        const int k = static_cast<int>(rec & kSampleMask);
         if (target == kTargetFar) {
-          const Eigen::Vector3d d = SampleDir(i, k);
-          const Eigen::Vector3d o = texel_pos[i] + p.n * kEps;
-          if (d.z() < -1e-9 && o.z() > 0) {
-            far += FarGround(s, o + (-o.z() / d.z()) * d);
-          } else {
-            far += s.sky.Radiance(d);
+          const Eigen::Vector2f& g = far_points[fk++];
+          if (std::isnan(g.x())) {
+            far += s.sky.Radiance(SampleDir(i, static_cast<int>(rec & kSampleMask)));
+          } else if (sun_up && !GroundSunlit(s, g.x(), g.y())) {
+            shadowed += sim::MaterialAlbedo(sim::kGround, Eigen::Vector3d(g.x(), g.y(), 0));
           }
         } else if (target == kTargetSky) {
-          open += s.sky.Radiance(SampleDir(i, k));
+          open += s.sky.Radiance(sky_angles[sk++]);
         } else if (rec_rising[r2 / 64] >> (r2 % 64) & 1) {
           // A hit: the sky behind it counts only above the horizon.
-          occluded += s.sky.Radiance(SampleDir(i, k));
+          occluded += s.sky.Radiance(sky_angles[sk++]);
         }
       }
+      far += (far_albedo[i].cwiseProduct(s.sky_h + sun_h) - shadowed.cwiseProduct(sun_h)) / kPi;
       e_sky[i] = cv_mode[i] ? Clamp0(unoccluded[texel_patch[i]] - w * occluded) : w * open;
       e_far[i] = w * far;
     }
@@ -649,6 +626,8 @@ const Site& SimWorld::site() const { return impl_->opt.site; }
 const SimWorldStats& SimWorld::stats() const { return impl_->stats; }
 
 void SimWorld::SetTime(UtcTime t) {
+  // Already current: nothing written (renders of this time may be running on other threads).
+  if (impl_->cur && impl_->cur->t == t) return;
   auto it = impl_->cache.find(t.ns);
   if (it != impl_->cache.end()) {
     impl_->cur = it->second;
@@ -777,7 +756,7 @@ Image SimWorld::RenderBlockIds(const Intrinsics& k, const Pose& pose) const {
       for (int x = 0; x < k.width; ++x) {
         if (!InsideImage(k, x + 0.5, y + 0.5)) continue;
         const Eigen::Vector3d d = pose.rotation * Unproject(k, Eigen::Vector2d(x + 0.5, y + 0.5));
-        const Impl::Hit h = im.Trace(pose.position, d);
+        const sim::RayHit h = im.Trace(pose.position, d);
         int id = -1;
         if (h.patch >= 0) {
           const sim::Patch& p = im.scene.patches[h.patch];

@@ -69,7 +69,8 @@ class SimWorld {
   const Site& site() const;
   const SimWorldStats& stats() const;
 
-  // Computes (or takes from the cache) the lighting at instant t and makes it current.
+  // Computes (or takes from the cache) the lighting at instant t and makes it current. Renders
+  // may run on several threads at once, and beside SetTime of the time already current.
   void SetTime(UtcTime t);
   bool HasTime() const;
   UtcTime Time() const;  // throws rouen::Error before the first SetTime
