@@ -317,7 +317,7 @@ void CollectPixels(const EnvPanorama& p, const RayCaster& model, const Eigen::Ve
   const Intrinsics& intrinsics = p.intrinsics;
   const Eigen::Vector3d c = p.pose.position;
   const double offset = model.surface_offset();
-  ground_shadow = ground_shadow && c.z() > ground_z && sun.z() > 0;
+  ground_shadow = ground_shadow && c.z() > ground_z;  // (the caller checks the sun is up)
   const int rows = (pano.height + stride - 1) / stride;
   const int chunk_rows = 8;
   const int nchunks = (rows + chunk_rows - 1) / chunk_rows;
