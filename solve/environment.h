@@ -33,10 +33,11 @@ struct EnvOptions {
   double layer_merge_m = 2.0;
   // Beyond the paper: a panorama pixel whose ray meets the ground (the model's lowest level)
   // where the model casts its shadow is read as that ground sunlit, its radiance scaled by the
-  // ground's sunlit/shadowed ratio (E_sky + E_sun sin(el)) / E_sky. The map then holds the
-  // ground as lit by sun and sky, and the irradiance puts the model's shadow back where each
-  // grid point sees it (IrradianceOptions::ground_shadow): a wall whose ground is sunlit no
-  // longer sees the shadow that lay in front of the panorama. Needs EnvSun::irradiance.
+  // inverse of the ground's shadowed/sunlit ratio along its ray (GroundShadowRatio, with
+  // EnvSun::ground_retro). The map then holds the ground as lit by sun and sky, and the
+  // irradiance puts the model's shadow back where each grid point sees it
+  // (IrradianceOptions::ground_shadow): a wall whose ground is sunlit no longer sees the
+  // shadow that lay in front of the panorama. Needs EnvSun::irradiance.
   bool lit_ground = true;
 
   void Validate() const;  // throws rouen::Error

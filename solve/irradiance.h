@@ -88,13 +88,13 @@ struct IrradianceOptions {
   // projects its faces onto each point's sphere of directions.
   const Mesh* mesh = nullptr;
   int sun_samples = 1;  // shadow rays per point over the sun disc (1: centre only)
-  // Beyond the paper: the environment below the horizon is taken as flat Lambertian ground at
-  // the model's lowest level (GroundLevel), sunlit as the map holds it (EnvOptions::lit_ground);
-  // where an escaped ray meets that ground inside the model's cast
-  // shadow, its radiance is scaled by the ground's shadowed/sunlit ratio E_sky / (E_sky +
-  // E_sun) (a tall building darkens the far ground it sees in the morning and evening).
-  // kVectorFlux: the shadowed ground is the model's faces projected along the sun onto that
-  // ground, clipped on the sphere like the occluders.
+  // Beyond the paper: the environment below the horizon is taken as flat ground at the model's
+  // lowest level (GroundLevel), sunlit as the map holds it (EnvOptions::lit_ground); where an
+  // escaped ray meets that ground inside the model's cast shadow, its radiance is scaled by the
+  // ground's shadowed/sunlit ratio seen along the ray (GroundShadowRatio; a tall building
+  // darkens the far ground it sees in the morning and evening). kVectorFlux: the shadowed
+  // ground is the model's faces projected along the sun onto that ground, clipped on the
+  // sphere like the occluders, with one ratio per point, seen towards the shadow's middle.
   bool ground_shadow = true;
   void Validate() const;
 };
