@@ -113,12 +113,7 @@ bool IsRawFileName(const std::string& path) {
 }
 
 PhotoMetadata ReadPhotoMetadata(const std::string& path) {
-  internal::CheckImageFileHeader(path);
-  auto in = OIIO::ImageInput::open(path);
-  if (!in) {
-    std::string msg = OIIO::geterror();
-    throw Error(path + ": cannot read image: " + (msg.empty() ? "unknown format" : msg));
-  }
+  auto in = internal::OpenImageFile(path, "image");
   const OIIO::ImageSpec spec = in->spec();
   PhotoMetadata m;
   m.width = spec.width;
@@ -219,12 +214,7 @@ Image ReadRawLinear(const std::string& path) {
   config.attribute("raw:use_camera_wb", 1);
   config.attribute("raw:auto_bright", 0);    // no automatic brightening
   config.attribute("raw:HighlightMode", 0);  // clip
-  internal::CheckImageFileHeader(path);
-  auto in = OIIO::ImageInput::open(path, &config);
-  if (!in) {
-    std::string msg = OIIO::geterror();
-    throw Error(path + ": cannot read RAW image: " + (msg.empty() ? "unknown format" : msg));
-  }
+  auto in = internal::OpenImageFile(path, "RAW image", &config);
   const OIIO::ImageSpec spec = in->spec();
   const int w = spec.width, h = spec.height, nch = spec.nchannels;
   if (w <= 0 || h <= 0 || nch <= 0) throw Error(path + ": RAW image has no pixels");

@@ -6,7 +6,9 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
@@ -14,6 +16,7 @@
 #include <string_view>
 
 #include "core/error.h"
+#include "core/exif.h"
 #include "core/files.h"
 #include "core/internal/image_input.h"
 #include "core/outputs.h"
@@ -143,19 +146,66 @@ void CheckPngChunks(std::ifstream& in, int64_t size, const std::string& path) {
 
 }  // namespace
 
-void CheckImageFileHeader(const std::string& path) {
+namespace {
+
+// The OpenImageIO reader for a file, from its name (RAW formats, Targa: no magic number) or its
+// first bytes; empty when rouen does not read that format.
+std::string ReaderFor(const std::string& path, std::string_view head) {
+  auto starts = [&](std::string_view magic) { return head.substr(0, magic.size()) == magic; };
+  if (IsRawFileName(path)) return "raw";
+  if (head.size() >= 4 && Le32(head.data()) == 20000630) return "openexr";
+  if (starts("\x89PNG\r\n\x1a\n")) return "png";
+  if (starts("II*") || starts(std::string_view("MM\0*", 4))) return "tiff";
+  if (starts("\xff\xd8\xff")) return "jpeg";
+  if (starts("#?")) return "hdr";
+  if (starts("BM")) return "bmp";
+  if (head.size() >= 2 && head[0] == 'P' && (head[1] == 'f' || head[1] == 'F' ||
+                                              (head[1] >= '1' && head[1] <= '6')))
+    return "pnm";
+  std::string ext = std::filesystem::path(path).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  if (ext == ".tga") return "targa";
+  return "";
+}
+
+}  // namespace
+
+std::unique_ptr<OIIO::ImageInput> OpenImageFile(const std::string& path, const char* what,
+                                                const OIIO::ImageSpec* config) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) return;  // OpenImageIO says why
-  char magic[8];
-  if (!in.read(magic, 8)) return;
+  if (!in) throw Error(path + ": cannot read " + what + ": " + std::strerror(errno));
+  char magic[8] = {};
+  in.read(magic, 8);
+  const std::string_view head(magic, static_cast<size_t>(in.gcount()));
+  in.clear();
   in.seekg(0, std::ios::end);
   const int64_t size = in.tellg();
-  if (Le32(magic) == 20000630) {
+  const std::string reader = ReaderFor(path, head);
+  if (reader.empty()) {
+    throw Error(path + ": cannot read " + what +
+                ": not a format rouen reads (OpenEXR, TIFF, JPEG, PNG, Radiance HDR, BMP, "
+                "PNM/PFM, Targa (.tga) or a camera RAW file)");
+  }
+  if (reader == "openexr") {
     in.seekg(8);
     CheckExrHeader(in, size, Le32(magic + 4), path);
-  } else if (std::string_view(magic, 8) == std::string_view("\x89PNG\r\n\x1a\n", 8)) {
+  } else if (reader == "png") {
     CheckPngChunks(in, size, path);
   }
+  // Only that reader: OpenImageIO would otherwise hand a file its reader refuses to every
+  // other one it has (movies, DICOM, SGI, ...), far more code than rouen's formats need.
+  std::unique_ptr<OIIO::ImageInput> input = OIIO::ImageInput::create(reader);
+  if (!input) throw Error(path + ": cannot read " + what + ": " + OIIO::geterror());
+  OIIO::ImageSpec spec;
+  const OIIO::ImageSpec none;
+  if (!input->open(path, spec, config ? *config : none)) {
+    std::string msg = input->geterror();
+    throw Error(path + ": cannot read " + what + ": " + (msg.empty() ? "not a valid " + reader +
+                                                                          " file"
+                                                                    : msg));
+  }
+  return input;
 }
 
 bool ReadRowBands(OIIO::ImageInput& in, OIIO::TypeDesc type,
@@ -191,12 +241,7 @@ Image ReadImage(const std::string& path, bool keep_alpha) {
   // Colour values as stored: no premultiplication by an alpha channel (dropped unless kept).
   OIIO::ImageSpec config;
   config.attribute("oiio:UnassociatedAlpha", 1);
-  internal::CheckImageFileHeader(path);
-  auto in = OIIO::ImageInput::open(path, &config);
-  if (!in) {
-    std::string msg = OIIO::geterror();
-    throw Error(path + ": cannot read image: " + (msg.empty() ? "unknown format" : msg));
-  }
+  auto in = internal::OpenImageFile(path, "image", &config);
   const OIIO::ImageSpec spec = in->spec();
   const int w = spec.width, h = spec.height, nch = spec.nchannels;
   if (spec.depth > 1) {
@@ -391,8 +436,7 @@ void WriteImage(const std::string& path, const Image& image, StoredType type,
 }
 
 std::vector<ImageAttribute> ReadImageAttributes(const std::string& path) {
-  auto in = OIIO::ImageInput::open(path);
-  if (!in) throw Error(path + ": cannot read the image header: " + OIIO::geterror());
+  auto in = internal::OpenImageFile(path, "the image header");
   std::vector<ImageAttribute> out;
   for (const OIIO::ParamValue& p : in->spec().extra_attribs) {
     const OIIO::TypeDesc t = p.type();

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <vector>
 
 #include "core/error.h"
 #include "core/exif.h"
@@ -142,6 +143,40 @@ TEST_F(ImageTest, CorruptFilesGiveErrorsNamingTheFile) {
       EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
     }
   }
+}
+
+// OpenImageIO hands a file its named reader refuses to every reader it has; rouen opens only
+// the formats it reads, each with its own reader: a valid SGI image (which OpenImageIO reads)
+// is refused under its own name and under a Targa name, and so is a GIF.
+TEST_F(ImageTest, OnlyTheFormatsRouenReadsAreOpened) {
+  const Image img = Ramp(8, 8, 3, PixelUnits::kDigital, 255.f);
+  std::vector<unsigned char> pixels(img.data.size());
+  for (size_t i = 0; i < pixels.size(); ++i) pixels[i] = static_cast<unsigned char>(img.data[i]);
+  auto out = OIIO::ImageOutput::create("sgi");
+  ASSERT_TRUE(out);
+  ASSERT_TRUE(out->open(P("ramp.sgi"), OIIO::ImageSpec(8, 8, 3, OIIO::TypeDesc::UINT8)));
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, pixels.data()));
+  ASSERT_TRUE(out->close());
+  ASSERT_TRUE(OIIO::ImageInput::open(P("ramp.sgi"))) << "OpenImageIO reads the SGI file";
+  fs::copy_file(P("ramp.sgi"), P("ramp.tga"));
+  WriteFileAtomic(P("tiny.gif"), std::string("GIF89a\x01\x00\x01\x00\x00\x00\x00;", 14));
+  for (const char* name : {"ramp.sgi", "ramp.tga", "tiny.gif"}) {
+    for (int call = 0; call < 3; ++call) {
+      try {
+        if (call == 0) ReadImage(P(name));
+        if (call == 1) ReadPhotoMetadata(P(name));
+        if (call == 2) ReadImageAttributes(P(name));
+        ADD_FAILURE() << name << " call " << call;
+      } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
+      }
+    }
+  }
+  // The formats it reads still open through their readers.
+  WriteImage(P("ramp.png"), img, StoredType::kUint8);
+  WriteImage(P("ramp.exr"), img, StoredType::kHalf);
+  EXPECT_EQ(ReadImage(P("ramp.png")).width, 8);
+  EXPECT_EQ(ReadPhotoMetadata(P("ramp.exr")).width, 8);
 }
 
 // A binary PPM header claiming width x height pixels, followed by 100 bytes of pixels.

@@ -7,18 +7,23 @@
 #include <algorithm>
 #include <cstddef>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
 namespace rouen::internal {
 
-// Checks what OpenImageIO's readers would trust blindly, before the file is opened with
-// OpenImageIO, in an OpenEXR header: attribute sizes (OpenEXR 3.1 allocates and clears a
-// claimed size of up to 2 GB before reading it; a 700-byte file took 1.9 GB and 10 s) and
-// channel pixel types (OpenImageIO 2.4 aborts the process on an unknown one); in a PNG, chunk
-// lengths (libpng allocates a chunk's claimed length first: a 558-byte file asked for 1.7 GB).
-// Other files pass. Throws rouen::Error naming the file.
-void CheckImageFileHeader(const std::string& path);
+// Opens an image file with the one OpenImageIO reader of its format, picked from its name
+// (camera RAW: IsRawFileName; Targa) or its magic number (OpenEXR, PNG, TIFF, JPEG, Radiance
+// HDR, BMP, PNM/PFM); `config` as OpenImageIO's open takes it. Before that, checks what the
+// readers would trust blindly: in an OpenEXR header, attribute sizes (OpenEXR 3.1 allocates and
+// clears a claimed size of up to 2 GB before reading it; a 700-byte file took 1.9 GB and 10 s)
+// and channel pixel types (OpenImageIO 2.4 aborts the process on an unknown one); in a PNG,
+// chunk lengths (libpng allocates a chunk's claimed length first: a 558-byte file asked for
+// 1.7 GB). Throws rouen::Error "PATH: cannot read WHAT: why" for another format, a file that
+// cannot be read, or one its reader refuses.
+std::unique_ptr<OIIO::ImageInput> OpenImageFile(const std::string& path, const char* what,
+                                                const OIIO::ImageSpec* config = nullptr);
 
 // Samples (pixels x channels) per band; a band is at least one row (or one row of tiles).
 constexpr size_t kBandSamples = size_t{1} << 22;

@@ -1,9 +1,9 @@
 // Image files through OpenImageIO (core/image.h ReadImage, core/exif.h ReadPhotoMetadata and
 // CaptureUtc; for TIFF-like input also ReadRawLinear, which DNG goes through). The bytes are
 // written to a file in a per-process folder under /dev/shm, named by their magic number as a
-// user's file would be (unknown magic: ".tga", which has none); OpenImageIO tries every
-// reader when the named one fails. A decoded image is within the size limits, holds
-// width x height x channels finite values.
+// user's file would be (unknown magic: ".tga", which has none); rouen opens each with the one
+// reader of its format (core/internal/image_input.h OpenImageFile). A decoded image is within
+// the size limits, holds width x height x channels finite values.
 #include <OpenImageIO/imageio.h>
 #include <unistd.h>
 
