@@ -8,8 +8,8 @@
 #include <cctype>
 #include <cerrno>
 #include <cmath>
-#include <cstring>
 #include <cstdint>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -159,8 +159,8 @@ std::string ReaderFor(const std::string& path, std::string_view head) {
   if (starts("\xff\xd8\xff")) return "jpeg";
   if (starts("#?")) return "hdr";
   if (starts("BM")) return "bmp";
-  if (head.size() >= 2 && head[0] == 'P' && (head[1] == 'f' || head[1] == 'F' ||
-                                              (head[1] >= '1' && head[1] <= '6')))
+  if (head.size() >= 2 && head[0] == 'P' &&
+      (head[1] == 'f' || head[1] == 'F' || (head[1] >= '1' && head[1] <= '6')))
     return "pnm";
   std::string ext = std::filesystem::path(path).extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
@@ -201,9 +201,8 @@ std::unique_ptr<OIIO::ImageInput> OpenImageFile(const std::string& path, const c
   const OIIO::ImageSpec none;
   if (!input->open(path, spec, config ? *config : none)) {
     std::string msg = input->geterror();
-    throw Error(path + ": cannot read " + what + ": " + (msg.empty() ? "not a valid " + reader +
-                                                                          " file"
-                                                                    : msg));
+    throw Error(path + ": cannot read " + what + ": " +
+                (msg.empty() ? "not a valid " + reader + " file" : msg));
   }
   return input;
 }
