@@ -508,7 +508,7 @@ void CompareWithScipy() {
       for (int i = 0; i < 7; ++i) *fields[i] = q[i].get<double>();
     }
   }
-  // rouen's default objective (relative L1 smoothed within norm_eps = 1e-3), and scipy's:
+  // rouen's default objective (relative L1 smoothed within SkyFitOptions::norm_eps), and scipy's:
   // soft_l1 with f_scale 0.01 is 2 (sqrt(1 + (r/0.01)^2) - 1), proportional to rouen's p = 1
   // objective sqrt(r^2 + eps^2) - eps with eps = 0.01, so both then seek the same minimum.
   SkyFitOptions same;
@@ -519,8 +519,10 @@ void CompareWithScipy() {
     std::printf(
         "\nSky fit vs scipy least_squares (soft_l1, 16 starts) on the same 20000 samples, "
         "scored against the truth; rouen: %s\n%-14s %6s  %10s %8s %8s  %10s %8s %8s  %8s\n",
-        std::string(variant) == "default" ? "its default objective (norm_eps 1e-3)"
-                                          : "scipy's objective (norm_eps 0.01)",
+        (std::string(variant) == "default"
+             ? "its default objective (norm_eps " + std::to_string(options.norm_eps) + ")"
+             : std::string("scipy's objective (norm_eps 0.01)"))
+            .c_str(),
         "sky", "sun el", "rouen ms", "median", "p90", "scipy ms", "median", "p90", "x scipy");
     std::vector<double> ratios, rouen_all, scipy_all;
     int rouen_p90_worse = 0;

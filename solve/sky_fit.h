@@ -80,7 +80,11 @@ struct SkyFitOptions {
   // half sum rho(r_i). Costs several times a least-squares fit.
   // In [1, 16]. Not used by kCie.
   double norm_p = 1;
-  double norm_eps = 1e-3;
+  // 5e-3 (0.5% relative error): on the sky bench's ten clear and hazy skies (sun 13-62 deg)
+  // its median error is below scipy's soft_l1 fit (f_scale 0.01) on every sky and its 90th
+  // percentile within 4% of scipy's on each and below it pooled; 1e-3 had the lower median
+  // but a 90th percentile 5-8% above scipy's on three low-sun skies, 1e-2 is scipy's fit.
+  double norm_eps = 5e-3;
   // Levenberg-Marquardt stops when a step lowers the objective by less than this, relative.
   // p < 2 converges linearly; 1e-7 leaves its minimum within a small fraction of the samples'
   // noise.
