@@ -1,366 +1,80 @@
 // rouen demo: the whole pipeline on the built-in simulated world. Captures a field session
 // through the real capture controller, calibrates, solves, renders the held-out time and
 // scores everything against the simulator's ground truth.
-#include <algorithm>
-#include <chrono>
-#include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <map>
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "app/command_list.h"
 #include "app/commands.h"
 #include "app/progress.h"
 #include "app/stop_signal.h"
-#include "capture/devices/devices.h"
-#include "capture/sim/sim_devices.h"
-#include "core/angles.h"
 #include "core/error.h"
-#include "core/files.h"
-#include "core/session.h"
-#include "core/stats.h"
-#include "core/temporaries.h"
 #include "pipeline/capture_session.h"
-#include "pipeline/report.h"
-#include "pipeline/scene.h"
-#include "pipeline/session_solve.h"
-#include "pipeline/validate.h"
-#include "render/metrics.h"
-#include "render/render.h"
-#include "render/tonemap.h"
+#include "pipeline/demo.h"
 
 namespace rouen {
 namespace {
 
-const char* kSimRig =
-#include "app/sim_rig.inc"
-    ;
-
-struct DemoArgs {
-  std::string out = "rouen-demo";
-  bool quick = false;
-  bool true_response = false;
-  uint64_t seed = 1;
-};
-
-// Evenly spread unit directions over the upper hemisphere (Fibonacci lattice).
-std::vector<Eigen::Vector3d> HemisphereDirections(int n, double min_elevation_deg) {
-  std::vector<Eigen::Vector3d> out;
-  const double golden = kPi * (3 - std::sqrt(5.0));
-  const double zmin = std::sin(min_elevation_deg * kPi / 180);
-  for (int i = 0; i < n; ++i) {
-    double z = zmin + (1 - zmin) * (i + 0.5) / n;
-    double r = std::sqrt(1 - z * z), phi = golden * i;
-    out.emplace_back(r * std::cos(phi), r * std::sin(phi), z);
-  }
-  return out;
-}
-
-void PrepareOut(const std::filesystem::path& out) {
-  namespace fs = std::filesystem;
-  if (fs::exists(out) && !fs::is_empty(out)) {
-    if (!fs::exists(out / ".rouen-demo"))
-      throw Error(out.string() + " exists and is not a rouen demo folder; choose another --out");
-    for (const char* sub : {"session", "work", "scene"}) fs::remove_all(out / sub);
-  }
-  fs::create_directories(out);
-  WatchForTemporaries(out);  // its images and reports: removed on Ctrl-C
-  WriteFileAtomic(out / ".rouen-demo", "This folder was written by `rouen demo`.\n");
-}
-
-void Run(const DemoArgs& a) {
-  namespace fs = std::filesystem;
-  const auto t0 = std::chrono::steady_clock::now();
-  const fs::path out = a.out;
-  PrepareOut(out);
-  auto say = [](const std::string& s) { std::fprintf(stderr, "demo: %s\n", s.c_str()); };
-
-  // 1. Capture the simulated field session through the capture controller.
-  RigConfig rig = ParseRig(kSimRig, "rigs/sim.toml (built in)");
-  rig.quick = a.quick;
-  rig.seed = a.seed;
-  say(std::string("capturing a simulated field session (") + (a.quick ? "quick" : "full") + ", " +
-      std::to_string(rig.plan.slots.size()) + " times of day) into " + (out / "session").string());
-  RigDevices dev = OpenRig(rig);
-  auto* sim_cam = dynamic_cast<SimCamera*>(dev.camera.get());
-  auto world = std::static_pointer_cast<SimWorld>(dev.keep_alive);
+void Run(DemoOptions options) {
+  options.log = [](const std::string& s) { std::fprintf(stderr, "demo: %s\n", s.c_str()); };
   CaptureSessionOptions capture;
   ProgressLine line(true);
   capture.progress = CaptureProgressPrinter(&line);
-  CaptureSummary cap;
+  DemoCapture demo;
   {
     // Ctrl-C and SIGTERM stop the capture after the frame in flight.
     StopOnSignals stop;
     capture.stop = stop.flag();
     try {
-      cap = CaptureToSession(rig, dev, out / "session", capture).capture;
+      demo = CaptureDemo(options, capture);
     } catch (...) {
       line.Done();
       throw;
     }
     line.Done();
   }
-  for (const std::string& w : cap.warnings) say("capture warning: " + w);
-  if (cap.stopped) throw Error("demo interrupted during capture");
-
-  // 2. Offline processing from the session folder, as for a field session.
-  Session session = Session::Load(out / "session");
-  PipelineOptions po;
-  po.work_dir = out / "work";
-  // As `rouen solve --quick` would: the defaults, then the rig's [solve] options.
-  po.config =
-      SessionSolveConfig(session.info(), (out / "session" / "session.json").string(), a.quick);
-  po.log = say;
-  const int heldout = rig.heldout_slot;
-  if (heldout >= 0) po.exclude_albedo_slots = {heldout};
-  if (a.true_response) po.response = sim_cam->sensor().TrueResponse();
-  const fs::path scene_dir = out / "scene";
-  SolveToScene(session, po, scene_dir);
-  // Everything below reads the scene back, as `rouen render` and `rouen validate` do.
-  const LoadedScene scene = LoadScene(scene_dir, say);
-  const SolveResult& solved = scene.solved;
-  const ResponseCurve& response = scene.scene.response;
-
-  // 3. Score against the simulator's ground truth (never seen by the solver).
-  nlohmann::json m;
-  const SimSensor& sensor = sim_cam->sensor();
-  // Response curve: recovered ln-exposure vs the true one, up to one offset per channel
-  // (Debevec-Malik fixes g(128) = 0; the absolute scale is unobservable from brackets).
-  std::array<double, 3> to_truth{};  // recovered relative radiance -> true radiance, per channel
-  double resp_err = 0;
-  for (int c = 0; c < 3; ++c) {
-    std::vector<double> diffs;
-    for (int z = 10; z <= 245; ++z)
-      diffs.push_back(sensor.TrueLogExposure(c, z) - response.g[c][z]);
-    double offset = Quantile(diffs, 0.5);
-    for (int z = 10; z <= 245; ++z)
-      resp_err = std::max(
-          resp_err,
-          std::abs(std::exp(response.g[c][z] + offset - sensor.TrueLogExposure(c, z)) - 1));
-    to_truth[c] = std::exp(offset);  // TrueLogExposure is ln(true radiance x exposure factor)
-  }
-  m["response_max_rel_error"] = resp_err;
-
-  std::vector<double> sun_dir_err, sun_rad_err, sky_err;
-  // The simulator lights each slot at the slot's planned instant (its frames follow within
-  // seconds); the truth is taken there.
-  for (const SlotSolve& ss : solved.slots) {
-    world->SetTime(rig.plan.slots.at(ss.slot));
-    Eigen::Vector3d truth_dir = world->TrueSunDirection();
-    sun_dir_err.push_back(std::acos(std::clamp(truth_dir.dot(ss.lighting.sun_dir), -1.0, 1.0)) *
-                          180 / kPi);
-    Eigen::Vector3d true_sun = world->TrueSunRadiance();
-    for (int c = 0; c < 3; ++c)
-      sun_rad_err.push_back(std::abs(to_truth[c] * ss.lighting.sun_radiance[c] - true_sun[c]) /
-                            true_sun[c]);
-    for (const Eigen::Vector3d& d : HemisphereDirections(2000, 3.0)) {
-      if (d.dot(truth_dir) > std::cos(3.0 * kPi / 180)) continue;  // the sun's own disc
-      Eigen::Vector3d fit = ss.lighting.sky.Radiance(d), tru = world->TrueSkyRadiance(d);
-      for (int c = 0; c < 3; ++c)
-        sky_err.push_back(std::abs(to_truth[c] * fit[c] - tru[c]) / tru[c]);
-    }
-  }
-  m["sun_direction_error_deg"] = Mean(sun_dir_err);
-  m["sun_radiance_rel_error"] = Mean(sun_rad_err);
-  m["sky_rel_error_median"] = Quantile(sky_err, 0.5);
-  m["sky_rel_error_p90"] = Quantile(sky_err, 0.9);
-
-  // Pseudo-albedos against the true per-channel albedo at each grid point (Lambertian RGB
-  // world: the pseudo-albedos of eqs. 11-12 equal it there). The headline figures are over
-  // the building; the plaza (seen at grazing angles) is reported beside them.
-  // Per block, the signed relative errors rho/truth - 1 (their absolute values give the means).
-  struct BlockErrors {
-    std::vector<double> sun, se;
-  };
-  std::map<std::string, BlockErrors> by_block;
-  std::vector<double> e_sun, e_se;
-  int never_sunlit = 0;
-  for (int i = 0; i < solved.grid.size(); ++i) {
-    if (solved.albedo.observations[i] == 0) continue;
-    const GridPoint& p = solved.grid.points[i];
-    const std::string& block = solved.mesh.block_names[p.block];
-    Eigen::Vector3d truth = world->TrueAlbedo(p.position);
-    bool sun_ok = !(solved.albedo.flags[i] & (kAlbedoSunUnobserved | kAlbedoFilled));
-    bool se_ok = !(solved.albedo.flags[i] & (kAlbedoNeverShadowed | kAlbedoFilled));
-    if (!sun_ok) ++never_sunlit;
-    BlockErrors& b = by_block[block];
-    for (int c = 0; c < 3; ++c) {
-      double ds = solved.albedo.rho_sun[i][c] / truth[c] - 1;
-      double de = solved.albedo.rho_se[i][c] / truth[c] - 1;
-      if (sun_ok) b.sun.push_back(ds);
-      if (se_ok) b.se.push_back(de);
-      if (block == "plaza") continue;
-      if (sun_ok) e_sun.push_back(std::abs(ds));
-      if (se_ok) e_se.push_back(std::abs(de));
-    }
-  }
-  m["albedo_sun_rel_error_mean"] = Mean(e_sun);
-  m["albedo_skyenv_rel_error_mean"] = Mean(e_se);
-  m["albedo_points_scored_sun"] = e_sun.size() / 3;
-  m["albedo_points_scored_skyenv"] = e_se.size() / 3;
-  m["albedo_points_never_sunlit"] = never_sunlit;
-  auto mean_abs = [](const std::vector<double>& v) {
-    double s = 0;
-    for (double x : v) s += std::abs(x);
-    return v.empty() ? 0.0 : s / v.size();
-  };
-  for (const auto& [block, b] : by_block)
-    m["albedo_by_block"][block] = {
-        {"sun_rel_error_mean", mean_abs(b.sun)}, {"skyenv_rel_error_mean", mean_abs(b.se)},
-        {"sun_rel_bias", Mean(b.sun)},           {"skyenv_rel_bias", Mean(b.se)},
-        {"points_sun", b.sun.size() / 3},        {"points_skyenv", b.se.size() / 3}};
-
-  // 4. Held-out time: render every architecture view and compare with the truth, first under
-  // the lighting measured at that time, then under lighting predicted from the other times
-  // only (§5: sun by extinction, sky interpolated, environment by photometric stereo).
-  // Figures from render/metrics (as `rouen validate` computes them) against the simulator's
-  // truth, in the recovered units (the truth divided by to_truth), over the building's pixels.
-  if (heldout < 0) throw Error("demo: the rig names no held-out time");
-  std::vector<std::string> heldout_views;
-  for (const auto& [name, v] : scene.scene.views)
-    if (v.slot == heldout && v.target == "architecture") heldout_views.push_back(name);
-  if (heldout_views.empty()) throw Error("demo: the held-out time has no architecture photo");
-  // 5 first. The held-out photographs themselves, as `rouen validate` compares them (no
-  // truth). Its renders of every held-out view under the measured and the predicted lighting
-  // are the ones scored against the truth below (one prediction fit, one irradiance per
-  // lighting).
-  say("validating the held-out photographs; predicting the held-out time's lighting from the "
-      "other times");
-  ValidateOptions vo;
-  vo.exclude_blocks = {"plaza"};
-  const Validation validation = ValidateSlot(scene, session, heldout, vo, say);
-  if (!validation.predicted_lighting) throw Error("demo: the validation predicted no lighting");
-  const Lighting& predicted = *validation.predicted_lighting;
-
-  MetricsOptions mo;
-  mo.response = &response;
-  MetricsAccumulator acc_measured(mo), acc_predicted(mo);
-  world->SetTime(rig.plan.slots.at(heldout));
-  for (size_t v = 0; v < heldout_views.size(); ++v) {
-    const SceneView& view = scene.scene.views.at(heldout_views[v]);
-    auto photo = std::find_if(validation.photos.begin(), validation.photos.end(),
-                              [&](const PhotoValidation& p) { return p.view == heldout_views[v]; });
-    if (photo == validation.photos.end())
-      throw Error("demo: the validation did not render " + heldout_views[v]);
-    const Image& rendered = photo->rendered_measured;
-    const Image& rendered_predicted = photo->rendered_predicted;
-    // The simulator's radiance of the photographed view (rendered for its frames).
-    Image truth = sim_cam->Radiance(Target::kArchitecture, ParseBracketName(heldout_views[v]).view,
-                                    rig.plan.slots.at(heldout));
-    for (size_t k = 0; k < truth.data.size(); ++k) truth.data[k] /= to_truth[k % 3];
-    const Image ids = world->RenderBlockIds(view.intrinsics, view.pose);
-    std::vector<uint8_t> building(static_cast<size_t>(ids.width) * ids.height, 0);
-    std::vector<double> green;
-    for (int y = 0; y < ids.height; ++y)
-      for (int x = 0; x < ids.width; ++x) {
-        const int id = static_cast<int>(ids.at(x, y, 0));
-        if (id < 0 || solved.mesh.block_names[id] == "plaza") continue;
-        building[static_cast<size_t>(y) * ids.width + x] = 1;
-        green.push_back(truth.at(x, y, 1));
-      }
-    acc_measured.Add(rendered, truth, building);
-    acc_predicted.Add(rendered_predicted, truth, building);
-    if (v == 0) {
-      // 8-bit images through the recovered response, exposed as the metrics expose them.
-      const double exposure =
-          std::exp(response.LogExposure(1, mo.target_dn)) / Quantile(green, mo.percentile);
-      for (const auto& [prefix, image] :
-           {std::pair<std::string, const Image*>{"heldout", &rendered},
-            std::pair<std::string, const Image*>{"heldout_predicted", &rendered_predicted}}) {
-        WriteImage((out / (prefix + ".png")).string(), ToDigital(*image, response, exposure),
-                   StoredType::kUint8);
-        WriteImage((out / (prefix + ".exr")).string(), *image, StoredType::kFloat);
-      }
-      WriteImage((out / "heldout_truth.png").string(), ToDigital(truth, response, exposure),
-                 StoredType::kUint8);
-    }
-  }
-  const RenderMetrics measured = acc_measured.Result();
-  m["heldout_render_rel_rmse"] = measured.rel_rmse;
-  m["heldout_render_psnr_db"] = measured.psnr_db;
-  m["heldout_render_median_rel_error"] = measured.median_rel_error;
-  const int64_t npx = measured.pixels;
-  const RenderMetrics pred = acc_predicted.Result();
-  m["heldout_predicted_render_rel_rmse"] = pred.rel_rmse;
-  m["heldout_predicted_render_psnr_db"] = pred.psnr_db;
-  m["heldout_predicted_render_median_rel_error"] = pred.median_rel_error;
-  {
-    world->SetTime(rig.plan.slots.at(heldout));
-    const Eigen::Vector3d true_sun = world->TrueSunRadiance();
-    double e = 0;
-    for (int c = 0; c < 3; ++c)
-      e += std::abs(to_truth[c] * predicted.sun_radiance[c] - true_sun[c]) / true_sun[c] / 3;
-    m["heldout_predicted_sun_radiance_rel_error"] = e;
-    std::vector<double> err;
-    const Eigen::Vector3d truth_dir = world->TrueSunDirection();
-    for (const Eigen::Vector3d& d : HemisphereDirections(2000, 3.0)) {
-      if (d.dot(truth_dir) > std::cos(3.0 * kPi / 180)) continue;
-      Eigen::Vector3d fit = predicted.sky.Radiance(d), tru = world->TrueSkyRadiance(d);
-      for (int c = 0; c < 3; ++c) err.push_back(std::abs(to_truth[c] * fit[c] - tru[c]) / tru[c]);
-    }
-    m["heldout_predicted_sky_rel_error_median"] = Quantile(err, 0.5);
-    m["heldout_predicted_sky_rel_error_p90"] = Quantile(err, 0.9);
-  }
-  m["validate_measured_rel_rmse"] = validation.measured.rel_rmse;
-  m["validate_measured_psnr_db"] = validation.measured.psnr_db;
-  m["validate_measured_median_rel_error"] = validation.measured.median_rel_error;
-  m["validate_predicted_rel_rmse"] = validation.predicted->rel_rmse;
-  m["validate_predicted_psnr_db"] = validation.predicted->psnr_db;
-  m["validate_predicted_median_rel_error"] = validation.predicted->median_rel_error;
-  m["heldout_building_pixels"] = npx;
-  m["frames_captured"] = static_cast<int>(session.frames().size());
-  m["wall_seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  m["quick"] = a.quick;
-  for (auto& [k, v] : m.items())
-    if (v.is_number_float() && !std::isfinite(v.get<double>()))
-      throw Error("demo: metric " + k + " is not finite");
-  WriteFileAtomic(out / "metrics.json", m.dump(2) + "\n");
-
-  // 6. The report of the demo's world, as `rouen report` writes it, with the held-out photos.
-  ReportRequest report;
-  report.scene = scene_dir;
-  report.session = out / "session";
-  report.work = out / "work";
-  report.metrics = {out / "metrics.json"};
-  report.validation = &validation;
-  const ReportSummary written = WriteReport(report, out / "report.html");
-
-  std::printf("rouen demo (%s): %d frames, %.1f s\n", a.quick ? "quick" : "full",
-              m["frames_captured"].get<int>(), m["wall_seconds"].get<double>());
-  std::printf("  response curve      max relative error  %.4f\n", resp_err);
-  std::printf("  sun direction       error               %.4f deg\n", Mean(sun_dir_err));
-  std::printf("  sun radiance        relative error      %.4f\n", Mean(sun_rad_err));
+  for (const std::string& w : demo.summary.warnings) options.log("capture warning: " + w);
+  if (demo.summary.stopped) throw Error("demo interrupted during capture");
+  const DemoResult r = SolveAndScoreDemo(demo, options);
+  const nlohmann::json& m = r.metrics;
+  const auto f = [&](const char* key) { return m.at(key).get<double>(); };
+  const std::filesystem::path& out = options.out;
+  std::printf("rouen demo (%s): %d frames, %.1f s\n", options.quick ? "quick" : "full",
+              m.at("frames_captured").get<int>(), f("wall_seconds"));
+  std::printf("  response curve      max relative error  %.4f\n", f("response_max_rel_error"));
+  std::printf("  sun direction       error               %.4f deg\n", f("sun_direction_error_deg"));
+  std::printf("  sun radiance        relative error      %.4f\n", f("sun_radiance_rel_error"));
   std::printf("  sky                 relative error      median %.4f  p90 %.4f\n",
-              m["sky_rel_error_median"].get<double>(), m["sky_rel_error_p90"].get<double>());
-  std::printf("  pseudo-albedo       relative error      sun %.4f  sky+env %.4f\n", Mean(e_sun),
-              Mean(e_se));
+              f("sky_rel_error_median"), f("sky_rel_error_p90"));
+  std::printf("  pseudo-albedo       relative error      sun %.4f  sky+env %.4f\n",
+              f("albedo_sun_rel_error_mean"), f("albedo_skyenv_rel_error_mean"));
   std::printf("  held-out render     relative RMSE       %.4f  PSNR %.2f dB\n",
-              m["heldout_render_rel_rmse"].get<double>(),
-              m["heldout_render_psnr_db"].get<double>());
+              f("heldout_render_rel_rmse"), f("heldout_render_psnr_db"));
   std::printf(
       "  held-out, predicted  relative RMSE       %.4f  PSNR %.2f dB  (sky median %.4f, "
       "sun %.4f)\n",
-      pred.rel_rmse, pred.psnr_db, m["heldout_predicted_sky_rel_error_median"].get<double>(),
-      m["heldout_predicted_sun_radiance_rel_error"].get<double>());
+      f("heldout_predicted_render_rel_rmse"), f("heldout_predicted_render_psnr_db"),
+      f("heldout_predicted_sky_rel_error_median"), f("heldout_predicted_sun_radiance_rel_error"));
   std::printf(
       "  held-out photographs relative RMSE       %.4f  PSNR %.2f dB  (predicted: %.4f, "
       "%.2f dB)\n",
-      validation.measured.rel_rmse, validation.measured.psnr_db, validation.predicted->rel_rmse,
-      validation.predicted->psnr_db);
+      f("validate_measured_rel_rmse"), f("validate_measured_psnr_db"),
+      f("validate_predicted_rel_rmse"), f("validate_predicted_psnr_db"));
   std::printf(
       "  the same figures:    rouen validate %s --session %s --slot %d --exclude-block plaza\n",
-      scene_dir.c_str(), (out / "session").c_str(), heldout);
+      r.scene_dir.c_str(), r.session_dir.c_str(), r.heldout_slot);
   std::printf("  wrote %s, %s, %s\n", (out / "metrics.json").c_str(), (out / "heldout.png").c_str(),
               (out / "heldout_truth.png").c_str());
   std::printf("  report: %s (%.1f MB, %.1f s)\n", (out / "report.html").c_str(),
-              written.bytes / 1e6, written.seconds);
+              r.report.bytes / 1e6, r.report.seconds);
 }
 
 }  // namespace
 
 void RegisterDemo(CLI::App& app) {
-  auto a = std::make_shared<DemoArgs>();
+  auto a = std::make_shared<DemoOptions>();
   CLI::App* c = app.add_subcommand("demo", CommandSummary("demo"));
   c->footer(
       "No camera and no download needed. A campanile on a plaza in Berkeley is captured at five\n"
