@@ -247,8 +247,9 @@ class EnvironmentRegions {
   bool below_horizon(int r) const { return r < bands_below_ * sectors_; }
   // Whether `env` has this layout (its radiances can be looked up by these regions' indices).
   bool Fits(const EnvironmentMap& env) const;
-  // Appends the regions whose polygons may meet the bounding cap of `q` (conservative: the
-  // cap against each band's elevations and the sectors its azimuths span).
+  // Appends the regions whose polygons may meet `q` (conservative: q's elevation range, from
+  // its vertices and its edges' highest and lowest points, against each band's, and the
+  // sectors its azimuths span; every sector when q holds a pole).
   void Near(const ConvexSpherical& q, std::vector<int>* out) const;
 
  private:
