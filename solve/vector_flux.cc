@@ -1066,26 +1066,24 @@ void EnvironmentRegions::Near(const ConvexSpherical& q, std::vector<int>* out) c
   const double el_hi = zenith ? kPi / 2 : std::asin(std::clamp(zhi, -1.0, 1.0)) + 1e-9;
   double lo = 0, hi = 0;  // azimuth span about the first vertex's azimuth, radians
   bool every_sector = zenith || nadir || el_hi >= kPi / 2 || el_lo <= -kPi / 2;
-  const auto azimuth = [](const Eigen::Vector3d& v) { return std::atan2(v.x(), v.y()); };
-  const double a0 = azimuth(q.vertices[0]);
   // An edge's azimuth runs monotonically from one end's to the other's, less than pi apart,
   // unless the edge passes a pole: the edges' signed steps, summed, give the span.
   double sum = 0;
   for (size_t i = 0; i < n && !every_sector; ++i) {
     const Eigen::Vector3d& a = q.vertices[i];
     const Eigen::Vector3d& b = q.vertices[i + 1 == n ? 0 : i + 1];
-    if (std::hypot(a.x(), a.y()) < 1e-9 || std::hypot(b.x(), b.y()) < 1e-9) {
+    if (a.x() * a.x() + a.y() * a.y() < 1e-18) {
       every_sector = true;
       break;
     }
-    double d = azimuth(b) - azimuth(a);
-    if (d > kPi) d -= 2 * kPi;
-    if (d < -kPi) d += 2 * kPi;
+    // Azimuth atan2(x, y) grows from north towards east: the step from a's to b's.
+    const double d = std::atan2(a.y() * b.x() - a.x() * b.y(), a.x() * b.x() + a.y() * b.y());
     if (std::abs(d) > kPi - 1e-6) every_sector = true;
     sum += d;
     lo = std::min(lo, sum);
     hi = std::max(hi, sum);
   }
+  const double a0 = std::atan2(q.vertices[0].x(), q.vertices[0].y());
   // Round the pole (a winding the pole tests missed), or nearly all the way round.
   if (std::abs(sum) > 1e-6 || hi - lo >= 2 * kPi - 2 * kPi / sectors_) every_sector = true;
   int s_first = 0, s_count = sectors_;
@@ -1255,13 +1253,22 @@ Eigen::Vector3d GroundShadowChange(const EnvironmentView& view, const Environmen
     // The pieces of one region.
     const int r = view.piece_region[k];
     CheckRegion(env, r);
+    const size_t first = k;
+    while (k < view.pieces.size() && view.piece_region[k] == r) ++k;
+    // The shadows that may meet it (none: nothing to take apart).
+    auto it = std::lower_bound(by_region.begin(), by_region.end(), std::make_pair(r, -1));
+    const auto end = std::find_if(it, by_region.end(), [r](const auto& p) { return p.first != r; });
+    while (it != end &&
+           Disjoint(regions.polygon(r), regions.cap(r), ground_shadow[it->second], false)) {
+      ++it;
+    }
+    if (it == end) continue;
     rest.clear();
-    for (; k < view.pieces.size() && view.piece_region[k] == r; ++k) rest.Add(view.pieces[k]);
+    for (size_t j = first; j < k; ++j) rest.Add(view.pieces[j]);
     // Shadowed ground: the union of the (overlapping) shadow polygons, taken apart piece by
     // piece so no direction counts twice; shadows clear of the whole region are skipped.
     Eigen::Vector3d phi = Eigen::Vector3d::Zero();
-    auto it = std::lower_bound(by_region.begin(), by_region.end(), std::make_pair(r, -1));
-    for (; it != by_region.end() && it->first == r; ++it) {
+    for (; it != end; ++it) {
       const ConvexSpherical& s = ground_shadow[it->second];
       if (Disjoint(regions.polygon(r), regions.cap(r), s, false)) continue;
       next.clear();
