@@ -650,7 +650,7 @@ void PointVisibility::Add(const Mesh& mesh, int t, std::vector<Candidate>* found
   AddPolygon({mesh.vertices[tri[0]], mesh.vertices[tri[1]], mesh.vertices[tri[2]]}, found);
 }
 
-void PointVisibility::AddPolygon(std::vector<Eigen::Vector3d> pts,
+void PointVisibility::AddPolygon(const std::vector<Eigen::Vector3d>& pts,
                                  std::vector<Candidate>* found) const {
   bool front = false;
   for (const auto& v : pts) front |= normal_.dot(v - origin_) > 0;
@@ -659,11 +659,6 @@ void PointVisibility::AddPolygon(std::vector<Eigen::Vector3d> pts,
   if (!ProjectPolygon(pts, origin_, normal_, &c.cs)) return;
   c.omega = std::abs(SolidAngle(c.cs.vertices));
   if (!(c.omega > 0)) return;
-  Eigen::Vector3d newell = Eigen::Vector3d::Zero();
-  for (size_t i = 0; i < pts.size(); ++i) newell += pts[i].cross(pts[(i + 1) % pts.size()]);
-  c.plane_n = newell.normalized();
-  c.plane_d = c.plane_n.dot(pts[0]);
-  c.corners = std::move(pts);
   found->push_back(std::move(c));
 }
 
@@ -678,18 +673,7 @@ void PointVisibility::Finish(std::vector<Candidate>* found) {
       const Candidate& q = (*found)[j];
       // Inside q's projection needs every corner inside its bounding cap: one checked first.
       if (q.cs.cap_centre.dot(f.cs.vertices[0]) < q.cs.cap_cos - 1e-12) continue;
-      const double so = q.plane_n.dot(origin_) - q.plane_d;  // the origin's side of q
-      if (!(std::abs(so) > 0)) continue;
-      bool behind = true;
-      const double tol = 1e-9 * (1 + std::abs(q.plane_d));
-      for (const auto& v : f.corners) {
-        const double sv = q.plane_n.dot(v) - q.plane_d;
-        if (so > 0 ? sv > tol : sv < -tol) {
-          behind = false;
-          break;
-        }
-      }
-      if (behind && Inside(f.cs.vertices, q.cs)) {
+      if (Inside(f.cs.vertices, q.cs)) {
         hidden = true;
         break;
       }

@@ -222,8 +222,8 @@ TEST(VectorFluxCacheTest, OccluderSelectionAgreesWithAllFaces) {
     // Missing an occluder can only add light.
     EXPECT_GE(ea, eb - 1e-6) << o.transpose();
   }
-  // Faces hidden behind nearer ones are culled, by the id buffer and (exactly, behind a
-  // single face) by PointVisibility itself.
+  // Faces hidden behind nearer ones are culled, by the id buffer and (exactly, inside a
+  // single face's projection) by PointVisibility itself.
   EXPECT_LT(selected_total, all_total);
   const PointVisibility plaza(m, {3, -3, 0.01}, {0, 0, 1});
   EXPECT_GE(plaza.num_culled(), 4);  // at least the small box's faces towards the point
