@@ -293,6 +293,8 @@ void SubtractCut(const SphericalPolygon& p, const ConvexSpherical& q, PolygonLis
                  PolygonList* inside, SubtractScratch* s) {
   SphericalPolygon& rest = s->rest;
   rest.assign(p.begin(), p.end());
+  // Duplicates dropped once: every cut below leaves none.
+  DropDuplicates(&rest);
   for (const auto& m : q.edge_normal) {
     const double scale = m.norm();
     if (rest.size() < 3 || !(scale > 0)) return;  // (ClipToHalfSpace: nothing on either side)
@@ -308,9 +310,7 @@ void SubtractCut(const SphericalPolygon& p, const ConvexSpherical& q, PolygonLis
       if (out.empty()) outside->PopBack();
     }
     if (all_in) {
-      // Every vertex kept and no crossing: the cut only drops duplicate vertices.
-      DropDuplicates(&rest);
-      if (rest.size() < 3) rest.clear();
+      // Every vertex kept and no crossing: the cut would change nothing.
     } else {
       CutInto(rest, s->d, 1.0, &s->cut);
       rest.swap(s->cut);
