@@ -511,6 +511,22 @@ void DemoGridTiming() {
                 "ratio",
                 "the 256-direction Monte Carlo for the same five slots in one call (wall time, "
                 "TBB)");
+  bench::Record("irradiance.demo_grid.five_slots.vector_flux_over_monte_carlo_256_cpu",
+                vf5_cpu / mc5_cpu, "ratio",
+                "the same, CPU time of all threads (less sensitive to a shared machine's load)");
+  // What `rouen solve` pays for either method: the hemisphere cache (its "surface grid and
+  // visibility" stage; both methods need it, for the interreflection) and one call for every
+  // training slot (in "irradiance and pseudo-albedos"). Each later single-lighting call
+  // (`rouen validate`, render) pays the vector flux's per-point geometry again.
+  std::printf(
+      "as the solve pays it (hemisphere cache + five slots in one call): monte carlo %.2f s, "
+      "vector flux %.2f s (ratio vf/mc %.2f)\n",
+      cache_s + mc5_s, cache_s + vf5_s, (cache_s + vf5_s) / (cache_s + mc5_s));
+  bench::Record("irradiance.demo_grid.as_solve_pays.vector_flux_over_monte_carlo_256",
+                (cache_s + vf5_s) / (cache_s + mc5_s), "ratio",
+                "the solve's cost of either method: the 256-direction hemisphere cache (built "
+                "for both: the interreflection uses it) plus five slots in one call (wall time, "
+                "TBB)");
 }
 
 void BM_VectorFluxGeometryEnv(benchmark::State& state) {

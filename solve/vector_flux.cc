@@ -40,22 +40,28 @@ void CutInto(const SphericalPolygon& poly, const std::vector<double>& d, double 
              SphericalPolygon* out) {
   out->clear();
   const size_t n = poly.size();
+  // Consecutive duplicates dropped as they come (as DropDuplicates would after the cut).
+  auto keep = [out](const Eigen::Vector3d& v) {
+    if (out->empty() || (v - out->back()).squaredNorm() > 1e-26) out->push_back(v);
+  };
   for (size_t i = 0; i < n; ++i) {
     const size_t j = i + 1 == n ? 0 : i + 1;
     const Eigen::Vector3d& a = poly[i];
     const Eigen::Vector3d& b = poly[j];
     const double da = sign * d[i], db = sign * d[j];
     const bool ina = da >= -kSideEps, inb = db >= -kSideEps;
-    if (ina) out->push_back(a);
+    if (ina) keep(a);
     if (ina != inb && std::abs(da - db) > 0) {
       // The chord meets the plane where the great arc does (both lie in the plane of O, a, b).
       const double t = da / (da - db);
       const Eigen::Vector3d x = a + t * (b - a);
       const double len = x.norm();
-      if (len > 0) out->push_back(x / len);
+      if (len > 0) keep(x / len);
     }
   }
-  DropDuplicates(out);
+  size_t w = out->size();
+  while (w > 1 && ((*out)[0] - (*out)[w - 1]).squaredNorm() <= 1e-26) --w;
+  out->resize(w);
   if (out->size() < 3) out->clear();
 }
 
@@ -180,6 +186,9 @@ bool Disjoint(const SphericalPolygon& p, const SphericalCap& pcap, const ConvexS
     return true;
   }
   for (const auto& m : q.edge_normal) {
+    // The whole cap (and so every vertex) beyond this edge's plane: m.x < 0 over the cap when
+    // the angle from m to its centre exceeds 90 deg plus its radius.
+    if (pcap.valid && m.dot(pcap.centre) < -pcap.sin) return true;
     bool all_out = true;
     for (const auto& v : p) {
       if (m.dot(v) > kSideEps) {
@@ -242,6 +251,8 @@ class PolygonList {
     SphericalPolygon& q = Add();
     q.assign(p.begin(), p.end());
   }
+  // Moves `p`'s vertices in (p receives some spare storage).
+  void AddSwap(SphericalPolygon* p) { Add().swap(*p); }
   void PopBack() { --count_; }
   void swap(PolygonList& o) {
     items_.swap(o.items_);
@@ -264,6 +275,9 @@ struct SubtractScratch {
 // m with ClipToHalfSpace for each edge normal m of q, with each vertex's distance to the
 // edge's plane computed once for both cuts, and a cut that leaves every vertex on one side
 // done without clipping.
+void SubtractCut(const SphericalPolygon& p, const ConvexSpherical& q, PolygonList* outside,
+                 PolygonList* inside, SubtractScratch* s);
+
 void SubtractInto(const SphericalPolygon& p, const ConvexSpherical& q, PolygonList* outside,
                   PolygonList* inside, SubtractScratch* s) {
   if (p.size() < 3) return;
@@ -271,8 +285,16 @@ void SubtractInto(const SphericalPolygon& p, const ConvexSpherical& q, PolygonLi
     outside->Add(p);
     return;
   }
+  SubtractCut(p, q, outside, inside, s);
+}
+
+// SubtractInto's cuts, for a `p` (3 vertices or more) not known to be disjoint from `q`.
+void SubtractCut(const SphericalPolygon& p, const ConvexSpherical& q, PolygonList* outside,
+                 PolygonList* inside, SubtractScratch* s) {
   SphericalPolygon& rest = s->rest;
   rest.assign(p.begin(), p.end());
+  // Duplicates dropped once: every cut below leaves none.
+  DropDuplicates(&rest);
   for (const auto& m : q.edge_normal) {
     const double scale = m.norm();
     if (rest.size() < 3 || !(scale > 0)) return;  // (ClipToHalfSpace: nothing on either side)
@@ -288,9 +310,7 @@ void SubtractInto(const SphericalPolygon& p, const ConvexSpherical& q, PolygonLi
       if (out.empty()) outside->PopBack();
     }
     if (all_in) {
-      // Every vertex kept and no crossing: the cut only drops duplicate vertices.
-      DropDuplicates(&rest);
-      if (rest.size() < 3) rest.clear();
+      // Every vertex kept and no crossing: the cut would change nothing.
     } else {
       CutInto(rest, s->d, 1.0, &s->cut);
       rest.swap(s->cut);
@@ -630,7 +650,7 @@ void PointVisibility::Add(const Mesh& mesh, int t, std::vector<Candidate>* found
   AddPolygon({mesh.vertices[tri[0]], mesh.vertices[tri[1]], mesh.vertices[tri[2]]}, found);
 }
 
-void PointVisibility::AddPolygon(std::vector<Eigen::Vector3d> pts,
+void PointVisibility::AddPolygon(const std::vector<Eigen::Vector3d>& pts,
                                  std::vector<Candidate>* found) const {
   bool front = false;
   for (const auto& v : pts) front |= normal_.dot(v - origin_) > 0;
@@ -639,11 +659,6 @@ void PointVisibility::AddPolygon(std::vector<Eigen::Vector3d> pts,
   if (!ProjectPolygon(pts, origin_, normal_, &c.cs)) return;
   c.omega = std::abs(SolidAngle(c.cs.vertices));
   if (!(c.omega > 0)) return;
-  Eigen::Vector3d newell = Eigen::Vector3d::Zero();
-  for (size_t i = 0; i < pts.size(); ++i) newell += pts[i].cross(pts[(i + 1) % pts.size()]);
-  c.plane_n = newell.normalized();
-  c.plane_d = c.plane_n.dot(pts[0]);
-  c.corners = std::move(pts);
   found->push_back(std::move(c));
 }
 
@@ -658,18 +673,7 @@ void PointVisibility::Finish(std::vector<Candidate>* found) {
       const Candidate& q = (*found)[j];
       // Inside q's projection needs every corner inside its bounding cap: one checked first.
       if (q.cs.cap_centre.dot(f.cs.vertices[0]) < q.cs.cap_cos - 1e-12) continue;
-      const double so = q.plane_n.dot(origin_) - q.plane_d;  // the origin's side of q
-      if (!(std::abs(so) > 0)) continue;
-      bool behind = true;
-      const double tol = 1e-9 * (1 + std::abs(q.plane_d));
-      for (const auto& v : f.corners) {
-        const double sv = q.plane_n.dot(v) - q.plane_d;
-        if (so > 0 ? sv > tol : sv < -tol) {
-          behind = false;
-          break;
-        }
-      }
-      if (behind && Inside(f.cs.vertices, q.cs)) {
+      if (Inside(f.cs.vertices, q.cs)) {
         hidden = true;
         break;
       }
@@ -740,6 +744,7 @@ namespace {
 // Buffers of VisibleParts.
 struct ClipScratch {
   PolygonList pieces, next;
+  std::vector<SphericalCap> caps, next_caps;  // of pieces, next
   std::vector<double> d;
   SubtractScratch subtract;
 };
@@ -759,13 +764,27 @@ void VisibleParts(const PointVisibility& vis, const SphericalPolygon& patch, con
     s->pieces.PopBack();
     return;
   }
+  // Each piece's bounding cap is computed once, when the piece is made: a piece clear of an
+  // occluder moves on unchanged, with its cap (the same pieces as SubtractInto's).
+  s->caps.assign(1, SphericalCap(front));
   for (size_t k = 0; k < count; ++k) {
     const ConvexSpherical& occ = vis.occluder(ids == nullptr ? static_cast<int>(k) : ids[k]);
     s->next.clear();
+    s->next_caps.clear();
     for (size_t j = 0; j < s->pieces.size(); ++j) {
-      SubtractInto(s->pieces[j], occ, &s->next, nullptr, &s->subtract);
+      SphericalPolygon& p = s->pieces[j];
+      if (p.size() < 3) continue;
+      if (Disjoint(p, s->caps[j], occ, false)) {
+        s->next.AddSwap(&p);
+        s->next_caps.push_back(s->caps[j]);
+        continue;
+      }
+      const size_t before = s->next.size();
+      SubtractCut(p, occ, &s->next, nullptr, &s->subtract);
+      for (size_t m = before; m < s->next.size(); ++m) s->next_caps.emplace_back(s->next[m]);
     }
     s->pieces.swap(s->next);
+    s->caps.swap(s->next_caps);
     if (s->pieces.empty()) return;
   }
 }
@@ -797,10 +816,18 @@ PointVisibility::Cover PointVisibility::Classify(const SphericalPolygon& patch,
                                                  const std::vector<int>* subset, bool convex,
                                                  std::vector<int>* overlapping) const {
   bool all_front = true, all_back = true;
-  for (const auto& v : patch) {
-    const double d = normal_.dot(v);
-    all_front &= d >= 0;
-    all_back &= d <= kSideEps;
+  // The bounding cap wholly behind or (by more than the side tolerance) in front of the
+  // tangent plane decides both without visiting the vertices.
+  const double nc = cap.valid ? normal_.dot(cap.centre) : 0;
+  if (cap.valid && nc < -cap.sin) return Cover::kHidden;
+  if (cap.valid && nc > cap.sin + 1e-9) {
+    all_back = false;
+  } else {
+    for (const auto& v : patch) {
+      const double d = normal_.dot(v);
+      all_front &= d >= 0;
+      all_back &= d <= kSideEps;
+    }
   }
   if (all_back) return Cover::kHidden;
   const size_t start = overlapping->size();
@@ -994,38 +1021,77 @@ bool EnvironmentRegions::Fits(const EnvironmentMap& env) const {
 }
 
 void EnvironmentRegions::Near(const ConvexSpherical& q, std::vector<int>* out) const {
-  // A cap of a hemisphere or more bounds the vertices but not the arcs between them.
-  if (!(q.cap_radius + margin_ < kPi / 2)) {
+  const size_t n = q.vertices.size();
+  auto all = [&]() {
     for (int r = 0; r < size(); ++r) out->push_back(r);
-    return;
+  };
+  if (n < 3 || q.edge_normal.size() != n) return all();
+  // Elevations: the boundary's lowest and highest points, at vertices or where an edge passes
+  // the top or bottom of its great circle; a pole inside every edge's half space is inside q.
+  double zlo = 1, zhi = -1;
+  bool zenith = true, nadir = true;
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3d& a = q.vertices[i];
+    const Eigen::Vector3d& b = q.vertices[i + 1 == n ? 0 : i + 1];
+    const Eigen::Vector3d& m = q.edge_normal[i];
+    zlo = std::min(zlo, a.z());
+    zhi = std::max(zhi, a.z());
+    zenith &= m.z() >= -1e-12;
+    nadir &= m.z() <= 1e-12;
+    Eigen::Vector3d top(-m.z() * m.x(), -m.z() * m.y(), 1 - m.z() * m.z());
+    const double len = top.norm();
+    if (!(len > 1e-12)) continue;  // a horizontal great circle: its vertices bound it
+    top /= len;
+    // A point t of the great circle lies on the arc a -> b when a x t and t x b point along m.
+    if (a.cross(top).dot(m) >= 0 && top.cross(b).dot(m) >= 0) zhi = std::max(zhi, top.z());
+    if (a.cross(-top).dot(m) >= 0 && (-top).cross(b).dot(m) >= 0) zlo = std::min(zlo, -top.z());
   }
-  const double el = std::asin(std::clamp(q.cap_centre.z(), -1.0, 1.0));
-  const double r = q.cap_radius + margin_;
-  const double lo = el - r, hi = el + r;
-  // Sectors: all when the cap reaches a pole, else the azimuths within asin(sin r / cos el).
+  const double el_lo = nadir ? -kPi / 2 : std::asin(std::clamp(zlo, -1.0, 1.0)) - 1e-9;
+  const double el_hi = zenith ? kPi / 2 : std::asin(std::clamp(zhi, -1.0, 1.0)) + 1e-9;
+  double lo = 0, hi = 0;  // azimuth span about the first vertex's azimuth, radians
+  bool every_sector = zenith || nadir || el_hi >= kPi / 2 || el_lo <= -kPi / 2;
+  // An edge's azimuth runs monotonically from one end's to the other's, less than pi apart,
+  // unless the edge passes a pole: the edges' signed steps, summed, give the span.
+  double sum = 0;
+  for (size_t i = 0; i < n && !every_sector; ++i) {
+    const Eigen::Vector3d& a = q.vertices[i];
+    const Eigen::Vector3d& b = q.vertices[i + 1 == n ? 0 : i + 1];
+    if (a.x() * a.x() + a.y() * a.y() < 1e-18) {
+      every_sector = true;
+      break;
+    }
+    // Azimuth atan2(x, y) grows from north towards east: the step from a's to b's.
+    const double d = std::atan2(a.y() * b.x() - a.x() * b.y(), a.x() * b.x() + a.y() * b.y());
+    if (std::abs(d) > kPi - 1e-6) every_sector = true;
+    sum += d;
+    lo = std::min(lo, sum);
+    hi = std::max(hi, sum);
+  }
+  const double a0 = std::atan2(q.vertices[0].x(), q.vertices[0].y());
+  // Round the pole (a winding the pole tests missed), or nearly all the way round.
+  if (std::abs(sum) > 1e-6 || hi - lo >= 2 * kPi - 2 * kPi / sectors_) every_sector = true;
   int s_first = 0, s_count = sectors_;
-  if (hi < kPi / 2 && lo > -kPi / 2) {
-    const double half = std::asin(std::min(1.0, std::sin(r) / std::cos(el)));
-    double az = std::atan2(q.cap_centre.x(), q.cap_centre.y());
-    if (az < 0) az += 2 * kPi;
+  if (!every_sector) {
     const double width = 2 * kPi / sectors_;
-    const int first = static_cast<int>(std::floor((az - half) / width));
-    const int last = static_cast<int>(std::floor((az + half) / width));
+    const int first = static_cast<int>(std::floor((a0 + lo - 1e-9) / width));
+    const int last = static_cast<int>(std::floor((a0 + hi + 1e-9) / width));
     if (last - first + 1 < sectors_) {
       s_first = first;
       s_count = last - first + 1;
     }
   }
+  // A region's arcs along its parallels stray from them by less than margin_ in elevation; its
+  // sides are meridians.
   const int bands = bands_below_ + bands_above_;
-  for (int b = 0; b < bands; ++b) {
-    const double b_lo = b < bands_below_ ? -kPi / 2 + b * (kPi / 2) / bands_below_
-                                         : (b - bands_below_) * (kPi / 2) / bands_above_;
-    const double b_hi = b < bands_below_ ? -kPi / 2 + (b + 1) * (kPi / 2) / bands_below_
-                                         : (b - bands_below_ + 1) * (kPi / 2) / bands_above_;
-    if (b_hi < lo || b_lo > hi) continue;
+  for (int band = 0; band < bands; ++band) {
+    const double b_lo = band < bands_below_ ? -kPi / 2 + band * (kPi / 2) / bands_below_
+                                            : (band - bands_below_) * (kPi / 2) / bands_above_;
+    const double b_hi = band < bands_below_ ? -kPi / 2 + (band + 1) * (kPi / 2) / bands_below_
+                                            : (band - bands_below_ + 1) * (kPi / 2) / bands_above_;
+    if (b_hi + margin_ < el_lo || b_lo - margin_ > el_hi) continue;
     for (int k = 0; k < s_count; ++k) {
       const int sector = ((s_first + k) % sectors_ + sectors_) % sectors_;
-      out->push_back(b * sectors_ + sector);
+      out->push_back(band * sectors_ + sector);
     }
   }
 }
@@ -1171,13 +1237,22 @@ Eigen::Vector3d GroundShadowChange(const EnvironmentView& view, const Environmen
     // The pieces of one region.
     const int r = view.piece_region[k];
     CheckRegion(env, r);
+    const size_t first = k;
+    while (k < view.pieces.size() && view.piece_region[k] == r) ++k;
+    // The shadows that may meet it (none: nothing to take apart).
+    auto it = std::lower_bound(by_region.begin(), by_region.end(), std::make_pair(r, -1));
+    const auto end = std::find_if(it, by_region.end(), [r](const auto& p) { return p.first != r; });
+    while (it != end &&
+           Disjoint(regions.polygon(r), regions.cap(r), ground_shadow[it->second], false)) {
+      ++it;
+    }
+    if (it == end) continue;
     rest.clear();
-    for (; k < view.pieces.size() && view.piece_region[k] == r; ++k) rest.Add(view.pieces[k]);
+    for (size_t j = first; j < k; ++j) rest.Add(view.pieces[j]);
     // Shadowed ground: the union of the (overlapping) shadow polygons, taken apart piece by
     // piece so no direction counts twice; shadows clear of the whole region are skipped.
     Eigen::Vector3d phi = Eigen::Vector3d::Zero();
-    auto it = std::lower_bound(by_region.begin(), by_region.end(), std::make_pair(r, -1));
-    for (; it != by_region.end() && it->first == r; ++it) {
+    for (; it != end; ++it) {
       const ConvexSpherical& s = ground_shadow[it->second];
       if (Disjoint(regions.polygon(r), regions.cap(r), s, false)) continue;
       next.clear();

@@ -138,7 +138,8 @@ class OccluderFaces {
 // What a surface point sees: the hemisphere above its tangent plane minus the model faces
 // in front of it (either every triangle with a vertex in front of the plane, or a given
 // candidate list such as SelectOccluders' -- extra faces hidden behind others cost time, never
-// accuracy). Faces hidden behind one single larger, nearer face are dropped (exact).
+// accuracy). Faces whose projection lies inside one single larger face's are dropped (exact:
+// what the point sees is the hemisphere less the union of the projections).
 class PointVisibility {
  public:
   // `origin`: the surface point lifted off the surface (as for the ray-cast gathering);
@@ -175,21 +176,18 @@ class PointVisibility {
   const Eigen::Vector3d& origin() const { return origin_; }
   const Eigen::Vector3d& normal() const { return normal_; }
   int num_occluders() const { return static_cast<int>(occluders_.size()); }
-  int num_culled() const { return culled_; }  // faces in front hidden behind one other face
+  int num_culled() const { return culled_; }  // faces in front inside one other's projection
   const ConvexSpherical& occluder(int k) const { return occluders_[k]; }
 
  private:
   struct Candidate {
     double omega;  // solid angle, sr
     ConvexSpherical cs;
-    Eigen::Vector3d plane_n;  // the face's plane: plane_n . x = plane_d
-    double plane_d;
-    std::vector<Eigen::Vector3d> corners;
   };
   void Add(const Mesh& mesh, int t, std::vector<Candidate>* found) const;
-  void AddPolygon(std::vector<Eigen::Vector3d> pts, std::vector<Candidate>* found) const;
-  // Sorts by solid angle and drops faces hidden behind a single larger, nearer face (their
-  // projection inside its projection, every corner behind its plane): exact culling.
+  void AddPolygon(const std::vector<Eigen::Vector3d>& pts, std::vector<Candidate>* found) const;
+  // Sorts by solid angle and drops faces whose projection lies inside a single larger one's:
+  // exact culling, as only the union of the projections is seen past (nearer or farther).
   void Finish(std::vector<Candidate>* found);
   Eigen::Vector3d origin_, normal_;
   std::vector<ConvexSpherical> occluders_;  // largest solid angle first
@@ -247,8 +245,9 @@ class EnvironmentRegions {
   bool below_horizon(int r) const { return r < bands_below_ * sectors_; }
   // Whether `env` has this layout (its radiances can be looked up by these regions' indices).
   bool Fits(const EnvironmentMap& env) const;
-  // Appends the regions whose polygons may meet the bounding cap of `q` (conservative: the
-  // cap against each band's elevations and the sectors its azimuths span).
+  // Appends the regions whose polygons may meet `q` (conservative: q's elevation range, from
+  // its vertices and its edges' highest and lowest points, against each band's, and the
+  // sectors its azimuths span; every sector when q holds a pole).
   void Near(const ConvexSpherical& q, std::vector<int>* out) const;
 
  private:

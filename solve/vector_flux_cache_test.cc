@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <random>
+#include <vector>
 
 #include "core/angles.h"
 #include "core/error.h"
@@ -136,6 +138,57 @@ TEST(VectorFluxCacheTest, EnvironmentViewEqualsClippingByEveryOccluder) {
   EXPECT_THROW(EnvironmentIrradiance(view, env, 0), Error);
 }
 
+// EnvironmentRegions::Near bounds a convex polygon by its elevations and azimuths: every
+// region the polygon meets (a clipped piece of more than rounding, |Phi| > 1e-12 sr) is listed,
+// for polygons anywhere: round a pole, across north (azimuth 0) and south (+-180 deg), on the
+// horizon, small and up to about 80 degrees across.
+TEST(VectorFluxCacheTest, EnvironmentRegionsNearListsEveryRegionAPolygonMeets) {
+  const EnvironmentMap env =
+      EnvironmentMap::Constant(EnvOptions(), Eigen::Vector3d(1, 1, 1), Eigen::Vector3d(1, 1, 1));
+  const EnvironmentRegions regions(env, VectorFluxOptions());
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<Eigen::Vector3d> centres = {Eigen::Vector3d::UnitZ(), -Eigen::Vector3d::UnitZ(),
+                                          Eigen::Vector3d::UnitY(), -Eigen::Vector3d::UnitY(),
+                                          Eigen::Vector3d(1, 0, 0.01).normalized()};
+  for (int k = 0; k < 60; ++k) {
+    const double z = 2 * u(rng) - 1, phi = 2 * kPi * u(rng);
+    const double r = std::sqrt(1 - z * z);
+    centres.emplace_back(r * std::cos(phi), r * std::sin(phi), z);
+  }
+  int tested = 0;
+  for (size_t k = 0; k < centres.size(); ++k) {
+    const Eigen::Vector3d c = centres[k];
+    Eigen::Vector3d t =
+        c.cross(std::abs(c.z()) < 0.9 ? Eigen::Vector3d::UnitZ() : Eigen::Vector3d::UnitX());
+    t.normalize();
+    const Eigen::Vector3d b = c.cross(t);
+    const double radius = (k % 3 == 0 ? 0.02 : 0.7) * (0.2 + u(rng));
+    const int corners = 3 + static_cast<int>(k % 4);
+    SphericalPolygon poly;
+    for (int i = 0; i < corners; ++i) {
+      const double a = 2 * kPi * (i + 0.3 * u(rng)) / corners;
+      poly.push_back((c + std::tan(radius) * (std::cos(a) * t + std::sin(a) * b)).normalized());
+    }
+    ConvexSpherical q;
+    ASSERT_TRUE(q.Set(poly)) << k;
+    std::vector<int> near;
+    regions.Near(q, &near);
+    std::sort(near.begin(), near.end());
+    for (int r = 0; r < regions.size(); ++r) {
+      std::vector<SphericalPolygon> outside, inside;
+      SubtractConvex(regions.polygon(r), q, &outside, &inside);
+      Eigen::Vector3d phi = Eigen::Vector3d::Zero();
+      for (const auto& p : inside) phi += VectorFlux(p);
+      if (phi.norm() <= 1e-12) continue;
+      ++tested;
+      EXPECT_TRUE(std::binary_search(near.begin(), near.end(), r))
+          << "polygon " << k << " about " << c.transpose() << " meets region " << r;
+    }
+  }
+  EXPECT_GT(tested, 500);
+}
+
 TEST(VectorFluxCacheTest, OccluderSelectionAgreesWithAllFaces) {
   const Mesh m = Street();
   const RayCaster rc(m);
@@ -169,8 +222,8 @@ TEST(VectorFluxCacheTest, OccluderSelectionAgreesWithAllFaces) {
     // Missing an occluder can only add light.
     EXPECT_GE(ea, eb - 1e-6) << o.transpose();
   }
-  // Faces hidden behind nearer ones are culled, by the id buffer and (exactly, behind a
-  // single face) by PointVisibility itself.
+  // Faces hidden behind nearer ones are culled, by the id buffer and (exactly, inside a
+  // single face's projection) by PointVisibility itself.
   EXPECT_LT(selected_total, all_total);
   const PointVisibility plaza(m, {3, -3, 0.01}, {0, 0, 1});
   EXPECT_GE(plaza.num_culled(), 4);  // at least the small box's faces towards the point
