@@ -246,7 +246,9 @@ TEST(IrradianceTest, GroundShadowDarkensTheEnvironmentBehindTheTower) {
   for (int i = 0; i < g.size(); ++i) {
     const GridPoint& p = g.points[i];
     if (p.block != tower || std::abs(p.normal.z()) > 0.5) continue;
-    if (p.normal.y() < -0.9) EXPECT_NEAR(c.direct_se[i].x(), b.direct_se[i].x(), 1e-12);
+    if (p.normal.y() < -0.9) {
+      EXPECT_NEAR(c.direct_se[i].x(), b.direct_se[i].x(), 1e-12);
+    }
     if (p.normal.y() > 0.9 && p.position.z() > 10) {
       EXPECT_LE(c.direct_se[i].x(), a.direct_se[i].x() + 1e-12);
       EXPECT_GE(c.direct_se[i].x(), b.direct_se[i].x() - kPi / 2 - 1e-9);
