@@ -769,15 +769,21 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   return r;
 }
 
-SlotIrradiance IrradianceFor(const SolveResult& solved, const Lighting& lighting) {
+std::vector<SlotIrradiance> IrradianceFor(const SolveResult& solved,
+                                          const std::vector<Lighting>& lightings) {
   const AlbedoOptions& ao = solved.albedo_options;
   IrradianceOptions io = ao.irradiance;
   io.mesh = &solved.mesh;
-  SlotIrradiance irr =
-      ComputeIrradiance(solved.grid, solved.hemisphere, *solved.caster, lighting, io);
-  AddInterreflection(solved.grid, solved.hemisphere, solved.albedo.rho_sun, solved.albedo.rho_se,
-                     &irr, ao.bounces);
+  std::vector<SlotIrradiance> irr =
+      ComputeIrradiance(solved.grid, solved.hemisphere, *solved.caster, lightings, io);
+  for (SlotIrradiance& one : irr)
+    AddInterreflection(solved.grid, solved.hemisphere, solved.albedo.rho_sun,
+                       solved.albedo.rho_se, &one, ao.bounces);
   return irr;
+}
+
+SlotIrradiance IrradianceFor(const SolveResult& solved, const Lighting& lighting) {
+  return std::move(IrradianceFor(solved, std::vector<Lighting>{lighting})[0]);
 }
 
 }  // namespace rouen

@@ -125,6 +125,10 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
 // Irradiance of the solved model's grid under other lighting (a novel time), with the
 // interreflection from the recovered albedos, computed as SolveSession computed the slots'.
 SlotIrradiance IrradianceFor(const SolveResult& solved, const Lighting& lighting);
+// The same for several lightings in one pass over the grid: what depends only on the geometry
+// (the vector flux's clipping, the Monte Carlo's escaping directions) is found once per point.
+std::vector<SlotIrradiance> IrradianceFor(const SolveResult& solved,
+                                          const std::vector<Lighting>& lightings);
 
 // The sky pixels of a sky photo for the §3.2 fit (the paper masks buildings and trees out),
 // as session.json's extra.sky_masks says for the group's name (or for "*"): an image file

@@ -123,8 +123,9 @@ TextureRender RenderSceneWithPhotoTexture(const LoadedScene& scene, const Sessio
   const Lighting novel = RequestedLighting(scene, r, log);
   Log(log, "irradiance at " + std::to_string(solved.grid.size()) +
                " grid points under the photograph's lighting and the requested one");
-  const SlotIrradiance photo_irr = IrradianceFor(solved, photo_lighting);
-  const SlotIrradiance novel_irr = IrradianceFor(solved, novel);
+  const std::vector<SlotIrradiance> irr = IrradianceFor(solved, {photo_lighting, novel});
+  const SlotIrradiance& photo_irr = irr[0];
+  const SlotIrradiance& novel_irr = irr[1];
   Log(log, "rendering " + std::to_string(r.intrinsics.width) + "x" +
                std::to_string(r.intrinsics.height) + " with the photograph's texture (§6.4)");
   PhotoTextureResult t = RenderWithPhotoTexture(

@@ -73,12 +73,9 @@ Validation ValidateSlot(const LoadedScene& scene, const Session& session, int sl
                  "not a prediction (rouen solve --holdout-slot " +
                  std::to_string(slot) + ")");
 
-  // Irradiance once per lighting, for every photo of the slot.
-  const Lighting measured = solved.slots[slot].lighting;
-  Log(log, "irradiance under slot " + std::to_string(slot) + "'s measured lighting");
-  const SlotIrradiance irr_measured = IrradianceFor(solved, measured);
+  // Irradiance once per lighting, for every photo of the slot; both lightings in one pass.
+  std::vector<Lighting> lightings = {solved.slots[slot].lighting};
   std::optional<Lighting> predicted;
-  SlotIrradiance irr_predicted;
   if (options.predicted) {
     RenderRequest request;
     request.time = solved.slots[slot].utc;
@@ -86,9 +83,14 @@ Validation ValidateSlot(const LoadedScene& scene, const Session& session, int sl
     request.predict_without_slots = {slot};
     request.intrinsics = scene.scene.views.at(views.front()).intrinsics;
     predicted = RequestedLighting(scene, request, log);
-    Log(log, "irradiance under the lighting predicted from the other slots");
-    irr_predicted = IrradianceFor(solved, *predicted);
+    lightings.push_back(*predicted);
   }
+  Log(log, "irradiance under slot " + std::to_string(slot) + "'s measured lighting" +
+               (predicted ? " and the lighting predicted from the other slots" : ""));
+  std::vector<SlotIrradiance> irr = IrradianceFor(solved, lightings);
+  const Lighting& measured = lightings[0];
+  const SlotIrradiance& irr_measured = irr[0];
+  const SlotIrradiance irr_predicted = predicted ? std::move(irr[1]) : SlotIrradiance{};
 
   MetricsOptions mo;
   mo.response = &scene.scene.response;

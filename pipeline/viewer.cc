@@ -306,9 +306,10 @@ ViewerData ComputeViewerData(const LoadedScene& scene, const ViewerOptions& opti
   for (int i = 0; i < n; ++i) {
     const UtcTime t = out.day.times[i];
     const Lighting lc = clear_sky.At(t, scene.scene.site);
-    const SlotIrradiance ic = IrradianceFor(solved, lc);
     const Lighting lo = overcast_sky.At(t, scene.scene.site);
-    const SlotIrradiance io = IrradianceFor(solved, lo);
+    const std::vector<SlotIrradiance> irr = IrradianceFor(solved, {lc, lo});
+    const SlotIrradiance& ic = irr[0];
+    const SlotIrradiance& io = irr[1];
     ViewerBasis b;
     b.utc = t;
     b.sun_dir = lc.sun_dir.normalized();
