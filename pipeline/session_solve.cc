@@ -777,8 +777,8 @@ std::vector<SlotIrradiance> IrradianceFor(const SolveResult& solved,
   std::vector<SlotIrradiance> irr =
       ComputeIrradiance(solved.grid, solved.hemisphere, *solved.caster, lightings, io);
   for (SlotIrradiance& one : irr)
-    AddInterreflection(solved.grid, solved.hemisphere, solved.albedo.rho_sun,
-                       solved.albedo.rho_se, &one, ao.bounces);
+    AddInterreflection(solved.grid, solved.hemisphere, solved.albedo.rho_sun, solved.albedo.rho_se,
+                       &one, ao.bounces);
   return irr;
 }
 
