@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/files.h"
 #include "core/internal/image_input.h"
 
 namespace rouen {
@@ -103,12 +104,7 @@ bool IsRawFileName(const std::string& path) {
                                ".srf", ".sr2", ".raf", ".orf", ".rw2", ".rwl", ".pef",
                                ".ptx", ".srw", ".raw", ".3fr", ".erf", ".kdc", ".dcr",
                                ".mrw", ".mos", ".mef", ".iiq", ".x3f"};
-  std::string ext;
-  const size_t dot = path.rfind('.');
-  if (dot == std::string::npos || path.find('/', dot) != std::string::npos) return false;
-  ext = path.substr(dot);
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  const std::string ext = LowerExtension(path);
   return std::find(std::begin(kExt), std::end(kExt), ext) != std::end(kExt);
 }
 

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <cctype>
 #include <cerrno>
 #include <cstdint>
 #include <cstdlib>
@@ -167,6 +168,13 @@ std::atomic<FileIo*> g_io{&g_system_io};
 FileIo& CurrentFileIo() { return *g_io.load(); }
 ScopedFileIo::ScopedFileIo(FileIo& io) : previous_(g_io.exchange(&io)) {}
 ScopedFileIo::~ScopedFileIo() { g_io.store(previous_); }
+
+std::string LowerExtension(const fs::path& path) {
+  std::string e = path.extension().string();
+  std::transform(e.begin(), e.end(), e.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return e;
+}
 
 std::string IoErrorMessage(const fs::path& path, std::string_view what, int err) {
   std::string m = path.string() + ": " + std::string(what) + ": " + std::strerror(err);

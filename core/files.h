@@ -64,6 +64,9 @@ std::filesystem::path ResolveInside(const std::filesystem::path& root, std::stri
 std::string Sha256Hex(std::string_view bytes);
 std::string Sha256File(const std::filesystem::path& path);
 
+// The extension of the file `path` names, lower case, with its dot (".dng"); empty for none.
+std::string LowerExtension(const std::filesystem::path& path);
+
 // The path of `program` as the shell would find it: itself when it holds a '/' and is
 // executable, else the first executable file of that name in a PATH folder; empty when none.
 std::string FindOnPath(const std::string& program);

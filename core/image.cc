@@ -9,7 +9,6 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdint>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -144,10 +143,6 @@ void CheckPngChunks(std::ifstream& in, int64_t size, const std::string& path) {
   }
 }
 
-}  // namespace
-
-namespace {
-
 // The OpenImageIO reader for a file, from its name (RAW formats, Targa: no magic number) or its
 // first bytes; empty when rouen does not read that format.
 std::string ReaderFor(const std::string& path, std::string_view head) {
@@ -162,10 +157,7 @@ std::string ReaderFor(const std::string& path, std::string_view head) {
   if (head.size() >= 2 && head[0] == 'P' &&
       (head[1] == 'f' || head[1] == 'F' || (head[1] >= '1' && head[1] <= '6')))
     return "pnm";
-  std::string ext = std::filesystem::path(path).extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  if (ext == ".tga") return "targa";
+  if (LowerExtension(path) == ".tga") return "targa";
   return "";
 }
 
@@ -174,7 +166,7 @@ std::string ReaderFor(const std::string& path, std::string_view head) {
 std::unique_ptr<OIIO::ImageInput> OpenImageFile(const std::string& path, const char* what,
                                                 const OIIO::ImageSpec* config) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error(path + ": cannot read " + what + ": " + std::strerror(errno));
+  if (!in) throw Error(IoErrorMessage(path, std::string("cannot read ") + what, errno));
   char magic[8] = {};
   in.read(magic, 8);
   const std::string_view head(magic, static_cast<size_t>(in.gcount()));

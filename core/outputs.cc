@@ -19,13 +19,6 @@ namespace fs = std::filesystem;
 namespace rouen {
 namespace {
 
-std::string LowerExtension(const std::string& path) {
-  std::string e = fs::path(path).extension().string();
-  std::transform(e.begin(), e.end(), e.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return e;
-}
-
 void RemoveQuietly(const std::string& path) {
   std::error_code ec;
   fs::remove(path, ec);
