@@ -2,12 +2,20 @@
 #
 #   blender -b --factory-startup --python gen.py -- --out DIR [--rouen PATH] [--scale S]
 #   blender -b --factory-startup --python gen.py -- --out DIR --rouen PATH --sky-pano-float
+#   blender -b --factory-startup --python gen.py -- --out DIR --rouen PATH --ground-patch
 #
 # --sky-pano-float renders only the mast sky panorama of each slot again, with the camera,
 # settings and seed of t<k>_sky_pano.exr (samples x --scale), as float32 (PXR24: 24-bit float)
 # in t<k>_sky_pano_f32.exr, where the sun disc (~2e6) is not clipped at half float's 65504. It
 # writes nothing else (no building.obj, list.txt, cameras.json, truth.json or checks.json).
 # sky_f32/ holds them at --scale 16 (README.md says why).
+#
+# --ground-patch gives the ground two albedos: a bright matte patch north of the building
+# (GROUND_PATCH: x -20..30 m, y 4..40 m), whose part just north of the building the ground
+# panorama (south-west of the tower) cannot see past the tower and annex, and the rest of the
+# 4 x 4 km plane as before. The plane is then cut into a 3 x 3 grid of coplanar quads sharing
+# their vertices (no overlapping faces, no T-junctions), the centre quad the patch. Everything
+# else is as without it; truth.json records the patch. ../blender_ground/ was rendered with it.
 #
 # A campanile (a 6 x 6 x 24 m tower with a pyramid roof and a 12 x 8 x 7 m annex) on a large
 # ground plane with a wall, two boxes and two trees around it, lit by Cycles' Nishita sky
@@ -65,6 +73,8 @@ SURROUNDING_MATERIALS = {
     "crown": {"base_color": [0.10, 0.22, 0.07], **MATTE},
     "trunk": {"base_color": [0.25, 0.17, 0.10], **MATTE},
 }
+# --ground-patch: the ground's second albedo, on the rectangle x0, x1, y0, y1 (m) at z = 0.
+GROUND_PATCH = {"rect": [-20.0, 30.0, 4.0, 40.0], "base_color": [0.60, 0.55, 0.48], **MATTE}
 
 # Cameras. Architecture views: (name, azimuth of the eye from the aim point, distance m,
 # eye height m, aim point). Pinhole, no distortion.
@@ -323,7 +333,34 @@ SURROUNDINGS = {
 }
 
 
-def build_scene(blocks, lambert=False):
+def ground_patch_object(name, box, patch, ground_mat, patch_mat):
+    """The ground plane `box` (z0 == z1) cut by the patch's rectangle into a 3 x 3 grid of
+    coplanar quads on 16 shared vertices; the centre quad (the patch) takes patch_mat."""
+    x0, x1, y0, y1, z, _ = box
+    px0, px1, py0, py1 = patch["rect"]
+    if not (x0 < px0 < px1 < x1 and y0 < py0 < py1 < y1):
+        raise RuntimeError(f"ground patch {patch['rect']} not inside the ground {box}")
+    xs, ys = [x0, px0, px1, x1], [y0, py0, py1, y1]
+    verts = [(x, y, z) for y in ys for x in xs]  # index 4 * j + i
+    faces, mat_index = [], []
+    for j in range(3):
+        for i in range(3):
+            a = 4 * j + i
+            faces.append([a, a + 1, a + 5, a + 4])  # counter-clockwise seen from above
+            mat_index.append(1 if (i, j) == (1, 1) else 0)
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(verts, [], faces)
+    me.update()
+    ob = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(ob)
+    ob.data.materials.append(ground_mat)
+    ob.data.materials.append(patch_mat)
+    me.polygons.foreach_set("material_index", mat_index)
+    me.update()
+    return ob
+
+
+def build_scene(blocks, lambert=False, ground_patch=False):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     sc = bpy.context.scene
     mats = {n: material(n, s, lambert)
@@ -331,7 +368,10 @@ def build_scene(blocks, lambert=False):
     building = [mesh_object("building_" + n, p, mats[n]) for n, p in blocks.items()]
     others = []
     for name, (mat, _, geo) in SURROUNDINGS.items():
-        if "box" in geo:
+        if name == "ground" and ground_patch:
+            others.append(ground_patch_object(name, geo["box"], GROUND_PATCH, mats[mat],
+                                              material("ground_patch", GROUND_PATCH, lambert)))
+        elif "box" in geo:
             x0, x1, y0, y1, z0, z1 = geo["box"]
             if z0 == z1:
                 polys = [[(x0, y0, z0), (x1, y0, z0), (x1, y1, z0), (x0, y1, z0)]]
@@ -576,6 +616,9 @@ def main():
     ap.add_argument("--lambert", action="store_true",
                     help="diagnostic, not the committed data: matte materials as Lambert "
                     "(Diffuse BSDF) instead of Principled BSDF")
+    ap.add_argument("--ground-patch", action="store_true",
+                    help="the ground with two albedos: GROUND_PATCH (a bright matte "
+                    "rectangle north of the building) and the rest as before")
     ap.add_argument("--sky-pano-float", action="store_true",
                     help="only render each slot's sky panorama again as float32 "
                     "(t<k>_sky_pano_f32.exr, the sun disc unclipped); writes nothing else")
@@ -593,7 +636,7 @@ def main():
     if not a.sky_pano_float:
         write_obj(os.path.join(out, "building.obj"), blocks)
     tris = triangles(blocks)
-    building, others, sky = build_scene(blocks, a.lambert)
+    building, others, sky = build_scene(blocks, a.lambert, a.ground_patch)
     samples = {n: max(1, int(round(s * a.scale))) for n, s in SAMPLES.items()}
 
     # Cameras: fixed architecture views and panoramas; the sun camera follows the sun.
@@ -747,6 +790,12 @@ def main():
     }
     if a.lambert:
         truth["lambert_diagnostic"] = True
+    if a.ground_patch:
+        truth["ground_patch"] = {
+            **GROUND_PATCH, "in_building_obj": False,
+            "shape": ("rectangle x0 x1 y0 y1 (m) of the ground plane at z = 0, cut out of it "
+                      "(coplanar quads, shared vertices); the rest of the plane keeps the "
+                      "ground material")}
     with open(os.path.join(out, "truth.json"), "w") as f:
         json.dump(truth, f, indent=1)
     if not a.no_checks or a.noise_check:
