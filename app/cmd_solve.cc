@@ -91,7 +91,11 @@ void RegisterSolve(CLI::App& app) {
       "rig's [solve] table, session.json extra.solve_config); --config FILE.toml then sets any\n"
       "of them with the tables and keys --print-config shows (SESSION --print-config: with the\n"
       "session's own applied), e.g.\n"
-      "  [sky_fit]\n  norm_p = 2\n  [grid.block_spacing_m]\n  ground = 2.0\n"
+      "  [sky_fit]\n  norm_p = 2\n  [grid.block_spacing_m]\n  plaza = 2.0\n"
+      "[ground] radius_m = 30 models the ground within 30 m of the building as a surface (block\n"
+      "'ground', not scored by rouen validate): its albedo from the photos, lit with the\n"
+      "building's shadow, so a wall sees the ground in front of it rather than the ground the\n"
+      "panoramas saw in its direction. Off by default.\n"
       "A key rouen does not know is an error, not a silent default.\n"
       "Example: rouen solve s --out s.scene --holdout-slot 2");
   c->add_option("session", a->session, "Session folder (from rouen capture or rouen import)");

@@ -92,6 +92,7 @@ SceneSolve SolveToScene(const Session& session, const PipelineOptions& options, 
   scene.site = SessionSite(session);
   scene.response = calib.response;
   scene.grid_options = options.config.grid;
+  scene.ground = options.config.ground;
   scene.hemisphere = options.config.hemisphere;
   for (const SlotSolve& s : solved.slots)
     scene.slots.push_back(SlotModel::FromLighting(s.lighting));

@@ -23,6 +23,7 @@
 #include "core/text.h"
 #include "core/version.h"
 #include "solve/env_stereo.h"
+#include "solve/ground_apron.h"
 #include "solve/relight.h"
 #include "solve/sky_segment.h"
 
@@ -536,8 +537,22 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
                          const PipelineOptions& options) {
   SolveResult r;
   StageClock clock(options, &r.stages);
-  r.mesh = ReadSessionModel(session);
+  GroundApronSummary ground;
+  Mesh building = ReadSessionModel(session);
+  r.mesh = WithGroundApron(building, options.config.ground, &ground);
+  // The panoramas' environment (§3.3) leaves out the pixels of the building only: what they see
+  // of the modelled ground is the environment's ground, which rays escaping beyond it meet.
+  std::unique_ptr<RayCaster> building_only;
+  if (ground.faces > 0) {
+    building_only = std::make_unique<RayCaster>(building);
+    std::ostringstream line;
+    line << std::fixed << std::setprecision(0) << "ground: " << ground.area_m2
+         << " m2 around the model modelled as block '" << options.config.ground.block << "' ("
+         << ground.faces << " faces at z " << std::setprecision(2) << ground.level_z << " m)";
+    Log(options, line.str());
+  }
   r.caster = std::make_unique<RayCaster>(r.mesh);
+  const RayCaster& env_caster = building_only ? *building_only : *r.caster;
   const Site site = SessionSite(session);
 
   int nslots = 0;
@@ -632,7 +647,7 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
     const EnvSun env_sun{sun_dir, ss.sun.angular_radius_deg * kPi / 180,
                          ss.sun_measured.radiance * ss.sun.SolidAngleSr()};
     EnvironmentMap env =
-        BuildEnvironmentMap(panoramas, *r.caster, env_sun, sky, options.config.environment);
+        BuildEnvironmentMap(panoramas, env_caster, env_sun, sky, options.config.environment);
     slot_panoramas.push_back(panoramas);
     slot_env_sun.push_back(env_sun);
     ss.lighting.utc = ss.utc;
@@ -672,7 +687,7 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
       for (size_t k = 0; k < r.slots.size(); ++k) {
         slot_env_sun[k].ground_retro = g.retro;
         r.slots[k].lighting.env =
-            BuildEnvironmentMap(slot_panoramas[k], *r.caster, slot_env_sun[k],
+            BuildEnvironmentMap(slot_panoramas[k], env_caster, slot_env_sun[k],
                                 r.slots[k].lighting.sky, options.config.environment);
       }
     }

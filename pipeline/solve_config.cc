@@ -67,6 +67,13 @@ class Fields {
     if (!n->is_boolean()) Fail(Path(key), "must be true or false");
     *v = n->get<bool>();
   }
+  void String(const char* key, std::string* v) {
+    const json* n = Find(key);
+    if (!n) return;
+    if (!n->is_string() || n->get<std::string>().empty())
+      Fail(Path(key), "must be a non-empty string");
+    *v = n->get<std::string>();
+  }
   template <typename E>
   void Enum(const char* key, E* v, const std::vector<std::pair<const char*, E>>& names) {
     const json* n = Find(key);
@@ -137,6 +144,7 @@ const char* NameOf(E v, const std::vector<std::pair<const char*, E>>& names) {
 
 void SolveConfig::Validate() const {
   grid.Validate();
+  ground.Validate();
   hemisphere.Validate();
   if (response_max_brackets < 1 || response_max_brackets > 1000)
     throw Error("response.max_brackets must be within 1..1000");
@@ -168,6 +176,12 @@ json SolveConfigJson(const SolveConfig& c) {
             {"block_spacing_m", c.grid.block_spacing_m},
             {"subdivision", NameOf(c.grid.subdivision, kSubdivisions)},
             {"max_subdivision", c.grid.max_subdivision}}},
+          {"ground",
+           {{"radius_m", c.ground.radius_m},
+            {"cell_m", c.ground.cell_m},
+            {"max_face_m", c.ground.max_face_m},
+            {"block", c.ground.block},
+            {"spacing_m", c.ground.spacing_m}}},
           {"hemisphere", {{"directions", c.hemisphere.directions}, {"seed", c.hemisphere.seed}}},
           {"response", {{"max_brackets", c.response_max_brackets}}},
           {"sky_fit",
@@ -251,6 +265,15 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
     }
     f.Enum("subdivision", &c.grid.subdivision, kSubdivisions);
     f.Int("max_subdivision", &c.grid.max_subdivision, 1, 4096);
+    f.Finish();
+  }
+  if (const json* t = root.Table("ground")) {
+    Fields f(*t, where, "ground");
+    f.Number("radius_m", &c.ground.radius_m, 0, 10000);
+    f.Number("cell_m", &c.ground.cell_m, 0.01, 100);
+    f.Number("max_face_m", &c.ground.max_face_m, 0.01, 10000);
+    f.String("block", &c.ground.block);
+    f.Number("spacing_m", &c.ground.spacing_m, 0.01, 100);
     f.Finish();
   }
   if (const json* t = root.Table("hemisphere")) {
@@ -355,6 +378,8 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
     f.Finish();
   }
   root.Finish();
+  // The modelled ground's grid, unless grid.block_spacing_m names its block.
+  if (c.ground.radius_m > 0) c.grid.block_spacing_m.try_emplace(c.ground.block, c.ground.spacing_m);
   try {
     c.Validate();
   } catch (const Error& e) {

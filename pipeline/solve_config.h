@@ -10,6 +10,7 @@
 #include "solve/albedo.h"
 #include "solve/environment.h"
 #include "solve/grid.h"
+#include "solve/ground_apron.h"
 #include "solve/irradiance.h"
 #include "solve/sky_fit.h"
 
@@ -18,6 +19,10 @@ namespace rouen {
 struct SolveConfig {
   // The surface grid the albedos are solved on; 0.6 m, 1.5 m on a block named "plaza".
   GridOptions grid;
+  // Beyond the paper: the ground around the building modelled as a surface (block "ground",
+  // gridded at ground.spacing_m unless grid.block_spacing_m names it), its albedo solved from
+  // the photos. Off by default (radius_m 0).
+  GroundApronOptions ground;
   HemisphereOptions hemisphere;  // the irradiance's gathering pattern over that grid
   // LDR brackets the response curve is recovered from, spread evenly over the session.
   int response_max_brackets = 12;
@@ -43,7 +48,7 @@ nlohmann::json SolveConfigJson(const SolveConfig& config);
 // throw rouen::Error naming `where` and the key path (e.g. "solve.toml: sky_fit.norm_p").
 SolveConfig ApplySolveConfig(const nlohmann::json& j, SolveConfig base, const std::string& where);
 // The same from a TOML file (tables as in SolveConfigJson: [grid], [grid.block_spacing_m],
-// [hemisphere], [response], [sky_fit], [environment], [albedo], [albedo.irradiance]).
+// [ground], [hemisphere], [response], [sky_fit], [environment], [albedo], [albedo.irradiance]).
 SolveConfig ReadSolveConfigFile(const std::string& path, const SolveConfig& base);
 // The options a session's solve starts from: the defaults with the session's own
 // (session.json extra.solve_config, e.g. from its rig's [solve] table) applied; errors name

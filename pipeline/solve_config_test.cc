@@ -32,6 +32,9 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   c.albedo.loss = RobustLoss::kPaper;
   c.albedo.irradiance.method = IrradianceMethod::kVectorFlux;
   c.albedo.observation.check_footprint = false;
+  c.ground.radius_m = 12;
+  c.ground.block = "yard";
+  c.grid.block_spacing_m["yard"] = 1.5;  // as resolving the options sets it
   const json j = SolveConfigJson(c);
   const SolveConfig back = ApplySolveConfig(j, DefaultSolveConfig(false), "x");
   EXPECT_EQ(SolveConfigJson(back), j);
@@ -51,6 +54,26 @@ TEST(SolveConfigTest, DefaultsAndQuick) {
   // No block of any particular model is special by default.
   EXPECT_TRUE(full.grid.block_spacing_m.empty());
   EXPECT_EQ(full.grid.SpacingFor("plaza"), 0.6);
+  EXPECT_EQ(full.ground.radius_m, 0);  // the ground is not modelled unless asked
+}
+
+// The modelled ground gets its own grid spacing unless the grid names its block.
+TEST(SolveConfigTest, TheModelledGroundsGrid) {
+  SolveConfig c = ApplySolveConfig(json::parse(R"({"ground": {"radius_m": 30}})"),
+                                   DefaultSolveConfig(false), "solve.toml");
+  EXPECT_EQ(c.ground.radius_m, 30);
+  EXPECT_EQ(c.grid.SpacingFor("ground"), 1.5);
+  c = ApplySolveConfig(json::parse(R"({"ground": {"radius_m": 30, "block": "yard", "spacing_m": 3},
+                      "grid": {"block_spacing_m": {"yard": 2}}})"),
+                       DefaultSolveConfig(false), "solve.toml");
+  EXPECT_EQ(c.grid.SpacingFor("yard"), 2);
+  EXPECT_EQ(c.grid.SpacingFor("ground"), 0.6);
+  EXPECT_NE(ErrorOf(json::parse(R"({"ground": {"radius_m": -3}})"))
+                .find("ground.radius_m must be a number within 0..10000"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(json::parse(R"({"ground": {"block": ""}})"))
+                .find("ground.block must be a non-empty string"),
+            std::string::npos);
 }
 
 // A session's own options (its rig's [solve] table) come between the defaults and a user's

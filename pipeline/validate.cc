@@ -13,7 +13,7 @@ void Log(const std::function<void(const std::string&)>& log, const std::string& 
   if (log) log(s);
 }
 
-// The model blocks scored: every block not excluded.
+// The model blocks scored: every block not excluded, less the ground the solve modelled.
 std::vector<int> ScoredBlocks(const LoadedScene& scene, const std::vector<std::string>& exclude) {
   const std::vector<std::string>& names = scene.solved.mesh.block_names;
   for (const std::string& e : exclude) {
@@ -23,9 +23,14 @@ std::vector<int> ScoredBlocks(const LoadedScene& scene, const std::vector<std::s
     throw Error(scene.dir.string() + ": the model has no block named '" + e +
                 "' (blocks: " + known + ")");
   }
+  // The ground the solve modelled (ground.radius_m) is not the building the paper scores.
+  const std::string modelled_ground =
+      scene.scene.ground.radius_m > 0 ? scene.scene.ground.block : "";
   std::vector<int> blocks;
   for (int b = 0; b < static_cast<int>(names.size()); ++b)
-    if (std::find(exclude.begin(), exclude.end(), names[b]) == exclude.end()) blocks.push_back(b);
+    if (std::find(exclude.begin(), exclude.end(), names[b]) == exclude.end() &&
+        names[b] != modelled_ground)
+      blocks.push_back(b);
   if (blocks.empty()) throw Error(scene.dir.string() + ": every block of the model is excluded");
   return blocks;
 }

@@ -252,6 +252,7 @@ void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const
     j["response"] = nullptr;
   }
   j["grid"] = scene.grid_options;
+  j["ground"] = scene.ground;
   j["hemisphere"] = {{"directions", scene.hemisphere.directions}, {"seed", scene.hemisphere.seed}};
   j["model_file"] = scene.model_file;
   j["model_sha256"] = Sha256File(model_path);
@@ -291,8 +292,7 @@ void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const
   std::vector<Eigen::Vector3d> info(n);
   for (size_t i = 0; i < n; ++i) info[i] = Eigen::Vector3d(a.observations[i], a.flags[i], 0);
   WriteImage((dir / "albedo_info.exr").string(), PackPointValues(info), StoredType::kFloat);
-  const Mesh read_mesh = mesh ? Mesh{} : ReadObj(model_path.string());
-  const Mesh& m = mesh ? *mesh : read_mesh;
+  const Mesh m = WithGroundApron(mesh ? *mesh : ReadObj(model_path.string()), scene.ground);
   // Per block by name: the retro parameter of the sun term (solve/retro.h; 0 is Lambert).
   nlohmann::json retro = nlohmann::json::object();
   for (int b = 0; b < static_cast<int>(m.block_names.size()); ++b) {
@@ -330,6 +330,8 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
     scene.site.height_m = site.at("height_m").get<double>();
     if (!j.at("response").is_null()) scene.response = j.at("response").get<ResponseCurve>();
     scene.grid_options = j.at("grid").get<GridOptions>();
+    // Scenes written before the ground could be modelled have none.
+    if (j.contains("ground")) scene.ground = j.at("ground").get<GroundApronOptions>();
     scene.hemisphere.directions = j.at("hemisphere").at("directions").get<int>();
     scene.hemisphere.seed = j.at("hemisphere").at("seed").get<uint64_t>();
     scene.hemisphere.Validate();
@@ -404,7 +406,7 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
     throw Error(json_path.string() + ": " + model_path.string() +
                 " is not the model the scene was solved with (its sha256 differs)");
   }
-  Mesh mesh = ReadObj(model_path.string());
+  Mesh mesh = WithGroundApron(ReadObj(model_path.string()), scene.ground);
   scene.albedo.retro.assign(mesh.block_names.size(), 0.0);
   for (const auto& [name, value] : retro.items()) {
     const auto it = std::find(mesh.block_names.begin(), mesh.block_names.end(), name);

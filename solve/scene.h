@@ -19,6 +19,7 @@
 #include "solve/albedo.h"
 #include "solve/environment.h"
 #include "solve/grid.h"
+#include "solve/ground_apron.h"
 #include "solve/irradiance.h"
 #include "solve/sky_model.h"
 
@@ -52,6 +53,9 @@ struct SceneModel {
   Site site;
   ResponseCurve response;  // may be empty (not valid()) when photos came in as HDR
   GridOptions grid_options;
+  // The ground the solve modelled around the building: not in model_file, added to it when read
+  // (WithGroundApron) before the grid is built.
+  GroundApronOptions ground;
   HemisphereOptions hemisphere;  // the irradiance's gathering pattern over that grid
   std::vector<SlotModel> slots;
   AlbedoResult albedo;
