@@ -791,9 +791,9 @@ std::vector<SlotIrradiance> IrradianceFor(const SolveResult& solved,
   io.mesh = &solved.mesh;
   std::vector<SlotIrradiance> irr =
       ComputeIrradiance(solved.grid, solved.hemisphere, *solved.caster, lightings, io);
-  for (SlotIrradiance& one : irr)
+  for (size_t k = 0; k < irr.size(); ++k)
     AddInterreflection(solved.grid, solved.hemisphere, solved.albedo.rho_sun, solved.albedo.rho_se,
-                       &one, ao.bounces);
+                       &irr[k], ao.bounces, solved.albedo.retro, lightings[k].sun_dir);
   return irr;
 }
 

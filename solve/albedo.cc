@@ -1018,8 +1018,9 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   std::vector<double> changes;
   std::vector<double> slot_weight;
   for (int it = 1; it < options.outer_iterations; ++it) {
-    for (auto& slot_irr : irr) {
-      AddInterreflection(grid, cache, res.rho_sun, res.rho_se, &slot_irr, options.bounces);
+    for (size_t k = 0; k < irr.size(); ++k) {
+      AddInterreflection(grid, cache, res.rho_sun, res.rho_se, &irr[k], options.bounces,
+                         shading.retro, shading.sun_dirs[k]);
     }
     if (options.slot_weighting) slot_weight = SlotWeights(grid, observations, irr, res, &shading);
     // Once, with the first interreflection: later iterations change the bounce little.
@@ -1097,8 +1098,9 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   if (irradiance) {
     // Hand back the irradiance with the interreflection from the returned albedos (ready for
     // rendering these slots).
-    for (auto& slot_irr : irr) {
-      AddInterreflection(grid, cache, res.rho_sun, res.rho_se, &slot_irr, options.bounces);
+    for (size_t k = 0; k < irr.size(); ++k) {
+      AddInterreflection(grid, cache, res.rho_sun, res.rho_se, &irr[k], options.bounces,
+                         shading.retro, shading.sun_dirs[k]);
     }
     *irradiance = std::move(irr);
   }

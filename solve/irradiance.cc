@@ -12,6 +12,7 @@
 #include "core/angles.h"
 #include "core/error.h"
 #include "core/hash_random.h"
+#include "solve/retro.h"
 #include "solve/vector_flux_cache.h"
 
 namespace rouen {
@@ -368,7 +369,8 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
 void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
                         const std::vector<Eigen::Vector3d>& rho_sun,
                         const std::vector<Eigen::Vector3d>& rho_se, SlotIrradiance* irr,
-                        int bounces) {
+                        int bounces, const std::vector<double>& retro,
+                        const Eigen::Vector3d& sun_dir) {
   const int n = grid.size();
   if (static_cast<int>(rho_sun.size()) != n || static_cast<int>(rho_se.size()) != n ||
       static_cast<int>(irr->sun.size()) != n || static_cast<int>(irr->direct_se.size()) != n) {
@@ -376,20 +378,35 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
                 std::to_string(n) + " points)");
   }
   if (bounces < 1) throw Error("interreflection: bounces must be >= 1");
+  if (!sun_dir.allFinite() || sun_dir.norm() == 0)
+    throw Error("interreflection: the sun direction must be finite and non-zero");
+  const Eigen::Vector3d s = sun_dir.normalized();
   const int K = cache.directions;
   std::vector<Eigen::Vector3d> se_prev = irr->direct_se;
-  std::vector<Eigen::Vector3d> radiosity(n);
+  std::vector<Eigen::Vector3d> from_sun(n), from_se(n);
   std::vector<Eigen::Vector3d> se(n);
   for (int pass = 0; pass < bounces; ++pass) {
     for (int j = 0; j < n; ++j) {
-      radiosity[j] = rho_sun[j].cwiseProduct(irr->sun[j]) + rho_se[j].cwiseProduct(se_prev[j]);
+      from_sun[j] = rho_sun[j].cwiseProduct(irr->sun[j]);
+      from_se[j] = rho_se[j].cwiseProduct(se_prev[j]);
     }
     tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& range) {
       for (int i = range.begin(); i < range.end(); ++i) {
         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
         for (int k = 0; k < K; ++k) {
           const int j = cache.Hit(i, k);
-          if (j >= 0) sum += radiosity[j];
+          if (j < 0) continue;
+          const GridPoint& q = grid.points[j];
+          const double r = BlockRetro(retro, q.block);
+          const Eigen::Vector3d to_i = grid.points[i].position - q.position;
+          const double d = to_i.norm();
+          if (r == 0 || !(d > 0)) {
+            sum += from_sun[j] + from_se[j];
+          } else {
+            const Eigen::Vector3d v = to_i / d;
+            sum += from_sun[j] * RetroFactor(r, q.normal, s, v) +
+                   from_se[j] * AmbientRetroFactor(r, q.normal, v);
+          }
         }
         // (B_j / pi) (pi / K)
         se[i] = irr->direct_se[i] + sum / K;

@@ -117,9 +117,15 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
 // One-bounce interreflection (§4.1): E_se[i] = E_direct_se[i] + (pi/K) sum over directions
 // hitting point j of B_j / pi, with B_j = rho_sun_j E_sun_j + rho_se_j E_direct_se_j. With
 // bounces > 1 the radiosity is iterated (B_j uses the previous E_se). Overwrites irr->se.
+// Beyond the paper: a point of a rough block (`retro` per block, solve/retro.h; empty: Lambert
+// everywhere) sends its light towards point i as the photos see it towards their cameras,
+// B_j = rho_sun_j E_sun_j D(retro, n_j, sun_dir, v) + rho_se_j E_se_j A(retro, n_j, v), v
+// towards i (RetroFactor, AmbientRetroFactor): rough ground seen from a wall at a grazing angle
+// is brighter than Lambert's law, as the photos that gave its albedo saw it.
 void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
                         const std::vector<Eigen::Vector3d>& rho_sun,
                         const std::vector<Eigen::Vector3d>& rho_se, SlotIrradiance* irr,
-                        int bounces = 1);
+                        int bounces = 1, const std::vector<double>& retro = {},
+                        const Eigen::Vector3d& sun_dir = Eigen::Vector3d::UnitZ());
 
 }  // namespace rouen

@@ -199,6 +199,66 @@ TEST(IrradianceTest, BounceBetweenFacingPlanesMatchesFormFactor) {
 }
 
 // A tall tower's own shadow on the unmodelled ground darkens what its shaded side sees.
+// A rough surface sends its light towards each receiver as the photos would see it there
+// (RetroFactor): ground lit from the zenith, seen from a plate 1 m above it, is brighter at
+// oblique views, D(theta) = 1 + retro (1/2 + cos theta) (1 - cos theta)^5, so the plate gets
+// the integral of D over its cosine-weighted view of the ground instead of the form factor.
+TEST(IrradianceTest, RoughSurfacesReflectTowardsEachReceiverAsTheyLook) {
+  Mesh m;
+  const int ground = m.AddBlock("ground"), plate = m.AddBlock("plate");
+  const double half = 20, c = 1;
+  testing::AddHorizontalRect(&m, -half, half, -half, half, 0, true, ground);
+  testing::AddHorizontalRect(&m, -0.5, 0.5, -0.5, 0.5, c, false, plate);
+  GridOptions go;
+  go.spacing_m = 0.25;
+  go.block_spacing_m["ground"] = 0.5;
+  const SurfaceGrid g = BuildSurfaceGrid(m, go);
+  const RayCaster rc(m);
+  HemisphereOptions ho;
+  ho.directions = 1024;
+  const HemisphereCache cache = BuildHemisphereCache(g, rc, ho);
+  SlotIrradiance irr;
+  irr.sun.assign(g.size(), Eigen::Vector3d::Zero());
+  irr.direct_se.assign(g.size(), Eigen::Vector3d::Zero());
+  std::vector<Eigen::Vector3d> rho_sun(g.size(), Eigen::Vector3d::Zero()), rho_se = rho_sun;
+  for (int i = 0; i < g.size(); ++i) {
+    if (g.points[i].block != ground) continue;
+    irr.sun[i].setOnes();  // the sun at the zenith: B = rho_sun E_sun = 1 (Lambert)
+    rho_sun[i].setOnes();
+  }
+  const Eigen::Vector3d zenith = Eigen::Vector3d::UnitZ();
+  SlotIrradiance lambert = irr, lambert_zero = irr, rough = irr;
+  AddInterreflection(g, cache, rho_sun, rho_se, &lambert, 1);
+  AddInterreflection(g, cache, rho_sun, rho_se, &lambert_zero, 1, {0.0, 0.0}, zenith);
+  AddInterreflection(g, cache, rho_sun, rho_se, &rough, 1, {1.0, 0.0}, zenith);
+  // The plate's view of the ground by the midpoint rule in theta (a disc of the square's half
+  // size: the corners lie beyond 87 degrees, where cos theta sin theta is small).
+  const double theta_max = std::atan(half / c);
+  double form = 0, with_d = 0;
+  const int steps = 20000;
+  for (int k = 0; k < steps; ++k) {
+    const double t = (k + 0.5) * theta_max / steps, ct = std::cos(t);
+    const double w = 2 * ct * std::sin(t) * theta_max / steps;
+    form += w;
+    with_d += w * (1 + (0.5 + ct) * std::pow(1 - ct, 5));
+  }
+  double sum_l = 0, sum_r = 0;
+  int n = 0;
+  for (int i = 0; i < g.size(); ++i) {
+    EXPECT_EQ(lambert_zero.se[i], lambert.se[i]) << i;  // retro 0 is Lambert, to the bit
+    if (g.points[i].block != plate) continue;
+    EXPECT_GE(rough.se[i].x(), lambert.se[i].x()) << i;  // D >= 1 for light from the normal
+    sum_l += lambert.se[i].x();
+    sum_r += rough.se[i].x();
+    ++n;
+  }
+  ASSERT_GT(n, 10);
+  // Stratified directions over n points: a fraction of a percent; 1% each.
+  EXPECT_NEAR(sum_l / n, form, 0.01 * form);
+  EXPECT_NEAR(sum_r / n, with_d, 0.01 * with_d);
+  EXPECT_GT(with_d / form, 1.02);  // the test tells the two apart
+}
+
 TEST(IrradianceTest, GroundShadowDarkensTheEnvironmentBehindTheTower) {
   Mesh m;
   const int ground = m.AddBlock("plaza");
