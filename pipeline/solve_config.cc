@@ -210,6 +210,7 @@ json SolveConfigJson(const SolveConfig& c) {
             {"min_scale", a.min_scale},
             {"irls_iterations", a.irls_iterations},
             {"outer_iterations", a.outer_iterations},
+            {"outer_tolerance", a.outer_tolerance},
             {"bounces", a.bounces},
             {"sunlit_threshold", a.sunlit_threshold},
             {"never_shadowed_prior", a.never_shadowed_prior},
@@ -322,6 +323,7 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
     f.Number("min_scale", &a.min_scale, 1e-9, 10);
     f.Int("irls_iterations", &a.irls_iterations, 1, 1000);
     f.Int("outer_iterations", &a.outer_iterations, 1, 100);
+    f.Number("outer_tolerance", &a.outer_tolerance, 0, 0.5);
     f.Int("bounces", &a.bounces, 0, 16);
     f.Number("sunlit_threshold", &a.sunlit_threshold, 0, kInf);
     f.Number("never_shadowed_prior", &a.never_shadowed_prior, 0, kInf);

@@ -255,6 +255,8 @@ void AlbedoOptions::Validate() const {
   if (!(min_scale > 0)) throw Error("AlbedoOptions: min_scale must be > 0");
   if (irls_iterations < 1) throw Error("AlbedoOptions: irls_iterations must be >= 1");
   if (outer_iterations < 1) throw Error("AlbedoOptions: outer_iterations must be >= 1");
+  if (!(outer_tolerance >= 0 && outer_tolerance < 1))
+    throw Error("AlbedoOptions: outer_tolerance must be within [0, 1)");
   if (bounces < 1) throw Error("AlbedoOptions: bounces must be >= 1");
   if (!(sunlit_threshold > 0)) throw Error("AlbedoOptions: sunlit_threshold must be > 0");
   if (!(never_shadowed_prior >= 0)) throw Error("AlbedoOptions: never_shadowed_prior must be >= 0");
@@ -1044,6 +1046,7 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
     }
     changes.push_back(count ? change / count : 0);
     res = std::move(next);
+    if (changes.back() < options.outer_tolerance) break;
   }
   if (options.sun_lobe.fit) {
     AlbedoSummary lobe_summary;
@@ -1092,7 +1095,7 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   res.summary.change_per_iteration = changes;
   res.summary.retro_cost_lambert = retro_summary.retro_cost_lambert;
   res.summary.retro_cost_fitted = retro_summary.retro_cost_fitted;
-  res.summary.outer_iterations = options.outer_iterations;
+  res.summary.outer_iterations = 1 + static_cast<int>(changes.size());
   res.summary.slot_weights =
       slot_weight.empty() ? std::vector<double>(slots.size(), 1.0) : slot_weight;
   if (irradiance) {

@@ -92,7 +92,13 @@ struct AlbedoOptions {
   double huber_k = 1.345;   // in units of the robust scale
   double min_scale = 0.01;  // floor on the relative residual scale (1%)
   int irls_iterations = 8;
-  int outer_iterations = 3;  // albedo -> interreflection -> albedo ... (§4.1)
+  // §4.1: albedo -> interreflection -> albedo ..., at most this many times, stopping once the
+  // albedos change by less than outer_tolerance (mean relative change over the observed points;
+  // 0: always outer_iterations). The ground and the walls light each other: on the demo the
+  // change was still 2.9% after 3 iterations and 0.18% after 6, and the held-out photographs
+  // scored 36.66 dB after 3, 37.49 dB after 6.
+  int outer_iterations = 8;
+  double outer_tolerance = 0.0025;
   // Radiosity passes in each interreflection update: 1 is the paper's one-bounce reflection;
   // 2 (default) also carries light bounced twice (belfry interiors, re-entrant corners).
   int bounces = 2;
@@ -144,7 +150,7 @@ struct AlbedoSummary {
   int points_clamped = 0;
   int points_filled_neighbours = 0;  // never observed, filled from observed neighbours
   int64_t observations = 0;
-  int outer_iterations = 0;
+  int outer_iterations = 0;  // run (at most AlbedoOptions::outer_iterations)
   // Mean relative change of the albedos at each outer iteration after the first.
   std::vector<double> change_per_iteration;
   double residual_rms_rel = 0;       // relative residual (pi I - model) / (pi I), all obs

@@ -326,10 +326,20 @@ TEST(AlbedoTest, OuterIterationConvergesToTheBounceConsistentAlbedo) {
   opt.outer_iterations = 1;
   const AlbedoResult first = SolveAlbedo(w.grid, w.cache, *w.rc, w.slots, obs, opt);
   opt.outer_iterations = 4;
+  opt.outer_tolerance = 0;  // all four
   std::vector<SlotIrradiance> final_irr;
   const AlbedoResult last = SolveAlbedo(w.grid, w.cache, *w.rc, w.slots, obs, opt, &final_irr);
   ASSERT_EQ(last.summary.change_per_iteration.size(), 3u);
+  EXPECT_EQ(last.summary.outer_iterations, 4);
   EXPECT_LT(last.summary.change_per_iteration[2], last.summary.change_per_iteration[0]);
+  // With a tolerance the iterations stop at the first change below it.
+  opt.outer_iterations = 20;
+  opt.outer_tolerance =
+      0.5 * (last.summary.change_per_iteration[1] + last.summary.change_per_iteration[2]);
+  const AlbedoResult stopped = SolveAlbedo(w.grid, w.cache, *w.rc, w.slots, obs, opt);
+  ASSERT_EQ(stopped.summary.change_per_iteration.size(), 3u);
+  EXPECT_EQ(stopped.summary.outer_iterations, 4);
+  EXPECT_LT(stopped.summary.change_per_iteration.back(), opt.outer_tolerance);
   ASSERT_EQ(final_irr.size(), w.slots.size());
   EXPECT_TRUE(final_irr[0].has_bounce);
   double e_first = 0, e_last = 0;
