@@ -537,14 +537,14 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
                          const PipelineOptions& options) {
   SolveResult r;
   StageClock clock(options, &r.stages);
-  GroundApronSummary ground;
-  Mesh building = ReadSessionModel(session);
-  r.mesh = WithGroundApron(building, options.config.ground, &ground);
+  r.mesh = ReadSessionModel(session);
   // The panoramas' environment (§3.3) leaves out the pixels of the building only: what they see
   // of the modelled ground is the environment's ground, which rays escaping beyond it meet.
   std::unique_ptr<RayCaster> building_only;
-  if (ground.faces > 0) {
-    building_only = std::make_unique<RayCaster>(building);
+  if (options.config.ground.radius_m > 0) {
+    building_only = std::make_unique<RayCaster>(r.mesh);
+    const GroundApronSummary ground =
+        AddGroundApron(*building_only, options.config.ground, &r.mesh);
     std::ostringstream line;
     line << std::fixed << std::setprecision(0) << "ground: " << ground.area_m2
          << " m2 around the model modelled as block '" << options.config.ground.block << "' ("
