@@ -833,8 +833,10 @@ Image LatLong(const EnvironmentMap& env, int layer, F value) {
 // out), as rouen render fits it to predict a novel time; nothing when every slot is held out.
 std::optional<EnvStereoResult> FitStereo(const Inputs& in) {
   std::vector<Lighting> measured;
+  std::vector<int> measured_slots;
   for (size_t k = 0; k < in.slots.size(); ++k) {
     if (in.holdout.count(static_cast<int>(k))) continue;
+    measured_slots.push_back(static_cast<int>(k));
     Lighting l;
     l.utc = in.slots[k].utc;
     l.sun_dir = in.slots[k].sun_dir;
@@ -847,8 +849,17 @@ std::optional<EnvStereoResult> FitStereo(const Inputs& in) {
   }
   if (measured.empty()) return std::nullopt;
   EnvStereoOptions eo = RelightOptions{}.env;
-  if (in.scene.contains("environment") && in.scene["environment"].is_object())
-    eo.ground_retro = in.scene["environment"].value("ground_retro", 0.0);
+  if (in.scene.contains("environment") && in.scene["environment"].is_object()) {
+    const nlohmann::json& env = in.scene["environment"];
+    eo.ground_retro = env.value("ground_retro", 0.0);
+    // The solve's own fit, when it was made from these slots with these options.
+    if (env.contains("stereo")) {
+      EnvStereoResult stored = env["stereo"].at("fit").get<EnvStereoResult>();
+      if (env["stereo"].at("slots").get<std::vector<int>>() == measured_slots &&
+          stored.options == eo)
+        return stored;
+    }
+  }
   return SolveEnvStereo(EnvObservationsOf(measured), eo);
 }
 
@@ -927,8 +938,9 @@ void Environment(Page& p, const Inputs& in, StereoFit* stereo_fit) {
   }
   const EnvStereoResult& stereo = *stereo_fit->result();
   p.html().Paragraph(
-      "Not stored in the scene: fitted here from the environment maps of the slots the albedos "
-      "used (held-out slots left out), as rouen render fits them to predict a novel time. " +
+      "From the environment maps of the slots the albedos used (held-out slots left out), "
+      "as rouen render predicts a novel time with it: the solve's fit, kept in scene.json "
+      "(fitted here for a scene without one). " +
       stereo.summary.BriefReport());
   EnvironmentMap grid;
   grid.bands_below = stereo.bands_below;

@@ -98,6 +98,8 @@ SceneSolve SolveToScene(const Session& session, const PipelineOptions& options, 
     scene.slots.push_back(SlotModel::FromLighting(s.lighting));
   scene.albedo = solved.albedo;
   scene.env_ground_retro = solved.env_ground_retro;
+  scene.env_stereo = solved.env_stereo;
+  scene.env_stereo_slots = solved.env_stereo_slots;
   scene.model_file = "model.obj";
   for (const auto& [name, g] : calib.groups)
     scene.views[name] = SceneView{g.slot, TargetName(g.target), g.utc, g.intrinsics, g.pose};
@@ -204,6 +206,9 @@ LoadedScene LoadScene(const fs::path& dir, const std::function<void(const std::s
   r.solved.hemisphere = BuildHemisphereCache(r.solved.grid, *r.solved.caster, r.scene.hemisphere);
   r.solved.albedo = std::move(r.scene.albedo);
   r.solved.env_ground_retro = r.scene.env_ground_retro;
+  r.solved.env_stereo = std::move(r.scene.env_stereo);
+  r.solved.env_stereo_slots = r.scene.env_stereo_slots;
+  r.scene.env_stereo.reset();
   r.scene.albedo = AlbedoResult{};
   for (size_t s = 0; s < r.scene.slots.size(); ++s) {
     SlotSolve ss;
@@ -256,6 +261,14 @@ void CheckRenderRequest(const LoadedScene& scene, const RenderRequest& request) 
   request.intrinsics.Validate();
 }
 
+const EnvStereoResult* StoredEnvStereo(const SolveResult& solved, const std::vector<int>& slots,
+                                       const EnvStereoOptions& options) {
+  if (!solved.env_stereo || solved.env_stereo_slots != slots ||
+      !(solved.env_stereo->options == options))
+    return nullptr;
+  return &*solved.env_stereo;
+}
+
 LightingPredictor PredictorFor(const LoadedScene& scene, const RenderRequest& request,
                                const std::function<void(const std::string&)>& log) {
   const SolveResult& solved = scene.solved;
@@ -264,18 +277,25 @@ LightingPredictor PredictorFor(const LoadedScene& scene, const RenderRequest& re
     without.insert(without.end(), scene.scene.holdout_slots.begin(),
                    scene.scene.holdout_slots.end());
   std::vector<Lighting> measured;
+  std::vector<int> measured_slots;
   for (const SlotSolve& ss : solved.slots)
-    if (std::find(without.begin(), without.end(), ss.slot) == without.end())
+    if (std::find(without.begin(), without.end(), ss.slot) == without.end()) {
       measured.push_back(ss.lighting);
+      measured_slots.push_back(ss.slot);
+    }
   if (measured.empty())
     throw Error(scene.dir.string() +
                 ": no slot is left to predict the lighting from (every slot is held out or left "
                 "out)");
-  Log(log, "fitting the sun's extinction, the sky interpolation and the environment's normals (" +
-               std::to_string(measured.size()) + " slots)");
   RelightOptions relight = request.relight;
   relight.env.ground_retro = solved.env_ground_retro;  // as the solve fitted it
-  LightingPredictor predictor(std::move(measured), relight);
+  // The solve's environment fit when it was made from these slots with these options.
+  const EnvStereoResult* fitted = StoredEnvStereo(solved, measured_slots, relight.env);
+  Log(log, std::string("fitting the sun's extinction, the sky interpolation") +
+               (fitted ? "; the environment's normals as the solve fitted them"
+                       : " and the environment's normals") +
+               " (" + std::to_string(measured.size()) + " slots)");
+  LightingPredictor predictor(std::move(measured), relight, fitted);
   Log(log, predictor.environment().summary.BriefReport());
   return predictor;
 }

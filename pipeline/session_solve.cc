@@ -669,16 +669,22 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   // it the ground in the model's shadow is read as sunlit again (EnvOptions::lit_ground): a
   // rough ground seen with the sun behind is brighter sunlit than Lambert's, its shadow darker.
   std::vector<Lighting> env_slots;
+  std::vector<int> env_slot_ids;
   for (const SlotSolve& ss : r.slots) {
     if (std::find(options.exclude_albedo_slots.begin(), options.exclude_albedo_slots.end(),
-                  ss.slot) == options.exclude_albedo_slots.end())
+                  ss.slot) == options.exclude_albedo_slots.end()) {
       env_slots.push_back(ss.lighting);
+      env_slot_ids.push_back(ss.slot);
+    }
   }
   const EnvStereoOptions env_options = RelightOptions{}.env;
   if (options.config.fit_ground_retro &&
       static_cast<int>(env_slots.size()) >= env_options.min_times) {
-    const GroundRetroFit g = FitGroundRetro(EnvObservationsOf(env_slots), env_options);
+    GroundRetroFit g = FitGroundRetro(EnvObservationsOf(env_slots), env_options);
     r.env_ground_retro = g.retro;
+    // Kept with the scene: predictions from these slots read it instead of fitting again.
+    r.env_stereo = std::move(g.result);
+    r.env_stereo_slots = env_slot_ids;
     std::ostringstream line;
     line << std::fixed << std::setprecision(3) << "environment: ground retro " << g.retro
          << " (median region residual " << 100 * g.cost_lambert << "% -> " << 100 * g.cost << "%)";

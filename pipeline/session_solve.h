@@ -16,6 +16,7 @@
 #include "core/session.h"
 #include "pipeline/solve_config.h"
 #include "solve/albedo.h"
+#include "solve/env_stereo.h"
 #include "solve/environment.h"
 #include "solve/grid.h"
 #include "solve/irradiance.h"
@@ -115,6 +116,9 @@ struct SolveResult {
   AlbedoResult albedo;
   AlbedoOptions albedo_options;  // what the albedos were solved with (irradiance, bounces)
   double env_ground_retro = 0;   // the ground's sun reflection for predictions (FitGroundRetro)
+  // The environment's photometric stereo fitted with it, from these slots (SceneModel).
+  std::optional<EnvStereoResult> env_stereo;
+  std::vector<int> env_stereo_slots;
 };
 
 // Sun, sky and environment per slot; irradiance at the surface grid; pseudo-albedos from the

@@ -150,11 +150,7 @@ void SolveConfig::Validate() const {
     throw Error("response.max_brackets must be within 1..1000");
   sky_fit.Validate();
   environment.Validate();
-  // The model the vector-flux irradiance needs is the pipeline's to give at solve time.
-  static const Mesh kNoModelYet;
-  AlbedoOptions a = albedo;
-  if (!a.irradiance.mesh) a.irradiance.mesh = &kNoModelYet;
-  a.Validate();
+  albedo.Validate();  // the model the vector-flux irradiance needs is given at solve time
 }
 
 SolveConfig DefaultSolveConfig(bool quick) {

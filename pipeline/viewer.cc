@@ -291,17 +291,22 @@ ViewerData ComputeViewerData(const LoadedScene& scene, const ViewerOptions& opti
                         options.min_elevation_deg);
   // As RequestedLighting: predicted from every slot but the held-out ones.
   std::vector<Lighting> measured;
+  std::vector<int> measured_slots;
   for (const SlotSolve& ss : solved.slots)
     if (std::find(scene.scene.holdout_slots.begin(), scene.scene.holdout_slots.end(), ss.slot) ==
-        scene.scene.holdout_slots.end())
+        scene.scene.holdout_slots.end()) {
       measured.push_back(ss.lighting);
+      measured_slots.push_back(ss.slot);
+    }
   if (measured.empty())
     throw Error(scene.dir.string() + ": every slot is held out: no lighting to predict from");
   RelightOptions clear;
   clear.env.ground_retro = solved.env_ground_retro;
   RelightOptions overcast = clear;
   overcast.pbs = 1;
-  const LightingPredictor clear_sky(measured, clear), overcast_sky(measured, overcast);
+  const EnvStereoResult* fitted = StoredEnvStereo(solved, measured_slots, clear.env);
+  const LightingPredictor clear_sky(measured, clear, fitted),
+      overcast_sky(measured, overcast, fitted);
   const int n = static_cast<int>(out.day.times.size());
   for (int i = 0; i < n; ++i) {
     const UtcTime t = out.day.times[i];

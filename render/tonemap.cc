@@ -1,5 +1,8 @@
 #include "render/tonemap.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <string>
@@ -17,20 +20,29 @@ Image ToDigital(const Image& radiance, const ResponseCurve& response, double exp
   }
   if (radiance.units != PixelUnits::kRadiance) throw Error("tonemap: input is not radiance");
   if (radiance.channels < 3) throw Error("tonemap: input needs 3 channels");
-  Image out(radiance.width, radiance.height, 3, PixelUnits::kDigital, 0.f);
   for (int y = 0; y < radiance.height; ++y) {
     for (int x = 0; x < radiance.width; ++x) {
       for (int c = 0; c < 3; ++c) {
-        const double l = radiance.at(x, y, c);
-        if (!std::isfinite(l)) {
+        if (!std::isfinite(radiance.at(x, y, c))) {
           throw Error("tonemap: non-finite radiance at pixel (" + std::to_string(x) + ", " +
                       std::to_string(y) + ")");
         }
-        const double dn = response.DigitalValue(c, std::max(0.0, l) * exposure_factor);
-        out.at(x, y, c) = static_cast<float>(std::clamp(std::round(dn), 0.0, 255.0));
       }
     }
   }
+  Image out(radiance.width, radiance.height, 3, PixelUnits::kDigital, 0.f);
+  tbb::parallel_for(
+      tbb::blocked_range<int>(0, radiance.height, 16), [&](const tbb::blocked_range<int>& rows) {
+        for (int y = rows.begin(); y < rows.end(); ++y) {
+          for (int x = 0; x < radiance.width; ++x) {
+            for (int c = 0; c < 3; ++c) {
+              const double l = radiance.at(x, y, c);
+              const double dn = response.DigitalValue(c, std::max(0.0, l) * exposure_factor);
+              out.at(x, y, c) = static_cast<float>(std::clamp(std::round(dn), 0.0, 255.0));
+            }
+          }
+        }
+      });
   return out;
 }
 

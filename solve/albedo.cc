@@ -171,11 +171,25 @@ bool IsSunlit(const Eigen::Vector3d& e_sun, const Eigen::Vector3d& e_se, double 
 
 bool IsSunlit(const Equation& q, double threshold) { return IsSunlit(q.e_sun, q.e_se, threshold); }
 
-// Fills points of category 0 (never observed) with the inverse-distance mean of up to 6
-// observed points (category 1..3) of the same block within `radius` (and in the same plane
-// when `coplanar`); filled points get category 4.
-void FillFromNeighbours(const SurfaceGrid& grid, double radius, bool coplanar,
-                        std::vector<uint8_t>* category, AlbedoResult* res) {
+// Never-observed points (category 0) filled from observed ones (category 1..3) of the same
+// block: the inverse-square-distance mean of up to 6 within `radius` in the same plane, then of
+// up to 6 within 4 x `radius` anywhere on the block. Which points fill which depends on the
+// grid and the categories only, so the outer iterations make the plan once and apply it to
+// each iteration's albedos.
+struct FillPlan {
+  double radius = -1;
+  std::vector<uint8_t> category_in;   // the categories it was made for
+  std::vector<uint8_t> category_out;  // the same with the filled points at 4
+  std::vector<int> target;            // filled points
+  std::vector<int> begin;             // per target, into source / weight (size target + 1)
+  std::vector<int> source;
+  std::vector<double> weight;  // normalised per target
+};
+
+// One pass: points of category 0 near observed ones within `radius` join the plan.
+void PlanFillPass(const SurfaceGrid& grid, double radius, bool coplanar,
+                  const std::vector<uint8_t>& cat, FillPlan* plan) {
+  constexpr int kMaxSources = 6;
   const int n = grid.size();
   const double R = radius;
   auto key = [&](const Eigen::Vector3d& p) {
@@ -187,12 +201,13 @@ void FillFromNeighbours(const SurfaceGrid& grid, double radius, bool coplanar,
     return (static_cast<int64_t>(k.x()) * 73856093) ^ (static_cast<int64_t>(k.y()) * 19349663) ^
            (static_cast<int64_t>(k.z()) * 83492791);
   };
-  const std::vector<uint8_t>& cat = *category;
   std::unordered_map<int64_t, std::vector<int>> cells;
   for (int i = 0; i < n; ++i) {
     if (cat[i] >= 1 && cat[i] <= 3) cells[hash(key(grid.points[i].position))].push_back(i);
   }
-  std::vector<uint8_t> filled(n, 0);
+  // Per point: its nearest sources (distance, index), found in parallel.
+  std::vector<std::array<std::pair<double, int>, kMaxSources>> found(n);
+  std::vector<uint8_t> count(n, 0);
   tbb::parallel_for(0, n, [&](int i) {
     if (cat[i] != 0) return;
     const GridPoint& p = grid.points[i];
@@ -216,24 +231,50 @@ void FillFromNeighbours(const SurfaceGrid& grid, double radius, bool coplanar,
         }
       }
     }
-    if (near.empty()) return;
-    const size_t m = std::min<size_t>(near.size(), 6);
+    const size_t m = std::min<size_t>(near.size(), kMaxSources);
     std::partial_sort(near.begin(), near.begin() + m, near.end());
-    Eigen::Vector3d se = Eigen::Vector3d::Zero(), sun = Eigen::Vector3d::Zero();
-    double wsum = 0;
-    for (size_t a = 0; a < m; ++a) {
-      const double w = 1.0 / (near[a].first * near[a].first + 1e-6);
-      se += w * res->rho_se[near[a].second];
-      sun += w * res->rho_sun[near[a].second];
-      wsum += w;
-    }
-    res->rho_se[i] = se / wsum;
-    res->rho_sun[i] = sun / wsum;
-    res->flags[i] |= kAlbedoNoObservations | kAlbedoFilled;
-    filled[i] = 1;
+    std::copy(near.begin(), near.begin() + m, found[i].begin());
+    count[i] = static_cast<uint8_t>(m);
   });
   for (int i = 0; i < n; ++i) {
-    if (filled[i]) (*category)[i] = 4;
+    if (count[i] == 0) continue;
+    double wsum = 0;
+    for (int a = 0; a < count[i]; ++a) wsum += 1.0 / (found[i][a].first * found[i][a].first + 1e-6);
+    for (int a = 0; a < count[i]; ++a) {
+      plan->source.push_back(found[i][a].second);
+      plan->weight.push_back(1.0 / (found[i][a].first * found[i][a].first + 1e-6) / wsum);
+    }
+    plan->target.push_back(i);
+    plan->begin.push_back(static_cast<int>(plan->source.size()));
+    plan->category_out[i] = 4;
+  }
+}
+
+FillPlan PlanFill(const SurfaceGrid& grid, double radius, const std::vector<uint8_t>& category) {
+  FillPlan plan;
+  plan.radius = radius;
+  plan.category_in = category;
+  plan.category_out = category;
+  plan.begin.push_back(0);
+  PlanFillPass(grid, radius, true, category, &plan);
+  // The wider pass draws on observed points only, as the first: what it fills is what the
+  // first left at 0.
+  std::vector<uint8_t> rest = plan.category_out;
+  PlanFillPass(grid, 4 * radius, false, rest, &plan);
+  return plan;
+}
+
+void ApplyFill(const FillPlan& plan, AlbedoResult* res) {
+  for (size_t t = 0; t < plan.target.size(); ++t) {
+    Eigen::Vector3d se = Eigen::Vector3d::Zero(), sun = Eigen::Vector3d::Zero();
+    for (int k = plan.begin[t]; k < plan.begin[t + 1]; ++k) {
+      se += plan.weight[k] * res->rho_se[plan.source[k]];
+      sun += plan.weight[k] * res->rho_sun[plan.source[k]];
+    }
+    const int i = plan.target[t];
+    res->rho_se[i] = se;
+    res->rho_sun[i] = sun;
+    res->flags[i] |= kAlbedoNoObservations | kAlbedoFilled;
   }
 }
 
@@ -463,13 +504,14 @@ std::vector<Observation> CollectObservations(const SurfaceGrid& grid, const RayC
   return out;
 }
 
-// Eqs. 11-12 with per-slot weights (empty: all 1); defined below.
+// Eqs. 11-12 with per-slot weights (empty: all 1); defined below. `fill` (optional) keeps the
+// neighbour fill's plan between calls on one grid.
 static AlbedoResult SolveWeighted(const SurfaceGrid& grid,
                                   const std::vector<Observation>& observations,
                                   const std::vector<SlotIrradiance>& irradiance,
                                   const AlbedoOptions& options,
-                                  const std::vector<double>& slot_weight,
-                                  const SunShading* shading);
+                                  const std::vector<double>& slot_weight, const SunShading* shading,
+                                  FillPlan* fill = nullptr);
 
 // Eqs. 11-12 per grid point with fixed irradiance.
 AlbedoResult SolveAlbedoFixedIrradiance(const SurfaceGrid& grid,
@@ -540,8 +582,8 @@ static AlbedoResult SolveWeighted(const SurfaceGrid& grid,
                                   const std::vector<Observation>& observations,
                                   const std::vector<SlotIrradiance>& irradiance,
                                   const AlbedoOptions& options,
-                                  const std::vector<double>& slot_weight,
-                                  const SunShading* shading) {
+                                  const std::vector<double>& slot_weight, const SunShading* shading,
+                                  FillPlan* fill) {
   const auto start = std::chrono::steady_clock::now();
   options.Validate();
   const int n = grid.size();
@@ -580,13 +622,21 @@ static AlbedoResult SolveWeighted(const SurfaceGrid& grid,
   for (const Observation& ob : observations) ++first[ob.point + 1];
   for (int i = 0; i < n; ++i) first[i + 1] += first[i];
 
+  std::vector<double> dark(irradiance.size(), 0.0);  // per slot: "no light" below this
+  for (size_t s = 0; s < irradiance.size(); ++s) {
+    for (size_t i = 0; i < irradiance[s].se.size() && i < irradiance[s].sun.size(); ++i)
+      dark[s] = std::max(dark[s], (irradiance[s].se[i] + irradiance[s].sun[i]).maxCoeff());
+    dark[s] *= 1e-9;
+  }
   auto equations = [&](int i) {
     std::vector<Equation> eqs;
     for (int k = first[i]; k < first[i + 1]; ++k) {
       const Observation& ob = observations[order[k]];
       const SlotIrradiance& irr = irradiance[ob.slot];
-      // A point that receives no light in this slot tells nothing about its albedo.
-      if (!((irr.se[ob.point] + irr.sun[ob.point]).maxCoeff() > 0)) continue;
+      // A point that receives no light in this slot tells nothing about its albedo (less than
+      // 1e-9 of the slot's brightest point is none: the exact irradiance of a point enclosed by
+      // faces keeps rounding-level flux through their shared edges).
+      if (!((irr.se[ob.point] + irr.sun[ob.point]).maxCoeff() > dark[ob.slot])) continue;
       const ShadingFactors f = FactorsOf(grid, ob, shading);
       eqs.push_back({kPi * ob.radiance.cast<double>(), irr.se[ob.point] * f.se,
                      irr.sun[ob.point] * f.sun, slot_weight.empty() ? 1.0 : slot_weight[ob.slot]});
@@ -673,8 +723,13 @@ static AlbedoResult SolveWeighted(const SurfaceGrid& grid,
   // Never-observed points: from the nearest observed points of the same face when close, then
   // of the same block (the paper's "fill in reflectance values from adjacent faces", §4.1).
   if (options.fill_radius_m > 0) {
-    FillFromNeighbours(grid, options.fill_radius_m, true, &category, &res);
-    FillFromNeighbours(grid, 4 * options.fill_radius_m, false, &category, &res);
+    FillPlan local;
+    FillPlan& plan = fill ? *fill : local;
+    if (plan.radius != options.fill_radius_m || plan.category_in != category) {
+      plan = PlanFill(grid, options.fill_radius_m, category);
+    }
+    ApplyFill(plan, &res);
+    category = plan.category_out;
   }
   // The rest: the block median (global median as a fallback).
   std::vector<std::array<std::vector<double>, 6>> block_vals(nblocks + 1);
@@ -798,10 +853,11 @@ std::vector<double> FitRetro(const SurfaceGrid& grid, const std::vector<Observat
   constexpr int kSteps = 8;  // candidates kRetroMin + k (kRetroMax - kRetroMin) / kSteps
   const double step = (kRetroMax - kRetroMin) / kSteps;
   SunShading shading{sun_dirs, {}};
+  FillPlan fill;
   auto costs_at = [&](const std::vector<double>& retro) {
     shading.retro = retro;
     const AlbedoResult r =
-        SolveWeighted(grid, observations, irradiance, options, slot_weight, &shading);
+        SolveWeighted(grid, observations, irradiance, options, slot_weight, &shading, &fill);
     return CostsPerBlock(grid, observations, irradiance, r, shading, options, nblocks);
   };
   std::vector<std::vector<double>> cost(kSteps + 1);
@@ -1005,17 +1061,23 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   const auto start = std::chrono::steady_clock::now();
   options.Validate();
   if (slots.empty()) throw Error("albedo: no time-of-day slots");
-  // Every slot at once: the vector flux's per-point geometry is shared by all of them.
-  std::vector<SlotIrradiance> irr =
-      ComputeIrradiance(grid, cache, model, slots, options.irradiance);
+  // Every slot at once: the vector flux's per-point geometry is shared by all of them. Exact
+  // where photographed; the points no photo sees only light the others (interreflection).
+  std::vector<uint8_t> observed(grid.size(), 0);
+  for (const Observation& ob : observations)
+    if (ob.point >= 0 && ob.point < grid.size()) observed[ob.point] = 1;
+  IrradianceOptions io = options.irradiance;
+  if (!io.exact_points) io.exact_points = &observed;
+  std::vector<SlotIrradiance> irr = ComputeIrradiance(grid, cache, model, slots, io);
   SunShading shading;
   for (const Lighting& l : slots) shading.sun_dirs.push_back(l.sun_dir.normalized());
   AlbedoSummary retro_summary;
-  AlbedoResult res = SolveWeighted(grid, observations, irr, options, {}, &shading);
+  FillPlan fill;  // made once, again only if the observed points change
+  AlbedoResult res = SolveWeighted(grid, observations, irr, options, {}, &shading, &fill);
   if (options.fit_retro && options.outer_iterations == 1) {
     shading.retro =
         FitRetro(grid, observations, irr, options, {}, shading.sun_dirs, &retro_summary);
-    res = SolveWeighted(grid, observations, irr, options, {}, &shading);
+    res = SolveWeighted(grid, observations, irr, options, {}, &shading, &fill);
   }
   std::vector<double> changes;
   std::vector<double> slot_weight;
@@ -1030,7 +1092,8 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
       shading.retro =
           FitRetro(grid, observations, irr, options, slot_weight, shading.sun_dirs, &retro_summary);
     }
-    AlbedoResult next = SolveWeighted(grid, observations, irr, options, slot_weight, &shading);
+    AlbedoResult next =
+        SolveWeighted(grid, observations, irr, options, slot_weight, &shading, &fill);
     double change = 0;
     int count = 0;
     for (int i = 0; i < grid.size(); ++i) {
@@ -1072,7 +1135,7 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
         }
         ob.radiance = (ob.radiance - lobe_light.cast<float>()).cwiseMax(0.f);
       }
-      return SolveWeighted(grid, diffuse, irr, options, slot_weight, &shading);
+      return SolveWeighted(grid, diffuse, irr, options, slot_weight, &shading, &fill);
     };
     if (any(sun_lobes)) {
       res = resolve();

@@ -83,9 +83,18 @@ std::vector<Observation> Observe(const World& w, const std::vector<SlotIrradianc
   return obs;
 }
 
+// The solve's default options, with the world's model for the exact (vector-flux) irradiance.
+AlbedoOptions OptionsFor(const World& w) {
+  AlbedoOptions o;
+  o.irradiance.mesh = &w.mesh;
+  return o;
+}
+
+// The irradiance as the solve computes it (the photos below are made with it).
 std::vector<SlotIrradiance> Irradiance(const World& w) {
   std::vector<SlotIrradiance> irr;
-  for (const auto& l : w.slots) irr.push_back(ComputeIrradiance(w.grid, w.cache, *w.rc, l));
+  for (const auto& l : w.slots)
+    irr.push_back(ComputeIrradiance(w.grid, w.cache, *w.rc, l, OptionsFor(w).irradiance));
   return irr;
 }
 
@@ -203,7 +212,7 @@ TEST(AlbedoTest, FitsTheGlossyBlocksSunLobeAndNotTheMatteOnes) {
       }
     }
   }
-  AlbedoOptions opt;
+  AlbedoOptions opt = OptionsFor(w);
   opt.outer_iterations = 1;  // the photos carry no interreflection
   opt.fit_retro = false;
   const AlbedoResult fit = SolveAlbedo(w.grid, w.cache, *w.rc, w.slots, obs, opt);
@@ -247,7 +256,7 @@ TEST(AlbedoTest, FitsEachBlocksRetroAndTheAlbedosWithIt) {
   const double truth = 0.8;  // between the fit's candidates (multiples of 0.25)
   const auto irr = Irradiance(w);
   const auto obs = ObserveRetro(w, irr, box, truth);
-  AlbedoOptions opt;
+  AlbedoOptions opt = OptionsFor(w);
   opt.outer_iterations = 1;  // the photos carry no interreflection
   opt.bounces = 1;
   const AlbedoResult fit = SolveAlbedo(w.grid, w.cache, *w.rc, w.slots, obs, opt);
@@ -295,7 +304,7 @@ TEST(AlbedoTest, RobustAgainstAShadowBoundaryOutlier) {
                        w.rho_sun[o.point].cwiseProduct(Eigen::Vector3d::Constant(300)) / kPi)
                           .cast<float>();
   }
-  AlbedoOptions opt;
+  AlbedoOptions opt = OptionsFor(w);
   const AlbedoResult r = SolveAlbedoFixedIrradiance(w.grid, obs, irr, opt);
   opt.loss = RobustLoss::kNone;
   const AlbedoResult plain = SolveAlbedoFixedIrradiance(w.grid, obs, irr, opt);
@@ -321,7 +330,7 @@ TEST(AlbedoTest, OuterIterationConvergesToTheBounceConsistentAlbedo) {
   auto irr = Irradiance(w);
   for (auto& s : irr) AddInterreflection(w.grid, w.cache, w.rho_sun, w.rho_se, &s, 1);
   const auto obs = Observe(w, irr);
-  AlbedoOptions opt;
+  AlbedoOptions opt = OptionsFor(w);
   opt.bounces = 1;  // as the photos were made
   opt.outer_iterations = 1;
   const AlbedoResult first = SolveAlbedo(w.grid, w.cache, *w.rc, w.slots, obs, opt);
@@ -420,7 +429,7 @@ TEST(AlbedoTest, BadInputThrows) {
   auto short_irr = irr;
   short_irr[1].sun.pop_back();
   EXPECT_THROW(SolveAlbedoFixedIrradiance(w.grid, obs, short_irr), Error);
-  AlbedoOptions opt;
+  AlbedoOptions opt = OptionsFor(w);
   opt.outer_iterations = 0;
   EXPECT_THROW(SolveAlbedoFixedIrradiance(w.grid, obs, irr, opt), Error);
   EXPECT_THROW(SolveAlbedo(w.grid, w.cache, *w.rc, {}, obs), Error);

@@ -13,7 +13,9 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <nlohmann/json.hpp>
 #include <string>
+#include <type_traits>
 
 #include "core/angles.h"
 #include "core/error.h"
@@ -48,6 +50,8 @@ struct SkyQuad {
   std::vector<Eigen::Vector3d> weight;
   Eigen::Vector3d horizontal = Eigen::Vector3d::Zero();  // E on an unoccluded level plane
   Eigen::Vector3d ground = Eigen::Vector3d::Zero();      // ground radiance (kPlane, albedo > 0)
+  // The same directions and weights by component, for SkyIrradiance's whole-array sums.
+  Eigen::ArrayXd dx, dy, dz, w0, w1, w2;
 };
 
 SkyQuad MakeSkyQuad(const EnvLighting& l, const EnvStereoOptions& o) {
@@ -68,6 +72,16 @@ SkyQuad MakeSkyQuad(const EnvLighting& l, const EnvStereoOptions& o) {
       q.horizontal += w * d.z();
     }
   }
+  const Eigen::Index k = static_cast<Eigen::Index>(q.dir.size());
+  for (Eigen::ArrayXd* a : {&q.dx, &q.dy, &q.dz, &q.w0, &q.w1, &q.w2}) a->resize(k);
+  for (Eigen::Index i = 0; i < k; ++i) {
+    q.dx[i] = q.dir[i].x();
+    q.dy[i] = q.dir[i].y();
+    q.dz[i] = q.dir[i].z();
+    q.w0[i] = q.weight[i][0];
+    q.w1[i] = q.weight[i][1];
+    q.w2[i] = q.weight[i][2];
+  }
   if (o.sky_irradiance == EnvSkyIrradiance::kPlane && o.ground_albedo > 0) {
     const Eigen::Vector3d sun_h =
         l.sun_radiance * l.sun_solid_angle_sr * std::max(0.0, l.sun_dir.normalized().z());
@@ -81,12 +95,23 @@ Eigen::Vector3d SkyIrradiance(const SkyQuad& q, const EnvStereoOptions& o,
                               const Eigen::Vector3d& nh, Eigen::Matrix3d* grad) {
   if (grad) grad->setZero();
   if (o.sky_irradiance == EnvSkyIrradiance::kAmbient) return q.horizontal;
-  Eigen::Vector3d e = Eigen::Vector3d::Zero();
-  for (size_t k = 0; k < q.dir.size(); ++k) {
-    double ds;
-    const double s = SoftCos(nh.dot(q.dir[k]), o.alpha, &ds);
-    e += q.weight[k] * s;
-    if (grad && ds != 0) *grad += (q.weight[k] * ds) * q.dir[k].transpose();
+  // SoftCos over every direction as whole-array operations: x where x >= 0 (slope 1), -1 / alpha
+  // where alpha x < -40 (slope 0), and the exponential only in the narrow band between.
+  thread_local Eigen::ArrayXd x, s, ds, wd;
+  x = nh.x() * q.dx + nh.y() * q.dy + nh.z() * q.dz;
+  const double far = -40 / o.alpha;
+  s = x.max(0.0) - (x < far).cast<double>() / o.alpha;
+  ds = (x >= 0).cast<double>();
+  for (Eigen::Index k = 0; k < x.size(); ++k) {
+    if (x[k] < 0 && x[k] >= far) s[k] = SoftCos(x[k], o.alpha, &ds[k]);
+  }
+  Eigen::Vector3d e((q.w0 * s).sum(), (q.w1 * s).sum(), (q.w2 * s).sum());
+  if (grad) {
+    const Eigen::ArrayXd* w[3] = {&q.w0, &q.w1, &q.w2};
+    for (int c = 0; c < 3; ++c) {
+      wd = *w[c] * ds;
+      grad->row(c) << (wd * q.dx).sum(), (wd * q.dy).sum(), (wd * q.dz).sum();
+    }
   }
   if (q.ground.any()) {
     // Flat Lambertian ground filling the lower hemisphere: E = L_g pi (1 - n_z) / 2.
@@ -715,14 +740,162 @@ EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
   return res;
 }
 
+void to_json(nlohmann::json& j, const EnvStereoResult& r) {
+  const EnvStereoOptions& o = r.options;
+  const EnvStereoSummary& s = r.summary;
+  auto v3 = [](const Eigen::Vector3d& v) { return nlohmann::json::array({v[0], v[1], v[2]}); };
+  nlohmann::json regions = nlohmann::json::array(), source = nlohmann::json::array();
+  for (const EnvRegionFit& f : r.regions)
+    regions.push_back({{"kind", static_cast<int>(f.kind)},
+                       {"normal", v3(f.normal)},
+                       {"rho_sky", v3(f.rho_sky)},
+                       {"rho_sun", v3(f.rho_sun)},
+                       {"sky_fraction", f.sky_fraction},
+                       {"rel_rms", f.rel_rms},
+                       {"sunlit_times", f.sunlit_times},
+                       {"to_viewer", v3(f.to_viewer)},
+                       {"iterations", f.iterations}});
+  for (EnvRegionSource src : r.source) source.push_back(static_cast<int>(src));
+  j = nlohmann::json{
+      {"bands_below", r.bands_below},
+      {"bands_above", r.bands_above},
+      {"sectors", r.sectors},
+      {"layer_z", r.layer_z},
+      {"source", source},
+      {"regions", regions},
+      {"options",
+       {{"alpha", o.alpha},
+        {"fixed_channel", o.fixed_channel},
+        {"fixed_rho_sun", o.fixed_rho_sun},
+        {"sky_irradiance", static_cast<int>(o.sky_irradiance)},
+        {"ground_albedo", o.ground_albedo},
+        {"sky_quadrature", o.sky_quadrature},
+        {"min_times", o.min_times},
+        {"sky_match_tolerance", o.sky_match_tolerance},
+        {"fit_sky_fraction", o.fit_sky_fraction},
+        {"fallback_rel_error", o.fallback_rel_error},
+        {"max_albedo", o.max_albedo},
+        {"sigma_relative", o.sigma_relative},
+        {"smoothing_weight", o.smoothing_weight},
+        {"ground_retro", o.ground_retro},
+        {"ground_normal_prior", o.ground_normal_prior},
+        {"max_iterations", o.max_iterations},
+        {"starts", o.starts}}},
+      {"summary",
+       {{"times", s.times},
+        {"regions_sky", s.regions_sky},
+        {"regions_landscape", s.regions_landscape},
+        {"regions_sky_only", s.regions_sky_only},
+        {"regions_unobserved", s.regions_unobserved},
+        {"fallback_bad_fit", s.fallback_bad_fit},
+        {"fallback_never_lit", s.fallback_never_lit},
+        {"underdetermined", s.underdetermined},
+        {"rel_rms_median", s.rel_rms_median},
+        {"rel_rms_p90", s.rel_rms_p90}}}};  // not its seconds: a scene is the same each solve
+}
+
+void from_json(const nlohmann::json& j, EnvStereoResult& r) {
+  r = EnvStereoResult();
+  std::string field;  // the one being read, for the error
+  try {
+    auto get = [&](const nlohmann::json& obj, const char* key, auto* out) {
+      field = key;
+      *out = obj.at(key).get<std::remove_pointer_t<decltype(out)>>();
+    };
+    auto vec3 = [&](const nlohmann::json& obj, const char* key) {
+      field = key;
+      const nlohmann::json& a = obj.at(key);
+      if (!a.is_array() || a.size() != 3) throw Error("not 3 numbers");
+      const Eigen::Vector3d v(a[0].get<double>(), a[1].get<double>(), a[2].get<double>());
+      if (!v.allFinite()) throw Error("not finite");
+      return v;
+    };
+    get(j, "bands_below", &r.bands_below);
+    get(j, "bands_above", &r.bands_above);
+    get(j, "sectors", &r.sectors);
+    get(j, "layer_z", &r.layer_z);
+    field = "source";
+    for (const auto& v : j.at("source")) {
+      const int k = v.get<int>();
+      if (k < 0 || k > 3) throw Error("unknown region source " + std::to_string(k));
+      r.source.push_back(static_cast<EnvRegionSource>(k));
+    }
+    for (const auto& g : j.at("regions")) {
+      EnvRegionFit f;
+      int kind = 0;
+      get(g, "kind", &kind);
+      if (kind < 0 || kind > 3) throw Error("unknown region kind " + std::to_string(kind));
+      f.kind = static_cast<EnvRegionKind>(kind);
+      f.normal = vec3(g, "normal");
+      f.rho_sky = vec3(g, "rho_sky");
+      f.rho_sun = vec3(g, "rho_sun");
+      get(g, "sky_fraction", &f.sky_fraction);
+      get(g, "rel_rms", &f.rel_rms);
+      get(g, "sunlit_times", &f.sunlit_times);
+      f.to_viewer = vec3(g, "to_viewer");
+      get(g, "iterations", &f.iterations);
+      r.regions.push_back(f);
+    }
+    const nlohmann::json& o = j.at("options");
+    EnvStereoOptions& op = r.options;
+    get(o, "alpha", &op.alpha);
+    get(o, "fixed_channel", &op.fixed_channel);
+    get(o, "fixed_rho_sun", &op.fixed_rho_sun);
+    int sky_irradiance = 0;
+    get(o, "sky_irradiance", &sky_irradiance);
+    if (sky_irradiance < 0 || sky_irradiance > 1) throw Error("must be 0 or 1");
+    op.sky_irradiance = static_cast<EnvSkyIrradiance>(sky_irradiance);
+    get(o, "ground_albedo", &op.ground_albedo);
+    get(o, "sky_quadrature", &op.sky_quadrature);
+    get(o, "min_times", &op.min_times);
+    get(o, "sky_match_tolerance", &op.sky_match_tolerance);
+    get(o, "fit_sky_fraction", &op.fit_sky_fraction);
+    get(o, "fallback_rel_error", &op.fallback_rel_error);
+    get(o, "max_albedo", &op.max_albedo);
+    get(o, "sigma_relative", &op.sigma_relative);
+    get(o, "smoothing_weight", &op.smoothing_weight);
+    get(o, "ground_retro", &op.ground_retro);
+    get(o, "ground_normal_prior", &op.ground_normal_prior);
+    get(o, "max_iterations", &op.max_iterations);
+    get(o, "starts", &op.starts);
+    const nlohmann::json& s = j.at("summary");
+    EnvStereoSummary& su = r.summary;
+    get(s, "times", &su.times);
+    get(s, "regions_sky", &su.regions_sky);
+    get(s, "regions_landscape", &su.regions_landscape);
+    get(s, "regions_sky_only", &su.regions_sky_only);
+    get(s, "regions_unobserved", &su.regions_unobserved);
+    get(s, "fallback_bad_fit", &su.fallback_bad_fit);
+    get(s, "fallback_never_lit", &su.fallback_never_lit);
+    get(s, "underdetermined", &su.underdetermined);
+    get(s, "rel_rms_median", &su.rel_rms_median);
+    get(s, "rel_rms_p90", &su.rel_rms_p90);
+  } catch (const nlohmann::json::exception& e) {
+    throw Error("environment stereo: " + field + ": " + e.what());
+  } catch (const Error& e) {
+    throw Error("environment stereo: " + field + ": " + e.what());
+  }
+  r.options.Validate();
+  if (r.bands_below < 1 || r.bands_above < 1 || r.sectors < 1 || r.layer_z.empty())
+    throw Error("environment stereo: bands, sectors and layers must be at least 1");
+  const size_t n = r.layer_z.size() * static_cast<size_t>(r.bands_below + r.bands_above) *
+                   static_cast<size_t>(r.sectors);
+  if (r.regions.size() != n || r.source.size() != n)
+    throw Error("environment stereo: " + std::to_string(r.regions.size()) + " regions and " +
+                std::to_string(r.source.size()) + " sources for " + std::to_string(n) +
+                " regions of its layers, bands and sectors");
+}
+
 GroundRetroFit FitGroundRetro(const std::vector<EnvObservation>& per_time,
                               const EnvStereoOptions& options, double min_gain) {
   if (!(min_gain >= 0 && min_gain < 1)) throw Error("ground retro: min_gain must be in [0, 1)");
   GroundRetroFit out;
+  std::vector<EnvStereoResult> fits;  // per candidate, as costed
   auto cost_at = [&](double retro) {
     EnvStereoOptions o = options;
     o.ground_retro = retro;
-    const EnvStereoResult r = SolveEnvStereo(per_time, o);
+    fits.push_back(SolveEnvStereo(per_time, o));
+    const EnvStereoResult& r = fits.back();
     const int first_above = r.bands_below * r.sectors;
     const int nreg = (r.bands_below + r.bands_above) * r.sectors;
     std::vector<double> rms;
@@ -771,6 +944,8 @@ GroundRetroFit FitGroundRetro(const std::vector<EnvObservation>& per_time,
     out.retro = 0;
     out.cost = out.cost_lambert;
   }
+  for (size_t k = 0; k < out.candidates.size(); ++k)
+    if (out.candidates[k] == out.retro) out.result = std::move(fits[k]);
   return out;
 }
 

@@ -16,6 +16,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <nlohmann/json_fwd.hpp>
 #include <string>
 #include <vector>
 
@@ -102,6 +103,7 @@ struct EnvStereoOptions {
   int starts = 3;
 
   void Validate() const;  // throws rouen::Error naming the bad field
+  bool operator==(const EnvStereoOptions&) const = default;
 };
 
 enum class EnvRegionKind : uint8_t {
@@ -154,8 +156,15 @@ struct EnvStereoResult {
 // the landscape regions below the horizon; refined by a parabola through the best candidate's
 // neighbours. The fit keeps 0 (Lambert) unless its cost is below (1 - min_gain) x the Lambertian
 // cost.
+// Every field but the summary's seconds, numbers kept exactly (a scene keeps the fit its solve
+// made, SceneModel::env_stereo, and a prediction reads it back instead of fitting again); from_json
+// validates and names the bad field.
+void to_json(nlohmann::json& j, const EnvStereoResult& r);
+void from_json(const nlohmann::json& j, EnvStereoResult& r);
+
 struct GroundRetroFit {
   double retro = 0;
+  EnvStereoResult result;                 // the fit with `retro`
   std::vector<double> candidates, costs;  // as evaluated (the refinement last)
   double cost_lambert = 0, cost = 0;
 };

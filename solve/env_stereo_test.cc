@@ -4,7 +4,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <iostream>
+#include <nlohmann/json.hpp>
 #include <random>
 
 #include "core/angles.h"
@@ -214,6 +216,57 @@ TEST(EnvStereoTest, RecoversNormalsAndAlbedosWithoutNoise) {
     const double bound = SmoothingBias(w.truth[r], train, o);
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(pred.radiance[r][c] / t[c], 1, 0.005 + bound) << r;
   }
+}
+
+// A scene keeps its solve's fit in scene.json: read back through text it is the same fit to the
+// bit and predicts the same environment; a damaged one is refused naming what is wrong.
+TEST(EnvStereoTest, AFitReadBackFromJsonIsTheSame) {
+  EnvStereoOptions o;
+  o.ground_retro = 0.5;
+  const EnvironmentMap grid = EnvironmentMap::Constant(SmallGrid(), {1, 1, 1}, {1, 1, 1});
+  const Synthetic w = MakeWorld(grid, 7);
+  const EnvStereoResult res = SolveEnvStereo(Observe(w, {0, 1, 2, 4}, o, 0.01, 5), o);
+  const nlohmann::json j = res;
+  const EnvStereoResult back = nlohmann::json::parse(j.dump()).get<EnvStereoResult>();
+  EXPECT_TRUE(back.options == res.options);
+  EXPECT_EQ(back.layer_z, res.layer_z);
+  EXPECT_EQ(back.source, res.source);
+  EXPECT_EQ(back.summary.times, 4);
+  EXPECT_EQ(back.summary.rel_rms_p90, res.summary.rel_rms_p90);
+  ASSERT_EQ(back.regions.size(), res.regions.size());
+  int landscape = 0;
+  for (size_t r = 0; r < res.regions.size(); ++r) {
+    const EnvRegionFit &a = res.regions[r], &b = back.regions[r];
+    landscape += a.kind == EnvRegionKind::kLandscape;
+    EXPECT_EQ(b.kind, a.kind) << r;
+    EXPECT_EQ(b.normal, a.normal) << r;
+    EXPECT_EQ(b.rho_sky, a.rho_sky) << r;
+    EXPECT_EQ(b.rho_sun, a.rho_sun) << r;
+    EXPECT_EQ(b.sky_fraction, a.sky_fraction) << r;
+    EXPECT_EQ(b.to_viewer, a.to_viewer) << r;
+    EXPECT_EQ(b.sunlit_times, a.sunlit_times) << r;
+  }
+  EXPECT_GE(landscape, 20);
+  EXPECT_EQ(PredictEnvironment(back, LightingAt(3)).radiance,
+            PredictEnvironment(res, LightingAt(3)).radiance);
+
+  const auto refused = [&](const std::function<void(nlohmann::json*)>& damage,
+                           const std::string& expect) {
+    nlohmann::json bad = j;
+    damage(&bad);
+    try {
+      bad.get<EnvStereoResult>();
+      ADD_FAILURE() << expect << ": accepted";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(expect), std::string::npos) << e.what();
+    }
+  };
+  refused([](nlohmann::json* b) { (*b)["regions"].erase(0); }, "regions of its layers");
+  refused([](nlohmann::json* b) { (*b)["regions"][3]["kind"] = 7; }, "kind: unknown region kind 7");
+  refused([](nlohmann::json* b) { (*b)["regions"][3]["normal"] = {1, "up", 0}; }, "normal");
+  refused([](nlohmann::json* b) { (*b)["regions"][3]["rho_sun"] = {1, 2}; }, "rho_sun: not 3");
+  refused([](nlohmann::json* b) { (*b)["options"]["sky_quadrature"] = 1; }, "sky_quadrature");
+  refused([](nlohmann::json* b) { (*b)["summary"].erase("times"); }, "times");
 }
 
 TEST(EnvStereoTest, NoiseGivesBoundedErrors) {

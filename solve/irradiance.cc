@@ -56,28 +56,75 @@ void IrradianceOptions::Validate() const {
   if (sun_samples < 1 || sun_samples > 1024) {
     throw Error("IrradianceOptions: sun_samples must be in 1..1024");
   }
-  if (method == IrradianceMethod::kVectorFlux) {
-    if (mesh == nullptr) {
-      throw Error("IrradianceOptions: the vector-flux method needs the model mesh (mesh)");
-    }
-    vector_flux.Validate();
-  }
+  if (method == IrradianceMethod::kVectorFlux) vector_flux.Validate();
 }
 
-Eigen::Vector3d HemisphereCache::Direction(const GridPoint& p, int point_index, int k) const {
-  const uint64_t h = MixHash(seed * 0x100000001B3ull + static_cast<uint64_t>(point_index));
-  const double s1 = HashUniform53(h), s2 = HashUniform53(MixHash(h));
-  const int a = k / strata, b = k % strata;
-  double u1 = (a + 0.5) / strata + s1;
-  double u2 = (b + 0.5) / strata + s2;
+namespace {
+
+// One point's share of its directions: the tangent frame and the Cranley-Patterson shift of
+// its strata (u1 by s1; the azimuth by 2 pi s2, as its cosine and sine).
+struct PointShift {
+  Eigen::Vector3d t, b, n;
+  double s1 = 0, cos2 = 1, sin2 = 0;
+};
+
+PointShift ShiftOf(const HemisphereCache& c, const GridPoint& p, int point_index) {
+  PointShift q;
+  const uint64_t h = MixHash(c.seed * 0x100000001B3ull + static_cast<uint64_t>(point_index));
+  q.s1 = HashUniform53(h);
+  const double s2 = HashUniform53(MixHash(h));
+  q.cos2 = std::cos(2 * kPi * s2);
+  q.sin2 = std::sin(2 * kPi * s2);
+  TangentFrame(p.normal, &q.t, &q.b);
+  q.n = p.normal;
+  return q;
+}
+
+// Stratum row a's radius and height (Malley's method: uniform on the disc, projected up, so
+// the density is cos(theta) / pi).
+void RowOf(const PointShift& q, int strata, int a, double* r, double* z) {
+  double u1 = (a + 0.5) / strata + q.s1;
   u1 -= std::floor(u1);
-  u2 -= std::floor(u2);
-  // Malley's method: uniform on the disc, projected up: density cos(theta) / pi.
-  const double r = std::sqrt(u1), phi = 2 * kPi * u2;
-  const double z = std::sqrt(std::max(0.0, 1.0 - u1));
-  Eigen::Vector3d t, bt;
-  TangentFrame(p.normal, &t, &bt);
-  return (r * std::cos(phi) * t + r * std::sin(phi) * bt + z * p.normal).normalized();
+  *r = std::sqrt(u1);
+  *z = std::sqrt(std::max(0.0, 1.0 - u1));
+}
+
+// The direction of row (r, z) and column angle phi_b = 2 pi (b + 0.5) / strata (its cosine and
+// sine), shifted by the point's azimuth.
+Eigen::Vector3d DirectionOf(const PointShift& q, double r, double z, double cos_b, double sin_b) {
+  const double cp = cos_b * q.cos2 - sin_b * q.sin2, sp = sin_b * q.cos2 + cos_b * q.sin2;
+  return (r * cp * q.t + r * sp * q.b + z * q.n).normalized();
+}
+
+}  // namespace
+
+Eigen::Vector3d HemisphereCache::Direction(const GridPoint& p, int point_index, int k) const {
+  const PointShift q = ShiftOf(*this, p, point_index);
+  const int a = k / strata, b = k % strata;
+  double r, z;
+  RowOf(q, strata, a, &r, &z);
+  const double phi_b = 2 * kPi * (b + 0.5) / strata;
+  return DirectionOf(q, r, z, std::cos(phi_b), std::sin(phi_b));
+}
+
+void HemisphereCache::Directions(const GridPoint& p, int point_index,
+                                 std::vector<Eigen::Vector3d>* out) const {
+  const PointShift q = ShiftOf(*this, p, point_index);
+  thread_local std::vector<double> cos_b, sin_b;
+  cos_b.resize(strata);
+  sin_b.resize(strata);
+  for (int b = 0; b < strata; ++b) {
+    const double phi_b = 2 * kPi * (b + 0.5) / strata;
+    cos_b[b] = std::cos(phi_b);
+    sin_b[b] = std::sin(phi_b);
+  }
+  out->resize(directions);
+  for (int a = 0; a < strata; ++a) {
+    double r, z;
+    RowOf(q, strata, a, &r, &z);
+    for (int b = 0; b < strata; ++b)
+      (*out)[a * strata + b] = DirectionOf(q, r, z, cos_b[b], sin_b[b]);
+  }
 }
 
 HemisphereCache BuildHemisphereCache(const SurfaceGrid& grid, const RayCaster& model,
@@ -95,12 +142,14 @@ HemisphereCache BuildHemisphereCache(const SurfaceGrid& grid, const RayCaster& m
   cache.escaped_fraction.assign(n, 0.f);
   const double offset = model.surface_offset();
   tbb::parallel_for(tbb::blocked_range<int>(0, n, 16), [&](const tbb::blocked_range<int>& range) {
+    std::vector<Eigen::Vector3d> dirs;
     for (int i = range.begin(); i < range.end(); ++i) {
       const GridPoint& p = grid.points[i];
       const Eigen::Vector3d origin = p.position + offset * p.normal;
       int escaped = 0;
+      cache.Directions(p, i, &dirs);
       for (int k = 0; k < K; ++k) {
-        const Eigen::Vector3d d = cache.Direction(p, i, k);
+        const Eigen::Vector3d& d = dirs[k];
         const RayHit h = model.Intersect(origin, d, 0.0);
         int32_t code = -1;
         if (h.hit) {
@@ -117,8 +166,52 @@ HemisphereCache BuildHemisphereCache(const SurfaceGrid& grid, const RayCaster& m
     }
   });
   cache.rays = static_cast<int64_t>(n) * K;
+  cache.lists = ListHits(cache, n);
   cache.seconds = Seconds(start);
   return cache;
+}
+
+HitLists ListHits(const HemisphereCache& cache, int points) {
+  const int K = cache.directions;
+  if (points < 0 || static_cast<int64_t>(cache.hit.size()) != static_cast<int64_t>(points) * K) {
+    throw Error("hemisphere cache: " + std::to_string(cache.hit.size()) + " entries for " +
+                std::to_string(points) + " points x " + std::to_string(K) + " directions");
+  }
+  // Per point: its hits sorted, then run lengths; counted first, written into place after.
+  auto sorted_hits = [&](int i, std::vector<int32_t>* h) {
+    h->clear();
+    for (int k = 0; k < K; ++k)
+      if (cache.Hit(i, k) >= 0) h->push_back(cache.Hit(i, k));
+    std::sort(h->begin(), h->end());
+  };
+  HitLists lists;
+  lists.begin.assign(static_cast<size_t>(points) + 1, 0);
+  tbb::parallel_for(tbb::blocked_range<int>(0, points, 256), [&](const tbb::blocked_range<int>& r) {
+    std::vector<int32_t> h;
+    for (int i = r.begin(); i < r.end(); ++i) {
+      sorted_hits(i, &h);
+      lists.begin[i + 1] = static_cast<int32_t>(std::unique(h.begin(), h.end()) - h.begin());
+    }
+  });
+  for (int i = 0; i < points; ++i) lists.begin[i + 1] += lists.begin[i];
+  lists.point.resize(lists.begin[points]);
+  lists.count.resize(lists.begin[points]);
+  tbb::parallel_for(tbb::blocked_range<int>(0, points, 256), [&](const tbb::blocked_range<int>& r) {
+    std::vector<int32_t> h;
+    for (int i = r.begin(); i < r.end(); ++i) {
+      sorted_hits(i, &h);
+      int32_t m = lists.begin[i];
+      for (size_t a = 0; a < h.size();) {
+        size_t b = a;
+        while (b < h.size() && h[b] == h[a]) ++b;
+        lists.point[m] = h[a];
+        lists.count[m] = static_cast<int32_t>(b - a);
+        ++m;
+        a = b;
+      }
+    }
+  });
+  return lists;
 }
 
 namespace {
@@ -179,11 +272,17 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
   }
   for (const Lighting& l : lightings) CheckLighting(l);
   const bool vector_flux = options.method == IrradianceMethod::kVectorFlux;
+  if (vector_flux && options.mesh == nullptr)
+    throw Error(
+        "irradiance: the vector-flux method needs the model mesh (IrradianceOptions::mesh)");
   if (vector_flux && static_cast<int>(options.mesh->triangles.size()) != model.num_triangles()) {
     throw Error("irradiance: the mesh has " + std::to_string(options.mesh->triangles.size()) +
                 " triangles but the ray-casting model " + std::to_string(model.num_triangles()) +
                 " (not the same model)");
   }
+  if (options.exact_points && static_cast<int>(options.exact_points->size()) != n)
+    throw Error("irradiance: exact_points has " + std::to_string(options.exact_points->size()) +
+                " entries for " + std::to_string(n) + " grid points");
   const double ground_z = GroundLevel(model);
 
   const int nl = static_cast<int>(lightings.size());
@@ -268,7 +367,7 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
     PointFluxCache sky_cache;
     // Monte Carlo: the point's escaping directions, and their environment regions, found once
     // for every lighting (the same values, in the same order, as found per lighting).
-    std::vector<Eigen::Vector3d> escaped;
+    std::vector<Eigen::Vector3d> escaped, dirs;
     std::vector<int> regions;
     const EnvironmentMap* regions_of = nullptr;
     for (int i = range.begin(); i < range.end(); ++i) {
@@ -285,7 +384,7 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
           out[li].sun[i] = ls.sun_e * (cosi * v);
         }
       }
-      if (vector_flux) {
+      if (vector_flux && (!options.exact_points || (*options.exact_points)[i])) {
         // App. A: vector flux of the visible sky patches / environment regions. The faces in
         // front of the point (an id buffer cast with Embree, or all of them) are projected
         // once, each layout's regions and the sky tree clipped once, for every lighting.
@@ -320,8 +419,9 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
         continue;
       }
       escaped.clear();
+      cache.Directions(p, i, &dirs);
       for (int k = 0; k < K; ++k)
-        if (cache.Hit(i, k) == -1) escaped.push_back(cache.Direction(p, i, k));
+        if (cache.Hit(i, k) == -1) escaped.push_back(dirs[k]);
       regions_of = nullptr;
       for (int li = 0; li < nl; ++li) {
         const LightingSetup& ls = setup[li];
@@ -382,6 +482,9 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
     throw Error("interreflection: the sun direction must be finite and non-zero");
   const Eigen::Vector3d s = sun_dir.normalized();
   const int K = cache.directions;
+  HitLists made;
+  if (cache.lists.begin.size() != static_cast<size_t>(n) + 1) made = ListHits(cache, n);
+  const HitLists& lists = made.begin.empty() ? cache.lists : made;
   std::vector<Eigen::Vector3d> se_prev = irr->direct_se;
   std::vector<Eigen::Vector3d> from_sun(n), from_se(n);
   std::vector<Eigen::Vector3d> se(n);
@@ -393,19 +496,23 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
     tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& range) {
       for (int i = range.begin(); i < range.end(); ++i) {
         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-        for (int k = 0; k < K; ++k) {
-          const int j = cache.Hit(i, k);
-          if (j < 0) continue;
+        for (int m = lists.begin[i]; m < lists.begin[i + 1]; ++m) {
+          const int j = lists.point[m];
+          const double c = lists.count[m];  // directions of point i that hit point j
           const GridPoint& q = grid.points[j];
           const double r = BlockRetro(retro, q.block);
+          if (r == 0) {
+            sum += c * (from_sun[j] + from_se[j]);
+            continue;
+          }
           const Eigen::Vector3d to_i = grid.points[i].position - q.position;
           const double d = to_i.norm();
-          if (r == 0 || !(d > 0)) {
-            sum += from_sun[j] + from_se[j];
+          if (!(d > 0)) {
+            sum += c * (from_sun[j] + from_se[j]);
           } else {
             const Eigen::Vector3d v = to_i / d;
-            sum += from_sun[j] * RetroFactor(r, q.normal, s, v) +
-                   from_se[j] * AmbientRetroFactor(r, q.normal, v);
+            sum += c * (from_sun[j] * RetroFactor(r, q.normal, s, v) +
+                        from_se[j] * AmbientRetroFactor(r, q.normal, v));
           }
         }
         // (B_j / pi) (pi / K)

@@ -43,6 +43,14 @@ struct HemisphereOptions {
   void Validate() const;
 };
 
+// Which grid points each point's gathering directions hit, and through how many of them: the
+// interreflection sums over these (AddInterreflection) instead of every direction.
+struct HitLists {
+  std::vector<int32_t> begin;  // per point, into `point` and `count`; size points + 1
+  std::vector<int32_t> point;  // increasing per point
+  std::vector<int32_t> count;
+};
+
 // Geometry-only gathering pattern, built once per model and reused for every time. For grid
 // point i and direction k: dir(i, k) is a stratified cosine-distributed direction about the
 // point's normal; hit(i, k) is -1 when the ray escapes the model, -2 when it hits the back of
@@ -54,15 +62,20 @@ struct HemisphereCache {
   uint64_t seed = 1;
   std::vector<int32_t> hit;             // size points * K
   std::vector<float> escaped_fraction;  // per point: cosine-weighted sky view factor
+  HitLists lists;  // of `hit` (BuildHemisphereCache; empty in a cache made otherwise)
   double seconds = 0;
   int64_t rays = 0;
 
   Eigen::Vector3d Direction(const GridPoint& p, int point_index, int k) const;
+  // All K of them (the same values), the point's shift and each stratum's trigonometry shared.
+  void Directions(const GridPoint& p, int point_index, std::vector<Eigen::Vector3d>* out) const;
   int Hit(int point, int k) const { return hit[static_cast<size_t>(point) * directions + k]; }
 };
 
 HemisphereCache BuildHemisphereCache(const SurfaceGrid& grid, const RayCaster& model,
                                      const HemisphereOptions& options = {});
+// The hit lists of `cache.hit` for `points` grid points.
+HitLists ListHits(const HemisphereCache& cache, int points);
 
 // Irradiance per grid point, RGB, in the lighting's relative radiance units x sr.
 struct SlotIrradiance {
@@ -84,9 +97,14 @@ struct IrradianceOptions {
   // interreflection (AddInterreflection, through the hemisphere cache) are the same for both.
   IrradianceMethod method = IrradianceMethod::kMonteCarlo;
   VectorFluxOptions vector_flux;
-  // The model mesh the RayCaster was built from (not owned); required by kVectorFlux, which
-  // projects its faces onto each point's sphere of directions.
+  // The model mesh the RayCaster was built from (not owned); kVectorFlux projects its faces onto
+  // each point's sphere of directions, and ComputeIrradiance refuses that method without it.
   const Mesh* mesh = nullptr;
+  // kVectorFlux: the points (nonzero; one per grid point, not owned) whose direct term is
+  // exact; the others take the hemisphere cache's Monte Carlo estimate (points only the
+  // interreflection uses, as the light they send: its 2.9% noise per point averages out over
+  // the many points each receiver sees). nullptr: every point exact.
+  const std::vector<uint8_t>* exact_points = nullptr;
   int sun_samples = 1;  // shadow rays per point over the sun disc (1: centre only)
   // Beyond the paper: the environment below the horizon is taken as flat ground at the model's
   // lowest level (GroundLevel), sunlit as the map holds it (EnvOptions::lit_ground); where an

@@ -44,6 +44,11 @@ TEST(HemisphereTest, DirectionsAreStratifiedCosineDistributed) {
   EXPECT_NEAR(m1 / 256, 2.0 / 3.0, 1.0 / 32);
   // Different points get different patterns.
   EXPECT_GT((c.Direction(p, 0, 5) - c.Direction(p, 1, 5)).norm(), 1e-6);
+  // All of a point's directions at once are the same, to the bit.
+  std::vector<Eigen::Vector3d> all;
+  c.Directions(p, 3, &all);
+  ASSERT_EQ(all.size(), 256u);
+  for (int k = 0; k < 256; ++k) EXPECT_EQ(all[k], c.Direction(p, 3, k)) << k;
 }
 
 TEST(IrradianceTest, HorizontalPlaneUnderUniformSkyIsPiL) {

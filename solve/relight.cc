@@ -119,7 +119,8 @@ bool CarryResidual(const std::vector<std::vector<Eigen::Vector3d>>& residual,
 
 }  // namespace
 
-LightingPredictor::LightingPredictor(std::vector<Lighting> measured, const RelightOptions& options)
+LightingPredictor::LightingPredictor(std::vector<Lighting> measured, const RelightOptions& options,
+                                     const EnvStereoResult* fitted)
     : measured_(std::move(measured)), options_(options) {
   options_.Validate();
   if (measured_.empty()) throw Error("relight: no measured time of day to predict from");
@@ -141,7 +142,18 @@ LightingPredictor::LightingPredictor(std::vector<Lighting> measured, const Relig
       extinction_.reset();  // e.g. every time at the same air mass: interpolate instead
     }
   }
-  env_ = SolveEnvStereo(EnvObservationsOf(measured_), options_.env);
+  if (fitted) {
+    const EnvironmentMap& m = measured_.front().env;
+    if (!(fitted->options == options_.env) ||
+        fitted->summary.times != static_cast<int>(measured_.size()) ||
+        fitted->bands_below != m.bands_below || fitted->bands_above != m.bands_above ||
+        fitted->sectors != m.sectors || fitted->layer_z != m.layer_z)
+      throw Error(
+          "relight: the environment fit given was made from other times, options or regions");
+    env_ = *fitted;
+  } else {
+    env_ = SolveEnvStereo(EnvObservationsOf(measured_), options_.env);
+  }
   if (options_.sky_residual) {
     for (const Lighting& l : measured_) {
       EnvOptions grid;

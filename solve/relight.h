@@ -90,8 +90,12 @@ class LightingPredictor {
   // `measured` holds the lighting solved at each captured time (sun, fitted sky, environment
   // map). Fits the sun's extinction when the sun was seen through at least two distinct air
   // masses and the environment's photometric stereo (§5.2). Throws rouen::Error for no
-  // measured time or inconsistent environment maps.
-  LightingPredictor(std::vector<Lighting> measured, const RelightOptions& options);
+  // measured time or inconsistent environment maps. `fitted` (optional): the environment's
+  // stereo already fitted from these maps with options.env (a scene keeps its solve's,
+  // SceneModel::env_stereo); it is taken instead of fitting again, and refused (rouen::Error)
+  // when its options, times or region layout differ.
+  LightingPredictor(std::vector<Lighting> measured, const RelightOptions& options,
+                    const EnvStereoResult* fitted = nullptr);
 
   // Lighting at `utc` seen from `site`. Throws rouen::Error when the sun is below the horizon
   // (the models are fitted to daylight) or the options are bad.

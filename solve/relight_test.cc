@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <functional>
+#include <nlohmann/json.hpp>
 #include <vector>
 
 #include "core/angles.h"
@@ -99,6 +100,27 @@ TEST(RelightTest, AMeasuredTimeGivesBackItsSky) {
     EXPECT_NEAR(l.sky.channel[c].Lz / day[1].sky.channel[c].Lz, 1, 1e-6);
     EXPECT_NEAR(l.sky.channel[c].c, day[1].sky.channel[c].c, 1e-6 * day[1].sky.channel[c].c);
   }
+}
+
+// A scene's stored environment fit (SceneModel::env_stereo) predicts exactly as a fresh fit of
+// the same times; one made from other times or options is refused.
+TEST(RelightTest, AStoredEnvironmentFitPredictsAsAFreshOne) {
+  const std::vector<Lighting> day = Day({0.1, 0.14, 0.2}, {1e4, 1e4, 1e4});
+  const LightingPredictor fresh(day, RelightOptions{});
+  const EnvStereoResult stored =
+      nlohmann::json::parse(nlohmann::json(fresh.environment()).dump()).get<EnvStereoResult>();
+  const LightingPredictor again(day, RelightOptions{}, &stored);
+  for (const char* t : {"09:00", "12:00", "17:30"}) {
+    const UtcTime utc = ParseIso8601(std::string("2026-08-25T") + t + ":00-07:00");
+    const Lighting a = fresh.At(utc, kSite), b = again.At(utc, kSite);
+    EXPECT_EQ(b.env.radiance, a.env.radiance) << t;
+    EXPECT_EQ(b.sun_radiance, a.sun_radiance) << t;
+  }
+  RelightOptions rough;
+  rough.env.ground_retro = 1;
+  EXPECT_THROW(LightingPredictor(day, rough, &stored), Error);
+  const std::vector<Lighting> fewer(day.begin(), day.begin() + 3);
+  EXPECT_THROW(LightingPredictor(fewer, RelightOptions{}, &stored), Error);
 }
 
 TEST(RelightTest, BlockedSunlightBlendsTowardsOvercast) {

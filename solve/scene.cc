@@ -278,6 +278,8 @@ void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const
   j["views"] = views;
   j["holdout_slots"] = scene.holdout_slots;
   j["environment"] = {{"ground_retro", scene.env_ground_retro}};
+  if (scene.env_stereo)
+    j["environment"]["stereo"] = {{"slots", scene.env_stereo_slots}, {"fit", *scene.env_stereo}};
   j["timings"] = scene.timings;
   j["provenance"] = {{"inputs_sha256", scene.inputs_sha256},
                      {"rouen_version", scene.rouen_version},
@@ -376,6 +378,19 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
       if (!(scene.env_ground_retro >= kRetroMin && scene.env_ground_retro <= kRetroMax))
         throw Error("environment.ground_retro must be in [" + std::to_string(kRetroMin) + ", " +
                     std::to_string(kRetroMax) + "]");
+      if (j.at("environment").contains("stereo")) {
+        const nlohmann::json& st = j.at("environment").at("stereo");
+        scene.env_stereo_slots = st.at("slots").get<std::vector<int>>();
+        for (int s : scene.env_stereo_slots)
+          if (s < 0 || s >= static_cast<int>(scene.slots.size()))
+            throw Error("environment.stereo.slots: slot " + std::to_string(s) +
+                        " is not in the scene");
+        scene.env_stereo = st.at("fit").get<EnvStereoResult>();
+        if (scene.env_stereo->summary.times != static_cast<int>(scene.env_stereo_slots.size()))
+          throw Error("environment.stereo: fitted from " +
+                      std::to_string(scene.env_stereo->summary.times) + " times but names " +
+                      std::to_string(scene.env_stereo_slots.size()) + " slots");
+      }
     }
     if (j.contains("provenance")) {
       const auto& p = j.at("provenance");

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -17,6 +18,7 @@
 #include "core/solar.h"
 #include "core/time.h"
 #include "solve/albedo.h"
+#include "solve/env_stereo.h"
 #include "solve/environment.h"
 #include "solve/grid.h"
 #include "solve/ground_apron.h"
@@ -62,6 +64,11 @@ struct SceneModel {
   // The environment's ground reflects the sun with RetroFactor(this) when predicted for a novel
   // time (solve/env_stereo.h EnvStereoOptions::ground_retro; 0: Lambert).
   double env_ground_retro = 0;
+  // The environment's photometric stereo (§5.2) as the solve fitted it from `env_stereo_slots`
+  // (the slots the albedos used): a prediction from those slots reads it instead of fitting
+  // again. Absent when the solve did not fit it (scenes from before, fit_ground_retro off).
+  std::optional<EnvStereoResult> env_stereo;
+  std::vector<int> env_stereo_slots;
   std::string model_file;  // OBJ, relative to the scene folder
   std::map<std::string, SceneView> views;
   std::vector<int> holdout_slots;  // slots whose architecture photos the albedos did not use

@@ -68,6 +68,14 @@ SceneModel MakeScene(const Mesh& mesh, SurfaceGrid* grid_out) {
   s.albedo.sky_lobes[1].n = 12;
   s.albedo.summary.points = grid.size();
   s.albedo.summary.residual_rms_rel = 0.0123;
+  // An environment fit from slot 0 alone (underdetermined: every landscape region sky-only).
+  EnvObservation seen;
+  seen.env = slot.env;
+  seen.lighting.sun_dir = slot.sun_dir;
+  seen.lighting.sun_radiance = slot.sun_radiance;
+  seen.lighting.sky = slot.sky;
+  s.env_stereo = SolveEnvStereo({seen});
+  s.env_stereo_slots = {0};
   if (grid_out) *grid_out = grid;
   return s;
 }
@@ -137,6 +145,37 @@ TEST(SceneTest, RoundTrip) {
   EXPECT_EQ(r.options, s.options);
   EXPECT_EQ(r.hemisphere.directions, 64);
   EXPECT_EQ(r.hemisphere.seed, 7u);
+  ASSERT_TRUE(r.env_stereo.has_value());
+  EXPECT_EQ(r.env_stereo_slots, std::vector<int>{0});
+  ASSERT_EQ(r.env_stereo->regions.size(), s.env_stereo->regions.size());
+  EXPECT_EQ(r.env_stereo->regions[5].rho_sky, s.env_stereo->regions[5].rho_sky);
+  EXPECT_TRUE(r.env_stereo->options == s.env_stereo->options);
+  std::filesystem::remove_all(dir);
+}
+
+// A stored environment fit naming a slot the scene lacks, or fitted from another number of
+// times than it names, is refused; a scene without one (from before) reads without.
+TEST(SceneTest, StoredEnvironmentFitMustMatchItsSlots) {
+  const auto dir = TempDir("stereo");
+  const Mesh mesh = MakeMesh();
+  WriteScene(dir, MakeScene(mesh, nullptr), &mesh);
+  const std::string text = ReadFileToString(dir / "scene.json");
+  for (const auto& [slots, expect] : std::vector<std::pair<std::string, std::string>>{
+           {"[5]", "slot 5 is not in the scene"}, {"[0, 1]", "fitted from 1 times but names 2"}}) {
+    nlohmann::json j = nlohmann::json::parse(text);
+    j["environment"]["stereo"]["slots"] = nlohmann::json::parse(slots);
+    WriteFileAtomic(dir / "scene.json", j.dump());
+    try {
+      ReadScene(dir);
+      ADD_FAILURE() << slots << " was accepted";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(expect), std::string::npos) << e.what();
+    }
+  }
+  nlohmann::json j = nlohmann::json::parse(text);
+  j["environment"].erase("stereo");
+  WriteFileAtomic(dir / "scene.json", j.dump());
+  EXPECT_FALSE(ReadScene(dir).env_stereo.has_value());
   std::filesystem::remove_all(dir);
 }
 

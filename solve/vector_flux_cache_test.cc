@@ -271,6 +271,46 @@ TEST(VectorFluxCacheTest, ComputeIrradianceWithIdBufferAgreesWithAllFaces) {
   }
 }
 
+// exact_points: the listed points get the vector flux's value and the others Monte Carlo's, each
+// to the bit as that method alone gives it; a mask of the wrong size is refused.
+TEST(VectorFluxCacheTest, ExactPointsMixTheTwoMethodsPointByPoint) {
+  const Mesh m = Street();
+  const RayCaster rc(m);
+  GridOptions go;
+  go.spacing_m = 3.0;
+  const SurfaceGrid grid = BuildSurfaceGrid(m, go);
+  HemisphereOptions ho;
+  ho.directions = 16;
+  const HemisphereCache cache = BuildHemisphereCache(grid, rc, ho);
+  Lighting l;
+  l.sky = testing::ClearSky(Eigen::Vector3d(0.4, -0.5, 0.5));
+  l.sun_dir = l.sky.sun_dir;
+  l.sun_radiance = Eigen::Vector3d(1e4, 1e4, 1e4);
+  l.env = EnvironmentMap::FromSky(EnvOptions(), l.sky, Eigen::Vector3d(0.3, 0.3, 0.3));
+  IrradianceOptions vf;
+  vf.method = IrradianceMethod::kVectorFlux;
+  vf.mesh = &m;
+  IrradianceOptions mc = vf;
+  mc.method = IrradianceMethod::kMonteCarlo;
+  std::vector<uint8_t> every_third(grid.size(), 0);
+  for (int i = 0; i < grid.size(); i += 3) every_third[i] = 1;
+  IrradianceOptions mixed = vf;
+  mixed.exact_points = &every_third;
+  const SlotIrradiance a = ComputeIrradiance(grid, cache, rc, l, vf);
+  const SlotIrradiance b = ComputeIrradiance(grid, cache, rc, l, mc);
+  const SlotIrradiance c = ComputeIrradiance(grid, cache, rc, l, mixed);
+  int differ = 0;
+  for (int i = 0; i < grid.size(); ++i) {
+    EXPECT_EQ(c.direct_se[i], every_third[i] ? a.direct_se[i] : b.direct_se[i]) << i;
+    EXPECT_EQ(c.sun[i], a.sun[i]) << i;
+    differ += a.direct_se[i] != b.direct_se[i];
+  }
+  EXPECT_GT(differ, grid.size() / 2);  // the two methods do differ: the test can fail
+  std::vector<uint8_t> short_mask(grid.size() - 1, 1);
+  mixed.exact_points = &short_mask;
+  EXPECT_THROW(ComputeIrradiance(grid, cache, rc, l, mixed), Error);
+}
+
 TEST(VectorFluxCacheTest, OccluderSelectionRejectsBadInput) {
   const Mesh m = Street();
   const RayCaster rc(m);

@@ -50,6 +50,12 @@ SimSensor::SimSensor(const SensorParams& params) : p_(params) {
       dn_threshold_[c].push_back(lo > one ? std::numeric_limits<float>::infinity()
                                           : std::bit_cast<float>(lo));
     }
+    const std::vector<float>& t = dn_threshold_[c];
+    for (uint32_t bin = 0; bin <= (one >> 16); ++bin) {
+      const float least = std::bit_cast<float>(bin << 16);
+      dn_of_bin_[c].push_back(
+          static_cast<uint8_t>(std::upper_bound(t.begin(), t.end(), least) - t.begin()));
+    }
   }
 }
 
@@ -145,16 +151,18 @@ Image SimSensor::Capture(const Image& radiance, double exposure_s, double gain, 
   Image out = CaptureLinear(radiance, exposure_s, gain, nd_density, seed);
   out.units = PixelUnits::kDigital;
   // The response and quantisation, pixel by pixel (rows in parallel, as the noise above):
-  // Quantised(c, x), found among the thresholds.
+  // Quantised(c, x), the number of thresholds x reaches, counted on from its bin's.
   const size_t row = static_cast<size_t>(out.width) * 3;
-  tbb::parallel_for(
-      tbb::blocked_range<int>(0, out.height, 8), [&](const tbb::blocked_range<int>& r) {
-        for (size_t i = r.begin() * row; i < r.end() * row; ++i) {
-          const std::vector<float>& t = dn_threshold_[i % 3];
-          out.data[i] =
-              static_cast<float>(std::upper_bound(t.begin(), t.end(), out.data[i]) - t.begin());
-        }
-      });
+  tbb::parallel_for(tbb::blocked_range<int>(0, out.height, 8),
+                    [&](const tbb::blocked_range<int>& r) {
+                      for (size_t i = r.begin() * row; i < r.end() * row; ++i) {
+                        const float x = out.data[i];  // in [0, 1] (CaptureLinear clamps)
+                        const std::vector<float>& t = dn_threshold_[i % 3];
+                        int dn = x > 0 ? dn_of_bin_[i % 3][std::bit_cast<uint32_t>(x) >> 16] : 0;
+                        while (dn < 255 && t[dn] <= x) ++dn;
+                        out.data[i] = static_cast<float>(dn);
+                      }
+                    });
   return out;
 }
 

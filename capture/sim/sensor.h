@@ -66,6 +66,10 @@ class SimSensor {
   // to an integer) is at least k, k = 1..255; the curve rises, so a signal's digital value is
   // the number of these it reaches.
   std::array<std::vector<float>, 3> dn_threshold_;
+  // Per channel, per bin of signals in [0, 1] sharing the top 16 bits of their float pattern
+  // (bins 0.8% wide, log-spaced): the digital value of the bin's least signal. A signal's value
+  // is its bin's plus the few thresholds it passes within the bin.
+  std::array<std::vector<uint8_t>, 3> dn_of_bin_;
   double Quantised(int c, float x) const;  // the curve rounded to 0..255
 };
 
