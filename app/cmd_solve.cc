@@ -96,6 +96,9 @@ void RegisterSolve(CLI::App& app) {
       "'ground', not scored by rouen validate): its albedo from the photos, lit with the\n"
       "building's shadow, so a wall sees the ground in front of it rather than the ground the\n"
       "panoramas saw in its direction. Off by default.\n"
+      "The sky and environment's light reaches each photographed grid point exactly (App. A's\n"
+      "vector flux of the visible regions); [albedo.irradiance] method = \"monte_carlo\" takes\n"
+      "the faster, noisier estimate over the hemisphere cache's directions instead.\n"
       "A key rouen does not know is an error, not a silent default.\n"
       "Example: rouen solve s --out s.scene --holdout-slot 2");
   c->add_option("session", a->session, "Session folder (from rouen capture or rouen import)");
