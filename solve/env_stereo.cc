@@ -44,19 +44,18 @@ inline double SoftCos(double x, double alpha, double* deriv) {
   return (e - 1) / alpha;
 }
 
-// The sky of one time as a quadrature over the upper hemisphere: direction and L x dOmega.
+// The sky of one time as a quadrature over the upper hemisphere: the directions (dx, dy, dz)
+// and L x dOmega per channel (w0, w1, w2), by component for SkyIrradiance's whole-array sums.
 struct SkyQuad {
-  std::vector<Eigen::Vector3d> dir;
-  std::vector<Eigen::Vector3d> weight;
+  Eigen::ArrayXd dx, dy, dz, w0, w1, w2;
   Eigen::Vector3d horizontal = Eigen::Vector3d::Zero();  // E on an unoccluded level plane
   Eigen::Vector3d ground = Eigen::Vector3d::Zero();      // ground radiance (kPlane, albedo > 0)
-  // The same directions and weights by component, for SkyIrradiance's whole-array sums.
-  Eigen::ArrayXd dx, dy, dz, w0, w1, w2;
 };
 
 SkyQuad MakeSkyQuad(const EnvLighting& l, const EnvStereoOptions& o) {
   SkyQuad q;
   const int ne = o.sky_quadrature, na = 2 * o.sky_quadrature;
+  for (Eigen::ArrayXd* a : {&q.dx, &q.dy, &q.dz, &q.w0, &q.w1, &q.w2}) a->resize(ne * na);
   const double del = kPi / 2 / ne, daz = 2 * kPi / na;
   for (int i = 0; i < ne; ++i) {
     const double el = (i + 0.5) * del;
@@ -67,20 +66,15 @@ SkyQuad MakeSkyQuad(const EnvLighting& l, const EnvStereoOptions& o) {
       const Eigen::Vector3d d(std::cos(el) * std::sin(az), std::cos(el) * std::cos(az),
                               std::sin(el));
       const Eigen::Vector3d w = l.sky.Radiance(d) * domega;
-      q.dir.push_back(d);
-      q.weight.push_back(w);
+      const int k = i * na + j;
+      q.dx[k] = d.x();
+      q.dy[k] = d.y();
+      q.dz[k] = d.z();
+      q.w0[k] = w[0];
+      q.w1[k] = w[1];
+      q.w2[k] = w[2];
       q.horizontal += w * d.z();
     }
-  }
-  const Eigen::Index k = static_cast<Eigen::Index>(q.dir.size());
-  for (Eigen::ArrayXd* a : {&q.dx, &q.dy, &q.dz, &q.w0, &q.w1, &q.w2}) a->resize(k);
-  for (Eigen::Index i = 0; i < k; ++i) {
-    q.dx[i] = q.dir[i].x();
-    q.dy[i] = q.dir[i].y();
-    q.dz[i] = q.dir[i].z();
-    q.w0[i] = q.weight[i][0];
-    q.w1[i] = q.weight[i][1];
-    q.w2[i] = q.weight[i][2];
   }
   if (o.sky_irradiance == EnvSkyIrradiance::kPlane && o.ground_albedo > 0) {
     const Eigen::Vector3d sun_h =
