@@ -1,9 +1,12 @@
 #include "render/html_report.h"
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <string>
 
 #include "core/error.h"
@@ -12,6 +15,10 @@
 namespace rouen {
 
 namespace {
+
+// Where Picture leaves an image's data URI to Finish: this, its index, then '\x1F' (no text the
+// page escapes holds that control character).
+constexpr const char* kPictureMarker = "\x1Fpicture:";
 
 constexpr const char* kStyle = R"(
 body { font-family: sans-serif; margin: 0 auto; max-width: 1240px; padding: 0 20px 40px;
@@ -136,15 +143,16 @@ void HtmlReport::Picture(const Image& image, const std::string& caption, int dis
                          bool pixelated) {
   if (image.channels != 1 && image.channels != 3)
     throw Error("HTML report: an image of " + std::to_string(image.channels) + " channels");
-  const std::string png = EncodeImage("image.png", image, StoredType::kUint8);
   const int w = display_width > 0 ? display_width : image.width;
   const int h = static_cast<int>(std::lround(static_cast<double>(image.height) * w / image.width));
   std::string& b = Body();
-  b += "<figure><img src=\"data:image/png;base64," + Base64(png) + "\" width=\"" +
-       std::to_string(w) + "\" height=\"" + std::to_string(h) + "\" alt=\"" + EscapeXml(caption) +
-       "\"" + (pixelated ? " class=\"pixelated\"" : "") + ">";
+  // The PNG comes in Finish, in place of the marker.
+  b += "<figure><img src=\"" + std::string(kPictureMarker) + std::to_string(pictures_.size()) +
+       "\x1F\" width=\"" + std::to_string(w) + "\" height=\"" + std::to_string(h) + "\" alt=\"" +
+       EscapeXml(caption) + "\"" + (pixelated ? " class=\"pixelated\"" : "") + ">";
   if (!caption.empty()) b += "<figcaption>" + EscapeXml(caption) + "</figcaption>";
   b += "</figure>\n";
+  pictures_.push_back(image);
   ++images_;
 }
 
@@ -160,6 +168,23 @@ void HtmlReport::EndRow() {
 }
 
 std::string HtmlReport::Finish() const {
+  std::vector<std::string> data(pictures_.size());
+  tbb::parallel_for(size_t{0}, pictures_.size(), [&](size_t k) {
+    data[k] = "data:image/png;base64," +
+              Base64(EncodeImage("image.png", pictures_[k], StoredType::kUint8));
+  });
+  // A section's body with each picture's marker replaced by its PNG.
+  const auto with_pictures = [&](const std::string& body) {
+    std::string out;
+    size_t from = 0;
+    for (size_t at; (at = body.find(kPictureMarker, from)) != std::string::npos;) {
+      const size_t num = at + std::strlen(kPictureMarker), end = body.find('\x1F', num);
+      out.append(body, from, at - from);
+      out += data.at(std::stoul(body.substr(num, end - num)));
+      from = end + 1;
+    }
+    return out.append(body, from, std::string::npos);
+  };
   std::string h =
       "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
       "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n<title>" +
@@ -170,7 +195,8 @@ std::string HtmlReport::Finish() const {
     h += "<li><a href=\"#" + s.id + "\">" + EscapeXml(s.title) + "</a></li>\n";
   h += "</ul></nav>\n";
   for (const Section& s : sections_) {
-    h += "<section id=\"" + s.id + "\">\n<h2>" + EscapeXml(s.title) + "</h2>\n" + s.body;
+    h += "<section id=\"" + s.id + "\">\n<h2>" + EscapeXml(s.title) + "</h2>\n" +
+         with_pictures(s.body);
     for (int i = 0; i < s.open_rows; ++i) h += "</div>\n";
     h += "</section>\n";
   }

@@ -53,6 +53,8 @@ class HtmlReport {
   std::string& Body();
   std::string title_, subtitle_;
   std::vector<Section> sections_;
+  // Picture's images, encoded by Finish all at once (in parallel) where their markers stand.
+  std::vector<Image> pictures_;
   int images_ = 0, plots_ = 0;
 };
 

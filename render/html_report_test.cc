@@ -139,5 +139,32 @@ TEST(HtmlReportTest, PicturesAreInlinedPngsOfTheirSize) {
   EXPECT_NE(html.find("<figcaption>an empty plot</figcaption>"), std::string::npos);
 }
 
+// Pictures are encoded when the page is finished, each where it was placed; text cannot pose
+// as one (the control character that marks them is dropped from text).
+TEST(HtmlReportTest, ManyPicturesEachInItsPlace) {
+  HtmlReport r("t", "s");
+  r.BeginSection("one", "One");
+  r.Picture(Image(3, 2, 3, PixelUnits::kDigital, 10.f), "first");
+  r.Paragraph("not a \x1Fpicture:0\x1F picture");
+  r.Picture(Image(5, 4, 1, PixelUnits::kDigital, 20.f), "second");
+  r.BeginSection("two", "Two");
+  r.Picture(Image(9, 6, 3, PixelUnits::kDigital, 30.f), "third");
+  const std::string html = r.Finish();
+  EXPECT_NE(html.find("<p>not a picture:0 picture</p>"), std::string::npos);
+  const std::regex img("<img src=\"data:image/png;base64,([A-Za-z0-9+/=]+)\" width=\"(\\d+)\"");
+  std::vector<std::pair<int, int>> sizes;
+  for (auto it = std::sregex_iterator(html.begin(), html.end(), img); it != std::sregex_iterator();
+       ++it) {
+    const auto file = std::filesystem::temp_directory_path() /
+                      ("rouen_html_report_many_" + std::to_string(::getpid()) + ".png");
+    WriteFileAtomic(file, DecodeBase64((*it)[1].str()));
+    const Image back = ReadImage(file.string());
+    std::filesystem::remove(file);
+    EXPECT_EQ(std::to_string(back.width), (*it)[2].str());
+    sizes.push_back({back.width, back.height});
+  }
+  EXPECT_EQ(sizes, (std::vector<std::pair<int, int>>{{3, 2}, {5, 4}, {9, 6}}));
+}
+
 }  // namespace
 }  // namespace rouen

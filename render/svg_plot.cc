@@ -107,6 +107,8 @@ std::string EscapeXml(std::string_view text) {
         out += "&#39;";
         break;
       default:
+        // Control characters other than tab and line ends are not allowed in XML: dropped.
+        if (static_cast<unsigned char>(c) < 0x20 && c != '\t' && c != '\n' && c != '\r') break;
         out += c;
     }
   }

@@ -13,7 +13,8 @@
 
 namespace rouen {
 
-// `text` with & < > " ' replaced by entities: safe in HTML and SVG text and attribute values.
+// `text` with & < > " ' replaced by entities and the control characters XML forbids (all below
+// 0x20 but tab, LF and CR) dropped: safe in HTML and SVG text and attribute values.
 std::string EscapeXml(std::string_view text);
 
 // An axis's range and its ticks at round values (1, 2 or 5 x 10^k apart; decades on a log axis).
