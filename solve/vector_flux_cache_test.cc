@@ -233,21 +233,40 @@ TEST(VectorFluxCacheTest, OccluderSelectionAgreesWithAllFaces) {
   for (int t : hidden) EXPECT_TRUE(t < 20 || t >= 30) << t;
 }
 
+// The street on a 3 m grid with a 16-direction hemisphere cache.
+struct StreetGrid {
+  Mesh m = Street();
+  RayCaster rc{m};
+  SurfaceGrid grid;
+  HemisphereCache cache;
+  StreetGrid() {
+    GridOptions go;
+    go.spacing_m = 3.0;
+    grid = BuildSurfaceGrid(m, go);
+    HemisphereOptions ho;
+    ho.directions = 16;
+    cache = BuildHemisphereCache(grid, rc, ho);
+  }
+};
+
+// A clear sky with its sun, the environment its region means over a grey ground.
+Lighting StreetLighting() {
+  Lighting l;
+  l.sky = testing::ClearSky(Eigen::Vector3d(0.4, -0.5, 0.5));
+  l.sun_dir = l.sky.sun_dir;
+  l.sun_radiance = Eigen::Vector3d(1e4, 1e4, 1e4);
+  l.env = EnvironmentMap::FromSky(EnvOptions(), l.sky, Eigen::Vector3d(0.3, 0.3, 0.3));
+  return l;
+}
+
 TEST(VectorFluxCacheTest, ComputeIrradianceWithIdBufferAgreesWithAllFaces) {
-  const Mesh m = Street();
-  const RayCaster rc(m);
-  GridOptions go;
-  go.spacing_m = 3.0;
-  const SurfaceGrid grid = BuildSurfaceGrid(m, go);
-  HemisphereOptions ho;
-  ho.directions = 16;
-  const HemisphereCache cache = BuildHemisphereCache(grid, rc, ho);
+  const StreetGrid s;
+  const Mesh& m = s.m;
+  const RayCaster& rc = s.rc;
+  const SurfaceGrid& grid = s.grid;
+  const HemisphereCache& cache = s.cache;
   for (bool use_env : {false, true}) {
-    Lighting l;
-    l.sky = testing::ClearSky(Eigen::Vector3d(0.4, -0.5, 0.5));
-    l.sun_dir = l.sky.sun_dir;
-    l.sun_radiance = Eigen::Vector3d(1e4, 1e4, 1e4);
-    l.env = EnvironmentMap::FromSky(EnvOptions(), l.sky, Eigen::Vector3d(0.3, 0.3, 0.3));
+    Lighting l = StreetLighting();
     l.use_env = use_env;
     IrradianceOptions all;
     all.method = IrradianceMethod::kVectorFlux;
@@ -274,19 +293,12 @@ TEST(VectorFluxCacheTest, ComputeIrradianceWithIdBufferAgreesWithAllFaces) {
 // exact_points: the listed points get the vector flux's value and the others Monte Carlo's, each
 // to the bit as that method alone gives it; a mask of the wrong size is refused.
 TEST(VectorFluxCacheTest, ExactPointsMixTheTwoMethodsPointByPoint) {
-  const Mesh m = Street();
-  const RayCaster rc(m);
-  GridOptions go;
-  go.spacing_m = 3.0;
-  const SurfaceGrid grid = BuildSurfaceGrid(m, go);
-  HemisphereOptions ho;
-  ho.directions = 16;
-  const HemisphereCache cache = BuildHemisphereCache(grid, rc, ho);
-  Lighting l;
-  l.sky = testing::ClearSky(Eigen::Vector3d(0.4, -0.5, 0.5));
-  l.sun_dir = l.sky.sun_dir;
-  l.sun_radiance = Eigen::Vector3d(1e4, 1e4, 1e4);
-  l.env = EnvironmentMap::FromSky(EnvOptions(), l.sky, Eigen::Vector3d(0.3, 0.3, 0.3));
+  const StreetGrid s;
+  const Mesh& m = s.m;
+  const RayCaster& rc = s.rc;
+  const SurfaceGrid& grid = s.grid;
+  const HemisphereCache& cache = s.cache;
+  const Lighting l = StreetLighting();
   IrradianceOptions vf;
   vf.method = IrradianceMethod::kVectorFlux;
   vf.mesh = &m;
