@@ -30,7 +30,7 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   c.sky_fit.norm_p = 2;
   c.environment.sectors = 36;
   c.albedo.loss = RobustLoss::kPaper;
-  c.albedo.irradiance.method = IrradianceMethod::kVectorFlux;
+  c.albedo.irradiance.method = IrradianceMethod::kMonteCarlo;  // not the default
   c.albedo.observation.check_footprint = false;
   c.ground.radius_m = 12;
   c.ground.block = "yard";
@@ -40,7 +40,7 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   EXPECT_EQ(SolveConfigJson(back), j);
   EXPECT_EQ(back.response_max_brackets, 6);
   EXPECT_EQ(back.environment.pixel_stride, 2);
-  EXPECT_EQ(back.albedo.irradiance.method, IrradianceMethod::kVectorFlux);
+  EXPECT_EQ(back.albedo.irradiance.method, IrradianceMethod::kMonteCarlo);
 }
 
 TEST(SolveConfigTest, DefaultsAndQuick) {
@@ -139,13 +139,14 @@ TEST(SolveConfigTest, TomlFile) {
   WriteFileAtomic(d / "solve.toml",
                   "# a user's overrides\n[sky_fit]\nnorm_p = 2\nweighting = \"paper\"\n"
                   "[grid.block_spacing_m]\nground = 2\n[albedo.irradiance]\nmethod = "
-                  "\"vector_flux\"\n");
+                  "\"monte_carlo\"\n");
   const SolveConfig c = ReadSolveConfigFile((d / "solve.toml").string(), DefaultSolveConfig(false));
   EXPECT_EQ(c.sky_fit.norm_p, 2);
   EXPECT_EQ(c.sky_fit.weighting, SkyWeighting::kPaper);
   EXPECT_EQ(c.grid.SpacingFor("ground"), 2);
   EXPECT_EQ(c.grid.SpacingFor("plaza"), 0.6);
-  EXPECT_EQ(c.albedo.irradiance.method, IrradianceMethod::kVectorFlux);
+  EXPECT_EQ(c.albedo.irradiance.method, IrradianceMethod::kMonteCarlo);
+  EXPECT_EQ(DefaultSolveConfig(false).albedo.irradiance.method, IrradianceMethod::kVectorFlux);
   WriteFileAtomic(d / "bad.toml", "[sky_fit]\nnorm_p = = 2\n");
   try {
     ReadSolveConfigFile((d / "bad.toml").string(), DefaultSolveConfig(false));
