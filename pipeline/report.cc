@@ -854,10 +854,10 @@ std::optional<EnvStereoResult> FitStereo(const Inputs& in) {
     eo.ground_retro = env.value("ground_retro", 0.0);
     // The solve's own fit, when it was made from these slots with these options.
     if (env.contains("stereo")) {
-      EnvStereoResult stored = env["stereo"].at("fit").get<EnvStereoResult>();
-      if (env["stereo"].at("slots").get<std::vector<int>>() == measured_slots &&
-          stored.options == eo)
-        return stored;
+      const std::optional<EnvStereoResult> stored = env["stereo"].at("fit").get<EnvStereoResult>();
+      if (const EnvStereoResult* fit =
+              FitFor(stored, env["stereo"].at("slots").get<std::vector<int>>(), measured_slots, eo))
+        return *fit;
     }
   }
   return SolveEnvStereo(EnvObservationsOf(measured), eo);

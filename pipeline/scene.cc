@@ -261,14 +261,6 @@ void CheckRenderRequest(const LoadedScene& scene, const RenderRequest& request) 
   request.intrinsics.Validate();
 }
 
-const EnvStereoResult* StoredEnvStereo(const SolveResult& solved, const std::vector<int>& slots,
-                                       const EnvStereoOptions& options) {
-  if (!solved.env_stereo || solved.env_stereo_slots != slots ||
-      !(solved.env_stereo->options == options))
-    return nullptr;
-  return &*solved.env_stereo;
-}
-
 LightingPredictor PredictorFor(const LoadedScene& scene, const RenderRequest& request,
                                const std::function<void(const std::string&)>& log) {
   const SolveResult& solved = scene.solved;
@@ -290,7 +282,8 @@ LightingPredictor PredictorFor(const LoadedScene& scene, const RenderRequest& re
   RelightOptions relight = request.relight;
   relight.env.ground_retro = solved.env_ground_retro;  // as the solve fitted it
   // The solve's environment fit when it was made from these slots with these options.
-  const EnvStereoResult* fitted = StoredEnvStereo(solved, measured_slots, relight.env);
+  const EnvStereoResult* fitted =
+      FitFor(solved.env_stereo, solved.env_stereo_slots, measured_slots, relight.env);
   Log(log, std::string("fitting the sun's extinction, the sky interpolation") +
                (fitted ? "; the environment's normals as the solve fitted them"
                        : " and the environment's normals") +

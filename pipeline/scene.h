@@ -113,10 +113,6 @@ const SceneView& FindView(const LoadedScene& scene, const std::string& name);
 // rouen::Error saying what is wrong.
 void CheckRenderRequest(const LoadedScene& scene, const RenderRequest& request);
 
-// The solve's environment fit (SolveResult::env_stereo) when it was made from exactly `slots`
-// with `options`; else nullptr (a prediction then fits its own).
-const EnvStereoResult* StoredEnvStereo(const SolveResult& solved, const std::vector<int>& slots,
-                                       const EnvStereoOptions& options);
 // The predictor of lighting at other times from the scene's slots (less the request's
 // predict_without_slots, and the held-out slots unless use_held_out_lighting), with the
 // request's relighting options: fitted once, asked for many times (rouen timelapse). The

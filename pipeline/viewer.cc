@@ -304,7 +304,8 @@ ViewerData ComputeViewerData(const LoadedScene& scene, const ViewerOptions& opti
   clear.env.ground_retro = solved.env_ground_retro;
   RelightOptions overcast = clear;
   overcast.pbs = 1;
-  const EnvStereoResult* fitted = StoredEnvStereo(solved, measured_slots, clear.env);
+  const EnvStereoResult* fitted =
+      FitFor(solved.env_stereo, solved.env_stereo_slots, measured_slots, clear.env);
   const LightingPredictor clear_sky(measured, clear, fitted),
       overcast_sky(measured, overcast, fitted);
   const int n = static_cast<int>(out.day.times.size());

@@ -880,6 +880,13 @@ void from_json(const nlohmann::json& j, EnvStereoResult& r) {
                 " regions of its layers, bands and sectors");
 }
 
+const EnvStereoResult* FitFor(const std::optional<EnvStereoResult>& fit,
+                              const std::vector<int>& fit_slots, const std::vector<int>& slots,
+                              const EnvStereoOptions& options) {
+  if (!fit || fit_slots != slots || !(fit->options == options)) return nullptr;
+  return &*fit;
+}
+
 GroundRetroFit FitGroundRetro(const std::vector<EnvObservation>& per_time,
                               const EnvStereoOptions& options, double min_gain) {
   if (!(min_gain >= 0 && min_gain < 1)) throw Error("ground retro: min_gain must be in [0, 1)");

@@ -17,6 +17,7 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <nlohmann/json_fwd.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -161,6 +162,12 @@ struct EnvStereoResult {
 // validates and names the bad field.
 void to_json(nlohmann::json& j, const EnvStereoResult& r);
 void from_json(const nlohmann::json& j, EnvStereoResult& r);
+
+// `fit` (made from the slots `fit_slots`, e.g. a scene's SceneModel::env_stereo) when it was made
+// from exactly `slots` with `options`; else nullptr, and a prediction fits its own.
+const EnvStereoResult* FitFor(const std::optional<EnvStereoResult>& fit,
+                              const std::vector<int>& fit_slots, const std::vector<int>& slots,
+                              const EnvStereoOptions& options);
 
 struct GroundRetroFit {
   double retro = 0;

@@ -269,6 +269,18 @@ TEST(EnvStereoTest, AFitReadBackFromJsonIsTheSame) {
   refused([](nlohmann::json* b) { (*b)["summary"].erase("times"); }, "times");
 }
 
+// A kept fit is taken only for the slots and options it was made with.
+TEST(EnvStereoTest, AKeptFitIsForItsOwnSlotsAndOptions) {
+  const std::optional<EnvStereoResult> fit = EnvStereoResult();
+  const EnvStereoOptions o = fit->options;
+  EXPECT_EQ(FitFor(fit, {0, 1, 3}, {0, 1, 3}, o), &*fit);
+  EXPECT_EQ(FitFor(fit, {0, 1, 3}, {0, 1, 2}, o), nullptr);
+  EnvStereoOptions rough = o;
+  rough.ground_retro = 0.5;
+  EXPECT_EQ(FitFor(fit, {0, 1, 3}, {0, 1, 3}, rough), nullptr);
+  EXPECT_EQ(FitFor(std::nullopt, {0, 1, 3}, {0, 1, 3}, o), nullptr);
+}
+
 TEST(EnvStereoTest, NoiseGivesBoundedErrors) {
   // 1% multiplicative noise on 15 equations per region: the albedos and the normal move by
   // about noise x (condition of the 8-unknown system, a few) / sqrt(redundancy) -- a few
