@@ -246,6 +246,26 @@ void ScalingStudy() {
                 "the same solve with about twice the grid points");
 }
 
+// The whole `rouen demo` as a user runs it (a process of its own): simulated capture, solve,
+// validation and report, wall time and peak resident memory. The field's bar: 20 s.
+void DemoStudy() {
+  const Fixture& f = Shared();
+  const fs::path out = f.dir / "demo_full";
+  const auto t0 = std::chrono::steady_clock::now();
+  rusage usage{};
+  if (RunProcess({ROUEN_BINARY, "demo", "--out", out.string()}, f.dir / "demo_full.log", &usage) !=
+      0) {
+    std::printf("rouen demo (CLI): failed; see %s\n", (f.dir / "demo_full.log").c_str());
+    return;
+  }
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("rouen demo (CLI, whole process): %.1f s, %.0f MB\n", seconds,
+              usage.ru_maxrss / 1024.0);
+  bench::Record("demo.full.seconds", seconds, "s");
+  bench::Record("demo.full.peak_memory_mb", usage.ru_maxrss / 1024.0, "MB");
+}
+
 }  // namespace
 }  // namespace rouen
 
@@ -254,6 +274,7 @@ int main(int argc, char** argv) {
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
   rouen::Shared();
   rouen::ScalingStudy();
+  rouen::DemoStudy();
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();
   std::error_code ec;
