@@ -99,6 +99,10 @@ void RegisterSolve(CLI::App& app) {
       "The sky and environment's light reaches each photographed grid point exactly (App. A's\n"
       "vector flux of the visible regions); [albedo.irradiance] method = \"monte_carlo\" takes\n"
       "the faster, noisier estimate over the hemisphere cache's directions instead.\n"
+      "Each sky region of the environment keeps its measured mean but is spread over 4 x 4\n"
+      "cells as the sky model times the panoramas' residual against it there, so the structure\n"
+      "near the sun and the horizon reaches the walls; [environment] sky_detail = 1 makes the\n"
+      "regions uniform, as the paper's map.\n"
       "A key rouen does not know is an error, not a silent default.\n"
       "Example: rouen solve s --out s.scene --holdout-slot 2");
   c->add_option("session", a->session, "Session folder (from rouen capture or rouen import)");

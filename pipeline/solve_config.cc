@@ -199,6 +199,7 @@ json SolveConfigJson(const SolveConfig& c) {
             {"sky_fill_samples", c.environment.sky_fill_samples},
             {"layer_merge_m", c.environment.layer_merge_m},
             {"lit_ground", c.environment.lit_ground},
+            {"sky_detail", c.environment.sky_detail},
             {"fit_ground_retro", c.fit_ground_retro}}},
           {"albedo",
            {{"loss", NameOf(a.loss, kLosses)},
@@ -308,6 +309,7 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
     f.Int("sky_fill_samples", &e.sky_fill_samples, 1, 1000);
     f.Number("layer_merge_m", &e.layer_merge_m, 0, 1000);
     f.Bool("lit_ground", &e.lit_ground);
+    f.Int("sky_detail", &e.sky_detail, 1, 64);
     f.Bool("fit_ground_retro", &c.fit_ground_retro);
     f.Finish();
   }

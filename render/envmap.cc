@@ -71,6 +71,8 @@ Image BakeLatLong(const Lighting& lighting, const LatLongOptions& options) {
   const int w = options.width, h = options.width / 2;
   const EnvironmentMap& env = lighting.env;
   const bool regions = lighting.use_env;
+  // The sky regions spread as the irradiance spreads them (EnvOptions::sky_detail).
+  const SkyShape shape(env, lighting.sky);
   const double z =
       std::isnan(options.height_m) ? (regions ? env.layer_z.front() : 0.0) : options.height_m;
   // The region edges in pixel coordinates: sectors at compass azimuth k 2 pi / sectors (column
@@ -110,10 +112,11 @@ Image BakeLatLong(const Lighting& lighting, const LatLongOptions& options) {
               }
             l /= ss * ss;
           } else if (regions) {
-            // Wholly inside one region: its radiance at the centre.
-            l = env.Radiance(LatLongDirection(w, h, 0.5 * (cols[j] + cols[j + 1]),
-                                              0.5 * (rows[i] + rows[i + 1])),
-                             z);
+            // Wholly inside one region: its radiance at the centre, spread by the sky's shape.
+            const Eigen::Vector3d d = LatLongDirection(w, h, 0.5 * (cols[j] + cols[j + 1]),
+                                                       0.5 * (rows[i] + rows[i + 1]));
+            const int r = env.Region(d);
+            l = env.RegionRadiance(r, z).cwiseProduct(shape.InRegion(d, r));
           }
           sum += sr * l;
           weight += sr;

@@ -22,8 +22,8 @@ namespace rouen {
 struct LatLongOptions {
   int width = 1024;  // pixels; the height is width / 2. Even, 8..16384.
   // Above the horizon: the sky model, supersampled (smooth, as `rouen render` draws the sky
-  // behind the building), instead of the environment's regions, which are what rouen's
-  // irradiance integrates (Lighting::EscapedRadiance). Below the horizon: the regions.
+  // behind the building), instead of the environment's regions spread by the sky's shape
+  // (SkyShape), which are what rouen's irradiance integrates. Below the horizon: the regions.
   bool sky_model = false;
   int sky_samples = 4;  // per axis, per pixel, for the sky model
   // The height (ENU metres) the environment is seen from, between its layers
@@ -40,7 +40,8 @@ Eigen::Vector2d LatLongPixel(int width, int height, const Eigen::Vector3d& dir);
 double LatLongPixelSolidAngle(int width, int height, int row);
 
 // The radiance arriving from every direction (RGB, the lighting's relative radiance units): each
-// pixel the exact solid-angle mean of the environment's piecewise-constant regions over it (or
+// pixel the solid-angle mean of the environment's regions over it, each spread by the sky's
+// shape at the middle of the part of the pixel it covers (or
 // of the supersampled sky model, see LatLongOptions), plus the sun disc added on top of them
 // (as the irradiance adds E_sun to the sky's) over the pixels it covers, each in proportion to
 // the part of the disc it holds, the whole scaled so that the pixels carry exactly the sun's

@@ -53,6 +53,8 @@ void InitMap(const EnvOptions& o, int layers, EnvironmentMap* m) {
   m->bands_below = o.bands_below;
   m->bands_above = o.bands_above;
   m->sectors = o.sectors;
+  m->detail = o.sky_detail;
+  m->sun_exclusion_rad = o.sun_exclusion_deg * kDeg;
   m->layer_z.assign(layers, 0.0);
   const size_t n = static_cast<size_t>(m->num_regions()) * layers;
   m->radiance.assign(n, Eigen::Vector3d::Zero());
@@ -128,6 +130,7 @@ void EnvOptions::Validate() const {
   if (min_region_pixels < 1) throw Error("EnvOptions: min_region_pixels must be >= 1");
   if (sky_fill_samples < 1) throw Error("EnvOptions: sky_fill_samples must be >= 1");
   if (!(layer_merge_m > 0)) throw Error("EnvOptions: layer_merge_m must be > 0 (metres)");
+  if (sky_detail < 1 || sky_detail > 64) throw Error("EnvOptions: sky_detail must be in 1..64");
 }
 
 int EnvironmentMap::Region(const Eigen::Vector3d& d) const {
@@ -160,6 +163,27 @@ void EnvironmentMap::RegionBounds(int region, double* el_lo, double* el_hi, doub
   }
   *az_lo = sector * 2 * kPi / sectors;
   *az_hi = (sector + 1) * 2 * kPi / sectors;
+}
+
+int EnvironmentMap::DetailCell(const Eigen::Vector3d& d) const {
+  const double el = std::atan2(d.z(), std::hypot(d.x(), d.y()));
+  if (!(el >= 0)) return -1;
+  double az = std::atan2(d.x(), d.y());
+  if (az < 0) az += 2 * kPi;
+  const int rows = bands_above * detail, cols = sectors * detail;
+  const int row = std::clamp(static_cast<int>(std::floor(el / (kPi / 2) * rows)), 0, rows - 1);
+  const int col = std::clamp(static_cast<int>(std::floor(az / (2 * kPi) * cols)), 0, cols - 1);
+  return row * cols + col;
+}
+
+void EnvironmentMap::CellBounds(int cell, double* el_lo, double* el_hi, double* az_lo,
+                                double* az_hi) const {
+  const int rows = bands_above * detail, cols = sectors * detail;
+  const int row = cell / cols, col = cell % cols;
+  *el_lo = row * (kPi / 2) / rows;
+  *el_hi = (row + 1) * (kPi / 2) / rows;
+  *az_lo = col * 2 * kPi / cols;
+  *az_hi = (col + 1) * 2 * kPi / cols;
 }
 
 Eigen::Vector3d EnvironmentMap::RegionRadiance(int r, double z) const {
@@ -217,6 +241,20 @@ void EnvironmentMap::Validate() const {
                   " has a negative or non-finite radiance");
     }
   }
+  if (detail < 1 || detail > 64) throw Error("environment map: detail must be in 1..64");
+  if (!sky_detail.empty() && sky_detail.size() != static_cast<size_t>(num_detail_cells())) {
+    throw Error("environment map: expected " + std::to_string(num_detail_cells()) +
+                " sky detail cells, got " + std::to_string(sky_detail.size()));
+  }
+  for (size_t i = 0; i < sky_detail.size(); ++i) {
+    if (!sky_detail[i].allFinite() || !(sky_detail[i].minCoeff() > 0)) {
+      throw Error("environment map: sky detail cell " + std::to_string(i) +
+                  " is not a positive finite number");
+    }
+  }
+  if (!(sun_exclusion_rad >= 0 && sun_exclusion_rad < kPi / 2)) {
+    throw Error("environment map: sun_exclusion_rad must be in [0, pi/2)");
+  }
 }
 
 EnvironmentMap EnvironmentMap::Constant(const EnvOptions& options, const Eigen::Vector3d& above,
@@ -224,6 +262,7 @@ EnvironmentMap EnvironmentMap::Constant(const EnvOptions& options, const Eigen::
   options.Validate();
   EnvironmentMap m;
   InitMap(options, 1, &m);
+  m.detail = 1;  // uniform: no shape
   for (int r = 0; r < m.num_regions(); ++r) {
     m.radiance[r] = r / m.sectors < m.bands_below ? below : above;
   }
@@ -233,6 +272,7 @@ EnvironmentMap EnvironmentMap::Constant(const EnvOptions& options, const Eigen::
 EnvironmentMap EnvironmentMap::FromSky(const EnvOptions& options, const SkyModel& sky,
                                        const Eigen::Vector3d& ground) {
   EnvironmentMap m = Constant(options, Eigen::Vector3d::Zero(), ground);
+  m.detail = options.sky_detail;  // spread as the model is
   for (int r = m.bands_below * m.sectors; r < m.num_regions(); ++r) {
     m.radiance[r] = SkyMean(sky, m, r, options.sky_fill_samples);
     m.source[r] = EnvRegionSource::kSkyModel;
@@ -256,7 +296,18 @@ void to_json(nlohmann::json& j, const EnvironmentMap& m) {
                      {"radiance", rad},
                      {"pixel_count", cnt},
                      {"source", src},
-                     {"ground_retro", m.ground_retro}};
+                     {"ground_retro", m.ground_retro},
+                     {"detail", m.detail},
+                     {"sun_exclusion_rad", m.sun_exclusion_rad}};
+  if (!m.sky_detail.empty()) {
+    nlohmann::json cells = nlohmann::json::array();
+    // Kept to 1e-4 (as BuildEnvironmentMap quantises it: the same floats read back).
+    for (const Eigen::Vector3f& c : m.sky_detail) {
+      for (int k = 0; k < 3; ++k)
+        cells.push_back(std::round(static_cast<double>(c[k]) * 1e4) / 1e4);
+    }
+    j["sky_detail"] = std::move(cells);
+  }
 }
 
 void from_json(const nlohmann::json& j, EnvironmentMap& m) {
@@ -267,6 +318,17 @@ void from_json(const nlohmann::json& j, EnvironmentMap& m) {
     m.sectors = j.at("sectors").get<int>();
     if (j.contains("layer_z")) m.layer_z = j.at("layer_z").get<std::vector<double>>();
     m.ground_retro = j.value("ground_retro", 0.0);
+    m.detail = j.value("detail", 1);
+    m.sun_exclusion_rad = j.value("sun_exclusion_rad", m.sun_exclusion_rad);
+    if (j.contains("sky_detail")) {
+      const auto& cells = j.at("sky_detail");
+      if (!cells.is_array() || cells.size() % 3 != 0)
+        throw Error("environment map: sky_detail is not a list of RGB triples");
+      for (size_t k = 0; k < cells.size(); k += 3) {
+        m.sky_detail.emplace_back(cells[k].get<float>(), cells[k + 1].get<float>(),
+                                  cells[k + 2].get<float>());
+      }
+    }
     for (const auto& r : j.at("radiance")) {
       if (r.size() != 3) throw Error("environment map: a radiance is not 3 numbers");
       m.radiance.emplace_back(r[0].get<double>(), r[1].get<double>(), r[2].get<double>());
@@ -429,6 +491,16 @@ EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
   std::vector<double> wsum(m.radiance.size(), 0.0);
   std::vector<std::pair<size_t, UsedPixel>> shaded;
   m.ground_retro = sun_at.ground_retro;
+  // Above the horizon, pooled over the layers: per detail cell and per region, the pixels'
+  // weighted radiance and the sky model's over the same pixels (the sky's residual).
+  const bool detail = m.detail > 1;
+  std::vector<Eigen::Vector3d> cell_obs, cell_model, region_obs, region_model;
+  if (detail) {
+    cell_obs.assign(m.num_detail_cells(), Eigen::Vector3d::Zero());
+    cell_model = cell_obs;
+    region_obs.assign(nreg, Eigen::Vector3d::Zero());
+    region_model = region_obs;
+  }
   for (int k = 0; k < layers; ++k) {
     double zsum = 0;
     std::vector<UsedPixel> used;
@@ -446,6 +518,13 @@ EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
       wsum[r] += u.weight;
       count[r - base] += 1;
       if (u.ground_shadow) shaded.emplace_back(r, u);
+      if (const int c = detail ? m.DetailCell(u.dir) : -1; c >= 0) {
+        const Eigen::Vector3d model = u.weight * sky.Radiance(u.dir);
+        cell_obs[c] += u.weight * u.radiance;
+        cell_model[c] += model;
+        region_obs[m.RegionOfCell(c)] += u.weight * u.radiance;
+        region_model[m.RegionOfCell(c)] += model;
+      }
     }
     for (int r = 0; r < nreg; ++r) {
       if (count[r] >= options.min_region_pixels && wsum[base + r] > 0) {
@@ -471,6 +550,24 @@ EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
     }
     for (int k = 0; k < layers; ++k) FillLayer(sky, options.sky_fill_samples, k * nreg, &m);
   }
+  if (detail) {
+    // Each cell's residual against the model relative to its region's; 1 where a cell or its
+    // region saw nothing the model lights. Quantised to 1e-4 (as scene.json keeps it).
+    m.sky_detail.assign(m.num_detail_cells(), Eigen::Vector3f::Ones());
+    bool any = false;
+    for (int c = 0; c < m.num_detail_cells(); ++c) {
+      const int r = m.RegionOfCell(c);
+      for (int k = 0; k < 3; ++k) {
+        const double cell = cell_model[c][k] > 0 ? cell_obs[c][k] / cell_model[c][k] : 0;
+        const double region = region_model[r][k] > 0 ? region_obs[r][k] / region_model[r][k] : 0;
+        if (!(cell > 0 && region > 0)) continue;
+        const double rel = std::clamp(cell / region, 1.0 / 16, 16.0);
+        m.sky_detail[c][k] = static_cast<float>(std::round(rel * 1e4) / 1e4);
+        any = true;
+      }
+    }
+    if (!any) m.sky_detail.clear();
+  }
   for (size_t r = 0; r < m.source.size(); ++r) {
     s.regions_observed += m.source[r] == EnvRegionSource::kObserved;
     s.regions_sky += m.source[r] == EnvRegionSource::kSkyModel;
@@ -495,6 +592,114 @@ Eigen::Vector3d GroundShadowRatio(double ground_retro, const Eigen::Vector3d& e_
     if (total > 0) ratio[c] = sky[c] / total;
   }
   return ratio;
+}
+
+SkyShape::SkyShape(const EnvironmentMap& env, const SkyModel& sky) : env_(&env) {
+  if (env.detail <= 1) return;
+  const int cells = env.num_detail_cells(), first = env.bands_below * env.sectors;
+  const int above = env.num_regions() - first;
+  if (!env.sky_detail.empty() && env.sky_detail.size() != static_cast<size_t>(cells)) {
+    throw Error("sky shape: the map's sky detail does not match its cells");
+  }
+  const Eigen::Vector3d sun = sky.sun_dir.normalized();
+  const double cos_excl = std::cos(env.sun_exclusion_rad);
+  std::vector<Eigen::Vector3d> q(cells), f(cells);
+  std::vector<double> omega(cells);
+  std::vector<uint8_t> known(cells);
+  std::vector<Eigen::Vector3d> mean(above, Eigen::Vector3d::Zero());
+  std::vector<double> area(above, 0.0);
+  for (int c = 0; c < cells; ++c) {
+    double el0, el1, az0, az1;
+    env.CellBounds(c, &el0, &el1, &az0, &az1);
+    // The model's mean over the cell (kSub x kSub samples, solid-angle weighted), none taken
+    // nearer the sun than the panoramas were averaged.
+    constexpr int kSub = 4;
+    Eigen::Vector3d mean_model = Eigen::Vector3d::Zero();
+    double wsum = 0;
+    for (int a = 0; a < kSub; ++a) {
+      const double el = el0 + (a + 0.5) / kSub * (el1 - el0);
+      for (int b = 0; b < kSub; ++b) {
+        const double az = az0 + (b + 0.5) / kSub * (az1 - az0);
+        const Eigen::Vector3d d(std::cos(el) * std::sin(az), std::cos(el) * std::cos(az),
+                                std::sin(el));
+        if (d.dot(sun) > cos_excl) continue;
+        mean_model += std::cos(el) * sky.Radiance(d);
+        wsum += std::cos(el);
+      }
+    }
+    // A cell wholly within the exclusion holds what the sun's measurement took for the local
+    // sky, not the model's aureole: its region's mean over the other cells (below).
+    known[c] = wsum > 0;
+    q[c] = known[c] ? Eigen::Vector3d((mean_model / wsum).cwiseMax(0.0)) : Eigen::Vector3d::Zero();
+    if (!env.sky_detail.empty()) q[c] = q[c].cwiseProduct(env.sky_detail[c].cast<double>());
+    // The cell's solid angle and first moment (the integral of w over it), exactly.
+    const double s0 = std::sin(el0), s1 = std::sin(el1);
+    omega[c] = (az1 - az0) * (s1 - s0);
+    const double cos2 = 0.5 * (el1 - el0) + 0.25 * (std::sin(2 * el1) - std::sin(2 * el0));
+    f[c] = Eigen::Vector3d(cos2 * (std::cos(az0) - std::cos(az1)),
+                           cos2 * (std::sin(az1) - std::sin(az0)),
+                           0.5 * (s1 * s1 - s0 * s0) * (az1 - az0));
+    const int r = env.RegionOfCell(c) - first;
+    if (!known[c]) continue;
+    mean[r] += omega[c] * q[c];
+    area[r] += omega[c];
+  }
+  for (int c = 0; c < cells; ++c) {
+    if (known[c]) continue;
+    const int r = env.RegionOfCell(c) - first;
+    q[c] = area[r] > 0 ? Eigen::Vector3d(mean[r] / area[r]) : Eigen::Vector3d::Ones();
+  }
+  for (int r = 0; r < above; ++r) {
+    mean[r].setZero();
+    area[r] = 0;
+  }
+  for (int c = 0; c < cells; ++c) {
+    const int r = env.RegionOfCell(c) - first;
+    mean[r] += omega[c] * q[c];
+    area[r] += omega[c];
+  }
+  shape_.resize(cells);
+  moment_.assign(above, Eigen::Matrix3d::Zero());
+  flux_.assign(above, Eigen::Vector3d::Zero());
+  for (int c = 0; c < cells; ++c) {
+    const int r = env.RegionOfCell(c) - first;
+    Eigen::Vector3d s;
+    for (int k = 0; k < 3; ++k) {
+      const double m = mean[r][k] / area[r];
+      s[k] = m > 0 ? q[c][k] / m : 1.0;
+    }
+    shape_[c] = s.cast<float>();
+    moment_[r] += s * f[c].transpose();
+    flux_[r] += f[c];
+  }
+}
+
+Eigen::Vector3d SkyShape::At(const Eigen::Vector3d& dir) const {
+  return shape_.empty() ? Eigen::Vector3d::Ones() : OfCell(env_->DetailCell(dir));
+}
+
+Eigen::Vector3d SkyShape::InRegion(const Eigen::Vector3d& d, int region) const {
+  if (shape_.empty() || region < env_->bands_below * env_->sectors) return Eigen::Vector3d::Ones();
+  const int det = env_->detail, cols = env_->sectors * det;
+  const int band = region / env_->sectors - env_->bands_below, sector = region % env_->sectors;
+  const double el = std::atan2(d.z(), std::hypot(d.x(), d.y()));
+  double az = std::atan2(d.x(), d.y());
+  if (az < 0) az += 2 * kPi;
+  const int row = std::clamp(static_cast<int>(std::floor(el / (kPi / 2) * env_->bands_above * det)),
+                             band * det, band * det + det - 1);
+  // The column nearest in azimuth (around the circle) among the sector's.
+  const double x = az / (2 * kPi) * cols - sector * det;  // in cells from the sector's start
+  const double wrapped = x - cols * std::round((x - 0.5 * det) / cols);
+  const int col = sector * det + std::clamp(static_cast<int>(std::floor(wrapped)), 0, det - 1);
+  return OfCell(row * cols + col);
+}
+
+Eigen::Matrix3d SkyShape::Moment(int region, const Eigen::Vector3d& region_flux) const {
+  const int r = region - env_->bands_below * env_->sectors;
+  Eigen::Matrix3d m = region_flux.transpose().replicate<3, 1>();
+  if (shape_.empty() || r < 0) return m;
+  // Where the shape is 1 this is the polygon's own flux; the cells only move light within it.
+  return m + moment_[r] - flux_[r].transpose().replicate<3, 1>();
 }
 
 double GroundLevel(const RayCaster& model) {

@@ -13,6 +13,7 @@
 #include <nlohmann/json_fwd.hpp>
 #include <vector>
 
+#include "core/angles.h"
 #include "core/camera.h"
 #include "core/image.h"
 #include "solve/raycast.h"
@@ -39,6 +40,12 @@ struct EnvOptions {
   // (IrradianceOptions::ground_shadow): a wall whose ground is sunlit no longer sees the
   // shadow that lay in front of the panorama. Needs EnvSun::irradiance.
   bool lit_ground = true;
+  // Beyond the paper: the sky's detail inside each region above the horizon, on a finer grid of
+  // sky_detail x sky_detail cells per region. A region keeps its measured mean, and the
+  // irradiance spreads it over the region as the sky model times the panoramas' residual
+  // against it per cell (SkyShape): the fine structure near the sun and the horizon survives.
+  // 1: uniform regions, as the paper's map.
+  int sky_detail = 4;
 
   void Validate() const;  // throws rouen::Error
 };
@@ -72,11 +79,31 @@ struct EnvironmentMap {
   // How roughly the ground reflects (solve/retro.h; 0: Lambert), with which its shadow was read
   // as sunlit (EnvOptions::lit_ground) and is put back (GroundShadowRatio, the irradiance).
   double ground_retro = 0;
+  // Above the horizon, each region split into detail x detail cells (EnvOptions::sky_detail),
+  // and per cell the panoramas' residual against the sky model there, relative to the region's
+  // (observed / model over the cell's pixels, divided by the same over the region's; 1 where no
+  // pixel was seen). Pooled over the layers. Empty: 1 everywhere (the model's shape alone).
+  // Cells are band-major from the horizon up, then by azimuth, as the regions.
+  int detail = 1;
+  std::vector<Eigen::Vector3f> sky_detail;
+  // The panoramas' pixels this close to the sun were not averaged (EnvOptions::sun_exclusion_deg):
+  // the shape takes the sky model no closer to the sun than this, radians.
+  double sun_exclusion_rad = 2.0 * kDeg;
 
   int num_bands() const { return bands_below + bands_above; }
   int num_regions() const { return num_bands() * sectors; }
   int num_layers() const { return static_cast<int>(layer_z.size()); }
   int Region(const Eigen::Vector3d& dir) const;  // `dir` need not be unit
+  int num_detail_cells() const { return bands_above * sectors * detail * detail; }
+  // The detail cell of a direction above the horizon (`dir` need not be unit), -1 below it.
+  int DetailCell(const Eigen::Vector3d& dir) const;
+  // The region a detail cell belongs to.
+  int RegionOfCell(int cell) const {
+    const int row = cell / (sectors * detail), col = cell % (sectors * detail);
+    return (bands_below + row / detail) * sectors + col / detail;
+  }
+  // Cell bounds in radians: elevation [lo, hi], azimuth [lo, hi].
+  void CellBounds(int cell, double* el_lo, double* el_hi, double* az_lo, double* az_hi) const;
   // The lowest layer (the lowest panorama's height).
   Eigen::Vector3d Radiance(const Eigen::Vector3d& dir) const { return radiance[Region(dir)]; }
   // Seen from height z: linear between the layers, clamped at the ends.
@@ -104,6 +131,36 @@ struct EnvironmentMap {
   // The sky model averaged per region above the horizon, `ground` below.
   static EnvironmentMap FromSky(const EnvOptions& options, const SkyModel& sky,
                                 const Eigen::Vector3d& ground);
+};
+
+// The radiance of each region above the horizon spread over it (EnvOptions::sky_detail): per
+// detail cell, the sky model at the cell's centre times the cell's residual (sky_detail),
+// divided by the region's solid-angle mean of the same, so that the shape averages to 1 over
+// each region and the region keeps its measured mean. Built per lighting; ones below the
+// horizon and everywhere when the map has detail 1.
+class SkyShape {
+ public:
+  SkyShape(const EnvironmentMap& env, const SkyModel& sky);
+  bool uniform() const { return shape_.empty(); }
+  // The shape (per channel) in direction `dir`, or of detail cell `cell` (-1: below the horizon).
+  Eigen::Vector3d At(const Eigen::Vector3d& dir) const;
+  // The same at `dir` taken into region `region`'s cells (a part of a region seen towards a
+  // direction just outside it, as its great-arc edges bulge): the nearest of its cells.
+  Eigen::Vector3d InRegion(const Eigen::Vector3d& dir, int region) const;
+  Eigen::Vector3d OfCell(int cell) const {
+    if (cell < 0 || shape_.empty()) return Eigen::Vector3d::Ones();
+    return shape_[cell].cast<double>();
+  }
+  // Region `region` (above the horizon) wholly seen: row c is the integral over it of the shape
+  // times w (sr), the region's own flux `region_flux` (eq. 20 of the polygon that stands for it)
+  // where the shape is 1, so n . row_c is the cosine-weighted integral of a unit mean radiance.
+  Eigen::Matrix3d Moment(int region, const Eigen::Vector3d& region_flux) const;
+
+ private:
+  const EnvironmentMap* env_;
+  std::vector<Eigen::Vector3f> shape_;   // per detail cell
+  std::vector<Eigen::Matrix3d> moment_;  // per region above the horizon: sum of shape x flux
+  std::vector<Eigen::Vector3d> flux_;    // per region above the horizon: sum of the cells' flux
 };
 
 void to_json(nlohmann::json& j, const EnvironmentMap& m);

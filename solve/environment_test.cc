@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <nlohmann/json.hpp>
 
@@ -108,6 +109,94 @@ TEST(BuildEnvironmentMapTest, AveragesSkipsModelAndSunAndFills) {
   EXPECT_EQ(env.num_layers(), 1);
   EXPECT_NEAR(env.layer_z[0], 1.6, 1e-12);
   EXPECT_EQ(s.regions_observed + s.regions_sky + s.regions_neighbour, env.num_regions());
+}
+
+// A photographed sky with structure the model lacks -- its lowest 5 degrees twice as bright as
+// the model says, half a band -- keeps it in the map's detail cells (EnvOptions::sky_detail):
+// each cell's shape times its region's mean is the cell's photographed mean, where uniform
+// regions miss it by a third; the detail survives scene.json exactly, and damaged detail is
+// refused.
+TEST(BuildEnvironmentMapTest, SkyDetailKeepsThePhotographedStructureInsideARegion) {
+  const Intrinsics k = Intrinsics::Equirect(720, 360);  // 0.5 deg per pixel
+  const Pose pose = Pose::Level({0, 0, 1.6}, 0, 0);
+  SkyModel sky;
+  sky.channel[0] = SkyParams{1.0, -1.0, -0.32, 10, -3, 0.45, 1};
+  sky.channel[1] = SkyParams{1.2, -1.0, -0.4, 12, -3.2, 0.5, 1};
+  sky.channel[2] = SkyParams{1.5, -1.0, -0.5, 8, -2.5, 0.3, 1};
+  sky.sun_dir = Dir(135, 40);
+  auto photographed = [&](const Eigen::Vector3d& d) -> Eigen::Vector3d {
+    const double el = std::asin(std::clamp(d.z(), -1.0, 1.0)) / kDeg;
+    return sky.Radiance(d) * (el < 5 ? 2.0 : 1.0);
+  };
+  Image pano(k.width, k.height, 3, PixelUnits::kRadiance);
+  for (int y = 0; y < k.height; ++y) {
+    for (int x = 0; x < k.width; ++x) {
+      const Eigen::Vector3d d = pose.rotation * Unproject(k, {x + 0.5, y + 0.5});
+      const Eigen::Vector3d v = d.z() >= 0 ? photographed(d) : Eigen::Vector3d(0.2, 0.2, 0.2);
+      for (int c = 0; c < 3; ++c) pano.at(x, y, c) = static_cast<float>(v[c]);
+    }
+  }
+  Mesh m;  // a small block far off, below the camera's horizon
+  testing::AddBox(&m, {200, 200, 0}, {201, 201, 1}, m.AddBlock("far"));
+  const RayCaster rc(m);
+  const EnvironmentMap env =
+      BuildEnvironmentMap({{&pano, k, pose}}, rc, {sky.sun_dir, 0.0047}, sky, EnvOptions());
+  ASSERT_EQ(env.detail, 4);
+  ASSERT_EQ(env.sky_detail.size(), static_cast<size_t>(env.num_detail_cells()));
+  const SkyShape shape(env, sky);
+  const SkyShape uniform(EnvironmentMap::Constant(EnvOptions(), {1, 1, 1}, {1, 1, 1}), sky);
+  double worst = 0, worst_uniform = 0;
+  for (int c = 0; c < env.num_detail_cells(); ++c) {
+    double el0, el1, az0, az1;
+    env.CellBounds(c, &el0, &el1, &az0, &az1);
+    const double el = 0.5 * (el0 + el1), az = 0.5 * (az0 + az1);
+    const Eigen::Vector3d centre = Dir(az / kDeg, el / kDeg);
+    if (centre.dot(sky.sun_dir) > std::cos(6 * kDeg)) continue;  // the sun's exclusion
+    // The cell's photographed mean (its 5 x 5 to 5 x 8 pixels' solid-angle weighted mean).
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    double w = 0;
+    for (double e = el0 + 0.25 * kDeg; e < el1; e += 0.5 * kDeg) {
+      for (double a = az0 + 0.25 * kDeg; a < az1; a += 0.5 * kDeg) {
+        sum += std::cos(e) * photographed(Dir(a / kDeg, e / kDeg));
+        w += std::cos(e);
+      }
+    }
+    const Eigen::Vector3d truth = sum / w;
+    const Eigen::Vector3d mean = env.radiance[env.RegionOfCell(c)];
+    const auto rel = [&](const Eigen::Vector3d& v) {
+      return (v - truth).cwiseQuotient(truth).cwiseAbs().maxCoeff();
+    };
+    worst = std::max(worst, rel(mean.cwiseProduct(shape.OfCell(c))));
+    worst_uniform = std::max(worst_uniform, rel(mean));
+    EXPECT_EQ(shape.At(centre), shape.OfCell(c));
+    EXPECT_EQ(shape.InRegion(centre, env.RegionOfCell(c)), shape.OfCell(c));
+  }
+  // The model varies within a cell (2.5 x 3.75 deg) by a few per cent at most; the shape takes
+  // its 4 x 4 sample mean against the pixels' (0.5 deg) mean.
+  EXPECT_LT(worst, 0.02);
+  EXPECT_GT(worst_uniform, 0.3);
+  // Below the horizon the shape is 1, as it is everywhere for a uniform map.
+  EXPECT_EQ(shape.At(Dir(10, -20)), Eigen::Vector3d::Ones());
+  EXPECT_TRUE(uniform.uniform());
+  // scene.json keeps the detail exactly; damaged detail is refused.
+  const EnvironmentMap back = nlohmann::json(env).get<EnvironmentMap>();
+  EXPECT_EQ(back.detail, env.detail);
+  EXPECT_EQ(back.sky_detail, env.sky_detail);
+  EXPECT_EQ(back.sun_exclusion_rad, env.sun_exclusion_rad);
+  nlohmann::json bad = env;
+  bad["sky_detail"].erase(0);
+  EXPECT_THROW(bad.get<EnvironmentMap>(), Error);
+  bad = env;
+  bad["sky_detail"].erase(0);
+  bad["sky_detail"].erase(0);
+  bad["sky_detail"].erase(0);
+  EXPECT_THROW(bad.get<EnvironmentMap>(), Error);  // one cell short
+  bad = env;
+  bad["sky_detail"][5] = -1;
+  EXPECT_THROW(bad.get<EnvironmentMap>(), Error);
+  bad = env;
+  bad["detail"] = 0;
+  EXPECT_THROW(bad.get<EnvironmentMap>(), Error);
 }
 
 // Ground with radiance 1 within 100 m of the site and 5 beyond, seen from panoramas at

@@ -235,6 +235,10 @@ struct LightingSetup {
   }
   int layout = -1;                            // vector flux, environment: index into the layouts
   std::unique_ptr<SkyTreeRadiance> sky_tree;  // vector flux, sky model
+  // The environment's regions above the horizon spread by the sky's shape (EnvOptions::
+  // sky_detail); null when uniform. Vector flux: its moments over the layout's regions.
+  std::unique_ptr<SkyShape> shape;
+  std::unique_ptr<ShapedRegions> shaped;
 };
 
 void CheckLighting(const Lighting& lighting) {
@@ -333,6 +337,10 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
         if (vertices > 0) ls.shadow_centre /= vertices;
       }
     }
+    if (lighting.use_env && lighting.env.detail > 1) {
+      ls.shape = std::make_unique<SkyShape>(lighting.env, lighting.sky);
+      if (ls.shape->uniform()) ls.shape.reset();
+    }
     if (!vector_flux) continue;
     if (lighting.use_env) {
       for (size_t k = 0; k < layouts.size() && ls.layout < 0; ++k) {
@@ -344,6 +352,7 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
         layout_shadow.push_back(false);
       }
       if (ls.ground_shadow && !ls.shadow_on_ground.empty()) layout_shadow[ls.layout] = true;
+      if (ls.shape) ls.shaped = std::make_unique<ShapedRegions>(*ls.shape, *layouts[ls.layout]);
     } else {
       if (!tree) tree = std::make_unique<SkyPatchTree>(options.vector_flux.sky_tree_levels);
       ls.sky_tree = std::make_unique<SkyTreeRadiance>(*tree, lighting.sky, options.vector_flux);
@@ -368,7 +377,7 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
     // Monte Carlo: the point's escaping directions, and their environment regions, found once
     // for every lighting (the same values, in the same order, as found per lighting).
     std::vector<Eigen::Vector3d> escaped, dirs;
-    std::vector<int> regions;
+    std::vector<int> regions, cells;
     const EnvironmentMap* regions_of = nullptr;
     for (int i = range.begin(); i < range.end(); ++i) {
       const GridPoint& p = grid.points[i];
@@ -407,7 +416,8 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
             continue;
           }
           const EnvironmentView& view = views[ls.layout];
-          Eigen::Vector3d e = EnvironmentIrradiance(view, ls.lighting->env, p.position.z());
+          Eigen::Vector3d e =
+              EnvironmentIrradiance(view, ls.lighting->env, p.position.z(), ls.shaped.get());
           if (ls.ground_shadow && origin.z() > ground_z && !view.pieces.empty()) {
             // One ratio per point: seen from the point towards the shadow's middle.
             e += GroundShadowChange(view, *layouts[ls.layout], ls.lighting->env, p.position.z(),
@@ -427,9 +437,14 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
         const LightingSetup& ls = setup[li];
         const Eigen::Vector3d& s = ls.lighting->sun_dir;
         const EnvironmentMap& env = ls.lighting->env;
-        if (ls.lighting->use_env && !(regions_of && regions_of->SameLayout(env))) {
+        if (ls.lighting->use_env &&
+            !(regions_of && regions_of->SameLayout(env) && regions_of->detail == env.detail)) {
           regions.resize(escaped.size());
-          for (size_t k = 0; k < escaped.size(); ++k) regions[k] = env.Region(escaped[k]);
+          cells.resize(escaped.size());
+          for (size_t k = 0; k < escaped.size(); ++k) {
+            regions[k] = env.Region(escaped[k]);
+            cells[k] = env.detail > 1 ? env.DetailCell(escaped[k]) : -1;
+          }
           regions_of = &env;
         }
         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
@@ -439,6 +454,7 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
           Eigen::Vector3d l = ls.lighting->use_env
                                   ? env.RegionRadiance(regions[k], p.position.z())
                                   : ls.lighting->EscapedRadiance(d, p.position.z());
+          if (ls.shape) l = l.cwiseProduct(ls.shape->OfCell(cells[k]));
           if (ls.ground_shadow && d.z() < -1e-3 && origin.z() > ground_z) {
             const Eigen::Vector3d q = origin + ((origin.z() - ground_z) / -d.z()) * d;
             if (model.Occluded(q + Eigen::Vector3d(0, 0, offset), s, 0.0)) {

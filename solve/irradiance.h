@@ -33,7 +33,8 @@ struct Lighting {
 
   double SunAngularRadius() const;  // radians, from the solid angle
   // Radiance arriving at height z (ENU metres) from direction `dir` when nothing of the model
-  // is in the way (no sun).
+  // is in the way (no sun): the environment's region means (the specular lobes' light);
+  // ComputeIrradiance spreads the sky regions by the sky's shape (SkyShape) too.
   Eigen::Vector3d EscapedRadiance(const Eigen::Vector3d& dir, double z) const;
 };
 
@@ -120,7 +121,9 @@ struct IrradianceOptions {
 // E_sun[i] = L_sun Omega max(0, n.s) V and E_se[i] = (pi/K) sum over escaped directions of L
 // (kMonteCarlo), or sum over visible sky patches / environment regions of L n.Phi
 // (kVectorFlux; the sky as the SkyPatchTree clipped per point against the sky integrated once
-// per call, solve/vector_flux_cache.h).
+// per call, solve/vector_flux_cache.h). With an environment map of detail > 1, L of a region
+// above the horizon is its mean times the lighting's SkyShape (per detail cell; the vector flux
+// takes a wholly visible region's shape moment, a part's shape towards its flux).
 SlotIrradiance ComputeIrradiance(const SurfaceGrid& grid, const HemisphereCache& cache,
                                  const RayCaster& model, const Lighting& lighting,
                                  const IrradianceOptions& options = {});

@@ -357,6 +357,10 @@ Lighting LightingPredictor::At(UtcTime utc, const Site& site, RelightSummary* su
   el.sky = out.sky;
   out.env = PredictEnvironment(env_, el);
   out.env.ground_retro = options_.env.ground_retro;  // as the shadow on it is put back
+  // Each sky region spread over itself as the new time's model is (no residual per cell: that
+  // was measured at other times), at the measured maps' detail.
+  out.env.detail = measured_.front().env.detail;
+  out.env.sun_exclusion_rad = measured_.front().env.sun_exclusion_rad;
   if (!sky_residual_.empty()) {
     // The measured sky's residual carried to the new sun as its band carries best, weighted as
     // the sky's parts (§5.1's weights); under a cloud layer it fades with the blocked sunlight

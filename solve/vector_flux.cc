@@ -1099,6 +1099,8 @@ void EnvironmentRegions::Near(const ConvexSpherical& q, std::vector<int>* out) c
 void EnvironmentView::Clear() {
   region.clear();
   weight.clear();
+  flux.clear();
+  whole.clear();
   piece_region.clear();
   pieces.clear();
 }
@@ -1158,7 +1160,14 @@ void SeeEnvironment(const PointVisibility& vis, const EnvironmentRegions& region
     }
     view->region.push_back(r);
     view->weight.push_back(n.dot(phi));
+    view->flux.push_back(phi);
+    view->whole.push_back(cover == PointVisibility::Cover::kFull);
   }
+}
+
+ShapedRegions::ShapedRegions(const SkyShape& s, const EnvironmentRegions& regions) : shape(&s) {
+  moment.resize(regions.size());
+  for (int r = 0; r < regions.size(); ++r) moment[r] = s.Moment(r, regions.flux(r));
 }
 
 namespace {
@@ -1197,15 +1206,28 @@ void CheckRegion(const EnvironmentMap& env, int r) {
 }  // namespace
 
 Eigen::Vector3d EnvironmentIrradiance(const EnvironmentView& view, const EnvironmentMap& env,
-                                      double z) {
+                                      double z, const ShapedRegions* shaped) {
   if (env.radiance.size() < static_cast<size_t>(env.num_layers()) * env.num_regions()) {
     throw Error("vector flux: the environment map holds fewer radiances than its regions");
   }
   const LayerBlend blend(env, z);
   Eigen::Vector3d e = Eigen::Vector3d::Zero();
+  const bool shape = shaped && !shaped->shape->uniform();
+  if (shape && (view.flux.size() != view.region.size() || view.whole.size() != view.region.size() ||
+                shaped->moment.size() != static_cast<size_t>(env.num_regions()))) {
+    throw Error("vector flux: the view or the shaped regions do not match the environment map");
+  }
+  const int first_above = env.bands_below * env.sectors;
   for (size_t k = 0; k < view.region.size(); ++k) {
-    CheckRegion(env, view.region[k]);
-    e += view.weight[k] * blend.L(env, view.region[k]);
+    const int r = view.region[k];
+    CheckRegion(env, r);
+    if (!shape || r < first_above) {
+      e += view.weight[k] * blend.L(env, r);
+    } else if (view.whole[k]) {
+      e += blend.L(env, r).cwiseProduct(shaped->moment[r] * view.normal);
+    } else {
+      e += view.weight[k] * blend.L(env, r).cwiseProduct(shaped->shape->InRegion(view.flux[k], r));
+    }
   }
   return e;
 }

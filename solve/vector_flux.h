@@ -265,6 +265,8 @@ struct EnvironmentView {
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
   std::vector<int32_t> region;
   std::vector<double> weight;
+  std::vector<Eigen::Vector3d> flux;  // Phi of the visible part of each region
+  std::vector<uint8_t> whole;         // 1: the whole region is visible
   std::vector<int32_t> piece_region;  // region of each piece
   std::vector<SphericalPolygon> pieces;
   void Clear();
@@ -275,10 +277,20 @@ struct EnvironmentView {
 void SeeEnvironment(const PointVisibility& vis, const EnvironmentRegions& regions,
                     bool keep_ground_pieces, EnvironmentView* view, FluxStats* stats = nullptr);
 
-// Direct environment irradiance from a view: sum of L(region at height z) n . Phi, RGB.
+// One lighting's sky shape (SkyShape) over a layout's regions: each region's moment for when it
+// is wholly seen (SkyShape::Moment of the region's polygon flux).
+struct ShapedRegions {
+  const SkyShape* shape = nullptr;      // not owned
+  std::vector<Eigen::Matrix3d> moment;  // per region (the polygon's flux below the horizon)
+  ShapedRegions(const SkyShape& shape, const EnvironmentRegions& regions);
+};
+
+// Direct environment irradiance from a view: sum of L(region at height z) n . Phi, RGB. With
+// `shaped`, regions above the horizon are spread by the sky's shape: a region wholly seen gives
+// L_c n . moment_c, a part of one L_c shape_c(towards its Phi) n . Phi.
 // Throws rouen::Error when the view holds a region the map does not have.
 Eigen::Vector3d EnvironmentIrradiance(const EnvironmentView& view, const EnvironmentMap& env,
-                                      double z);
+                                      double z, const ShapedRegions* shaped = nullptr);
 
 // The change the ground shadow makes to a view's irradiance: the visible pieces below the
 // horizon inside the shadow polygons (convex, seen from the point, possibly overlapping:
