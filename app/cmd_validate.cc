@@ -27,6 +27,7 @@ struct ValidateArgs {
   std::vector<std::string> exclude_blocks;
   int erode_px = 1;
   bool no_predicted = false;
+  bool terms = false;
   PredictionArgs prediction;
 };
 
@@ -46,6 +47,7 @@ void Run(const ValidateArgs& a) {
   vo.exclude_blocks = a.exclude_blocks;
   vo.erode_px = a.erode_px;
   vo.predicted = !a.no_predicted;
+  vo.terms = a.terms;
   ApplyPrediction(a.prediction, &vo.relight);
   vo.Validate();
   // Outputs before any work: the JSON now, the images' folder now and its files once the
@@ -116,6 +118,22 @@ void Run(const ValidateArgs& a) {
   }
   PrintRow("all photos, measured lighting", v.measured);
   if (v.predicted) PrintRow("all photos, predicted lighting", *v.predicted);
+  if (!v.shaded_terms.empty()) {
+    std::printf(
+        "faces the sun does not reach (measured lighting), share of the irradiance, R G B:\n");
+    std::printf("  %-12s %7s  %-17s  %-17s  %-17s\n", "block", "points", "sky", "environment",
+                "interreflection");
+    auto rgb = [](const Eigen::Vector3d& x) {
+      char buf[64];
+      std::snprintf(buf, sizeof buf, "%4.0f%% %4.0f%% %4.0f%%", 100 * x.x(), 100 * x.y(),
+                    100 * x.z());
+      return std::string(buf);
+    };
+    for (const ShadedTerms& t : v.shaded_terms) {
+      std::printf("  %-12s %7d  %-17s  %-17s  %-17s\n", t.block.c_str(), t.points,
+                  rgb(t.sky).c_str(), rgb(t.environment).c_str(), rgb(t.interreflection).c_str());
+    }
+  }
   if (!a.json.empty()) std::printf("wrote %s\n", a.json.c_str());
   if (!a.images.empty()) std::printf("wrote the images to %s\n", a.images.c_str());
 }
@@ -149,6 +167,10 @@ void RegisterValidate(CLI::App& app) {
       ->capture_default_str();
   c->add_flag("--no-predicted", a->no_predicted,
               "Only the slot's measured lighting (no prediction from the other slots)");
+  c->add_flag("--terms", a->terms,
+              "Also print what lights the faces the sun does not reach at that time, per block: "
+              "the sky's, the environment's (below the horizon) and the interreflection's share "
+              "of their irradiance under the measured lighting (one more irradiance pass)");
   c->add_option("--json", a->json, "Write the figures as JSON");
   AddPredictionOptions(c, &a->prediction, kSkyInterpOption);
   c->add_option("--images", a->images,

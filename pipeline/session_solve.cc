@@ -690,12 +690,18 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
          << " (median region residual " << 100 * g.cost_lambert << "% -> " << 100 * g.cost << "%)";
     Log(options, line.str());
     if (g.retro != 0 && options.config.environment.lit_ground) {
+      env_slots.clear();
       for (size_t k = 0; k < r.slots.size(); ++k) {
         slot_env_sun[k].ground_retro = g.retro;
         r.slots[k].lighting.env =
             BuildEnvironmentMap(slot_panoramas[k], env_caster, slot_env_sun[k],
                                 r.slots[k].lighting.sky, options.config.environment);
+        if (std::find(env_slot_ids.begin(), env_slot_ids.end(), r.slots[k].slot) !=
+            env_slot_ids.end())
+          env_slots.push_back(r.slots[k].lighting);
       }
+      // The kept fit is of the maps the scene keeps: those with the ground read at this retro.
+      r.env_stereo = SolveEnvStereo(EnvObservationsOf(env_slots), r.env_stereo->options);
     }
   }
   clock.Lap("environment ground reflection");

@@ -48,6 +48,54 @@ void ValidateOptions::Validate() const {
   relight.Validate();
 }
 
+namespace {
+
+// ShadedTerms: the sky's direct share from the same lighting with nothing below the horizon.
+std::vector<ShadedTerms> ShadedTermsOf(const SolveResult& solved, const Lighting& measured,
+                                       const SlotIrradiance& irr, const std::vector<int>& blocks,
+                                       const std::function<void(const std::string&)>& log) {
+  Lighting sky_only = measured;
+  EnvironmentMap& env = sky_only.env;
+  const int below = env.bands_below * env.sectors;
+  for (int k = 0; k < env.num_layers(); ++k)
+    for (int r = 0; r < below; ++r)
+      env.radiance[static_cast<size_t>(k) * env.num_regions() + r] = Eigen::Vector3d::Zero();
+  Log(log, "the irradiance on the shaded faces by term (the sky alone once more)");
+  const SlotIrradiance sky = IrradianceFor(solved, sky_only);
+  std::vector<ShadedTerms> out(1);
+  out[0].block = "all";
+  for (int b : blocks) {
+    out.emplace_back();
+    out.back().block = solved.mesh.block_names[b];
+  }
+  for (int i = 0; i < solved.grid.size(); ++i) {
+    const GridPoint& p = solved.grid.points[i];
+    if (irr.sun[i].maxCoeff() > 0 || solved.albedo.observations[i] == 0) continue;
+    const auto it = std::find(blocks.begin(), blocks.end(), p.block);
+    if (it == blocks.end()) continue;
+    for (ShadedTerms* t : {&out[0], &out[1 + (it - blocks.begin())]}) {
+      ++t->points;
+      t->irradiance += irr.se[i];
+      t->sky += sky.direct_se[i];
+      t->environment += irr.direct_se[i] - sky.direct_se[i];
+      t->interreflection += irr.se[i] - irr.direct_se[i];
+    }
+  }
+  std::vector<ShadedTerms> kept;
+  for (ShadedTerms& t : out) {
+    if (t.points == 0) continue;
+    const Eigen::Vector3d total = t.irradiance.cwiseMax(1e-300);
+    t.sky = t.sky.cwiseQuotient(total);
+    t.environment = t.environment.cwiseQuotient(total);
+    t.interreflection = t.interreflection.cwiseQuotient(total);
+    t.irradiance /= t.points;
+    kept.push_back(std::move(t));
+  }
+  return kept;
+}
+
+}  // namespace
+
 Validation ValidateSlot(const LoadedScene& scene, const Session& session, int slot,
                         const ValidateOptions& options,
                         const std::function<void(const std::string&)>& log) {
@@ -96,6 +144,8 @@ Validation ValidateSlot(const LoadedScene& scene, const Session& session, int sl
   const Lighting& measured = lightings[0];
   const SlotIrradiance& irr_measured = irr[0];
   const SlotIrradiance irr_predicted = predicted ? std::move(irr[1]) : SlotIrradiance{};
+
+  if (options.terms) out.shaded_terms = ShadedTermsOf(solved, measured, irr_measured, blocks, log);
 
   MetricsOptions mo;
   mo.response = &scene.scene.response;
@@ -165,6 +215,19 @@ nlohmann::json ValidationToJson(const Validation& v) {
     nlohmann::json pj = {{"view", p.view}, {"measured", MetricsJson(p.measured)}};
     if (p.predicted) pj["predicted"] = MetricsJson(*p.predicted);
     j["photos"].push_back(pj);
+  }
+  if (!v.shaded_terms.empty()) {
+    auto rgb = [](const Eigen::Vector3d& x) { return nlohmann::json{x.x(), x.y(), x.z()}; };
+    nlohmann::json terms = nlohmann::json::array();
+    for (const ShadedTerms& t : v.shaded_terms) {
+      terms.push_back({{"block", t.block},
+                       {"points", t.points},
+                       {"irradiance", rgb(t.irradiance)},
+                       {"sky", rgb(t.sky)},
+                       {"environment", rgb(t.environment)},
+                       {"interreflection", rgb(t.interreflection)}});
+    }
+    j["shaded_terms"] = terms;
   }
   return j;
 }

@@ -28,7 +28,24 @@ struct ValidateOptions {
   int erode_px = 1;
   bool predicted = true;   // also render under lighting predicted from the other slots
   RelightOptions relight;  // for the prediction
-  void Validate() const;   // throws rouen::Error
+  // Also split the measured lighting's irradiance on the shaded faces into its terms
+  // (ShadedTerms); costs one more pass of the irradiance.
+  bool terms = false;
+  void Validate() const;  // throws rouen::Error
+};
+
+// What lights the faces the sun does not reach at the slot's time (E_sun = 0: facing away from
+// the sun or in a cast shadow), per block among the scored ones and over all of them: each
+// term's share of the summed irradiance per channel (RGB) at their observed grid points, under
+// the slot's measured lighting. The sky is the direct light from above the horizon, the
+// environment from below it (the ground and landscape, with the model's shadow on the ground),
+// the interreflection what other model faces send (§4.1).
+struct ShadedTerms {
+  std::string block;  // "all": every scored block
+  int points = 0;
+  Eigen::Vector3d irradiance = Eigen::Vector3d::Zero();  // mean E_se over the points
+  Eigen::Vector3d sky = Eigen::Vector3d::Zero(), environment = Eigen::Vector3d::Zero(),
+                  interreflection = Eigen::Vector3d::Zero();
 };
 
 struct PhotoValidation {
@@ -51,6 +68,7 @@ struct Validation {
   // prediction, the one predicted from the other slots (§5).
   Lighting measured_lighting;
   std::optional<Lighting> predicted_lighting;
+  std::vector<ShadedTerms> shaded_terms;  // with ValidateOptions::terms: "all" first
 };
 
 // Validates slot `slot` of `scene` against the architecture photos of `session` (the session
