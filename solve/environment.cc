@@ -131,6 +131,9 @@ void EnvOptions::Validate() const {
   if (sky_fill_samples < 1) throw Error("EnvOptions: sky_fill_samples must be >= 1");
   if (!(layer_merge_m > 0)) throw Error("EnvOptions: layer_merge_m must be > 0 (metres)");
   if (sky_detail < 1 || sky_detail > 64) throw Error("EnvOptions: sky_detail must be in 1..64");
+  if (int64_t{bands_above} * sectors * sky_detail * sky_detail > kMaxDetailCells)
+    throw Error("EnvOptions: more than " + std::to_string(kMaxDetailCells) +
+                " sky detail cells (bands_above x sectors x sky_detail^2)");
 }
 
 int EnvironmentMap::Region(const Eigen::Vector3d& d) const {
@@ -242,6 +245,9 @@ void EnvironmentMap::Validate() const {
     }
   }
   if (detail < 1 || detail > 64) throw Error("environment map: detail must be in 1..64");
+  if (int64_t{bands_above} * sectors * detail * detail > kMaxDetailCells)
+    throw Error("environment map: more than " + std::to_string(kMaxDetailCells) +
+                " sky detail cells (bands_above x sectors x detail^2)");
   if (!sky_detail.empty() && sky_detail.size() != static_cast<size_t>(num_detail_cells())) {
     throw Error("environment map: expected " + std::to_string(num_detail_cells()) +
                 " sky detail cells, got " + std::to_string(sky_detail.size()));

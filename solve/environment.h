@@ -50,6 +50,10 @@ struct EnvOptions {
   void Validate() const;  // throws rouen::Error
 };
 
+// The most sky detail cells a map may have (EnvOptions::sky_detail): 1 deg cells over the sky
+// are 32400.
+inline constexpr int64_t kMaxDetailCells = 1 << 20;
+
 // The sun at the panoramas' time.
 struct EnvSun {
   Eigen::Vector3d dir = Eigen::Vector3d::UnitZ();  // unit ENU, towards the sun

@@ -197,6 +197,13 @@ TEST(BuildEnvironmentMapTest, SkyDetailKeepsThePhotographedStructureInsideARegio
   bad = env;
   bad["detail"] = 0;
   EXPECT_THROW(bad.get<EnvironmentMap>(), Error);
+  // A detail grid too large to hold is refused before anything is allocated.
+  EnvOptions huge;
+  huge.sectors = 720;
+  huge.sky_detail = 64;
+  EXPECT_THROW(huge.Validate(), Error);
+  huge.sky_detail = 4;
+  EXPECT_NO_THROW(huge.Validate());
 }
 
 // Ground with radiance 1 within 100 m of the site and 5 beyond, seen from panoramas at
