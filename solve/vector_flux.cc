@@ -1098,7 +1098,6 @@ void EnvironmentRegions::Near(const ConvexSpherical& q, std::vector<int>* out) c
 
 void EnvironmentView::Clear() {
   region.clear();
-  weight.clear();
   flux.clear();
   whole.clear();
   piece_region.clear();
@@ -1159,7 +1158,6 @@ void SeeEnvironment(const PointVisibility& vis, const EnvironmentRegions& region
       }
     }
     view->region.push_back(r);
-    view->weight.push_back(n.dot(phi));
     view->flux.push_back(phi);
     view->whole.push_back(cover == PointVisibility::Cover::kFull);
   }
@@ -1213,20 +1211,22 @@ Eigen::Vector3d EnvironmentIrradiance(const EnvironmentView& view, const Environ
   const LayerBlend blend(env, z);
   Eigen::Vector3d e = Eigen::Vector3d::Zero();
   const bool shape = shaped && !shaped->shape->uniform();
-  if (shape && (view.flux.size() != view.region.size() || view.whole.size() != view.region.size() ||
-                shaped->moment.size() != static_cast<size_t>(env.num_regions()))) {
+  if (view.flux.size() != view.region.size() ||
+      (shape && (view.whole.size() != view.region.size() ||
+                 shaped->moment.size() != static_cast<size_t>(env.num_regions())))) {
     throw Error("vector flux: the view or the shaped regions do not match the environment map");
   }
   const int first_above = env.bands_below * env.sectors;
   for (size_t k = 0; k < view.region.size(); ++k) {
     const int r = view.region[k];
     CheckRegion(env, r);
+    const double weight = view.normal.dot(view.flux[k]);  // n . Phi
     if (!shape || r < first_above) {
-      e += view.weight[k] * blend.L(env, r);
+      e += weight * blend.L(env, r);
     } else if (view.whole[k]) {
       e += blend.L(env, r).cwiseProduct(shaped->moment[r] * view.normal);
     } else {
-      e += view.weight[k] * blend.L(env, r).cwiseProduct(shaped->shape->InRegion(view.flux[k], r));
+      e += weight * blend.L(env, r).cwiseProduct(shaped->shape->InRegion(view.flux[k], r));
     }
   }
   return e;

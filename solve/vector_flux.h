@@ -258,13 +258,12 @@ class EnvironmentRegions {
   std::vector<Eigen::Vector3d> flux_;
 };
 
-// What one surface point sees of each environment region (geometry only): n . Phi (sr) of the
-// visible part of every region not hidden, and, when asked, the visible pieces of the regions
-// below the horizon (where a ground shadow may cut them).
+// What one surface point sees of each environment region (geometry only): Phi (sr) of the
+// visible part of every region not hidden and whether that is the whole region, and, when asked,
+// the visible pieces of the regions below the horizon (where a ground shadow may cut them).
 struct EnvironmentView {
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
   std::vector<int32_t> region;
-  std::vector<double> weight;
   std::vector<Eigen::Vector3d> flux;  // Phi of the visible part of each region
   std::vector<uint8_t> whole;         // 1: the whole region is visible
   std::vector<int32_t> piece_region;  // region of each piece

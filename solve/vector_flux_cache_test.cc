@@ -134,7 +134,7 @@ TEST(VectorFluxCacheTest, EnvironmentViewEqualsClippingByEveryOccluder) {
   EXPECT_GE(occluded, 4);
   // A view of a larger map is refused by a smaller one.
   view.region.push_back(env.num_regions());
-  view.weight.push_back(1);
+  view.flux.push_back(view.normal);
   EXPECT_THROW(EnvironmentIrradiance(view, env, 0), Error);
 }
 
