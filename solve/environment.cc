@@ -49,6 +49,14 @@ Eigen::Vector3d SkyMean(const SkyModel& sky, const EnvironmentMap& m, int region
   return sum / wsum;
 }
 
+// Elevation in [-pi/2, pi/2] and azimuth in [0, 2 pi) (from north eastward) of `d` (need not
+// be unit), as the map's regions and detail cells take them.
+void ElevationAzimuth(const Eigen::Vector3d& d, double* el, double* az) {
+  *el = std::atan2(d.z(), std::hypot(d.x(), d.y()));
+  *az = std::atan2(d.x(), d.y());
+  if (*az < 0) *az += 2 * kPi;
+}
+
 void InitMap(const EnvOptions& o, int layers, EnvironmentMap* m) {
   m->bands_below = o.bands_below;
   m->bands_above = o.bands_above;
@@ -137,10 +145,8 @@ void EnvOptions::Validate() const {
 }
 
 int EnvironmentMap::Region(const Eigen::Vector3d& d) const {
-  const double horiz = std::hypot(d.x(), d.y());
-  const double el = std::atan2(d.z(), horiz);
-  double az = std::atan2(d.x(), d.y());
-  if (az < 0) az += 2 * kPi;
+  double el, az;
+  ElevationAzimuth(d, &el, &az);
   int band;
   if (el < 0) {
     band = static_cast<int>(std::floor((el + kPi / 2) / (kPi / 2) * bands_below));
@@ -169,10 +175,9 @@ void EnvironmentMap::RegionBounds(int region, double* el_lo, double* el_hi, doub
 }
 
 int EnvironmentMap::DetailCell(const Eigen::Vector3d& d) const {
-  const double el = std::atan2(d.z(), std::hypot(d.x(), d.y()));
+  double el, az;
+  ElevationAzimuth(d, &el, &az);
   if (!(el >= 0)) return -1;
-  double az = std::atan2(d.x(), d.y());
-  if (az < 0) az += 2 * kPi;
   const int rows = bands_above * detail, cols = sectors * detail;
   const int row = std::clamp(static_cast<int>(std::floor(el / (kPi / 2) * rows)), 0, rows - 1);
   const int col = std::clamp(static_cast<int>(std::floor(az / (2 * kPi) * cols)), 0, cols - 1);
@@ -645,52 +650,35 @@ SkyShape::SkyShape(const EnvironmentMap& env, const SkyModel& sky) : env_(&env) 
     f[c] = Eigen::Vector3d(cos2 * (std::cos(az0) - std::cos(az1)),
                            cos2 * (std::sin(az1) - std::sin(az0)),
                            0.5 * (s1 * s1 - s0 * s0) * (az1 - az0));
-    const int r = env.RegionOfCell(c) - first;
     if (!known[c]) continue;
-    mean[r] += omega[c] * q[c];
-    area[r] += omega[c];
-  }
-  for (int c = 0; c < cells; ++c) {
-    if (known[c]) continue;
-    const int r = env.RegionOfCell(c) - first;
-    q[c] = area[r] > 0 ? Eigen::Vector3d(mean[r] / area[r]) : Eigen::Vector3d::Ones();
-  }
-  for (int r = 0; r < above; ++r) {
-    mean[r].setZero();
-    area[r] = 0;
-  }
-  for (int c = 0; c < cells; ++c) {
     const int r = env.RegionOfCell(c) - first;
     mean[r] += omega[c] * q[c];
     area[r] += omega[c];
   }
+  // Per region, the mean over its known cells (which filling the others with it leaves as it
+  // is), or 1 when the exclusion hides the whole region.
+  for (int r = 0; r < above; ++r)
+    mean[r] = area[r] > 0 ? Eigen::Vector3d(mean[r] / area[r]) : Eigen::Vector3d::Ones();
   shape_.resize(cells);
   moment_.assign(above, Eigen::Matrix3d::Zero());
   flux_.assign(above, Eigen::Vector3d::Zero());
   for (int c = 0; c < cells; ++c) {
     const int r = env.RegionOfCell(c) - first;
+    if (!known[c]) q[c] = mean[r];
     Eigen::Vector3d s;
-    for (int k = 0; k < 3; ++k) {
-      const double m = mean[r][k] / area[r];
-      s[k] = m > 0 ? q[c][k] / m : 1.0;
-    }
+    for (int k = 0; k < 3; ++k) s[k] = mean[r][k] > 0 ? q[c][k] / mean[r][k] : 1.0;
     shape_[c] = s.cast<float>();
     moment_[r] += s * f[c].transpose();
     flux_[r] += f[c];
   }
 }
 
-Eigen::Vector3d SkyShape::At(const Eigen::Vector3d& dir) const {
-  return shape_.empty() ? Eigen::Vector3d::Ones() : OfCell(env_->DetailCell(dir));
-}
-
 Eigen::Vector3d SkyShape::InRegion(const Eigen::Vector3d& d, int region) const {
   if (shape_.empty() || region < env_->bands_below * env_->sectors) return Eigen::Vector3d::Ones();
   const int det = env_->detail, cols = env_->sectors * det;
   const int band = region / env_->sectors - env_->bands_below, sector = region % env_->sectors;
-  const double el = std::atan2(d.z(), std::hypot(d.x(), d.y()));
-  double az = std::atan2(d.x(), d.y());
-  if (az < 0) az += 2 * kPi;
+  double el, az;
+  ElevationAzimuth(d, &el, &az);
   const int row = std::clamp(static_cast<int>(std::floor(el / (kPi / 2) * env_->bands_above * det)),
                              band * det, band * det + det - 1);
   // The column nearest in azimuth (around the circle) among the sector's.

@@ -138,7 +138,7 @@ struct EnvironmentMap {
 };
 
 // The radiance of each region above the horizon spread over it (EnvOptions::sky_detail): per
-// detail cell, the sky model at the cell's centre times the cell's residual (sky_detail),
+// detail cell, the sky model's mean over the cell times the cell's residual (sky_detail),
 // divided by the region's solid-angle mean of the same, so that the shape averages to 1 over
 // each region and the region keeps its measured mean. Built per lighting; ones below the
 // horizon and everywhere when the map has detail 1.
@@ -146,11 +146,10 @@ class SkyShape {
  public:
   SkyShape(const EnvironmentMap& env, const SkyModel& sky);
   bool uniform() const { return shape_.empty(); }
-  // The shape (per channel) in direction `dir`, or of detail cell `cell` (-1: below the horizon).
-  Eigen::Vector3d At(const Eigen::Vector3d& dir) const;
-  // The same at `dir` taken into region `region`'s cells (a part of a region seen towards a
-  // direction just outside it, as its great-arc edges bulge): the nearest of its cells.
+  // The shape (per channel) at `dir` taken into region `region`'s cells (a part of a region seen
+  // towards a direction just outside it, as its great-arc edges bulge): the nearest of its cells.
   Eigen::Vector3d InRegion(const Eigen::Vector3d& dir, int region) const;
+  // The shape of detail cell `cell` (EnvironmentMap::DetailCell; -1, below the horizon: 1).
   Eigen::Vector3d OfCell(int cell) const {
     if (cell < 0 || shape_.empty()) return Eigen::Vector3d::Ones();
     return shape_[cell].cast<double>();

@@ -168,7 +168,7 @@ TEST(BuildEnvironmentMapTest, SkyDetailKeepsThePhotographedStructureInsideARegio
     };
     worst = std::max(worst, rel(mean.cwiseProduct(shape.OfCell(c))));
     worst_uniform = std::max(worst_uniform, rel(mean));
-    EXPECT_EQ(shape.At(centre), shape.OfCell(c));
+    EXPECT_EQ(shape.OfCell(env.DetailCell(centre)), shape.OfCell(c));
     EXPECT_EQ(shape.InRegion(centre, env.RegionOfCell(c)), shape.OfCell(c));
   }
   // The model varies within a cell (2.5 x 3.75 deg) by a few per cent at most; the shape takes
@@ -176,7 +176,7 @@ TEST(BuildEnvironmentMapTest, SkyDetailKeepsThePhotographedStructureInsideARegio
   EXPECT_LT(worst, 0.02);
   EXPECT_GT(worst_uniform, 0.3);
   // Below the horizon the shape is 1, as it is everywhere for a uniform map.
-  EXPECT_EQ(shape.At(Dir(10, -20)), Eigen::Vector3d::Ones());
+  EXPECT_EQ(shape.OfCell(env.DetailCell(Dir(10, -20))), Eigen::Vector3d::Ones());
   EXPECT_TRUE(uniform.uniform());
   // scene.json keeps the detail exactly; damaged detail is refused.
   const EnvironmentMap back = nlohmann::json(env).get<EnvironmentMap>();

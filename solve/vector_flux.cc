@@ -1128,7 +1128,6 @@ void SeeEnvironment(const PointVisibility& vis, const EnvironmentRegions& region
   for (int k = 0; k < vis.num_occluders(); ++k) {
     for (int m = first_near[k]; m < first_near[k + 1]; ++m) list[fill[near[m]]++] = k;
   }
-  const Eigen::Vector3d& n = vis.normal();
   for (int r = 0; r < nreg; ++r) {
     subset.assign(list.begin() + start[r], list.begin() + start[r + 1]);
     const SphericalPolygon& poly = regions.polygon(r);

@@ -261,10 +261,7 @@ Lighting StreetLighting() {
 
 TEST(VectorFluxCacheTest, ComputeIrradianceWithIdBufferAgreesWithAllFaces) {
   const StreetGrid s;
-  const Mesh& m = s.m;
-  const RayCaster& rc = s.rc;
-  const SurfaceGrid& grid = s.grid;
-  const HemisphereCache& cache = s.cache;
+  const auto& [m, rc, grid, cache] = s;
   for (bool use_env : {false, true}) {
     Lighting l = StreetLighting();
     l.use_env = use_env;
@@ -294,10 +291,7 @@ TEST(VectorFluxCacheTest, ComputeIrradianceWithIdBufferAgreesWithAllFaces) {
 // to the bit as that method alone gives it; a mask of the wrong size is refused.
 TEST(VectorFluxCacheTest, ExactPointsMixTheTwoMethodsPointByPoint) {
   const StreetGrid s;
-  const Mesh& m = s.m;
-  const RayCaster& rc = s.rc;
-  const SurfaceGrid& grid = s.grid;
-  const HemisphereCache& cache = s.cache;
+  const auto& [m, rc, grid, cache] = s;
   const Lighting l = StreetLighting();
   IrradianceOptions vf;
   vf.method = IrradianceMethod::kVectorFlux;
