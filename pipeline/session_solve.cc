@@ -578,6 +578,8 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
       throw Error(session.dir().string() + ": slot " + std::to_string(s) +
                   " lacks a sky or landscape bracket (rouen status " + session.dir().string() +
                   " lists each slot's brackets and the command that adds a missing one)");
+    // The sky photo sees the sky the building hides from the landscape panoramas.
+    panoramas.push_back({&sky_g->radiance, sky_g->intrinsics, sky_g->pose, true});
     ss.utc = sky_g->utc;
     ss.sun = ComputeSunPosition(ss.utc, site);
     const Eigen::Vector3d sun_dir = ss.sun.DirectionEnu();

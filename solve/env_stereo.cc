@@ -419,6 +419,10 @@ void EnvStereoOptions::Validate() const {
   if (starts < 1 || starts > 3) throw Error("EnvStereoOptions: starts must be 1, 2 or 3");
 }
 
+bool SkyOnlyExplains(const EnvRegionFit& fit, const EnvStereoOptions& options) {
+  return fit.rho_sky.maxCoeff() <= options.max_albedo && fit.rel_rms <= options.fallback_rel_error;
+}
+
 const char* EnvRegionKindName(EnvRegionKind kind) {
   switch (kind) {
     case EnvRegionKind::kSky:
@@ -481,7 +485,12 @@ EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
   res.bands_above = m0.bands_above;
   res.sectors = m0.sectors;
   res.layer_z = m0.layer_z;
+  // Observed at any time (PredictEnvironment fills the others below the horizon).
   res.source = m0.source;
+  for (size_t gi = 0; gi < res.source.size(); ++gi)
+    for (const EnvObservation& o : per_time)
+      if (o.env.source[gi] == EnvRegionSource::kObserved)
+        res.source[gi] = EnvRegionSource::kObserved;
   res.options = options;
   res.regions.assign(static_cast<size_t>(nreg) * L, EnvRegionFit());
   res.summary.times = T;
@@ -532,7 +541,13 @@ EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
       fit.sky_fraction = 1;
       return;
     }
-    if (all_zero) {
+    // Below the horizon, a region no panorama saw at any time holds copies of its neighbours
+    // (FillBelowHorizon): fitted, it would be their data seen from the wrong direction. It is
+    // predicted as the maps fill it.
+    bool seen = false;
+    for (int t = 0; t < T; ++t)
+      seen = seen || per_time[t].env.source[gi] == EnvRegionSource::kObserved;
+    if (all_zero || (!above && !seen)) {
       fit.kind = EnvRegionKind::kUnobserved;
       return;
     }
@@ -579,6 +594,35 @@ EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
     const std::array<int, 3> idx = SunIndex(fc);
     ceres::Solver::Options so;
     SolverOptions(options, &so);
+    // Solves `trial` from its values; with bound_sky, rho_sky within max_albedo.
+    auto solve = [&](RegionState* trial, bool bound_sky) {
+      ceres::Problem::Options po;
+      po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
+      ceres::Problem problem(po);
+      auto* cost = new RegionCost(&trial->data, &options, trial->with_fraction);
+      if (trial->with_fraction) {
+        problem.AddResidualBlock(cost, nullptr, trial->x, &trial->f);
+        problem.SetParameterLowerBound(&trial->f, 0, 0.0);
+        problem.SetParameterUpperBound(&trial->f, 0, 1.0);
+      } else {
+        problem.AddResidualBlock(cost, nullptr, trial->x);
+      }
+      for (int k = 0; k < 5; ++k) problem.SetParameterLowerBound(trial->x, k, 0.0);
+      if (bound_sky) {
+        for (int k = 0; k < 3; ++k) {
+          trial->x[k] = std::min(trial->x[k], options.max_albedo / kPi);
+          problem.SetParameterUpperBound(trial->x, k, options.max_albedo / kPi);
+        }
+      }
+      if (!above && options.ground_normal_prior > 0) {
+        problem.AddResidualBlock(new ceres::AutoDiffCostFunction<NormalPrior, 3, kNumParams>(
+                                     new NormalPrior{options.ground_normal_prior}),
+                                 nullptr, trial->x);
+      }
+      ceres::Solver::Summary sum;
+      ceres::Solve(so, &problem, &sum);
+      return static_cast<int>(sum.iterations.size());
+    };
     // The best start; a normal facing the viewer (n . d < 0: the patch is seen from its
     // front) is preferred over any that faces away.
     double best = std::numeric_limits<double>::infinity();
@@ -595,25 +639,7 @@ EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
       }
       for (int k = 0; k < 3; ++k) trial.x[5 + k] = starts[s][k] * scale;
       trial.f = 0.5;
-      ceres::Problem::Options po;
-      po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
-      ceres::Problem problem(po);
-      auto* cost = new RegionCost(&trial.data, &options, trial.with_fraction);
-      if (trial.with_fraction) {
-        problem.AddResidualBlock(cost, nullptr, trial.x, &trial.f);
-        problem.SetParameterLowerBound(&trial.f, 0, 0.0);
-        problem.SetParameterUpperBound(&trial.f, 0, 1.0);
-      } else {
-        problem.AddResidualBlock(cost, nullptr, trial.x);
-      }
-      for (int k = 0; k < 5; ++k) problem.SetParameterLowerBound(trial.x, k, 0.0);
-      if (!above && options.ground_normal_prior > 0) {
-        problem.AddResidualBlock(new ceres::AutoDiffCostFunction<NormalPrior, 3, kNumParams>(
-                                     new NormalPrior{options.ground_normal_prior}),
-                                 nullptr, trial.x);
-      }
-      ceres::Solver::Summary sum;
-      ceres::Solve(so, &problem, &sum);
+      const int iterations = solve(&trial, false);
       const double c = Cost(trial, options);
       const Eigen::Vector3d tn(trial.x[5], trial.x[6], trial.x[7]);
       const bool facing = tn.dot(view) < 0;
@@ -621,7 +647,23 @@ EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
         best_facing = facing;
         best = c;
         best_state = trial;
-        best_iter = static_cast<int>(sum.iterations.size());
+        best_iter = iterations;
+      }
+    }
+    // A sky albedo past max_albedo (a channel the sky barely lights, following a few percent of
+    // light from elsewhere: a wall's reflection on the ground) would make the region fall back
+    // to sky-only; solved again from there with rho_sky bounded, it keeps a surface when that
+    // still explains it.
+    if (std::isfinite(best) &&
+        kPi * Eigen::Vector3d(best_state.x[0], best_state.x[1], best_state.x[2]).maxCoeff() >
+            options.max_albedo) {
+      RegionState bounded = best_state;
+      const int iterations = solve(&bounded, true);
+      const double c = Cost(bounded, options);
+      if (std::isfinite(c)) {
+        best = c;
+        best_state = bounded;
+        best_iter += iterations;
       }
     }
     if (!std::isfinite(best)) {
@@ -638,11 +680,12 @@ EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
     // normal no training sun lit (its solar term and direction are then unconstrained).
     const bool away = fit.normal.dot(view) > 0;
     const bool implausible =
-        std::max(fit.rho_sun.maxCoeff(), fit.rho_sky.maxCoeff()) > options.max_albedo;
+        std::max(fit.rho_sun.maxCoeff(), fit.rho_sky.maxCoeff()) > options.max_albedo * (1 + 1e-9);
+    const Eigen::Vector3d fallback_normal = away ? Eigen::Vector3d(-view) : fit.normal;
     if ((fit.rel_rms > options.fallback_rel_error && away) || implausible ||
         fit.sunlit_times == 0) {
       fallback_reason[gi] = fit.sunlit_times == 0 ? 2 : 1;
-      FitSkyOnly(st.data, options, away ? Eigen::Vector3d(-view) : fit.normal, &fit);
+      FitSkyOnly(st.data, options, fallback_normal, &fit);
     }
   });
 
@@ -989,6 +1032,7 @@ EnvironmentMap PredictEnvironment(const EnvStereoResult& result, const EnvLighti
     m.radiance[gi] =
         PredictWithQuad(result.regions[gi], result.options, lighting, q, sky.radiance[r]);
   }
+  for (int layer = 0; layer < L; ++layer) FillBelowHorizon(&m, layer);
   m.Validate();
   return m;
 }

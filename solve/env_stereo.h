@@ -116,6 +116,13 @@ enum class EnvRegionKind : uint8_t {
 
 const char* EnvRegionKindName(EnvRegionKind kind);
 
+struct EnvRegionFit;
+struct EnvStereoOptions;
+// Whether a sky-only fallback explains its region at all: an albedo within max_albedo and a
+// relative residual within fallback_rel_error. One that does not (a partly hidden region, a
+// haze band) extrapolates a surface that is not there to other suns.
+bool SkyOnlyExplains(const EnvRegionFit& fit, const EnvStereoOptions& options);
+
 struct EnvRegionFit {
   EnvRegionKind kind = EnvRegionKind::kUnobserved;
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  // unit ENU (the fallback's: fixed)

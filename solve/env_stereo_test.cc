@@ -341,6 +341,53 @@ TEST(EnvStereoTest, NeverSunlitRegionFallsBackToSkyOnly) {
   }
 }
 
+// A region with light from elsewhere in one channel (a wall's reflection on the ground, warm)
+// that the sun and sky cannot explain: its sky albedo stays within max_albedo and the region
+// keeps a landscape fit within 10%, rather than its red albedo running past the bound and the
+// region falling back to sky-only.
+TEST(EnvStereoTest, TheSkyAlbedoStaysWithinItsBound) {
+  EnvStereoOptions o;
+  o.ground_normal_prior = 0;
+  const EnvironmentMap grid = EnvironmentMap::Constant(SmallGrid(), {1, 1, 1}, {1, 1, 1});
+  Synthetic w = MakeWorld(grid, 7);
+  const std::vector<int> train = {0, 1, 2, 4};
+  int r = -1;
+  for (int q = 0; q < grid.bands_below * grid.sectors && r < 0; ++q)
+    if (w.landscape[q] && WellLit(w.truth[q], train)) r = q;
+  ASSERT_GE(r, 0);
+  w.truth[r].rho_sky = Eigen::Vector3d(1.4, 0.5, 0.4);
+  std::vector<EnvObservation> obs = Observe(w, train, o, 0, 1);
+  for (EnvObservation& ob : obs) ob.env.radiance[r][0] *= 1.3;
+  const EnvRegionFit fit = SolveEnvStereo(obs, o).regions[r];
+  EXPECT_EQ(fit.kind, EnvRegionKind::kLandscape);
+  EXPECT_LE(fit.rho_sky.maxCoeff(), o.max_albedo + 1e-9) << fit.rho_sky.transpose();
+  EXPECT_LT(fit.rel_rms, 0.1);
+}
+
+// A region below the horizon no panorama saw at any time holds its neighbours' radiance
+// (FillBelowHorizon): it is not fitted (that would be their data seen from its direction), and
+// its prediction is the predicted map filled the same way.
+TEST(EnvStereoTest, ARegionNeverSeenIsFilledAsTheMapsFillIt) {
+  EnvStereoOptions o;
+  o.ground_normal_prior = 0;
+  const EnvironmentMap grid = EnvironmentMap::Constant(SmallGrid(), {1, 1, 1}, {1, 1, 1});
+  const Synthetic w = MakeWorld(grid, 7);
+  const int r = 1 * grid.sectors + 3, left = r - 1, right = r + 1;
+  std::vector<EnvObservation> obs = Observe(w, {0, 1, 2, 4}, o, 0, 1);
+  for (EnvObservation& ob : obs) {
+    ob.env.source[r] = EnvRegionSource::kNeighbour;
+    ob.env.radiance[r] = 0.5 * (ob.env.radiance[left] + ob.env.radiance[right]);
+  }
+  const EnvStereoResult res = SolveEnvStereo(obs, o);
+  EXPECT_EQ(res.regions[r].kind, EnvRegionKind::kUnobserved);
+  ASSERT_EQ(res.regions[left].kind, EnvRegionKind::kLandscape);
+  ASSERT_EQ(res.regions[right].kind, EnvRegionKind::kLandscape);
+  const EnvironmentMap pred = PredictEnvironment(res, LightingAt(3));
+  EXPECT_EQ(pred.source[r], EnvRegionSource::kNeighbour);
+  EXPECT_LT((pred.radiance[r] - 0.5 * (pred.radiance[left] + pred.radiance[right])).norm(),
+            1e-12 * pred.radiance[r].norm());
+}
+
 TEST(EnvStereoTest, OneTimeIsUnderdeterminedAndReproducesItsMap) {
   EnvStereoOptions o;
   const EnvironmentMap grid = EnvironmentMap::Constant(SmallGrid(), {1, 1, 1}, {1, 1, 1});

@@ -71,8 +71,7 @@ void InitMap(const EnvOptions& o, int layers, EnvironmentMap* m) {
 }
 
 // Fills the unobserved regions of one layer (starting at `base`): sky model above the
-// horizon; below, the nearest observed sector in the band, else the nearest band with any
-// observation (towards the horizon first).
+// horizon; below, as FillBelowHorizon.
 void FillLayer(const SkyModel& sky, int sky_samples, int base, EnvironmentMap* m) {
   const int S = m->sectors, nreg = m->num_regions();
   for (int r = m->bands_below * S; r < nreg; ++r) {
@@ -80,6 +79,16 @@ void FillLayer(const SkyModel& sky, int sky_samples, int base, EnvironmentMap* m
     m->radiance[base + r] = SkyMean(sky, *m, r, sky_samples);
     m->source[base + r] = EnvRegionSource::kSkyModel;
   }
+  FillBelowHorizon(m, base / nreg);
+}
+
+}  // namespace
+
+void FillBelowHorizon(EnvironmentMap* m, int layer) {
+  const int S = m->sectors, nreg = m->num_regions();
+  const size_t base = static_cast<size_t>(layer) * nreg;
+  if (layer < 0 || m->radiance.size() < base + nreg || m->source.size() < base + nreg)
+    throw Error("environment map: no layer " + std::to_string(layer) + " to fill");
   auto observed = [&](int r) { return m->source[base + r] == EnvRegionSource::kObserved; };
   std::vector<bool> band_has(m->bands_below, false);
   for (int b = 0; b < m->bands_below; ++b) {
@@ -123,8 +132,6 @@ void FillLayer(const SkyModel& sky, int sky_samples, int base, EnvironmentMap* m
     }
   }
 }
-
-}  // namespace
 
 void EnvOptions::Validate() const {
   if (bands_below < 1 || bands_above < 1 || sectors < 1 || bands_below > 180 || bands_above > 180 ||
@@ -398,13 +405,20 @@ void CollectPixels(const EnvPanorama& p, const RayCaster& model, const Eigen::Ve
   tbb::parallel_for(0, nchunks, [&](int ci) {
     Chunk& ch = chunks[ci];
     for (int r = ci * chunk_rows; r < std::min(rows, (ci + 1) * chunk_rows); ++r) {
-      const int y = r * stride;
       for (int x = 0; x < pano.width; x += stride) {
-        const Eigen::Vector2d px(x + 0.5, y + 0.5);
+        // One pixel per stride x stride block, on the block's diagonal, one step further along
+        // it from block to block in either direction: every row and column of a region is read
+        // about as often. The block's first pixel alone skips rows (at the horizon, where the sky
+        // changes within a pixel or two, the region means came out 2% too bright); a block's
+        // mean would mix in the model's pixels beside its silhouette.
+        const int o = (x / stride + r) % stride;
+        const int sx = std::min(pano.width - 1, x + o);
+        const int y = std::min(pano.height - 1, r * stride + o);
+        const Eigen::Vector2d px(sx + 0.5, y + 0.5);
         bool finite = true;
         Eigen::Vector3d rad;
         for (int k = 0; k < 3; ++k) {
-          rad[k] = pano.at(x, y, k);
+          rad[k] = pano.at(sx, y, k);
           finite = finite && std::isfinite(rad[k]) && rad[k] >= 0;
         }
         if (!finite) {
@@ -461,7 +475,9 @@ EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
                                    EnvSummary* summary) {
   const auto start = std::chrono::steady_clock::now();
   options.Validate();
-  if (panoramas.empty()) throw Error("environment map: no landscape panorama given");
+  if (std::none_of(panoramas.begin(), panoramas.end(),
+                   [](const EnvPanorama& p) { return !p.sky_only; }))
+    throw Error("environment map: no landscape panorama given");
   for (size_t i = 0; i < panoramas.size(); ++i) CheckPanorama(panoramas[i], static_cast<int>(i));
   if (!sun_at.dir.allFinite() || sun_at.dir.norm() < 0.5) {
     throw Error("environment map: sun direction is not a unit vector");
@@ -475,9 +491,11 @@ EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
   const bool lit_ground = options.lit_ground && sun_at.irradiance.maxCoeff() > 0 && sun.z() > 0;
   const double ground_z = GroundLevel(model);
 
-  // Layers: the panoramas by height; those within layer_merge_m of the layer's lowest join it.
-  std::vector<int> order(panoramas.size());
-  for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
+  // Layers: the landscape panoramas by height; those within layer_merge_m of the layer's lowest
+  // join it.
+  std::vector<int> order;
+  for (size_t i = 0; i < panoramas.size(); ++i)
+    if (!panoramas[i].sky_only) order.push_back(static_cast<int>(i));
   std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
     return panoramas[a].pose.position.z() < panoramas[b].pose.position.z();
   });
@@ -512,6 +530,22 @@ EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
     region_obs.assign(nreg, Eigen::Vector3d::Zero());
     region_model = region_obs;
   }
+  // The sky photos' pixels above the horizon, per region and detail cell, for the sky regions
+  // the landscape panoramas do not see.
+  std::vector<UsedPixel> sky_used;
+  for (const EnvPanorama& p : panoramas)
+    if (p.sky_only)
+      CollectPixels(p, model, sun, cos_excl, options.pixel_stride, false, ground_z, &sky_used, &s);
+  std::vector<Eigen::Vector3d> sky_sum(nreg, Eigen::Vector3d::Zero());
+  std::vector<double> sky_wsum(nreg, 0.0);
+  std::vector<int> sky_count(nreg, 0);
+  for (const UsedPixel& u : sky_used) {
+    if (!(u.dir.z() > 0)) continue;
+    const int r = m.Region(u.dir);
+    sky_sum[r] += u.weight * u.radiance;
+    sky_wsum[r] += u.weight;
+    ++sky_count[r];
+  }
   for (int k = 0; k < layers; ++k) {
     double zsum = 0;
     std::vector<UsedPixel> used;
@@ -542,6 +576,10 @@ EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
         m.radiance[base + r] = sum[base + r] / wsum[base + r];
         m.pixel_count[base + r] = count[r];
         m.source[base + r] = EnvRegionSource::kObserved;
+      } else if (sky_count[r] >= options.min_region_pixels && sky_wsum[r] > 0) {
+        m.radiance[base + r] = sky_sum[r] / sky_wsum[r];
+        m.pixel_count[base + r] = sky_count[r];
+        m.source[base + r] = EnvRegionSource::kObserved;
       }
     }
     FillLayer(sky, options.sky_fill_samples, static_cast<int>(base), &m);
@@ -562,6 +600,18 @@ EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
     for (int k = 0; k < layers; ++k) FillLayer(sky, options.sky_fill_samples, k * nreg, &m);
   }
   if (detail) {
+    // The sky photos' pixels give the detail of the regions no landscape panorama saw.
+    std::vector<bool> landscape_saw(nreg);
+    for (int r = 0; r < nreg; ++r) landscape_saw[r] = region_model[r].maxCoeff() > 0;
+    for (const UsedPixel& u : sky_used) {
+      const int c = m.DetailCell(u.dir);
+      if (c < 0 || landscape_saw[m.RegionOfCell(c)]) continue;
+      const Eigen::Vector3d model = u.weight * sky.Radiance(u.dir);
+      cell_obs[c] += u.weight * u.radiance;
+      cell_model[c] += model;
+      region_obs[m.RegionOfCell(c)] += u.weight * u.radiance;
+      region_model[m.RegionOfCell(c)] += model;
+    }
     // Each cell's residual against the model relative to its region's; 1 where a cell or its
     // region saw nothing the model lights. Quantised to 1e-4 (as scene.json keeps it).
     m.sky_detail.assign(m.num_detail_cells(), Eigen::Vector3f::Ones());

@@ -185,18 +185,29 @@ struct EnvPanorama {
   const Image* radiance = nullptr;  // kRadiance, >= 3 channels; not owned
   Intrinsics intrinsics;
   Pose pose;
+  // A sky photo (fisheye or panorama from the mast): only its pixels above the horizon are
+  // read, for the sky regions no landscape panorama saw (the building hides them from the
+  // ground); it makes no layer.
+  bool sky_only = false;
 };
 
 // §3.3: averages HDR panoramas over the regions, one layer per panorama height (see
 // EnvOptions::layer_merge_m). Pixels whose ray from the panorama position hits the model are
 // skipped (the model is lit by interreflection), as are pixels near the sun and invalid ones;
 // ground in the model's shadow is read as sunlit (EnvOptions::lit_ground).
-// In each layer, unobserved regions above the horizon take the sky model's mean over the
-// region; below, the nearest observed region in the same band, else the nearest band with
-// observations (towards the horizon first). Throws rouen::Error for no panorama or bad input.
+// In each layer, regions above the horizon no landscape panorama saw take the sky photos'
+// (EnvPanorama::sky_only) mean there, else the sky model's mean over the region; below, the nearest
+// observed region in the same band, else the nearest band with observations (towards the horizon
+// first). Throws rouen::Error for no panorama or bad input.
 EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
                                    const RayCaster& model, const EnvSun& sun, const SkyModel& sky,
                                    const EnvOptions& options, EnvSummary* summary = nullptr);
+
+// Fills the regions below the horizon of one layer that no panorama saw (source not
+// kObserved): the nearest observed sector in the band, else the nearest band with any
+// observation (towards the horizon first); kNeighbour, or kConstant 0 when the layer saw nothing
+// below the horizon. BuildEnvironmentMap fills its maps so, and a predicted map the same way.
+void FillBelowHorizon(EnvironmentMap* m, int layer);
 
 // The shadowed/sunlit radiance ratio of horizontal ground of roughness `ground_retro`
 // (solve/retro.h; 0: Lambert) under a sky of horizontal irradiance `e_sky`

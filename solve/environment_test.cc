@@ -111,6 +111,45 @@ TEST(BuildEnvironmentMapTest, AveragesSkipsModelAndSunAndFills) {
   EXPECT_EQ(s.regions_observed + s.regions_sky + s.regions_neighbour, env.num_regions());
 }
 
+// A sky photo (EnvPanorama::sky_only) fills the sky regions the building hides from the
+// landscape panorama with what it saw there, not the sky model; regions the landscape
+// panorama saw keep its pixels, and the sky photo makes no layer. Sky photos alone are refused.
+TEST(BuildEnvironmentMapTest, ASkyPhotoFillsTheSkyTheBuildingHides) {
+  const Intrinsics k = Intrinsics::Equirect(720, 360);
+  const Pose ground = Pose::Level({0, 0, 1.6}, 0, 0), mast = Pose::Level({0, 0, 30}, 0, 0);
+  const Eigen::Vector3d sun = Dir(135, 40);
+  const Image pano = Panorama(k, ground, sun);
+  // The sky photo's sky is 5 6 7 (the landscape panorama's 1 2 4): where a region holds it, it
+  // came from the sky photo.
+  Image photo = Panorama(k, mast, sun);
+  for (int y = 0; y < k.height / 2; ++y)
+    for (int x = 0; x < k.width; ++x)
+      for (int c = 0; c < 3; ++c)
+        if (photo.at(x, y, c) < 100) photo.at(x, y, c) = static_cast<float>(5 + c);
+  // A wall due east that hides azimuths ~[63, 117] deg up to ~60 deg from the ground; the mast
+  // at 30 m sees over it.
+  Mesh m;
+  const int b = m.AddBlock("wall");
+  m.AddPolygon({{10, 5, -1}, {10, -5, -1}, {10, -5, 21}, {10, 5, 21}}, b);
+  const RayCaster rc(m);
+  SkyModel sky;
+  for (auto& ch : sky.channel) ch.Lz = 7;
+  EnvPanorama sky_photo{&photo, k, mast};
+  sky_photo.sky_only = true;
+  const EnvironmentMap env =
+      BuildEnvironmentMap({{&pano, k, ground}, sky_photo}, rc, {sun, 0.0047}, sky, EnvOptions());
+  EXPECT_EQ(env.num_layers(), 1);
+  EXPECT_NEAR(env.layer_z[0], 1.6, 1e-12);
+  const int hidden = env.Region(Dir(90, 30)), seen = env.Region(Dir(270, 30));
+  EXPECT_EQ(env.source[hidden], EnvRegionSource::kObserved);
+  EXPECT_NEAR((env.radiance[hidden] - Eigen::Vector3d(5, 6, 7)).norm(), 0, 1e-5);
+  EXPECT_NEAR((env.radiance[seen] - Eigen::Vector3d(1, 2, 4)).norm(), 0, 1e-5);
+  // Below the horizon the sky photo adds nothing: the ground behind the wall is filled from
+  // the landscape panorama's neighbours.
+  EXPECT_NEAR((env.radiance[env.Region(Dir(90, -5))] - Eigen::Vector3d(3, 3, 2)).norm(), 0, 1e-5);
+  EXPECT_THROW(BuildEnvironmentMap({sky_photo}, rc, {sun, 0.0047}, sky, EnvOptions()), Error);
+}
+
 // A photographed sky with structure the model lacks -- its lowest 5 degrees twice as bright as
 // the model says, half a band -- keeps it in the map's detail cells (EnvOptions::sky_detail):
 // each cell's shape times its region's mean is the cell's photographed mean, where uniform
@@ -362,6 +401,41 @@ TEST(BuildEnvironmentMapTest, OneLayerPerPanoramaHeight) {
                                 {Dir(90, 45), 0.0047}, sky, apart)
                 .num_layers(),
             2);
+}
+
+// pixel_stride s reads one pixel per s x s block, on the block's diagonal, one step further
+// along it from block to block: a sky striped row by row (1 and 3 alternately in the lowest band,
+// as a haze band changes within a pixel or two of the horizon) keeps the mean of every row; the
+// block's first pixel alone would read only the 1s.
+TEST(BuildEnvironmentMapTest, AStrideReadsEveryRow) {
+  const Intrinsics k = Intrinsics::Equirect(720, 360);  // 0.5 deg per pixel
+  const Pose pose = Pose::Level({0, 0, 1.6}, 0, 0);
+  Image pano(720, 360, 3, PixelUnits::kRadiance);
+  for (int y = 0; y < 360; ++y) {
+    const double el = 90 - (y + 0.5) * 0.5;
+    const double v = el < 0 ? 2.0 : el < 10 ? (y % 2 == 0 ? 1.0 : 3.0) : 5.0;
+    for (int x = 0; x < 720; ++x)
+      for (int c = 0; c < 3; ++c) pano.at(x, y, c) = static_cast<float>(v);
+  }
+  Mesh m;  // a thin pole far away (only so that the caster has something)
+  const int b = m.AddBlock("pole");
+  m.AddPolygon({{300, 0, 0}, {300.1, 0, 0}, {300.1, 0, 50}, {300, 0, 50}}, b);
+  const RayCaster rc(m);
+  SkyModel sky;
+  const EnvSun below{Dir(90, -30), 0.0047};  // no sun above the horizon to skip
+  EnvOptions o;
+  o.sky_detail = 1;
+  const EnvironmentMap full = BuildEnvironmentMap({{&pano, k, pose}}, rc, below, sky, o);
+  const int horizon = full.Region(Dir(100, 5)), high = full.Region(Dir(100, 45));
+  // Rows 0.5 deg apart weigh cos(el) each: within 0.1% of 2 below 10 deg.
+  EXPECT_NEAR(full.radiance[horizon][0], 2, 2e-3);
+  for (const int stride : {2, 4}) {
+    o.pixel_stride = stride;
+    const EnvironmentMap env = BuildEnvironmentMap({{&pano, k, pose}}, rc, below, sky, o);
+    EXPECT_NEAR(env.radiance[horizon][0], full.radiance[horizon][0], 2e-3) << stride;
+    EXPECT_NEAR(env.radiance[high][0], 5, 1e-6) << stride;
+    EXPECT_NEAR(env.radiance[env.Region(Dir(100, -5))][0], 2, 1e-6) << stride;
+  }
 }
 
 TEST(BuildEnvironmentMapTest, BadInputThrows) {

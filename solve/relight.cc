@@ -356,6 +356,28 @@ Lighting LightingPredictor::At(UtcTime utc, const Site& site, RelightSummary* su
   el.sun_solid_angle_sr = out.sun_solid_angle_sr;
   el.sky = out.sky;
   out.env = PredictEnvironment(env_, el);
+  // A sky-only fallback that does not explain its region (SkyOnlyExplains) is not carried to
+  // the new sun as a surface: the region takes its measured radiances (or what the maps filled
+  // it with from their neighbours at times no panorama saw it), weighted as the sky's times are
+  // (§5.1; by default by the sun's elevation, which sets how bright the haze and the distant
+  // ground near the horizon are, more than the sun's azimuth does).
+  const std::vector<double>& fallback_w = is.weights;
+  for (size_t gi = 0; gi < out.env.radiance.size() && gi < env_.regions.size(); ++gi) {
+    const EnvRegionFit& fit = env_.regions[gi];
+    if (fit.kind != EnvRegionKind::kSkyOnly || SkyOnlyExplains(fit, options_.env)) continue;
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    double wsum = 0;
+    for (size_t t = 0; t < measured_.size() && t < fallback_w.size(); ++t) {
+      const EnvironmentMap& m = measured_[t].env;
+      if (!(fallback_w[t] > 0) || gi >= m.radiance.size() ||
+          (m.source[gi] != EnvRegionSource::kObserved &&
+           m.source[gi] != EnvRegionSource::kNeighbour))
+        continue;
+      sum += fallback_w[t] * m.radiance[gi];
+      wsum += fallback_w[t];
+    }
+    if (wsum > 0) out.env.radiance[gi] = sum / wsum;
+  }
   out.env.ground_retro = options_.env.ground_retro;  // as the shadow on it is put back
   // Each sky region spread over itself as the new time's model is (no residual per cell: that
   // was measured at other times), at the measured maps' detail.

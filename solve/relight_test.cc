@@ -254,6 +254,50 @@ TEST(RelightTest, RegionsTheResidualExplainsAreSky) {
   EXPECT_LE(std::abs(std::remainder((brightest + 0.5) * sector - az_new, 2 * kPi)), sector);
 }
 
+// A sky-only fallback is a surface lit by the sky alone, carried to the new sun by its normal.
+// One that does not explain its region (an albedo of 8, a 40% residual: a region partly hidden
+// by the building, a haze band) would carry a surface that is not there; the region takes its
+// measured radiances instead, weighted as the sky's times are. One that explains its region
+// (albedo 0.3, 2% residual) stays a surface.
+TEST(RelightTest, ASkyOnlyFallbackThatExplainsNothingTakesItsMeasuredRadiances) {
+  std::vector<Lighting> day = Day({0.1, 0.14, 0.2}, {1e4, 1e4, 1e4});
+  const EnvironmentMap& m0 = day.front().env;
+  const size_t gi = static_cast<size_t>((m0.bands_below - 1) * m0.sectors + 2);  // below
+  for (size_t t = 0; t < day.size(); ++t) {
+    day[t].env.radiance[gi] = Eigen::Vector3d(40, 50, 60) * (1 + 0.5 * t);
+    day[t].env.source[gi] = EnvRegionSource::kObserved;
+  }
+  const EnvStereoResult fresh = LightingPredictor(day, RelightOptions{}).environment();
+  const UtcTime utc = ParseIso8601("2026-08-25T17:00:00-07:00");
+  for (const bool explains : {false, true}) {
+    EnvStereoResult stored = fresh;
+    EnvRegionFit& fit = stored.regions[gi];
+    fit = EnvRegionFit();
+    fit.kind = EnvRegionKind::kSkyOnly;
+    fit.normal = Eigen::Vector3d(0, -1, 0.2).normalized();
+    fit.rho_sky = Eigen::Vector3d::Constant(explains ? 0.3 : 8.0);
+    fit.rel_rms = explains ? 0.02 : 0.4;
+    ASSERT_EQ(SkyOnlyExplains(fit, stored.options), explains);
+    const LightingPredictor p(day, RelightOptions{}, &stored);
+    RelightSummary rs;
+    const Lighting l = p.At(utc, kSite, &rs);
+    ASSERT_EQ(rs.sky_weights.size(), day.size());
+    Eigen::Vector3d want = Eigen::Vector3d::Zero();
+    double wsum = 0;
+    for (size_t t = 0; t < day.size(); ++t) {
+      want += rs.sky_weights[t] * day[t].env.radiance[gi];
+      wsum += rs.sky_weights[t];
+    }
+    want /= wsum;
+    if (explains) {
+      // rho_sky E_sky / pi: a sky of Lz about 1 lights it with a few units, far below 40.
+      EXPECT_LT(l.env.radiance[gi].maxCoeff(), 10) << l.env.radiance[gi].transpose();
+    } else {
+      for (int c = 0; c < 3; ++c) EXPECT_NEAR(l.env.radiance[gi][c], want[c], 1e-9 * want[c]);
+    }
+  }
+}
+
 TEST(RelightTest, RefusesNightAndNoData) {
   LightingPredictor predictor(Day({0.1, 0.1, 0.1}, {1e4, 1e4, 1e4}), RelightOptions{});
   try {

@@ -68,8 +68,9 @@ TEST(BlenderWorldTest, ImportStatusSolveRenderValidate) {
   ASSERT_EQ(r.code, 0) << r.out;
   EXPECT_NE(r.out.find("solvable: yes"), std::string::npos) << r.out;
 
+  // The solve a user runs (not --quick): its held-out figures are the ones the bar is for.
   r = RunRouen("solve " + Q(session) + " --out " + Q(scene) + " --holdout-slot " +
-               std::to_string(heldout) + " --quick");
+               std::to_string(heldout));
   ASSERT_EQ(r.code, 0) << r.out;
   ASSERT_TRUE(fs::is_regular_file(scene / "scene.json")) << r.out;
 
@@ -139,18 +140,16 @@ TEST(BlenderWorldTest, ImportStatusSolveRenderValidate) {
   // held-out time at 32 dB or better on the building under either lighting, within 3% median
   // relative error under either lighting, and the lighting measured at that time not worse
   // than the lighting predicted from the other times (once it was: 23 against 29 dB). rouen
-  // scored 41-43 dB and 0.7-1.1% measured, 40-43 dB and 0.8-1.5% predicted (README.md), the
-  // two within 3% of each other's rel. RMSE; the Lambertian model of the paper scored 23-29
-  // dB. The 5% margin on "not worse" is the measured lighting's own fit error (its sky fit's
-  // p90 is 1.8%), which can leave it a little behind a prediction that lands closer by chance.
+  // scores 42.5-44.8 dB and 0.5-0.8% measured, 42.1-44.7 dB and 0.6-1.0% predicted
+  // (tests/data/blender_world/README.md), measured 0.5-5% below predicted in rel. RMSE; the
+  // Lambertian model of the paper scored 23-29 dB.
   for (const nlohmann::json& p : v["photos"]) {
     const std::string name = p["view"].get<std::string>();
     EXPECT_GE(p["measured"]["psnr_db"].get<double>(), 32) << name;
     EXPECT_GE(p["predicted"]["psnr_db"].get<double>(), 32) << name;
     EXPECT_LE(p["measured"]["median_rel_error"].get<double>(), 0.03) << name;
     EXPECT_LE(p["predicted"]["median_rel_error"].get<double>(), 0.03) << name;
-    EXPECT_LE(p["measured"]["rel_rmse"].get<double>(),
-              1.05 * p["predicted"]["rel_rmse"].get<double>())
+    EXPECT_LE(p["measured"]["rel_rmse"].get<double>(), p["predicted"]["rel_rmse"].get<double>())
         << name;
   }
   // The overall brightness: a 2x albedo error gives 2 or 0.5.
