@@ -544,10 +544,7 @@ EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
     // Below the horizon, a region no panorama saw at any time holds copies of its neighbours
     // (FillBelowHorizon): fitted, it would be their data seen from the wrong direction. It is
     // predicted as the maps fill it.
-    bool seen = false;
-    for (int t = 0; t < T; ++t)
-      seen = seen || per_time[t].env.source[gi] == EnvRegionSource::kObserved;
-    if (all_zero || (!above && !seen)) {
+    if (all_zero || (!above && res.source[gi] != EnvRegionSource::kObserved)) {
       fit.kind = EnvRegionKind::kUnobserved;
       return;
     }

@@ -116,13 +116,6 @@ enum class EnvRegionKind : uint8_t {
 
 const char* EnvRegionKindName(EnvRegionKind kind);
 
-struct EnvRegionFit;
-struct EnvStereoOptions;
-// Whether a sky-only fallback explains its region at all: an albedo within max_albedo and a
-// relative residual within fallback_rel_error. One that does not (a partly hidden region, a
-// haze band) extrapolates a surface that is not there to other suns.
-bool SkyOnlyExplains(const EnvRegionFit& fit, const EnvStereoOptions& options);
-
 struct EnvRegionFit {
   EnvRegionKind kind = EnvRegionKind::kUnobserved;
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  // unit ENU (the fallback's: fixed)
@@ -135,6 +128,11 @@ struct EnvRegionFit {
   Eigen::Vector3d to_viewer = Eigen::Vector3d::Zero();
   int iterations = 0;  // of the winning start (plus smoothing refinement)
 };
+
+// Whether a sky-only fallback explains its region at all: an albedo within max_albedo and a
+// relative residual within fallback_rel_error. One that does not (a partly hidden region, a
+// haze band) extrapolates a surface that is not there to other suns.
+bool SkyOnlyExplains(const EnvRegionFit& fit, const EnvStereoOptions& options);
 
 struct EnvStereoSummary {
   int times = 0;

@@ -387,9 +387,10 @@ void CheckPanorama(const EnvPanorama& p, int index) {
   }
 }
 
-// The panorama's usable pixels (fixed chunks of rows, concatenated in order: deterministic).
-// With `ground_shadow`, each pixel whose ray meets the ground at `ground_z` is marked when the
-// model shades that ground from the sun.
+// The panorama's usable pixels (fixed chunks of rows, concatenated in order: deterministic); a
+// sky photo's (EnvPanorama::sky_only) above the horizon only. With `ground_shadow`, each pixel
+// whose ray meets the ground at `ground_z` is marked when the model shades that ground from the
+// sun.
 void CollectPixels(const EnvPanorama& p, const RayCaster& model, const Eigen::Vector3d& sun,
                    double cos_excl, int stride, bool ground_shadow, double ground_z,
                    std::vector<UsedPixel>* used, EnvSummary* s) {
@@ -434,6 +435,7 @@ void CollectPixels(const EnvPanorama& p, const RayCaster& model, const Eigen::Ve
           ++ch.sun;
           continue;
         }
+        if (p.sky_only && !(d.z() > 0)) continue;
         if (model.Occluded(c, d, offset)) {
           ++ch.model;
           continue;
@@ -540,7 +542,6 @@ EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
   std::vector<double> sky_wsum(nreg, 0.0);
   std::vector<int> sky_count(nreg, 0);
   for (const UsedPixel& u : sky_used) {
-    if (!(u.dir.z() > 0)) continue;
     const int r = m.Region(u.dir);
     sky_sum[r] += u.weight * u.radiance;
     sky_wsum[r] += u.weight;
