@@ -10,6 +10,7 @@
 #include "core/error.h"
 #include "core/files.h"
 #include "core/image.h"
+#include "core/json_text.h"
 #include "solve/atlas.h"
 
 namespace rouen {
@@ -306,7 +307,7 @@ void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const
   j["albedo"]["sun_lobes"] = LobesJson(a.sun_lobes, m);
   j["albedo"]["sky_lobes"] = LobesJson(a.sky_lobes, m);
   j["atlas"] = WriteAlbedoAtlases(dir, scene, m);
-  WriteFileAtomic(dir / "scene.json", j.dump(1));
+  WriteFileAtomic(dir / "scene.json", JsonText(j));
 }
 
 SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGrid* grid_out) {

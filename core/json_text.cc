@@ -1,0 +1,53 @@
+#include "core/json_text.h"
+
+namespace rouen {
+namespace {
+
+bool Numbers(const nlohmann::json& a, size_t max_size) {
+  if (!a.is_array() || a.size() > max_size) return false;
+  for (const nlohmann::json& v : a)
+    if (!v.is_number()) return false;
+  return true;
+}
+
+// An array kept on one line: numbers, or arrays of at most four numbers each.
+bool OneLine(const nlohmann::json& a) {
+  if (!a.is_array() || a.empty()) return false;
+  for (const nlohmann::json& v : a)
+    if (!v.is_number() && !Numbers(v, 4)) return false;
+  return true;
+}
+
+void Write(const nlohmann::json& j, int depth, std::string* out) {
+  const std::string pad(depth + 1, ' '), close(depth, ' ');
+  if (j.is_object() && !j.empty()) {
+    *out += "{\n";
+    size_t k = 0;
+    for (const auto& [key, value] : j.items()) {
+      *out += pad + nlohmann::json(key).dump() + ": ";
+      Write(value, depth + 1, out);
+      *out += ++k < j.size() ? ",\n" : "\n";
+    }
+    *out += close + "}";
+  } else if (j.is_array() && !j.empty() && !OneLine(j)) {
+    *out += "[\n";
+    for (size_t k = 0; k < j.size(); ++k) {
+      *out += pad;
+      Write(j[k], depth + 1, out);
+      *out += k + 1 < j.size() ? ",\n" : "\n";
+    }
+    *out += close + "]";
+  } else {
+    *out += j.dump();
+  }
+}
+
+}  // namespace
+
+std::string JsonText(const nlohmann::json& j) {
+  std::string out;
+  Write(j, 0, &out);
+  return out + "\n";
+}
+
+}  // namespace rouen
