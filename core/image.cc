@@ -123,6 +123,23 @@ void CheckExrHeader(std::ifstream& in, int64_t size, int32_t version, const std:
 
 // PNG chunks after the signature: big-endian uint32 length, 4-byte type, data, CRC, up to
 // IEND. libpng allocates a chunk's claimed length before reading it.
+// A BMP's info header: RLE compression is refused. OpenImageIO 2.4's RLE decoder reads out of
+// bounds on a file whose compression and bit depth disagree (found by tests/fuzz/image_fuzz), and
+// no camera or tool rouen works with writes RLE bitmaps.
+void CheckBmpHeader(std::ifstream& in, const std::string& path) {
+  char h[34] = {};
+  in.seekg(0);
+  if (!in.read(h, sizeof h)) return;  // too short for an info header: the reader refuses it
+  const int32_t info_size = Le32(h + 14);
+  if (info_size < 40) return;  // OS/2 headers have no compression field
+  const int32_t compression = Le32(h + 30);
+  if (compression == 1 || compression == 2) {
+    throw Error(path + ": cannot read image: run-length encoded BMP (RLE" +
+                std::string(compression == 1 ? "8" : "4") +
+                ") is not supported; save it as PNG or TIFF");
+  }
+}
+
 void CheckPngChunks(std::ifstream& in, int64_t size, const std::string& path) {
   in.seekg(8);
   unsigned char head[8];
@@ -184,6 +201,8 @@ std::unique_ptr<OIIO::ImageInput> OpenImageFile(const std::string& path, const c
     CheckExrHeader(in, size, Le32(magic + 4), path);
   } else if (reader == "png") {
     CheckPngChunks(in, size, path);
+  } else if (reader == "bmp") {
+    CheckBmpHeader(in, path);
   }
   // Only that reader: OpenImageIO would otherwise hand a file its reader refuses to every
   // other one it has (movies, DICOM, SGI, ...), far more code than rouen's formats need.

@@ -314,6 +314,27 @@ TEST_F(ImageTest, PngChunkClaimingMoreThanTheFileIsRefused) {
   EXPECT_EQ(ReadImage(P("ok.png")).width, 4);  // a whole PNG passes
 }
 
+TEST_F(ImageTest, RunLengthEncodedBmpIsRefusedNamingTheFile) {
+  // Found by tests/fuzz/image_fuzz: a 76-byte 24-bit BMP whose header says RLE8 made
+  // OpenImageIO's decoder read out of bounds (a crash). RLE bitmaps are refused before it runs;
+  // an uncompressed BMP still reads.
+  const std::string crash(
+      "BM\x86\0\0\0\0\x84\0\0\x36\0\0\0\x28\0\0\0\x06\0\0\0\x04\0\0\0\x01\0\x18\0"
+      "\x01\0\0\0\0\0\0\xa4\x77\x6f\x80\x77\x6f\x80\x77\x6f\0\0\x66\x4d\x36\x66\x4d\x33"
+      "\x66\x4d\x33\x66\x4d\0\0\x01\x33\0\0\0\0\xa4\x66\x4d\x33\x66\x4d\x33\0\0",
+      76);
+  WriteFileAtomic(P("rle.bmp"), crash);
+  try {
+    ReadImage(P("rle.bmp"));
+    ADD_FAILURE() << "read";
+  } catch (const Error& e) {
+    EXPECT_EQ(std::string(e.what()).rfind(P("rle.bmp") + ": cannot read image: run-length", 0), 0u)
+        << e.what();
+  }
+  WriteImage(P("plain.bmp"), Ramp(6, 4, 3, PixelUnits::kDigital, 100.f), StoredType::kUint8);
+  EXPECT_EQ(ReadImage(P("plain.bmp")).width, 6);
+}
+
 TEST_F(ImageTest, ReadsTiledAndScanlineFilesInBands) {
   // More samples than one band (internal::kBandSamples): the bands join seamlessly.
   const Image img = Ramp(1500, 1000, 3, PixelUnits::kRadiance, 4.f);
