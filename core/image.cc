@@ -121,8 +121,6 @@ void CheckExrHeader(std::ifstream& in, int64_t size, int32_t version, const std:
   }
 }
 
-// PNG chunks after the signature: big-endian uint32 length, 4-byte type, data, CRC, up to
-// IEND. libpng allocates a chunk's claimed length before reading it.
 // A BMP's info header: RLE compression is refused. OpenImageIO 2.4's RLE decoder reads out of
 // bounds on a file whose compression and bit depth disagree (found by tests/fuzz/image_fuzz), and
 // no camera or tool rouen works with writes RLE bitmaps.
@@ -140,6 +138,8 @@ void CheckBmpHeader(std::ifstream& in, const std::string& path) {
   }
 }
 
+// PNG chunks after the signature: big-endian uint32 length, 4-byte type, data, CRC, up to
+// IEND. libpng allocates a chunk's claimed length before reading it.
 void CheckPngChunks(std::ifstream& in, int64_t size, const std::string& path) {
   in.seekg(8);
   unsigned char head[8];

@@ -361,20 +361,19 @@ Lighting LightingPredictor::At(UtcTime utc, const Site& site, RelightSummary* su
   // it with from their neighbours at times no panorama saw it), weighted as the sky's times are
   // (§5.1; by default by the sun's elevation, which sets how bright the haze and the distant
   // ground near the horizon are, more than the sun's azimuth does).
-  const std::vector<double>& fallback_w = is.weights;
   for (size_t gi = 0; gi < out.env.radiance.size() && gi < env_.regions.size(); ++gi) {
     const EnvRegionFit& fit = env_.regions[gi];
     if (fit.kind != EnvRegionKind::kSkyOnly || SkyOnlyExplains(fit, options_.env)) continue;
     Eigen::Vector3d sum = Eigen::Vector3d::Zero();
     double wsum = 0;
-    for (size_t t = 0; t < measured_.size() && t < fallback_w.size(); ++t) {
+    for (size_t t = 0; t < measured_.size() && t < is.weights.size(); ++t) {
       const EnvironmentMap& m = measured_[t].env;
-      if (!(fallback_w[t] > 0) || gi >= m.radiance.size() ||
+      if (!(is.weights[t] > 0) || gi >= m.radiance.size() ||
           (m.source[gi] != EnvRegionSource::kObserved &&
            m.source[gi] != EnvRegionSource::kNeighbour))
         continue;
-      sum += fallback_w[t] * m.radiance[gi];
-      wsum += fallback_w[t];
+      sum += is.weights[t] * m.radiance[gi];
+      wsum += is.weights[t];
     }
     if (wsum > 0) out.env.radiance[gi] = sum / wsum;
   }
