@@ -35,13 +35,15 @@ void Log(const ImportOptions& o, const std::string& s) {
 constexpr double kSlotGapSeconds = 30 * 60;
 constexpr double kBaseIso = 100;
 
-// One line of the list: "image seconds [ISO-time] [group=NAME] [target=T] [nd=D|nd=R,G,B]".
+// One line of the list: "image seconds [ISO-time] [group=NAME] [target=T[+T...]] [nd=D|nd=R,G,B]".
 struct ListEntry {
   std::string name;  // relative to --photos
   std::optional<double> seconds;
   std::optional<UtcTime> utc;
   std::string group;
-  std::optional<Target> target;
+  // What the photo shows; several (target=landscape+sky: one panorama from the ground is both
+  // the landscape and the sky photo) import it once per target. Empty: ImportOptions::target.
+  std::vector<Target> targets;
   double nd_density = 0;                        // the filter's optical density (mean)
   std::optional<std::array<double, 3>> nd_rgb;  // per channel, when given so
   std::string where;                            // "<list>:<line>", for messages
@@ -145,11 +147,20 @@ std::vector<ListEntry> ReadImportList(const std::string& list) {
       } else if (w.rfind("nd=", 0) == 0) {
         ParseNd(w.substr(3), where, &e);
       } else if (w.rfind("target=", 0) == 0) {
-        try {
-          e.target = ParseTarget(w.substr(7));
-        } catch (const Error& err) {
-          throw Error(where + ": " + err.what());
+        if (!e.targets.empty()) throw Error(where + ": target= given twice");
+        std::stringstream ts(w.substr(7));
+        std::string t;
+        while (std::getline(ts, t, '+')) {
+          try {
+            e.targets.push_back(ParseTarget(t));
+          } catch (const Error& err) {
+            throw Error(where + ": " + err.what());
+          }
+          if (std::count(e.targets.begin(), e.targets.end(), e.targets.back()) > 1)
+            throw Error(where + ": " + w + ": target '" + t + "' named twice");
         }
+        if (e.targets.empty() || w.back() == '+')
+          throw Error(where + ": " + w + ": expected target=T or target=T+T (e.g. landscape+sky)");
       } else if (!e.utc && i == 2) {
         try {
           e.utc = ParseIso8601(w);
@@ -269,17 +280,25 @@ std::vector<Photo> PlanImport(const ImportOptions& o, std::vector<std::string>* 
                   "list's third column, or give --time)");
     }
     p.group = le ? le->group : "";
-    p.target = le && le->target ? *le->target : o.target;
     if (le) {
       p.nd_density = le->nd_density;
       p.nd_rgb = le->nd_rgb;
     }
-    photos.push_back(std::move(p));
+    const std::vector<Target> targets =
+        le && !le->targets.empty() ? le->targets : std::vector<Target>{o.target};
+    for (size_t t = 0; t < targets.size(); ++t) {
+      p.target = targets[t];
+      if (t + 1 < targets.size()) {
+        photos.push_back(p);
+      } else {
+        photos.push_back(std::move(p));
+      }
+    }
   }
 
   // Slots: clusters of capture times separated by more than 30 minutes.
   std::sort(photos.begin(), photos.end(), [](const Photo& x, const Photo& y) {
-    return std::tie(x.utc, x.name) < std::tie(y.utc, y.name);
+    return std::tie(x.utc, x.name, x.target) < std::tie(y.utc, y.name, y.target);
   });
   int slot = 0;
   for (size_t i = 0; i < photos.size(); ++i) {

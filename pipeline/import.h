@@ -42,7 +42,8 @@ namespace rouen {
 struct ImportOptions {
   std::filesystem::path photos;  // folder of photos
   // List file: "image seconds [ISO-time] [group=NAME] [target=T] [nd=D | nd=R,G,B]" per line
-  // (seconds may be a fraction 1/250 or '-' for EXIF; images relative to `photos`).
+  // (seconds may be a fraction 1/250 or '-' for EXIF; images relative to `photos`; target=T+T
+  // imports the photo once per target, e.g. landscape+sky).
   std::filesystem::path list;
   // Cameras file (JSON): {"<image>" | "group=<NAME>" | "*": {"intrinsics": {...} | "lens":
   // "LENS.json", "pose": {...} | "POSE.json"}}: an image's own entry, else its list group's,

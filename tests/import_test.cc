@@ -259,6 +259,56 @@ TEST(ImportTest, TimezoneSlotsGroupsPosesAndExr) {
   fs::remove_all(dir);
 }
 
+// One panorama from the ground is the landscape and the sky photo of its slot: listed with
+// target=landscape+sky it is imported once per target, the same pixels and time in both.
+TEST(ImportTest, OnePhotoForTwoTargets) {
+  const fs::path dir = TempDir("twotargets");
+  const fs::path photos = dir / "photos";
+  fs::create_directories(photos);
+  Image pano(16, 8, 3, PixelUnits::kRadiance);
+  for (size_t i = 0; i < pano.data.size(); ++i) pano.data[i] = 0.5f + 0.125f * (i % 7);
+  WriteImage((photos / "pano.exr").string(), pano, StoredType::kFloat);
+  WriteImage((photos / "arch.exr").string(), pano, StoredType::kFloat);
+  WriteText(dir / "list.txt",
+            "pano.exr 1 2024-06-21T07:00:00Z group=pano target=landscape+sky\n"
+            "arch.exr 1 2024-06-21T07:00:10Z group=front\n");
+  const fs::path out = dir / "s";
+  Result r = RunRouen("import --photos " + Q(photos) + " --list " + Q(dir / "list.txt") +
+                      " --site 48.8566,2.3522,35 --out " + Q(out));
+  ASSERT_EQ(r.code, 0) << r.out;
+  const Session s = Session::Load(out);
+  ASSERT_EQ(s.frames().size(), 3u);
+  const auto sources = SourcesById(s);
+  std::map<Target, FrameRecord> pano_by;
+  for (const FrameRecord& f : s.frames())
+    if (sources.at(f.id).at("source") == "pano.exr") pano_by[f.target] = f;
+  ASSERT_EQ(pano_by.size(), 2u);
+  ASSERT_TRUE(pano_by.count(Target::kLandscape) && pano_by.count(Target::kSky));
+  EXPECT_EQ(pano_by[Target::kLandscape].group, "slot0/landscape/view0");
+  EXPECT_EQ(pano_by[Target::kSky].group, "slot0/sky/view0");
+  EXPECT_EQ(pano_by[Target::kSky].utc, pano_by[Target::kLandscape].utc);
+  for (const auto& [target, f] : pano_by) {
+    const Image back = s.LoadFrame(f);
+    ASSERT_EQ(back.data.size(), pano.data.size());
+    for (size_t i = 0; i < pano.data.size(); ++i) EXPECT_EQ(back.data[i], pano.data[i]);
+  }
+  // A target named twice, an empty one, or an unknown one is refused by line.
+  for (const auto& [target, needle] :
+       {std::pair{"sky+sky", "list.txt:1: target=sky+sky: target 'sky' named twice"},
+        std::pair{"landscape+", "list.txt:1: target=landscape+: expected target=T or target=T+T"},
+        std::pair{"landscape+roof", "list.txt:1:"}}) {
+    SCOPED_TRACE(target);
+    WriteText(dir / "list.txt",
+              std::string("pano.exr 1 2024-06-21T07:00:00Z target=") + target + "\n");
+    r = RunRouen("import --photos " + Q(photos) + " --list " + Q(dir / "list.txt") +
+                 " --site 48.8566,2.3522,35 --out " + Q(dir / "bad"));
+    EXPECT_EQ(r.code, 1) << r.out;
+    EXPECT_NE(r.out.find(needle), std::string::npos) << r.out;
+    EXPECT_FALSE(fs::exists(dir / "bad"));
+  }
+  fs::remove_all(dir);
+}
+
 // A minimal uncompressed 16-bit Bayer (RGGB) DNG of a uniform grey field: black level 256,
 // white level 4095, stored value black + level * (white - black), identity colour matrix and
 // a neutral as-shot white balance, with ExposureTime, FNumber and ISO in an EXIF sub-IFD.
