@@ -771,8 +771,10 @@ FrameRecord SessionWriter::Append(FrameRecord meta, const Image& pixels) {
   if (meta.hdr) {
     type = StoredType::kHalf;
     for (float v : pixels.data) {
-      if (std::abs(v) > kHalfMax) {
-        type = StoredType::kFloat;  // beyond half range: keep full precision
+      // Beyond half range, or rounding to its maximum (a float above 65488 becomes 65504, the
+      // value a half frame clips at, which the sun's measurement refuses): full precision.
+      if (std::abs(v) > kHalfMax - 16) {
+        type = StoredType::kFloat;
         break;
       }
     }

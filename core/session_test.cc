@@ -185,6 +185,23 @@ TEST_F(SessionTest, RoundTrip) {
   }
 }
 
+// An HDR frame whose largest value would round to the half-float maximum (65499.5 -> 65504,
+// where a half frame clips and the sun's measurement refuses the disc) keeps full precision.
+TEST_F(SessionTest, HdrNearTheHalfMaximumIsNotRoundedToIt) {
+  SessionWriter w = SessionWriter::Create(dir_, Info());
+  Image near = Pixels(true, 1);
+  near.data[5] = 65499.5f;
+  w.Append(Meta(Target::kSun, true, 0), near);
+  Image below = Pixels(true, 1);
+  below.data[5] = 65400.f;  // a half value's neighbourhood, far from the maximum: half
+  w.Append(Meta(Target::kSun, true, 0), below);
+  const Session s = Session::Load(dir_);
+  EXPECT_EQ(s.LoadFrame(s.frames()[0]).data[5], 65499.5f);
+  const float back = s.LoadFrame(s.frames()[1]).data[5];
+  EXPECT_NEAR(back, 65400.f, 32.f);
+  EXPECT_LT(back, 65504.f);
+}
+
 TEST_F(SessionTest, ResumeContinuesIdsAndCleansUp) {
   WriteThree();
   WriteFileAtomic(dir_ / "frames" / "000004.png.tmp-99-0.png", "partial");

@@ -118,7 +118,9 @@ SunMeasurement MeasureSun(const Image& hdr, const Intrinsics& k, const Pose& pos
       const double val = hdr.data[p * hdr.channels + (hdr.channels == 1 ? 0 : ch)];
       const bool finite = std::isfinite(val) && val >= 0;
       v[ch] = finite ? val : 0.0;
-      ok = ok && finite && !(clip > 0 && std::abs(val - clip) <= 1e-4 * clip);
+      // At the clip value itself (within float rounding), not merely near it: a float frame's
+      // rim pixel may read 65499.5 (the next half below 65504 is 65472).
+      ok = ok && finite && !(clip > 0 && std::abs(val - clip) <= 1e-6 * clip);
     }
     if (good) *good = ok;
     return v;

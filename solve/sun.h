@@ -24,8 +24,9 @@ struct SunOptions {
   double disc_min_pixels = 2.5;           // integrate within at least this many pixels
   double annulus_inner_min_pixels = 2.0;  // annulus from at least disc window + this many
   double annulus_outer_min_pixels = 6.0;  // to at least disc window + this many pixels
-  // Pixels with a channel at this value (relative 1e-4) are clipped, not radiance: the largest
-  // half float, where a panorama stored as half EXR saturates. 0 turns the test off.
+  // Pixels with a channel at this value (relative 1e-6: float rounding) are clipped, not
+  // radiance: the largest half float, where a panorama stored as half EXR saturates (a float32
+  // frame's values near it are radiance). 0 turns the test off.
   double clip_radiance = 65504.0;
   int centroid_iterations = 8;
 

@@ -468,6 +468,15 @@ TEST(MeasureSun, ClippedPanoramaSunIsFlagged) {
   for (float& v : scaled.data) v *= 0.5f;
   EXPECT_FALSE(MeasureSun(scaled, k, pose, sun.dir, sun.SolidAngle(), opt).any_invalid);
   EXPECT_TRUE(MeasureSun(scaled, k, pose, sun.dir, sun.SolidAngle(), opt, &mask).any_invalid);
+  // A float32 frame whose disc pixels happen to read just below the half maximum (65499.5; the
+  // half below 65504 is 65472) is radiance, not clipped.
+  Image near = r.image;
+  for (size_t p = 0; p < mask.size(); ++p) {
+    if (!mask[p]) near.data[p * 3 + 1] = 65499.5f;
+  }
+  for (float& v : near.data)
+    if (v == 65504.f) v = 65499.5f;
+  EXPECT_FALSE(MeasureSun(near, k, pose, sun.dir, sun.SolidAngle(), opt).any_invalid);
   // Infinite (overflowed) disc pixels.
   Image inf = unclipped;
   for (size_t p = 0; p < mask.size(); ++p) {
