@@ -306,13 +306,15 @@ def mesh_object(name, polys, mat):
     return ob
 
 
-def tree_object(name, x, y, crown_mat, trunk_mat):
-    bpy.ops.mesh.primitive_cylinder_add(vertices=12, radius=0.25, depth=3.2, location=(x, y, 1.6))
+def tree_object(name, x, y, crown_mat, trunk_mat, trunk_r=0.25, trunk_h=3.2, crown_r=2.5,
+                crown_z=5.0):
+    bpy.ops.mesh.primitive_cylinder_add(vertices=12, radius=trunk_r, depth=trunk_h,
+                                        location=(x, y, 0.5 * trunk_h))
     trunk = bpy.context.active_object
     trunk.name = name + "_trunk"
     trunk.data.materials.append(trunk_mat)
-    bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=10, radius=2.5,
-                                         location=(x, y, 5.0))
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=10, radius=crown_r,
+                                         location=(x, y, crown_z))
     crown = bpy.context.active_object
     crown.name = name + "_crown"
     crown.data.materials.append(crown_mat)
@@ -360,27 +362,10 @@ def ground_patch_object(name, box, patch, ground_mat, patch_mat):
     return ob
 
 
-def build_scene(blocks, lambert=False, ground_patch=False):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+def nishita_world(altitude_m=SITE["height_m"]):
+    """Cycles' Nishita sky with its sun disc as the world, the only light, for a site at
+    altitude_m; returns its node (the caller sets sun_elevation and sun_rotation per time)."""
     sc = bpy.context.scene
-    mats = {n: material(n, s, lambert)
-            for n, s in {**BLOCK_MATERIALS, **SURROUNDING_MATERIALS}.items()}
-    building = [mesh_object("building_" + n, p, mats[n]) for n, p in blocks.items()]
-    others = []
-    for name, (mat, _, geo) in SURROUNDINGS.items():
-        if name == "ground" and ground_patch:
-            others.append(ground_patch_object(name, geo["box"], GROUND_PATCH, mats[mat],
-                                              material("ground_patch", GROUND_PATCH, lambert)))
-        elif "box" in geo:
-            x0, x1, y0, y1, z0, z1 = geo["box"]
-            if z0 == z1:
-                polys = [[(x0, y0, z0), (x1, y0, z0), (x1, y1, z0), (x0, y1, z0)]]
-            else:
-                polys = box_polygons(x0, x1, y0, y1, z0, z1)
-            others.append(mesh_object(name, polys, mats[mat]))
-        else:
-            others.extend(tree_object(name, *geo["tree"], mats["crown"], mats["trunk"]))
-
     world = bpy.data.worlds.new("sky")
     sc.world = world
     world.use_nodes = True
@@ -390,7 +375,7 @@ def build_scene(blocks, lambert=False, ground_patch=False):
     sky.sun_disc = True
     sky.sun_size = math.radians(SUN_DIAMETER_DEG)
     sky.sun_intensity = 1.0
-    sky.altitude = SITE["height_m"]
+    sky.altitude = altitude_m
     sky.air_density = 1.0
     sky.dust_density = 1.0
     sky.ozone_density = 1.0
@@ -398,7 +383,12 @@ def build_scene(blocks, lambert=False, ground_patch=False):
     nt.nodes["Background"].inputs["Strength"].default_value = 1.0
     world.cycles.sampling_method = "MANUAL"
     world.cycles.sample_map_resolution = 2048
+    return sky
 
+
+def setup_render():
+    """Cycles on the CPU, linear scene radiance out: the settings every frame is rendered with."""
+    sc = bpy.context.scene
     sc.render.engine = "CYCLES"
     c = sc.cycles
     c.device = "CPU"
@@ -440,6 +430,30 @@ def build_scene(blocks, lambert=False, ground_patch=False):
     s = sc.render.image_settings
     s.file_format = "OPEN_EXR"
     s.color_mode = "RGB"
+
+
+def build_scene(blocks, lambert=False, ground_patch=False):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    mats = {n: material(n, s, lambert)
+            for n, s in {**BLOCK_MATERIALS, **SURROUNDING_MATERIALS}.items()}
+    building = [mesh_object("building_" + n, p, mats[n]) for n, p in blocks.items()]
+    others = []
+    for name, (mat, _, geo) in SURROUNDINGS.items():
+        if name == "ground" and ground_patch:
+            others.append(ground_patch_object(name, geo["box"], GROUND_PATCH, mats[mat],
+                                              material("ground_patch", GROUND_PATCH, lambert)))
+        elif "box" in geo:
+            x0, x1, y0, y1, z0, z1 = geo["box"]
+            if z0 == z1:
+                polys = [[(x0, y0, z0), (x1, y0, z0), (x1, y1, z0), (x0, y1, z0)]]
+            else:
+                polys = box_polygons(x0, x1, y0, y1, z0, z1)
+            others.append(mesh_object(name, polys, mats[mat]))
+        else:
+            others.extend(tree_object(name, *geo["tree"], mats["crown"], mats["trunk"]))
+
+    sky = nishita_world()
+    setup_render()
     return building, others, sky
 
 
@@ -809,4 +823,5 @@ def main():
           flush=True)
 
 
-main()
+if __name__ == "__main__":
+    main()
