@@ -100,6 +100,7 @@ SceneSolve SolveToScene(const Session& session, const PipelineOptions& options, 
   scene.env_ground_retro = solved.env_ground_retro;
   scene.env_stereo = solved.env_stereo;
   scene.env_stereo_slots = solved.env_stereo_slots;
+  scene.ground_field = solved.ground_field;
   scene.model_file = "model.obj";
   for (const auto& [name, g] : calib.groups)
     scene.views[name] = SceneView{g.slot, TargetName(g.target), g.utc, g.intrinsics, g.pose};
@@ -208,6 +209,7 @@ LoadedScene LoadScene(const fs::path& dir, const std::function<void(const std::s
   r.solved.env_ground_retro = r.scene.env_ground_retro;
   r.solved.env_stereo = std::move(r.scene.env_stereo);
   r.solved.env_stereo_slots = r.scene.env_stereo_slots;
+  r.solved.ground_field = r.scene.ground_field;
   r.scene.env_stereo.reset();
   r.scene.albedo = AlbedoResult{};
   for (size_t s = 0; s < r.scene.slots.size(); ++s) {
@@ -216,6 +218,7 @@ LoadedScene LoadScene(const fs::path& dir, const std::function<void(const std::s
     ss.utc = r.scene.slots[s].utc;
     ss.sun = ComputeSunPosition(ss.utc, r.scene.site);
     ss.lighting = r.scene.slots[s].ToLighting();
+    ss.lighting.ground = r.solved.ground_field;
     r.solved.slots.push_back(std::move(ss));
   }
   Log(log, "scene " + dir.string() + ": " + std::to_string(r.solved.slots.size()) + " slots, " +

@@ -708,6 +708,31 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   }
   clock.Lap("environment ground reflection");
 
+  // Beyond §3.3: the ground as a light field, from the landscape panoramas of the slots the
+  // albedos use (a held-out slot's photos do not shape what predicts it).
+  if (options.config.ground_field.enabled) {
+    std::vector<GroundFieldTime> times;
+    for (size_t k = 0; k < r.slots.size(); ++k) {
+      if (std::find(env_slot_ids.begin(), env_slot_ids.end(), r.slots[k].slot) ==
+          env_slot_ids.end())
+        continue;
+      const Lighting& l = r.slots[k].lighting;
+      times.push_back({slot_panoramas[k], l.sun_dir, l.sun_radiance * l.sun_solid_angle_sr,
+                       l.env.HorizontalSkyIrradiance()});
+    }
+    GroundFieldSummary gs;
+    r.ground_field = std::make_shared<const GroundField>(
+        BuildGroundField(times, env_caster, r.env_ground_retro, options.config.ground_field, &gs));
+    for (SlotSolve& ss : r.slots) ss.lighting.ground = r.ground_field;
+    Log(options, "ground field: " + std::to_string(gs.cells_observed) + " of " +
+                     std::to_string(gs.cells) + " cells of " +
+                     std::to_string(options.config.ground_field.cell_m) + " m seen in " +
+                     std::to_string(gs.pixels_used) + " panorama pixels (" +
+                     std::to_string(gs.pixels_model) + " on the model, " +
+                     std::to_string(gs.pixels_far) + " beyond the field)");
+    clock.Lap("ground field");
+  }
+
   // Surface grid and geometry-only visibility, computed once.
   r.grid = BuildSurfaceGrid(r.mesh, options.config.grid);
   r.hemisphere = BuildHemisphereCache(r.grid, *r.caster, options.config.hemisphere);

@@ -119,6 +119,8 @@ struct SolveResult {
   // The environment's photometric stereo fitted with it, from these slots (SceneModel).
   std::optional<EnvStereoResult> env_stereo;
   std::vector<int> env_stereo_slots;
+  // The ground as a light field (SolveConfig::ground_field), shared by every slot's lighting.
+  std::shared_ptr<const GroundField> ground_field;
 };
 
 // Sun, sky and environment per slot; irradiance at the surface grid; pseudo-albedos from the

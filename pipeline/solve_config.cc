@@ -150,6 +150,7 @@ void SolveConfig::Validate() const {
     throw Error("response.max_brackets must be within 1..1000");
   sky_fit.Validate();
   environment.Validate();
+  ground_field.Validate();
   albedo.Validate();  // the model the vector-flux irradiance needs is given at solve time
 }
 
@@ -201,6 +202,7 @@ json SolveConfigJson(const SolveConfig& c) {
             {"lit_ground", c.environment.lit_ground},
             {"sky_detail", c.environment.sky_detail},
             {"fit_ground_retro", c.fit_ground_retro}}},
+          {"ground_field", c.ground_field},
           {"albedo",
            {{"loss", NameOf(a.loss, kLosses)},
             {"huber_k", a.huber_k},
@@ -311,6 +313,17 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
     f.Bool("lit_ground", &e.lit_ground);
     f.Int("sky_detail", &e.sky_detail, 1, 64);
     f.Bool("fit_ground_retro", &c.fit_ground_retro);
+    f.Finish();
+  }
+  if (const json* t = root.Table("ground_field")) {
+    Fields f(*t, where, "ground_field");
+    GroundFieldOptions& g = c.ground_field;
+    f.Bool("enabled", &g.enabled);
+    f.Number("cell_m", &g.cell_m, 0.05, 100);
+    f.Number("radius_factor", &g.radius_factor, 0, 100);
+    f.Number("min_radius_m", &g.min_radius_m, 0, 1e5);
+    f.Int64("max_cells", &g.max_cells, 1, int64_t{1} << 30);
+    f.Int("sky_rays", &g.sky_rays, 1, 4096);
     f.Finish();
   }
   if (const json* t = root.Table("albedo")) {

@@ -31,6 +31,10 @@ struct SolveConfig {
   // cannot follow exactly, from pulling the rest of the fit (bench/sky_bench.cc).
   SkyFitOptions sky_fit;
   EnvOptions environment;  // §3.3
+  // Beyond §3.3: the ground around the model as a light field (solve/ground_field.h): the
+  // landscape panoramas re-projected onto it, lit per time with the model's cast shadow, seen
+  // from where each grid point stands. Off by default.
+  GroundFieldOptions ground_field;
   // Beyond §5.2: fit how roughly the ground below the horizon reflects the sun (the scene's
   // environment.ground_retro, used when the environment is predicted for a novel time).
   bool fit_ground_retro = true;
@@ -48,7 +52,8 @@ nlohmann::json SolveConfigJson(const SolveConfig& config);
 // throw rouen::Error naming `where` and the key path (e.g. "solve.toml: sky_fit.norm_p").
 SolveConfig ApplySolveConfig(const nlohmann::json& j, SolveConfig base, const std::string& where);
 // The same from a TOML file (tables as in SolveConfigJson: [grid], [grid.block_spacing_m],
-// [ground], [hemisphere], [response], [sky_fit], [environment], [albedo], [albedo.irradiance]).
+// [ground], [hemisphere], [response], [sky_fit], [environment], [ground_field], [albedo],
+// [albedo.irradiance]).
 SolveConfig ReadSolveConfigFile(const std::string& path, const SolveConfig& base);
 // The options a session's solve starts from: the defaults with the session's own
 // (session.json extra.solve_config, e.g. from its rig's [solve] table) applied; errors name

@@ -55,6 +55,7 @@ std::vector<ShadedTerms> ShadedTermsOf(const SolveResult& solved, const Lighting
                                        const SlotIrradiance& irr, const std::vector<int>& blocks,
                                        const std::function<void(const std::string&)>& log) {
   Lighting sky_only = measured;
+  sky_only.ground.reset();  // the ground's light field is below the horizon too
   EnvironmentMap& env = sky_only.env;
   const int below = env.bands_below * env.sectors;
   for (int k = 0; k < env.num_layers(); ++k)

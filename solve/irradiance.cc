@@ -233,6 +233,10 @@ struct LightingSetup {
     return GroundShadowRatio(lighting->env.ground_retro, ground_e_sky, sun_e, lighting->sun_dir,
                              view);
   }
+  // Lighting::ground lit at this time, and (vector flux) the map with nothing below the horizon:
+  // the regions above it by the vector flux, the ground by the hemisphere cache's directions.
+  std::unique_ptr<GroundLight> ground;
+  EnvironmentMap above_only;
   int layout = -1;                            // vector flux, environment: index into the layouts
   std::unique_ptr<SkyTreeRadiance> sky_tree;  // vector flux, sky model
   // The environment's regions above the horizon spread by the sky's shape (EnvOptions::
@@ -318,8 +322,20 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
         ls.disc.push_back((s + rr * (std::cos(phi) * t + std::sin(phi) * b)).normalized());
       }
     }
-    ls.ground_shadow =
-        options.ground_shadow && lighting.use_env && s.z() > 0 && n > 0 && ls.sun_e.maxCoeff() > 0;
+    if (lighting.use_env && lighting.ground) {
+      ls.ground = std::make_unique<GroundLight>(*lighting.ground, model, s, ls.sun_e,
+                                                lighting.env.HorizontalSkyIrradiance());
+      if (vector_flux) {
+        ls.above_only = lighting.env;
+        const int below = ls.above_only.bands_below * ls.above_only.sectors;
+        for (int k = 0; k < ls.above_only.num_layers(); ++k)
+          for (int r = 0; r < below; ++r)
+            ls.above_only.radiance[static_cast<size_t>(k) * ls.above_only.num_regions() + r]
+                .setZero();
+      }
+    }
+    ls.ground_shadow = options.ground_shadow && lighting.use_env && !ls.ground && s.z() > 0 &&
+                       n > 0 && ls.sun_e.maxCoeff() > 0;
     if (ls.ground_shadow) {
       ls.ground_e_sky = lighting.env.HorizontalSkyIrradiance();
       if (vector_flux) {
@@ -379,6 +395,23 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
     std::vector<Eigen::Vector3d> escaped, dirs;
     std::vector<int> regions, cells;
     const EnvironmentMap* regions_of = nullptr;
+    // The ground's light field (Lighting::ground) at point i by the hemisphere cache's escaped
+    // directions below the horizon, found once per point: (pi / K) sum of L.
+    std::vector<Eigen::Vector3d> ground_dirs;
+    int ground_dirs_of = -1;
+    auto ground_light = [&](int i, const GridPoint& p, const Eigen::Vector3d& origin,
+                            const GroundLight& g) {
+      if (ground_dirs_of != i) {
+        ground_dirs.clear();
+        cache.Directions(p, i, &dirs);
+        for (int k = 0; k < K; ++k)
+          if (cache.Hit(i, k) == -1 && dirs[k].z() < 0) ground_dirs.push_back(dirs[k]);
+        ground_dirs_of = i;
+      }
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      for (const Eigen::Vector3d& d : ground_dirs) sum += g.Arriving(origin, d);
+      return Eigen::Vector3d(sum * (kPi / K));
+    };
     for (int i = range.begin(); i < range.end(); ++i) {
       const GridPoint& p = grid.points[i];
       const Eigen::Vector3d origin = p.position + offset * p.normal;
@@ -416,6 +449,12 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
             continue;
           }
           const EnvironmentView& view = views[ls.layout];
+          if (ls.ground) {
+            out[li].direct_se[i] =
+                EnvironmentIrradiance(view, ls.above_only, p.position.z(), ls.shaped.get()) +
+                ground_light(i, p, origin, *ls.ground);
+            continue;
+          }
           Eigen::Vector3d e =
               EnvironmentIrradiance(view, ls.lighting->env, p.position.z(), ls.shaped.get());
           if (ls.ground_shadow && origin.z() > ground_z && !view.pieces.empty()) {
@@ -455,6 +494,7 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
                                   ? env.RegionRadiance(regions[k], p.position.z())
                                   : ls.lighting->EscapedRadiance(d, p.position.z());
           if (ls.shape) l = l.cwiseProduct(ls.shape->OfCell(cells[k]));
+          if (ls.ground && d.z() < 0) l = ls.ground->Arriving(origin, d);
           if (ls.ground_shadow && d.z() < -1e-3 && origin.z() > ground_z) {
             const Eigen::Vector3d q = origin + ((origin.z() - ground_z) / -d.z()) * d;
             if (model.Occluded(q + Eigen::Vector3d(0, 0, offset), s, 0.0)) {

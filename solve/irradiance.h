@@ -7,12 +7,14 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "core/mesh.h"
 #include "core/time.h"
 #include "solve/environment.h"
 #include "solve/grid.h"
+#include "solve/ground_field.h"
 #include "solve/raycast.h"
 #include "solve/sky_model.h"
 #include "solve/vector_flux.h"
@@ -30,6 +32,10 @@ struct Lighting {
   // true: escaped directions take env.Radiance (which holds the observed sky and landscape);
   // false: the sky model above the horizon and nothing below.
   bool use_env = true;
+  // With use_env: the ground as a light field (solve/ground_field.h), shared by every time;
+  // escaped directions below the horizon take it lit at this time instead of the map's regions
+  // there (and the map's ground shadow). Null: the map's directions alone.
+  std::shared_ptr<const GroundField> ground;
 
   double SunAngularRadius() const;  // radians, from the solid angle
   // Radiance arriving at height z (ENU metres) from direction `dir` when nothing of the model

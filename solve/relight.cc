@@ -402,6 +402,7 @@ Lighting LightingPredictor::At(UtcTime utc, const Site& site, RelightSummary* su
     }
   }
   out.use_env = true;
+  out.ground = measured_.front().ground;  // the ground's albedos hold at any time
   if (!out.sun_radiance.allFinite() || out.sun_radiance.minCoeff() < 0)
     throw Error("relight: the predicted sun radiance is not finite");
   if (summary) *summary = rs;

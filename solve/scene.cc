@@ -281,6 +281,7 @@ void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const
   j["environment"] = {{"ground_retro", scene.env_ground_retro}};
   if (scene.env_stereo)
     j["environment"]["stereo"] = {{"slots", scene.env_stereo_slots}, {"fit", *scene.env_stereo}};
+  if (scene.ground_field) j["environment"]["ground_field"] = *scene.ground_field;
   j["timings"] = scene.timings;
   j["provenance"] = {{"inputs_sha256", scene.inputs_sha256},
                      {"rouen_version", scene.rouen_version},
@@ -391,6 +392,14 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
           throw Error("environment.stereo: fitted from " +
                       std::to_string(scene.env_stereo->summary.times) + " times but names " +
                       std::to_string(scene.env_stereo_slots.size()) + " slots");
+      }
+      if (j.at("environment").contains("ground_field")) {
+        try {
+          scene.ground_field = std::make_shared<const GroundField>(
+              j.at("environment").at("ground_field").get<GroundField>());
+        } catch (const Error& e) {
+          throw Error(std::string("environment.ground_field: ") + e.what());
+        }
       }
     }
     if (j.contains("provenance")) {

@@ -7,6 +7,7 @@
 #include <Eigen/Core>
 #include <filesystem>
 #include <map>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -22,6 +23,7 @@
 #include "solve/environment.h"
 #include "solve/grid.h"
 #include "solve/ground_apron.h"
+#include "solve/ground_field.h"
 #include "solve/irradiance.h"
 #include "solve/sky_model.h"
 
@@ -69,6 +71,9 @@ struct SceneModel {
   // again. Absent when the solve did not fit it (scenes from before, fit_ground_retro off).
   std::optional<EnvStereoResult> env_stereo;
   std::vector<int> env_stereo_slots;
+  // The ground as a light field (SolveConfig::ground_field), every slot's lighting shares it;
+  // null without it.
+  std::shared_ptr<const GroundField> ground_field;
   std::string model_file;  // OBJ, relative to the scene folder
   std::map<std::string, SceneView> views;
   std::vector<int> holdout_slots;  // slots whose architecture photos the albedos did not use

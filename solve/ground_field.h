@@ -1,0 +1,105 @@
+// The ground around the building as a light field (beyond Yu & Malik 1998; §3.3 notes that a
+// large building needs more than one environment map, "the surrounding light field is a four
+// dimensional distribution"). A panorama at eye height sees the ground at grazing angles, a
+// wall 40 m up sees it at 30-70 deg and farther out, and the two see different ground: one map
+// of directions cannot light both. Here the landscape panoramas' pixels below the horizon are
+// re-projected onto the level ground around the model, and each becomes an albedo: its radiance
+// over what lights that spot of ground at its time -- the sun unless the model shades it (from
+// the geometry), the sky the model leaves it -- through the ground's rough diffuse reflection
+// (solve/retro.h), pooled per plan cell over every time. A grid point then sees, along each
+// direction that meets the ground, that albedo lit at the time being rendered and seen from
+// where the point stands: the model's cast shadow where it lies at that time, the sun's grazing
+// reflection towards the point, not towards the panorama.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <nlohmann/json_fwd.hpp>
+#include <vector>
+
+#include "solve/environment.h"
+#include "solve/raycast.h"
+
+namespace rouen {
+
+struct GroundFieldOptions {
+  bool enabled = false;  // false: the ground is the environment map's directions (§3.3)
+  double cell_m = 2.0;   // plan cell size, metres
+  // The field reaches this far beyond the model's footprint: radius_factor x the model's height
+  // above the ground, at least min_radius_m (a wall sees the ground within a few heights of it
+  // under most of its solid angle).
+  double radius_factor = 3.0;
+  double min_radius_m = 60.0;
+  int64_t max_cells = int64_t{1} << 22;  // refused beyond (memory: 20 bytes a cell)
+  // Rays per cell for the sky the model leaves the ground (cosine-weighted over the hemisphere).
+  int sky_rays = 64;
+  void Validate() const;  // throws rouen::Error naming the bad field
+};
+
+// One time's panoramas and what lit the ground then.
+struct GroundFieldTime {
+  std::vector<EnvPanorama> panoramas;  // landscape panoramas (sky_only ones are skipped)
+  Eigen::Vector3d sun_dir = Eigen::Vector3d::UnitZ();  // unit ENU
+  Eigen::Vector3d sun_e = Eigen::Vector3d::Zero();     // sun radiance x solid angle, RGB
+  Eigen::Vector3d sky_e = Eigen::Vector3d::Zero();     // sky irradiance on level open ground
+};
+
+struct GroundField {
+  double level_z = 0;     // the ground's height (GroundLevel)
+  double x0 = 0, y0 = 0;  // plan corner of cell (0, 0), metres
+  double cell_m = 2;
+  int nx = 0, ny = 0;
+  double retro = 0;                     // the ground's rough diffuse reflection (solve/retro.h)
+  std::vector<Eigen::Vector3f> albedo;  // per cell (row-major in y), observed or filled
+  std::vector<uint8_t> observed;        // per cell: 1 when some panorama pixel fell in it
+  std::vector<float> sky_visibility;    // per cell: the part of the sky the model leaves it
+  Eigen::Vector3d far_albedo = Eigen::Vector3d::Zero();  // beyond the cells
+
+  bool empty() const { return nx == 0 || ny == 0; }
+  int Cell(double x, double y) const;  // -1 outside
+  Eigen::Vector3d CellCentre(int cell) const;
+  Eigen::Vector3d Albedo(int cell) const {
+    return cell < 0 ? far_albedo : albedo[cell].cast<double>();
+  }
+  void Validate() const;  // throws rouen::Error when sizes disagree or values are not finite
+};
+
+struct GroundFieldSummary {
+  int cells = 0, cells_observed = 0;
+  int64_t pixels_used = 0, pixels_model = 0, pixels_far = 0;
+  double seconds = 0;
+};
+
+// Re-projects every time's landscape panorama pixels below the horizon onto the level ground
+// (GroundLevel of `model`), skipping those whose ray meets the model first, and pools their
+// albedo per cell: per time the mean, over the times the median. Cells no pixel fell in take the
+// nearest observed cell's albedo; beyond the cells, the median of the observed cells at the
+// field's rim. Throws rouen::Error for bad options or when no pixel meets the ground.
+GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const RayCaster& model,
+                             double retro, const GroundFieldOptions& options,
+                             GroundFieldSummary* summary = nullptr);
+
+// The ground at one time: the field lit by a sun and a sky, the model's shadow per cell.
+class GroundLight {
+ public:
+  GroundLight(const GroundField& field, const RayCaster& model, const Eigen::Vector3d& sun_dir,
+              const Eigen::Vector3d& sun_e, const Eigen::Vector3d& sky_e);
+  // Radiance leaving ground point q (on the ground plane) towards unit direction `to_viewer`.
+  Eigen::Vector3d Radiance(const Eigen::Vector3d& q, const Eigen::Vector3d& to_viewer) const;
+  // Radiance arriving from unit direction d (d.z < 0) at `origin` (above the ground), the ray
+  // assumed to meet nothing of the model before the ground.
+  Eigen::Vector3d Arriving(const Eigen::Vector3d& origin, const Eigen::Vector3d& d) const;
+  const GroundField& field() const { return *field_; }
+
+ private:
+  const GroundField* field_;
+  Eigen::Vector3d sun_dir_, sun_e_, sky_e_;
+  std::vector<uint8_t> shadow_;  // per cell, 1: the model hides the sun from its centre
+};
+
+void to_json(nlohmann::json& j, const GroundFieldOptions& o);
+void from_json(const nlohmann::json& j, GroundFieldOptions& o);  // validates; missing keys keep
+void to_json(nlohmann::json& j, const GroundField& f);
+void from_json(const nlohmann::json& j, GroundField& f);  // validates
+
+}  // namespace rouen

@@ -1,0 +1,200 @@
+#include "solve/ground_field.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "core/angles.h"
+#include "core/error.h"
+#include "solve/irradiance.h"
+#include "solve/retro.h"
+#include "solve/test_scenes.h"
+
+namespace rouen {
+namespace {
+
+Eigen::Vector3d SunAt(double az_deg, double el_deg) {
+  const double a = az_deg * kDeg, e = el_deg * kDeg;
+  return {std::cos(e) * std::sin(a), std::cos(e) * std::cos(a), std::sin(e)};
+}
+
+// The ground's albedo in the test world: 0.2 0.3 0.4 west of x = 0, 0.5 0.4 0.3 east of it.
+Eigen::Vector3d TrueAlbedo(const Eigen::Vector3d& q) {
+  return q.x() < 0 ? Eigen::Vector3d(0.2, 0.3, 0.4) : Eigen::Vector3d(0.5, 0.4, 0.3);
+}
+
+// An equirect panorama at `eye` of a sunlit rough ground (retro) with the model's cast shadow,
+// no sky light: each pixel below the horizon the ground's radiance along its ray, the model's
+// pixels 7 (not ground), the sky 1.
+Image RenderPanorama(const RayCaster& model, const Eigen::Vector3d& eye, const Intrinsics& k,
+                     const Pose& pose, const Eigen::Vector3d& sun, double sun_e, double retro) {
+  Image im(k.width, k.height, 3, PixelUnits::kRadiance);
+  for (int y = 0; y < k.height; ++y) {
+    for (int x = 0; x < k.width; ++x) {
+      const Eigen::Vector3d d = pose.rotation * Unproject(k, Eigen::Vector2d(x + 0.5, y + 0.5));
+      Eigen::Vector3d l = Eigen::Vector3d::Ones();
+      const RayHit h = model.Intersect(eye, d);
+      if (h.hit && (d.z() >= 0 || h.t < eye.z() / -d.z())) {
+        l.setConstant(7);
+      } else if (d.z() < 0) {
+        const Eigen::Vector3d q = eye + (eye.z() / -d.z()) * d;
+        const bool lit = !model.Occluded(q + Eigen::Vector3d(0, 0, 1e-3), sun, 0.0);
+        l = TrueAlbedo(q) *
+            (lit ? sun_e * sun.z() * RetroFactor(retro, {0, 0, 1}, sun, -d) / kPi : 0.0);
+      }
+      for (int c = 0; c < 3; ++c) im.at(x, y, c) = static_cast<float>(l[c]);
+    }
+  }
+  return im;
+}
+
+TEST(GroundFieldTest, PanoramaPixelsBecomeTheGroundsAlbedoWhereTheModelLeavesThem) {
+  Mesh m;
+  testing::AddBox(&m, {-5, -5, 0}, {5, 5, 30}, m.AddBlock("tower"));
+  const RayCaster model(m);
+  Intrinsics k;
+  k.projection = Projection::kEquirect;
+  k.width = 360;
+  k.height = 180;
+  const Eigen::Vector3d eye(0, -30, 1.7);
+  const Pose pose = Pose::Level(eye, 0, 0);
+  const double retro = 0.5, sun_e = 100;
+  // Two times: the tower's shadow falls north-west, then north-east; no sky light, so ground in
+  // the shadow gives nothing and is seen sunlit at the other time.
+  std::vector<Image> images;
+  std::vector<GroundFieldTime> times;
+  for (const Eigen::Vector3d& sun : {SunAt(120, 35), SunAt(230, 40)})
+    images.push_back(RenderPanorama(model, eye, k, pose, sun, sun_e, retro));
+  const Eigen::Vector3d suns[2] = {SunAt(120, 35), SunAt(230, 40)};
+  for (int t = 0; t < 2; ++t) {
+    GroundFieldTime gt;
+    gt.panoramas.push_back({&images[t], k, pose});
+    gt.sun_dir = suns[t];
+    gt.sun_e = Eigen::Vector3d::Constant(sun_e);
+    times.push_back(gt);
+  }
+  GroundFieldOptions o;
+  o.cell_m = 1;
+  o.min_radius_m = 40;
+  o.radius_factor = 1;
+  GroundFieldSummary s;
+  const GroundField f = BuildGroundField(times, model, retro, o, &s);
+  EXPECT_GT(s.pixels_model, 0);
+  EXPECT_GT(s.pixels_used, 1000);
+  EXPECT_EQ(f.level_z, 0);
+  // Every observed cell holds its side's albedo (a cell straddling x = 0 the mix of both), up to
+  // float rounding: the model and the renderer agree exactly.
+  int checked = 0;
+  for (int c = 0; c < f.nx * f.ny; ++c) {
+    if (!f.observed[c]) continue;
+    const Eigen::Vector3d q = f.CellCentre(c);
+    if (std::abs(q.x()) < 1) continue;
+    EXPECT_LT((f.Albedo(c) - TrueAlbedo(q)).cwiseAbs().maxCoeff(), 1e-4) << q.transpose();
+    ++checked;
+  }
+  EXPECT_GT(checked, 500);
+  // The ground the tower hides from the panorama (north of it) was not observed; it is filled.
+  const int behind = f.Cell(0.5, 20);
+  ASSERT_GE(behind, 0);
+  EXPECT_EQ(f.observed[behind], 0);
+  EXPECT_GT(f.Albedo(behind).minCoeff(), 0.19);
+  // The sky the tower leaves: most of it at 30 m, little more than half at its foot.
+  EXPECT_GT(f.sky_visibility[f.Cell(0.5, -35)], 0.9);
+  EXPECT_LT(f.sky_visibility[f.Cell(0.5, -5.5)], 0.7);
+
+  // Lit at the first time, the field gives the panorama's pixels back, the shadow included.
+  const GroundLight g(f, model, suns[0], Eigen::Vector3d::Constant(sun_e), Eigen::Vector3d::Zero());
+  for (int y = 95; y < 180; y += 7) {
+    for (int x = 0; x < 360; x += 11) {
+      const Eigen::Vector3d d = pose.rotation * Unproject(k, Eigen::Vector2d(x + 0.5, y + 0.5));
+      if (model.Intersect(eye, d).hit) continue;
+      const Eigen::Vector3d q = eye + (eye.z() / -d.z()) * d;
+      const int c = f.Cell(q.x(), q.y());
+      if (c < 0 || !f.observed[c] || std::abs(q.x()) < 1) continue;
+      // The shadow is taken per cell: near its edge a pixel and its cell's centre may differ.
+      const Eigen::Vector3d want(images[0].at(x, y, 0), images[0].at(x, y, 1),
+                                 images[0].at(x, y, 2));
+      const Eigen::Vector3d got = g.Arriving(eye, d);
+      if (want.maxCoeff() > 0 && got.maxCoeff() > 0)
+        EXPECT_NEAR(got.x() / want.x(), 1.0, 0.03) << x << " " << y;
+    }
+  }
+
+  // The JSON round trip keeps every cell.
+  const GroundField back = nlohmann::json(f).get<GroundField>();
+  EXPECT_EQ(back.nx, f.nx);
+  EXPECT_EQ(back.albedo[behind], f.albedo[behind]);
+  EXPECT_EQ(back.sky_visibility, f.sky_visibility);
+  EXPECT_EQ(back.far_albedo, f.far_albedo);
+}
+
+TEST(GroundFieldTest, BadInputIsRefusedByName) {
+  Mesh m;
+  testing::AddBox(&m, {-5, -5, 0}, {5, 5, 30}, m.AddBlock("tower"));
+  const RayCaster model(m);
+  GroundFieldOptions o;
+  o.cell_m = 0;
+  EXPECT_THROW(BuildGroundField({}, model, 0, o), Error);
+  o = GroundFieldOptions{};
+  o.max_cells = 10;
+  try {
+    BuildGroundField({}, model, 0, o);
+    ADD_FAILURE() << "too many cells were accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("max_cells"), std::string::npos) << e.what();
+  }
+  // No panorama pixel meets the ground.
+  try {
+    BuildGroundField({}, model, 0, GroundFieldOptions{});
+    ADD_FAILURE() << "a field without pixels was accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("no landscape panorama pixel"), std::string::npos);
+  }
+  nlohmann::json j = nlohmann::json(GroundField{});
+  j["albedo"] = {1, 2};
+  EXPECT_THROW(j.get<GroundField>(), Error);
+}
+
+// A vertical wall sees the level ground below its horizon under half its projected solid angle:
+// a uniform Lambertian ground lit by the sun alone gives it rho E_h / 2, E_h the sun's
+// irradiance on the ground, by either irradiance method.
+TEST(GroundFieldTest, AWallSeesHalfOfAUniformGround) {
+  Mesh m;
+  const int b = m.AddBlock("wall");
+  m.AddPolygon({{0, 0, 0}, {4, 0, 0}, {4, 0, 20}, {0, 0, 20}}, b);  // normal -y
+  GridOptions go;
+  go.spacing_m = 2;
+  const SurfaceGrid g = BuildSurfaceGrid(m, go);
+  const RayCaster rc(m);
+  const HemisphereCache cache = BuildHemisphereCache(g, rc);
+  auto field = std::make_shared<GroundField>();
+  field->cell_m = 4;
+  field->nx = field->ny = 100;
+  field->x0 = field->y0 = -200;
+  field->albedo.assign(10000, Eigen::Vector3f(0.3f, 0.3f, 0.3f));
+  field->observed.assign(10000, 1);
+  field->sky_visibility.assign(10000, 1.f);
+  field->far_albedo = Eigen::Vector3d::Constant(0.3);
+  Lighting l;
+  l.sun_dir = SunAt(180, 30);  // from the south: the wall's shadow falls behind it
+  l.sun_radiance = Eigen::Vector3d::Constant(1e5);
+  l.sky = testing::UniformSkyModel(0);
+  l.env = EnvironmentMap::Constant(EnvOptions{}, Eigen::Vector3d::Zero(), Eigen::Vector3d::Ones());
+  l.ground = field;
+  const double e_h = 1e5 * l.sun_solid_angle_sr * 0.5;
+  IrradianceOptions mc, vf;
+  vf.method = IrradianceMethod::kVectorFlux;
+  vf.mesh = &m;
+  for (const IrradianceOptions& o : {mc, vf}) {
+    const SlotIrradiance irr = ComputeIrradiance(g, cache, rc, l, o);
+    double mean = 0;
+    for (int i = 0; i < g.size(); ++i) mean += irr.direct_se[i].x() / g.size();
+    // The cache's 256 stratified directions: half of each azimuth ring below the horizon (up to
+    // one of its 16 strata on the boundary).
+    EXPECT_NEAR(mean, 0.3 * e_h / 2, 0.3 * e_h / 32);
+  }
+}
+
+}  // namespace
+}  // namespace rouen
