@@ -377,8 +377,10 @@ std::vector<SkySample> ExtractSkySamples(const Image& hdr, const std::vector<uin
   const Eigen::Vector3d sun = sun_dir.normalized();
   const double z0 = std::sin(options.min_elevation_deg * kDeg);
 
-  // Equal-area cells: azimuth x z (z = sin elevation is uniform in solid angle).
-  const double cells = std::max(64.0, static_cast<double>(options.max_samples));
+  // Equal-area cells: azimuth x z (z = sin elevation is uniform in solid angle); about one
+  // per sample, never more than there are pixels.
+  const double cells = std::clamp(static_cast<double>(options.max_samples), 64.0,
+                                  std::max(64.0, static_cast<double>(np)));
   const double step = std::sqrt(2 * kPi * (1 - z0) / cells);
   const int n_az = std::max(1, static_cast<int>(std::ceil(2 * kPi / step)));
   const int n_z = std::max(1, static_cast<int>(std::ceil((1 - z0) / step)));
@@ -395,8 +397,10 @@ std::vector<SkySample> ExtractSkySamples(const Image& hdr, const std::vector<uin
     return (pose.rotation * Unproject(intrinsics, Eigen::Vector2d(x + 0.5, y + 0.5))).normalized();
   };
 
-  // Every pixel is a candidate (a lattice would miss small masked regions): its cell, or -1.
+  // Every pixel is a candidate (a lattice would miss small masked regions): its cell (or -1)
+  // and its solid angle.
   std::vector<int32_t> cell_of(np, -1);
+  std::vector<float> omega(np, 0.f);
   tbb::parallel_for(0, hdr.height, [&](int y) {
     for (int x = 0; x < hdr.width; ++x) {
       const size_t p = static_cast<size_t>(y) * hdr.width + x;
@@ -410,16 +414,21 @@ std::vector<SkySample> ExtractSkySamples(const Image& hdr, const std::vector<uin
       const int ia = std::min(n_az - 1, static_cast<int>(az / (2 * kPi) * n_az));
       const int iz = std::min(n_z - 1, static_cast<int>((d.z() - z0) / (1 - z0) * n_z));
       cell_of[p] = iz * n_az + ia;
+      omega[p] = static_cast<float>(PixelSolidAngle(intrinsics, x, y));
     }
   });
   std::vector<size_t> count(n_cells, 0);
+  std::vector<double> cell_omega(n_cells, 0);
   size_t total = 0;
-  for (int32_t c : cell_of) {
-    if (c >= 0) ++count[static_cast<size_t>(c)], ++total;
+  for (size_t p = 0; p < np; ++p) {
+    if (cell_of[p] < 0) continue;
+    ++count[static_cast<size_t>(cell_of[p])];
+    cell_omega[static_cast<size_t>(cell_of[p])] += omega[p];
+    ++total;
   }
 
-  // Equal shares: every cell keeps min(count, level) candidates, the level the largest whose
-  // sum fits max_samples; the remainder one more each in cells with candidates left, in a random
+  // Equal shares: every cell keeps min(count, level) samples, the level the largest whose sum
+  // fits max_samples; the remainder one more each in cells with candidates left, in a random
   // cell order.
   std::mt19937_64 rng(options.seed);
   std::vector<size_t> occupied;
@@ -433,7 +442,7 @@ std::vector<SkySample> ExtractSkySamples(const Image& hdr, const std::vector<uin
     for (size_t i : occupied) sum += std::min(count[i], level);
     return sum;
   };
-  size_t lo = 0, hi = *std::max_element(count.begin(), count.end());
+  size_t lo = 0, hi = total == 0 ? 0 : *std::max_element(count.begin(), count.end());
   while (lo < hi) {  // the largest level with kept_at(level) <= want
     const size_t mid = (lo + hi + 1) / 2;
     if (kept_at(mid) <= want) {
@@ -449,36 +458,52 @@ std::vector<SkySample> ExtractSkySamples(const Image& hdr, const std::vector<uin
     if (extra > 0 && count[i] > lo) ++quota[i], --extra;
   }
 
-  // Within a cell, a uniformly random subset of its quota (selection sampling in pixel order);
-  // weight = the pixel's solid angle / the share of the cell's candidates kept.
-  std::vector<std::vector<SkySample>> bins(n_cells);
-  std::vector<size_t> left = count;
+  // A cell that keeps every candidate weighs each by its solid angle. Otherwise its quota is
+  // drawn in proportion to solid angle, systematically in pixel order (thresholds at (j + u)
+  // cell solid angle / quota, u random per cell), each draw standing for that share of the
+  // cell's solid angle (a pixel drawn twice: twice the weight).
   std::uniform_real_distribution<double> u(0, 1);
+  std::vector<double> next(n_cells, 0), run(n_cells, 0);
+  for (size_t i : occupied) next[i] = u(rng) * cell_omega[i] / static_cast<double>(quota[i]);
+  std::vector<std::vector<SkySample>> bins(n_cells);
   for (int y = 0; y < hdr.height; ++y) {
     for (int x = 0; x < hdr.width; ++x) {
       const size_t p = static_cast<size_t>(y) * hdr.width + x;
       if (cell_of[p] < 0) continue;
       const size_t c = static_cast<size_t>(cell_of[p]);
-      const size_t need = quota[c] - bins[c].size();
-      if (need > 0 && u(rng) * static_cast<double>(left[c]) < static_cast<double>(need)) {
-        SkySample s;
-        s.dir = direction_at(x, y);
-        radiance_at(p, &s.radiance);
-        s.weight = PixelSolidAngle(intrinsics, x, y) * static_cast<double>(count[c]) /
-                   static_cast<double>(quota[c]);
-        bins[c].push_back(s);
+      if (quota[c] == 0) continue;
+      double weight = 0;
+      if (quota[c] == count[c]) {
+        weight = omega[p];
+      } else {
+        const double share = cell_omega[c] / static_cast<double>(quota[c]);
+        run[c] += omega[p];
+        while (next[c] < run[c]) {
+          weight += share;
+          next[c] += share;
+        }
       }
-      --left[c];
+      if (weight == 0) continue;
+      SkySample s;
+      s.dir = direction_at(x, y);
+      radiance_at(p, &s.radiance);
+      s.weight = weight;
+      bins[c].push_back(s);
     }
   }
 
   // Round-robin over the cells (random order), so that any prefix is spread evenly too.
   std::vector<SkySample> out;
   out.reserve(want);
-  for (size_t round = 0; out.size() < want; ++round) {
+  for (size_t round = 0;; ++round) {
+    bool any = false;
     for (size_t i : occupied) {
-      if (round < bins[i].size()) out.push_back(bins[i][round]);
+      if (round < bins[i].size()) {
+        out.push_back(bins[i][round]);
+        any = true;
+      }
     }
+    if (!any) break;
   }
   return out;
 }

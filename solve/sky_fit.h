@@ -40,12 +40,12 @@ bool InSkyFitRegion(const Eigen::Vector3d& dir, const Eigen::Vector3d& sun,
 // `valid_mask` (width x height, nonzero = valid; may be null), with finite positive radiance in
 // every channel. Every such pixel is a candidate; at most max_samples are kept, spread evenly
 // over solid angle: equal-area cells in azimuth x sin(elevation) get equal shares (a cell with
-// fewer candidates gives all of them), drawn at random within a cell. Each sample's weight is
-// its pixel's solid angle divided by the share of its cell's candidates kept, so the samples
-// weigh the sky by solid angle whatever the projection's pixel density (an equirect's rows
-// near the zenith hold many pixels per steradian) and however the cap thins them. Concatenate
-// the results of several photos to fit them together. Throws rouen::Error for a wrong image
-// or mask.
+// fewer candidates gives all of them, each weighing its pixel's solid angle); within a cell
+// the share is drawn in proportion to solid angle, each draw weighing the cell's solid angle /
+// its share. So the samples weigh the sky by solid angle whatever the projection's pixel
+// density (an equirect's rows near the zenith hold many pixels per steradian) and however the
+// cap thins them; a pixel drawn twice comes once with twice the weight. Concatenate the results
+// of several photos to fit them together. Throws rouen::Error for a wrong image or mask.
 std::vector<SkySample> ExtractSkySamples(const Image& hdr, const std::vector<uint8_t>* valid_mask,
                                          const Intrinsics& intrinsics, const Pose& pose,
                                          const Eigen::Vector3d& sun_dir,
