@@ -37,7 +37,8 @@ struct SkyFitArgs {
   int max_samples = 20000;
   int min_directions = SkyFitOptions{}.min_directions;
   double min_spread = SkyFitOptions{}.min_spread_deg;
-  double norm_p = 0;  // 0: the solve's default
+  double norm_p = 0;    // 0: the solve's default
+  double norm_eps = 0;  // 0: the solve's default
   bool no_segment = false;
 };
 
@@ -174,6 +175,7 @@ void RunFit(const SkyFitArgs& a) {
     throw Error("sky fit: --weighting '" + a.weighting + "' is not one of paper, relative");
   }
   if (a.norm_p > 0) fo.norm_p = a.norm_p;
+  if (a.norm_eps > 0) fo.norm_eps = a.norm_eps;
   fo.min_directions = a.min_directions;
   fo.min_spread_deg = a.min_spread;
   fo.Validate();
@@ -234,6 +236,7 @@ void RunFit(const SkyFitArgs& a) {
   }
   j["weighting"] = fo.weighting == SkyWeighting::kPaper ? "paper" : "relative";
   j["norm_p"] = fo.norm_p;
+  j["norm_eps"] = fo.norm_eps;
   if (csv) {
     j["samples_file"] = a.samples;
     j["directions_left_out"] = in.left_out;
@@ -387,6 +390,10 @@ void RegisterSky(CLI::App& app) {
                 "Exponent p of the residuals' norm: 2 is eq. 10's least squares, 1 (the "
                 "default, as in rouen solve) is robust to regions eq. 9 cannot follow")
       ->check(Within(1, 16));
+  c->add_option("--norm-eps", f->norm_eps,
+                "Relative error below which the norm is smoothed to a square (default 0.005, as "
+                "in rouen solve; scipy's soft_l1 with f_scale 0.01 is 0.01)")
+      ->check(Within(1e-6, 0.1));
   c->add_option("--min-elevation", f->min_elevation, "Skip samples below this elevation, deg")
       ->check(Within(0, 89, "deg"));
   c->add_option("--sun-exclusion", f->sun_exclusion, "Skip samples this close to the sun, deg")
