@@ -3,6 +3,10 @@
 // based skies (capture/sim/atmosphere.h, the demo's atmosphere and site) at the demo's five
 // times of day. Accuracy is scored like `rouen demo`'s sky_rel_error_*: |fit - truth| / truth
 // per channel over 2000 even directions above 3 deg elevation, more than 3 deg from the sun.
+// Then rouen against scipy (bench/sky_fit_scipy.py, the same samples and weights): the demo's
+// skies clear and hazy, hazy skies with a low sun (turbidity 2.5-6, sun 5-30 deg), and the real
+// sky-scanner scans of ../shared/data/sky-scans (also painted into a panorama and fitted from
+// it, solid-angle weights against every pixel alike).
 // ROUEN_SKY_BENCH_STUDY=1 adds an error study: fit error on noise-free truth per objective
 // (eq. 10, relative, p-norms) for three atmospheres (visibility 35, 15, 80 km) with the tail
 // broken down by slot, elevation, sun distance and channel; then the sampling error of the
@@ -31,8 +35,11 @@
 #include "capture/sim/atmosphere.h"
 #include "capture/sim/sim_world.h"
 #include "core/angles.h"
+#include "core/camera.h"
+#include "core/image.h"
 #include "core/solar.h"
 #include "core/stats.h"
+#include "core/text.h"
 #include "core/time.h"
 #include "solve/sky_fit.h"
 
@@ -427,56 +434,52 @@ void PrintPhotoStudy() {
   }
 }
 
-// The peer: scipy.optimize.least_squares fitting the same model (bench/sky_fit_scipy.py) on the
-// same 20000 samples of each sky, the demo's five skies at visibility 35 km and the same five
-// times in haze (15 km). Both fits are scored against the truth as PrintAccuracy scores them;
-// times are wall times of the fit alone (rouen: FitSky with the pipeline's options; scipy:
-// the three channels' fits, measured inside Python, without its start-up and parsing).
-void CompareWithScipy() {
-  namespace fs = std::filesystem;
-  const fs::path script = fs::path(ROUEN_SOURCE_DIR) / "bench" / "sky_fit_scipy.py";
+// The peer: scipy.optimize.least_squares fitting the same model (bench/sky_fit_scipy.py).
+std::string PeerPython() {
   // Debian's python3 (python3-scipy) first: a python3 earlier on PATH may lack scipy.
-  std::string python;
   for (const char* candidate : {"/usr/bin/python3", "python3"}) {
     const std::string probe = std::string(candidate) + " -c 'import scipy.optimize' 2>/dev/null";
-    if (std::system(probe.c_str()) == 0) {
-      python = candidate;
-      break;
-    }
+    if (std::system(probe.c_str()) == 0) return candidate;
   }
+  return "";
+}
+
+// One sky of a comparison: its samples (with their weights) and the directions and radiances
+// both fits are scored at (|fit - truth| / truth per channel).
+struct Case {
+  std::string name;
+  double sun_elevation_deg = 0;
+  Eigen::Vector3d sun;
+  std::vector<SkySample> samples;
+  std::vector<Eigen::Vector3d> score_dirs, score_truth;
+};
+
+// The peer's fit of every case (the same samples and weights), and its wall time per case; an
+// empty result when the peer is missing or did not answer every case (said on stdout).
+struct PeerFit {
+  SkyModel model;
+  double seconds = 0;
+  bool complete = true;
+};
+std::vector<PeerFit> RunPeer(const std::vector<Case>& cases) {
+  namespace fs = std::filesystem;
+  const std::string python = PeerPython();
   if (python.empty()) {
     std::printf(
         "\nsky fit vs scipy: skipped (no python3 with scipy: apt-get install python3-scipy)\n");
-    return;
+    return {};
   }
-  struct Case {
-    std::string name;
-    TruthSky sky;
-    std::vector<SkySample> samples;
-  };
-  std::vector<Case> cases;
-  AtmosphereParams hazy;
-  hazy.visibility_km = 15;
-  for (const auto& [label, params] :
-       {std::pair<std::string, AtmosphereParams>{"clear", AtmosphereParams{}}, {"hazy", hazy}}) {
-    for (TruthSky& t : Skies(params)) {
-      Case c;
-      c.name = label + "_" + t.label;
-      c.samples = Samples(t, 20000, 13);
-      c.sky = std::move(t);
-      cases.push_back(std::move(c));
-    }
-  }
+  const fs::path script = fs::path(ROUEN_SOURCE_DIR) / "bench" / "sky_fit_scipy.py";
   const fs::path input = fs::temp_directory_path() / "rouen_sky_bench_samples.txt";
   {
     std::ofstream out(input);
+    out.precision(9);
     for (const Case& c : cases) {
-      out << "sky " << c.name << " " << c.sky.sun.x() << " " << c.sky.sun.y() << " "
-          << c.sky.sun.z() << " " << c.samples.size() << "\n";
-      out.precision(9);
+      out << "sky " << c.name << " " << c.sun.x() << " " << c.sun.y() << " " << c.sun.z() << " "
+          << c.samples.size() << "\n";
       for (const SkySample& k : c.samples)
         out << k.dir.x() << " " << k.dir.y() << " " << k.dir.z() << " " << k.radiance.x() << " "
-            << k.radiance.y() << " " << k.radiance.z() << "\n";
+            << k.radiance.y() << " " << k.radiance.z() << " " << k.weight << "\n";
     }
   }
   std::vector<nlohmann::json> peer;
@@ -486,83 +489,269 @@ void CompareWithScipy() {
     while (std::fgets(line, sizeof line, p)) peer.push_back(nlohmann::json::parse(line));
     pclose(p);
   }
-  std::filesystem::remove(input);
+  fs::remove(input);
   if (peer.size() != cases.size()) {
     std::printf("\nsky fit vs scipy: the peer answered %zu of %zu skies\n", peer.size(),
                 cases.size());
-    return;
+    return {};
   }
-  // The peer's fits, scored once.
-  std::vector<SkyModel> theirs(cases.size());
-  std::vector<bool> complete(cases.size(), true);
+  std::vector<PeerFit> out(cases.size());
   for (size_t k = 0; k < cases.size(); ++k) {
-    theirs[k].sun_dir = cases[k].sky.sun;
+    out[k].model.sun_dir = cases[k].sun;
+    out[k].seconds = peer[k]["seconds"].get<double>();
     for (int ch = 0; ch < 3; ++ch) {
       const nlohmann::json& q = peer[k]["channels"][ch];
       if (q.is_null()) {
-        complete[k] = false;
+        out[k].complete = false;
         continue;
       }
-      SkyParams& sp = theirs[k].channel[ch];
+      SkyParams& sp = out[k].model.channel[ch];
       double* fields[] = {&sp.Lz, &sp.a, &sp.b, &sp.c, &sp.d, &sp.e, &sp.h};
       for (int i = 0; i < 7; ++i) *fields[i] = q[i].get<double>();
     }
   }
+  return out;
+}
+
+std::vector<double> CaseErrors(const SkyModel& fit, const Case& c) {
+  std::vector<double> err;
+  for (size_t i = 0; i < c.score_dirs.size(); ++i) {
+    const Eigen::Vector3d f = fit.Radiance(c.score_dirs[i]);
+    for (int ch = 0; ch < 3; ++ch)
+      err.push_back(std::abs(f[ch] - c.score_truth[i][ch]) / c.score_truth[i][ch]);
+  }
+  return err;
+}
+
+// One table: rouen (FitSky with `options`) and the peer on the same cases, median and p90 of
+// the errors per sky and pooled, and how many skies rouen's median or p90 is more than 5 %
+// above the peer's. Records the figures under `key` when it is not empty.
+void CompareTable(const std::string& title, const std::vector<Case>& cases,
+                  const std::vector<PeerFit>& peer, const SkyFitOptions& options,
+                  const std::string& key, const std::string& set_note) {
+  std::printf("\n%s\n%-16s %6s %7s  %10s %8s %8s  %10s %8s %8s  %8s\n", title.c_str(), "sky",
+              "sun el", "samples", "rouen ms", "median", "p90", "scipy ms", "median", "p90",
+              "x scipy");
+  std::vector<double> ratios, rouen_all, scipy_all;
+  int p90_worse = 0, median_worse = 0;
+  for (size_t k = 0; k < cases.size(); ++k) {
+    const Case& c = cases[k];
+    SkyModel mine;
+    const auto t0 = std::chrono::steady_clock::now();
+    FitSky(c.samples, c.sun, options, &mine);
+    const double t_rouen =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const std::vector<double> e_rouen = CaseErrors(mine, c), e_scipy = CaseErrors(peer[k].model, c);
+    const double med_r = Quantile(e_rouen, 0.5), med_s = Quantile(e_scipy, 0.5);
+    const double p90_r = Quantile(e_rouen, 0.9), p90_s = Quantile(e_scipy, 0.9);
+    p90_worse += p90_r > p90_s * 1.05;
+    median_worse += med_r > med_s * 1.05;
+    ratios.push_back(peer[k].seconds / t_rouen);
+    rouen_all.insert(rouen_all.end(), e_rouen.begin(), e_rouen.end());
+    scipy_all.insert(scipy_all.end(), e_scipy.begin(), e_scipy.end());
+    std::printf("%-16s %6.1f %7zu  %10.1f %8.4f %8.4f  %10.1f %8.4f %8.4f  %8.1f%s\n",
+                c.name.c_str(), c.sun_elevation_deg, c.samples.size(), t_rouen * 1e3, med_r, p90_r,
+                peer[k].seconds * 1e3, med_s, p90_s, peer[k].seconds / t_rouen,
+                peer[k].complete ? "" : "  (scipy failed on a channel)");
+  }
+  const double ratio = Quantile(ratios, 0.5);
+  std::printf(
+      "pooled: rouen median %.4f p90 %.4f; scipy median %.4f p90 %.4f; rouen more than 5%% above "
+      "scipy on %d of %zu skies at the median, %d at the p90; median speed ratio %.1fx\n",
+      Quantile(rouen_all, 0.5), Quantile(rouen_all, 0.9), Quantile(scipy_all, 0.5),
+      Quantile(scipy_all, 0.9), median_worse, cases.size(), p90_worse, ratio);
+  if (key.empty()) return;
+  const std::string n = std::to_string(cases.size());
+  bench::Record(key + ".x_scipy", ratio, "ratio",
+                "scipy least_squares (soft_l1, 16 starts) on the same samples and weights, median "
+                "over " +
+                    n + " " + set_note + ", wall time of the fit");
+  bench::Record(key + ".rouen_rel_error_p90", Quantile(rouen_all, 0.9), "");
+  bench::Record(key + ".rouen_rel_error_median", Quantile(rouen_all, 0.5), "");
+  bench::Record(key + ".skies_rouen_p90_worse", p90_worse, "skies of " + n);
+  bench::Record(key + ".skies_rouen_median_worse", median_worse, "skies of " + n);
+  bench::Record(key + ".scipy_rel_error_p90", Quantile(scipy_all, 0.9), "");
+  bench::Record(key + ".scipy_rel_error_median", Quantile(scipy_all, 0.5), "");
+}
+
+// A simulator sky as a comparison case: 20000 samples uniform in solid angle (weight 1 each),
+// scored at the demo's directions.
+Case SimCase(const std::string& name, const TruthSky& t) {
+  Case c;
+  c.name = name;
+  c.sun = t.sun;
+  c.sun_elevation_deg = t.sun_elevation_deg;
+  c.samples = Samples(t, 20000, 13);
+  c.score_dirs = ScoreDirections(t.sun);
+  for (const Eigen::Vector3d& d : c.score_dirs) c.score_truth.push_back(t.table.Radiance(d));
+  return c;
+}
+
+// Visibility (km) of the simulator's atmosphere with turbidity `t`: Linke's ratio (Preetham's
+// and Hosek-Wilkie's turbidity) of the whole atmosphere's vertical optical depth at 550 nm to
+// its molecules' alone, T = 1 + tau_Mie / tau_Rayleigh, each tau = sea-level extinction x scale
+// height; the visibility is Koschmieder's 3.912 / total sea-level extinction.
+double VisibilityKmForTurbidity(double t) {
+  const AtmosphereParams p;
+  const double beta_r = p.rayleigh_sea_level[1];
+  const double beta_m = (t - 1) * beta_r * p.rayleigh_scale_m / p.mie_scale_m;
+  return 3.912 / (beta_r + beta_m) / 1e3;
+}
+
+// Hazy skies with a low sun: turbidity 2.5, 4 and 6, sun 5, 10, 20 and 30 deg high at azimuth
+// 240 (an afternoon), the demo's site height.
+std::vector<Case> HazyLowSunCases() {
+  std::vector<Case> out;
+  for (const double t : {2.5, 4.0, 6.0}) {
+    AtmosphereParams ap;
+    ap.visibility_km = VisibilityKmForTurbidity(t);
+    const Atmosphere atmosphere{ap};
+    for (const double el : {5.0, 10.0, 20.0, 30.0}) {
+      TruthSky ts;
+      ts.sun = EnuFromAzEl(240, el).normalized();
+      ts.sun_elevation_deg = el;
+      ts.table = SkyTable(atmosphere, Site{}.height_m, ts.sun, ap.solar_toa);
+      out.push_back(SimCase(Formatted("T%.1f_el%02.0f", t, el), ts));
+    }
+  }
+  return out;
+}
+
+// The real scans of ../shared/data/sky-scans/kider2014-sept (README.md there): 81 directions
+// each, fitted and scored at the same directions. Left out: sample 0 (idx 0, the scan's first
+// position, reads 39-75 % of its neighbours: the scanner settling, not the sky) and, as the
+// README advises, the directions within 12 deg of the sun. Weight 1 per direction.
+std::vector<Case> RealScanCases() {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::path(ROUEN_SHARED_DIR) / "data" / "sky-scans" / "kider2014-sept";
+  std::vector<Case> out;
+  if (!fs::exists(dir / "skies.json")) {
+    std::printf("\nreal sky scans: skipped (no %s)\n", dir.c_str());
+    return out;
+  }
+  const nlohmann::json skies = nlohmann::json::parse(std::ifstream(dir / "skies.json"))["skies"];
+  SkySampleOptions region;
+  region.min_sun_distance_deg = 12;
+  for (const nlohmann::json& s : skies) {
+    Case c;
+    c.name = s["file"].get<std::string>().substr(11, 4);  // HHMM
+    c.sun_elevation_deg = s["sun_elevation_deg"].get<double>();
+    c.sun = EnuFromAzEl(s["sun_azimuth_deg"].get<double>(), c.sun_elevation_deg).normalized();
+    const std::vector<SkySample> all =
+        ReadSkySamplesCsv((dir / s["file"].get<std::string>()).string());
+    for (size_t i = 1; i < all.size(); ++i) {  // the file's first line is idx 0
+      if (InSkyFitRegion(all[i].dir, c.sun, region)) c.samples.push_back(all[i]);
+    }
+    for (const SkySample& k : c.samples) {
+      c.score_dirs.push_back(k.dir);
+      c.score_truth.push_back(k.radiance);
+    }
+    out.push_back(std::move(c));
+  }
+  return out;
+}
+
+// The real scans painted into an equirect panorama (a disc of 2 deg around each direction,
+// the rest masked out) and fitted through ExtractSkySamples, as `rouen sky fit --image --mask`
+// fits them: solid-angle weights, and for contrast every pixel alike (weight 1), both scored at
+// the scans' directions. The discs hold about the same solid angle, but near the zenith many
+// more pixels.
+void PaintedScans(const std::vector<Case>& scans) {
+  if (scans.empty()) return;
+  std::printf(
+      "\nThe real scans painted into a 1024x512 equirect (2 deg discs, masked), fitted from the "
+      "image: per direction\n%-16s  %8s %8s  %8s %8s  %8s %8s\n",
+      "sky", "CSV med", "p90", "px/sr med", "p90", "px med", "p90");
+  const Intrinsics k = Intrinsics::Equirect(1024, 512);
+  const Pose pose = Pose::Level(Eigen::Vector3d::Zero(), 0, 0);
+  std::vector<double> all_csv, all_sr, all_px;
+  for (const Case& c : scans) {
+    Image img(k.width, k.height, 3, PixelUnits::kRadiance, 0.f);
+    std::vector<uint8_t> mask(static_cast<size_t>(k.width) * k.height, 0);
+    for (int y = 0; y < k.height; ++y) {
+      for (int x = 0; x < k.width; ++x) {
+        const Eigen::Vector3d d =
+            (pose.rotation * Unproject(k, Eigen::Vector2d(x + 0.5, y + 0.5))).normalized();
+        for (const SkySample& s : c.samples) {
+          if (d.dot(s.dir) < std::cos(2 * kDeg)) continue;
+          for (int ch = 0; ch < 3; ++ch) img.at(x, y, ch) = static_cast<float>(s.radiance[ch]);
+          mask[static_cast<size_t>(y) * k.width + x] = 1;
+        }
+      }
+    }
+    SkySampleOptions so;
+    so.min_sun_distance_deg = 12;
+    std::vector<SkySample> px = ExtractSkySamples(img, &mask, k, pose, c.sun, so);
+    SkyModel csv_fit, sr_fit, px_fit;
+    FitSky(c.samples, c.sun, SkyFitOptions{}, &csv_fit);
+    FitSky(px, c.sun, SkyFitOptions{}, &sr_fit);
+    for (SkySample& s : px) s.weight = 1;
+    FitSky(px, c.sun, SkyFitOptions{}, &px_fit);
+    const std::vector<double> e_csv = CaseErrors(csv_fit, c), e_sr = CaseErrors(sr_fit, c),
+                              e_px = CaseErrors(px_fit, c);
+    all_csv.insert(all_csv.end(), e_csv.begin(), e_csv.end());
+    all_sr.insert(all_sr.end(), e_sr.begin(), e_sr.end());
+    all_px.insert(all_px.end(), e_px.begin(), e_px.end());
+    std::printf("%-16s  %8.4f %8.4f  %8.4f %8.4f  %8.4f %8.4f\n", c.name.c_str(),
+                Quantile(e_csv, 0.5), Quantile(e_csv, 0.9), Quantile(e_sr, 0.5),
+                Quantile(e_sr, 0.9), Quantile(e_px, 0.5), Quantile(e_px, 0.9));
+  }
+  std::printf("%-16s  %8.4f %8.4f  %8.4f %8.4f  %8.4f %8.4f\n", "pooled", Quantile(all_csv, 0.5),
+              Quantile(all_csv, 0.9), Quantile(all_sr, 0.5), Quantile(all_sr, 0.9),
+              Quantile(all_px, 0.5), Quantile(all_px, 0.9));
+  bench::Record("sky_fit.painted_scans.solid_angle_rel_error_p90", Quantile(all_sr, 0.9), "");
+  bench::Record("sky_fit.painted_scans.per_pixel_rel_error_p90", Quantile(all_px, 0.9), "");
+}
+
+// rouen against the peer on the same samples, scored against the truth: the demo's five skies
+// at visibility 35 km and the same five times in haze (15 km), hazy skies with a low sun, and
+// the real scans. Times are wall times of the fit alone (rouen: FitSky with the pipeline's
+// options; scipy: the three channels' fits, measured inside Python, without its start-up and
+// parsing).
+void CompareWithScipy() {
+  std::vector<Case> demo;
+  AtmosphereParams hazy;
+  hazy.visibility_km = 15;
+  for (const auto& [label, params] :
+       {std::pair<std::string, AtmosphereParams>{"clear", AtmosphereParams{}}, {"hazy", hazy}}) {
+    for (const TruthSky& t : Skies(params)) demo.push_back(SimCase(label + "_" + t.label, t));
+  }
+  const std::vector<Case> low = HazyLowSunCases(), scans = RealScanCases();
+  std::vector<Case> all = demo;
+  all.insert(all.end(), low.begin(), low.end());
+  all.insert(all.end(), scans.begin(), scans.end());
+  const std::vector<PeerFit> peer = RunPeer(all);
+  if (peer.empty()) return;
+  const std::vector<PeerFit> peer_demo(peer.begin(), peer.begin() + demo.size());
+  const std::vector<PeerFit> peer_low(peer.begin() + demo.size(),
+                                      peer.begin() + demo.size() + low.size());
+  const std::vector<PeerFit> peer_scans(peer.begin() + demo.size() + low.size(), peer.end());
   // rouen's default objective (relative L1 smoothed within SkyFitOptions::norm_eps), and scipy's:
   // soft_l1 with f_scale 0.01 is 2 (sqrt(1 + (r/0.01)^2) - 1), proportional to rouen's p = 1
   // objective sqrt(r^2 + eps^2) - eps with eps = 0.01, so both then seek the same minimum.
   SkyFitOptions same;
   same.norm_eps = 0.01;
-  const std::pair<const char*, SkyFitOptions> variants[] = {{"default", SkyFitOptions{}},
-                                                            {"same_objective", same}};
-  for (const auto& [variant, options] : variants) {
-    std::printf(
-        "\nSky fit vs scipy least_squares (soft_l1, 16 starts) on the same 20000 samples, "
-        "scored against the truth; rouen: %s\n%-14s %6s  %10s %8s %8s  %10s %8s %8s  %8s\n",
-        (std::string(variant) == "default"
-             ? "its default objective (norm_eps " + std::to_string(options.norm_eps) + ")"
-             : std::string("scipy's objective (norm_eps 0.01)"))
-            .c_str(),
-        "sky", "sun el", "rouen ms", "median", "p90", "scipy ms", "median", "p90", "x scipy");
-    std::vector<double> ratios, rouen_all, scipy_all;
-    int rouen_p90_worse = 0;
-    for (size_t k = 0; k < cases.size(); ++k) {
-      const Case& c = cases[k];
-      SkyModel mine;
-      const auto t0 = std::chrono::steady_clock::now();
-      FitSky(c.samples, c.sky.sun, options, &mine);
-      const double t_rouen =
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      std::vector<double> e_rouen, e_scipy;
-      AppendErrors(mine, c.sky, &e_rouen);
-      AppendErrors(theirs[k], c.sky, &e_scipy);
-      const double t_scipy = peer[k]["seconds"].get<double>();
-      const double p90_r = Quantile(e_rouen, 0.9), p90_s = Quantile(e_scipy, 0.9);
-      if (p90_r > p90_s * 1.05) ++rouen_p90_worse;
-      ratios.push_back(t_scipy / t_rouen);
-      rouen_all.insert(rouen_all.end(), e_rouen.begin(), e_rouen.end());
-      scipy_all.insert(scipy_all.end(), e_scipy.begin(), e_scipy.end());
-      std::printf("%-14s %6.1f  %10.1f %8.4f %8.4f  %10.1f %8.4f %8.4f  %8.1f%s\n", c.name.c_str(),
-                  c.sky.sun_elevation_deg, t_rouen * 1e3, Quantile(e_rouen, 0.5), p90_r,
-                  t_scipy * 1e3, Quantile(e_scipy, 0.5), p90_s, t_scipy / t_rouen,
-                  complete[k] ? "" : "  (scipy failed on a channel)");
-    }
-    const double ratio = Quantile(ratios, 0.5);
-    std::printf(
-        "pooled: rouen median %.4f p90 %.4f; scipy median %.4f p90 %.4f; rouen's p90 more "
-        "than 5%% above scipy's on %d of %zu skies; median speed ratio %.1fx\n",
-        Quantile(rouen_all, 0.5), Quantile(rouen_all, 0.9), Quantile(scipy_all, 0.5),
-        Quantile(scipy_all, 0.9), rouen_p90_worse, cases.size(), ratio);
-    const std::string key = std::string("sky_fit.") + variant;
-    bench::Record(key + ".x_scipy", ratio, "ratio",
-                  "scipy least_squares (soft_l1, 16 starts) on the same samples, median over 10 "
-                  "skies, wall time of the fit");
-    bench::Record(key + ".rouen_rel_error_p90", Quantile(rouen_all, 0.9), "");
-    bench::Record(key + ".rouen_rel_error_median", Quantile(rouen_all, 0.5), "");
-    bench::Record(key + ".skies_rouen_p90_worse", rouen_p90_worse, "skies of 10");
-    bench::Record("sky_fit.scipy_rel_error_p90", Quantile(scipy_all, 0.9), "");
-    bench::Record("sky_fit.scipy_rel_error_median", Quantile(scipy_all, 0.5), "");
+  const std::string head =
+      "Sky fit vs scipy least_squares (soft_l1, 16 starts) on the same samples";
+  CompareTable(head + ", 20000 per sky, scored against the truth; rouen: its default objective",
+               demo, peer_demo, SkyFitOptions{}, "sky_fit.default", "demo skies");
+  CompareTable(head +
+                   ", 20000 per sky, scored against the truth; rouen: scipy's objective "
+                   "(norm_eps 0.01)",
+               demo, peer_demo, same, "sky_fit.same_objective", "demo skies");
+  CompareTable(head +
+                   ": hazy skies with a low sun (turbidity T, sun elevation), 20000 samples "
+                   "each, scored against the truth; rouen: its default objective",
+               low, peer_low, SkyFitOptions{}, "sky_fit.hazy_low_sun", "hazy low-sun skies");
+  if (!scans.empty()) {
+    CompareTable(
+        head +
+            ": real sky-scanner scans (Kider et al. 2014, 2013-09-24, local time), "
+            "fitted and scored at their directions (not sample 0, not within 12 deg of the "
+            "sun); rouen: its default objective",
+        scans, peer_scans, SkyFitOptions{}, "sky_fit.real_scans", "real scans");
   }
+  PaintedScans(scans);
 }
 
 void BM_FitSky20k(benchmark::State& state, SkyModelKind kind, SkyWeighting weighting,

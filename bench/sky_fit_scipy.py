@@ -3,12 +3,14 @@
 (Yu & Malik 1998, eq. 9) fitted per colour channel with scipy.optimize.least_squares.
 
 Input (argv[1]): a text file of skies. Each sky is a line "sky NAME SX SY SZ N" (sun direction,
-ENU) followed by N lines "X Y Z R G B" (a unit direction above the horizon and its radiance).
+ENU) followed by N lines "X Y Z R G B W" (a unit direction above the horizon, its radiance and
+its weight: the sample's term of the objective is multiplied by W, as in rouen's fit).
 Output (stdout): one JSON object per sky and line: {"name", "seconds", "channels": [[Lz, a, b,
 c, d, e, h] x 3], "cost"}; seconds is the wall time of the three fits alone.
 
 The fit: relative residuals model/y - 1 under scipy's soft_l1 loss (a smooth L1, as robust to
-outliers as rouen's default relative-L1 objective), trust-region reflective within the model's
+outliers as rouen's default relative-L1 objective), each sample's loss times its weight
+(normalised to mean 1), trust-region reflective within the model's
 box bounds, from the CIE general-sky shapes and Preetham's turbidity 3 and 6 skies plus
 `--random` random starts, each with Lz in closed form; the lowest cost wins.
 """
@@ -39,8 +41,17 @@ def shape(p, inv_cos_xi, log_gamma, cos2_gamma):
                                                e * cos2_gamma)
 
 
-def fit_channel(y, geom, random_starts, rng):
+def weighted_soft_l1(w):
+    """scipy's soft_l1 loss rho(z) = 2 (sqrt(1 + z) - 1) with its derivatives, times w."""
+    def loss(z):
+        t = 1 + z
+        return np.vstack([w * 2 * (t**0.5 - 1), w * t**-0.5, w * -0.5 * t**-1.5])
+    return loss
+
+
+def fit_channel(y, w, geom, random_starts, rng):
     inv_cos_xi, log_gamma, cos2_gamma = geom
+    loss = weighted_soft_l1(w)
 
     def residuals(q):
         return q[0] * shape(q[1:], inv_cos_xi, log_gamma, cos2_gamma) / y - 1
@@ -54,10 +65,10 @@ def fit_channel(y, geom, random_starts, rng):
         ratio = f / y
         if not np.all(np.isfinite(ratio)) or np.sum(ratio * ratio) <= 0:
             continue
-        lz = np.sum(ratio) / np.sum(ratio * ratio)  # least squares of lz f / y = 1
+        lz = np.sum(w * ratio) / np.sum(w * ratio * ratio)  # least squares of lz f / y = 1
         q0 = np.clip(np.concatenate([[max(lz, 1e-9)], s]), LOWER, np.minimum(UPPER, 1e300))
         try:
-            r = least_squares(residuals, q0, bounds=(LOWER, UPPER), loss="soft_l1",
+            r = least_squares(residuals, q0, bounds=(LOWER, UPPER), loss=loss,
                               f_scale=0.01, method="trf", x_scale="jac", max_nfev=400)
         except (ValueError, FloatingPointError):
             continue
@@ -82,12 +93,12 @@ def main():
         name, sun, n = head[1], np.array([float(v) for v in head[2:5]]), int(head[5])
         data = np.loadtxt(lines[i:i + n], ndmin=2)
         i += n
-        dirs, rad = data[:, :3], data[:, 3:]
+        dirs, rad, w = data[:, :3], data[:, 3:6], data[:, 6] / np.mean(data[:, 6])
         t0 = time.perf_counter()
         inv_cos_xi = 1.0 / np.maximum(dirs[:, 2], 0.01)
         gamma = np.arccos(np.clip(dirs @ sun, -1, 1))
         geom = (inv_cos_xi, np.log(np.maximum(gamma, 1e-6)), np.cos(gamma)**2)
-        fits = [fit_channel(rad[:, c], geom, random_starts, rng) for c in range(3)]
+        fits = [fit_channel(rad[:, c], w, geom, random_starts, rng) for c in range(3)]
         seconds = time.perf_counter() - t0
         print(json.dumps({
             "name": name,

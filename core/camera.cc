@@ -213,6 +213,14 @@ Eigen::Vector3d Unproject(const Intrinsics& k, const Eigen::Vector2d& pixel) {
   return Eigen::Vector3d(0, 0, 1);
 }
 
+double PixelSolidAngle(const Intrinsics& k, int x, int y) {
+  const Eigen::Vector3d a = Unproject(k, Eigen::Vector2d(x, y));
+  const Eigen::Vector3d b = Unproject(k, Eigen::Vector2d(x + 1, y));
+  const Eigen::Vector3d c = Unproject(k, Eigen::Vector2d(x, y + 1));
+  const Eigen::Vector3d d = Unproject(k, Eigen::Vector2d(x + 1, y + 1));
+  return 0.5 * (d - a).cross(c - b).norm();
+}
+
 Pose Pose::LookAt(const Eigen::Vector3d& eye, const Eigen::Vector3d& target) {
   Pose p;
   p.position = eye;

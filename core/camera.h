@@ -36,6 +36,9 @@ struct Intrinsics {
 std::optional<Eigen::Vector2d> Project(const Intrinsics& k, const Eigen::Vector3d& dir_cam);
 // Unit camera-frame ray through pixel coordinates (inverse of Project).
 Eigen::Vector3d Unproject(const Intrinsics& k, const Eigen::Vector2d& pixel);
+// Solid angle (sr) the pixel with top-left corner (x, y) sees: the quadrilateral of its four
+// corners' rays, half the cross product of its diagonals (exact to second order in the pixel).
+double PixelSolidAngle(const Intrinsics& k, int x, int y);
 
 // Camera pose in the world: x_world = rotation * x_cam + position.
 struct Pose {

@@ -108,6 +108,35 @@ TEST(CameraTest, EquirectRoundTripAndOrientation) {
   }
 }
 
+// Pixel solid angles: an equirect pixel spans d(azimuth) x d(sin elevation) exactly; the
+// corner quadrilateral is exact to second order in the pixel's angular size t, so each pixel
+// is within t^2 of it (relative) and the sphere sums to 4 pi within the same; a 180-degree
+// fisheye's pixels inside its circle sum to the hemisphere, 2 pi, within t^2 plus the circle's
+// edge pixels (a ring one pixel wide: 2 / radius of it, relative).
+TEST(CameraTest, PixelSolidAngleIsExactToSecondOrder) {
+  const int w = 64, h = 32;
+  const Intrinsics k = Intrinsics::Equirect(w, h);
+  const double t = kPi / h;
+  double sum = 0;
+  for (int y = 0; y < h; ++y) {
+    const double exact = 2 * kPi / w * (std::cos(y * t) - std::cos((y + 1) * t));
+    for (int x = 0; x < w; ++x) {
+      const double omega = PixelSolidAngle(k, x, y);
+      EXPECT_NEAR(omega / exact, 1, t * t) << x << " " << y;
+      sum += omega;
+    }
+  }
+  EXPECT_NEAR(sum / (4 * kPi), 1, t * t);
+  const Intrinsics f = Intrinsics::FisheyeFov(200, 200, 180);
+  double hemi = 0;
+  for (int y = 0; y < f.height; ++y) {
+    for (int x = 0; x < f.width; ++x) {
+      if (std::hypot(x + 0.5 - f.cx, y + 0.5 - f.cy) < 100) hemi += PixelSolidAngle(f, x, y);
+    }
+  }
+  EXPECT_NEAR(hemi / (2 * kPi), 1, 2.0 / 100 + std::pow(kPi / 200, 2));
+}
+
 TEST(CameraTest, BehindOrDegenerateDirections) {
   const Intrinsics k = DistortedPinhole();
   EXPECT_FALSE(Project(k, Eigen::Vector3d(0, 0, -1)).has_value());

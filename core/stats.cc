@@ -1,6 +1,7 @@
 #include "core/stats.h"
 
 #include <algorithm>
+#include <cassert>
 #include <numeric>
 
 namespace rouen {
@@ -31,6 +32,26 @@ float Median(std::vector<float> v) { return MiddleValue(v); }
 
 double Quantile(std::vector<double> v, double p) { return LowerRank(v, p); }
 float Quantile(std::vector<float> v, double p) { return LowerRank(v, p); }
+
+double WeightedQuantile(const std::vector<double>& v, const std::vector<double>& w, double p) {
+  assert(v.size() == w.size());
+  if (v.empty()) return 0;
+  std::vector<size_t> order(v.size());
+  std::iota(order.begin(), order.end(), size_t{0});
+  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return v[a] < v[b]; });
+  const double total = std::accumulate(w.begin(), w.end(), 0.0);
+  const double target = std::clamp(p, 0.0, 1.0) * (total - w[order.back()]);
+  // Sums of equal weights round; 1e-12 of the total keeps equal weights on Quantile's rank.
+  const double slack = 1e-12 * total;
+  double before = 0;
+  size_t k = 0;
+  for (size_t i = 1; i < order.size(); ++i) {
+    before += w[order[i - 1]];
+    if (before > target + slack) break;
+    k = i;
+  }
+  return v[order[k]];
+}
 
 double Mean(const std::vector<double>& v) {
   return v.empty() ? 0.0 : std::accumulate(v.begin(), v.end(), 0.0) / static_cast<double>(v.size());

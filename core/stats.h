@@ -11,6 +11,12 @@ namespace rouen {
 double Quantile(std::vector<double> v, double p);
 float Quantile(std::vector<float> v, double p);
 
+// The p-quantile of `v` where element i counts with weight w[i] (> 0; a solid angle, say): in
+// ascending order, the last element whose preceding weight is at most p (W - w_last), W the
+// total and w_last the largest value's weight. Equal weights give Quantile(v, p). 0 for an
+// empty vector; `v` and `w` must have the same size.
+double WeightedQuantile(const std::vector<double>& v, const std::vector<double>& w, double p);
+
 // The sample median: the middle element, or the mean of the two middle ones for an even count
 // (the robust centre the solvers estimate with; reports use Quantile). 0 for an empty vector.
 double Median(std::vector<double> v);

@@ -20,6 +20,21 @@ TEST(StatsTest, QuantileIsTheLowerNearestRank) {
   EXPECT_EQ(Quantile(std::vector<double>{}, 0.5), 0);
 }
 
+TEST(StatsTest, WeightedQuantileCountsEachElementByItsWeight) {
+  // Equal weights: the lower nearest rank, as Quantile, at every p on a fine grid.
+  const std::vector<double> v{50, 10, 40, 20, 30, 60, 70};
+  for (double p = 0; p <= 1.0; p += 0.01) {
+    EXPECT_EQ(WeightedQuantile(v, std::vector<double>(v.size(), 0.1), p), Quantile(v, p)) << p;
+  }
+  // Weight 3 on the value 10 is that value three times over.
+  const std::vector<double> rep{10, 10, 10, 20, 30};
+  const std::vector<double> once{10, 20, 30};
+  for (double p = 0; p <= 1.0; p += 0.01) {
+    EXPECT_EQ(WeightedQuantile(once, {3, 1, 1}, p), Quantile(rep, p)) << p;
+  }
+  EXPECT_EQ(WeightedQuantile({}, {}, 0.5), 0);
+}
+
 TEST(StatsTest, MedianIsTheSampleMedian) {
   EXPECT_EQ(Median(std::vector<double>{50, 10, 40, 20, 30}), 30);
   // An even count: the mean of the two middle values (unlike Quantile's lower middle).

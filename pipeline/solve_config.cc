@@ -187,6 +187,8 @@ json SolveConfigJson(const SolveConfig& c) {
             {"norm_p", c.sky_fit.norm_p},
             {"norm_eps", c.sky_fit.norm_eps},
             {"max_iterations", c.sky_fit.max_iterations},
+            {"min_directions", c.sky_fit.min_directions},
+            {"min_spread_deg", c.sky_fit.min_spread_deg},
             {"multiple_starts", c.sky_fit.multiple_starts},
             {"random_starts", c.sky_fit.random_starts},
             {"seed", c.sky_fit.seed}}},
@@ -294,6 +296,8 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
     f.Number("norm_p", &c.sky_fit.norm_p, 1, 16);
     f.Number("norm_eps", &c.sky_fit.norm_eps, 1e-12, 1);
     f.Int("max_iterations", &c.sky_fit.max_iterations, 1, 100000);
+    f.Int("min_directions", &c.sky_fit.min_directions, 7, 1000000);
+    f.Number("min_spread_deg", &c.sky_fit.min_spread_deg, 0, 90);
     f.Bool("multiple_starts", &c.sky_fit.multiple_starts);
     f.Int("random_starts", &c.sky_fit.random_starts, 0, 10000);
     f.Seed("seed", &c.sky_fit.seed);

@@ -5,15 +5,19 @@
 #include <algorithm>
 #include <array>
 #include <cassert>
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <limits>
 #include <random>
 #include <string>
+#include <string_view>
 
 #include "core/angles.h"
 #include "core/error.h"
+#include "core/solar.h"
 #include "core/stats.h"
+#include "core/text.h"
 #include "solve/internal/sky_cost.h"
 #include "solve/sky_cie.h"
 
@@ -54,6 +58,19 @@ constexpr double kSameMinimum = 1e-3;
 constexpr double kRefineWithin = 0.25;
 // Levenberg-Marquardt stops when a step is this small relative to the parameters.
 constexpr double kParameterTolerance = 1e-10;
+
+// `s` without leading and trailing spaces and tabs.
+std::string Trimmed(std::string_view s) {
+  const size_t a = s.find_first_not_of(" \t");
+  if (a == std::string_view::npos) return "";
+  return std::string(s.substr(a, s.find_last_not_of(" \t") + 1 - a));
+}
+
+// The whole of `s` as a number (nan and inf included: the caller names them).
+bool ParseFullDouble(const std::string& s, double* v) {
+  const auto r = std::from_chars(s.data(), s.data() + s.size(), *v);
+  return !s.empty() && r.ec == std::errc() && r.ptr == s.data() + s.size();
+}
 
 double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
@@ -205,8 +222,8 @@ void MakeStart(const std::vector<SkyPoint>& points, const double shape[6], doubl
   double num = 0, den = 0;
   for (const SkyPoint& q : points) {
     const double f = internal::SkyModelAt(p, q, nullptr);
-    num += q.s * q.s * q.y * f;
-    den += q.s * q.s * f * f;
+    num += q.w * q.s * q.s * q.y * f;
+    den += q.w * q.s * q.s * f * f;
   }
   p[0] = den > 0 && num > 0 ? num / den : 1.0;
 }
@@ -220,14 +237,14 @@ double FitLzOnly(const std::vector<SkyPoint>& points, double* p) {
   for (size_t i = 0; i < points.size(); ++i) {
     const SkyPoint& q = points[i];
     f[i] = internal::SkyModelAt(p, q, nullptr);
-    num += q.s * q.s * q.y * f[i];
-    den += q.s * q.s * f[i] * f[i];
+    num += q.w * q.s * q.s * q.y * f[i];
+    den += q.w * q.s * q.s * f[i] * f[i];
   }
   p[0] = den > 0 && num > 0 ? num / den : 1.0;
   double cost = 0;
   for (size_t i = 0; i < points.size(); ++i) {
     const double r = points[i].s * (points[i].y - p[0] * f[i]);
-    cost += 0.5 * r * r;
+    cost += 0.5 * points[i].w * r * r;
   }
   return std::isfinite(cost) ? cost : std::numeric_limits<double>::infinity();
 }
@@ -305,9 +322,13 @@ void SkyFitOptions::Validate() const {
     throw Error("SkyFitOptions: max_iterations must be positive, got " +
                 std::to_string(max_iterations));
   }
-  if (min_samples < 7) {
-    throw Error("SkyFitOptions: min_samples must be at least 7 (the parameter count), got " +
-                std::to_string(min_samples));
+  if (min_directions < 7) {
+    throw Error("SkyFitOptions: min_directions must be at least 7 (the parameter count), got " +
+                std::to_string(min_directions));
+  }
+  if (!std::isfinite(min_spread_deg) || min_spread_deg < 0 || min_spread_deg > 90) {
+    throw Error("SkyFitOptions: min_spread_deg must be in [0, 90], got " +
+                std::to_string(min_spread_deg));
   }
   if (!std::isfinite(function_tolerance) || function_tolerance <= 0) {
     throw Error("SkyFitOptions: function_tolerance must be positive");
@@ -355,64 +376,261 @@ std::vector<SkySample> ExtractSkySamples(const Image& hdr, const std::vector<uin
   }
   const Eigen::Vector3d sun = sun_dir.normalized();
   const double z0 = std::sin(options.min_elevation_deg * kDeg);
-  const double cos_sun = std::cos(options.min_sun_distance_deg * kDeg);
 
-  // Equal-area cells: azimuth x z (z = sin elevation is uniform in solid angle).
-  const double cells = std::max(64.0, static_cast<double>(options.max_samples));
+  // Equal-area cells: azimuth x z (z = sin elevation is uniform in solid angle); about one
+  // per sample, never more than there are pixels.
+  const double cells = std::clamp(static_cast<double>(options.max_samples), 64.0,
+                                  std::max(64.0, static_cast<double>(np)));
   const double step = std::sqrt(2 * kPi * (1 - z0) / cells);
   const int n_az = std::max(1, static_cast<int>(std::ceil(2 * kPi / step)));
   const int n_z = std::max(1, static_cast<int>(std::ceil((1 - z0) / step)));
-  std::vector<std::vector<SkySample>> bins(static_cast<size_t>(n_az) * n_z);
+  const size_t n_cells = static_cast<size_t>(n_az) * n_z;
+  auto radiance_at = [&](size_t p, Eigen::Vector3d* rad) {
+    bool ok = true;
+    for (int c = 0; c < 3; ++c) {
+      (*rad)[c] = hdr.data[p * hdr.channels + (hdr.channels == 1 ? 0 : c)];
+      ok = ok && std::isfinite((*rad)[c]) && (*rad)[c] > 0;
+    }
+    return ok;
+  };
+  auto direction_at = [&](int x, int y) {
+    return (pose.rotation * Unproject(intrinsics, Eigen::Vector2d(x + 0.5, y + 0.5))).normalized();
+  };
 
-  // Visit a pixel lattice with about 8 candidates per requested sample.
-  const double oversample = 8.0 * options.max_samples;
-  const int stride =
-      std::max(1, static_cast<int>(std::floor(std::sqrt(static_cast<double>(np) / oversample))));
-  for (int y = stride / 2; y < hdr.height; y += stride) {
-    for (int x = stride / 2; x < hdr.width; x += stride) {
+  // Every pixel is a candidate (a lattice would miss small masked regions): its cell (or -1)
+  // and its solid angle.
+  std::vector<int32_t> cell_of(np, -1);
+  std::vector<float> omega(np, 0.f);
+  tbb::parallel_for(0, hdr.height, [&](int y) {
+    for (int x = 0; x < hdr.width; ++x) {
       const size_t p = static_cast<size_t>(y) * hdr.width + x;
-      if (valid_mask && !valid_mask->empty() && (*valid_mask)[p] == 0) continue;
       Eigen::Vector3d rad;
-      bool ok = true;
-      for (int c = 0; c < 3; ++c) {
-        rad[c] = hdr.data[p * hdr.channels + (hdr.channels == 1 ? 0 : c)];
-        ok = ok && std::isfinite(rad[c]) && rad[c] > 0;
-      }
-      if (!ok) continue;
-      const Eigen::Vector3d d =
-          (pose.rotation * Unproject(intrinsics, Eigen::Vector2d(x + 0.5, y + 0.5))).normalized();
-      if (!d.allFinite() || d.z() < z0 || d.dot(sun) > cos_sun) continue;
+      if ((valid_mask && !valid_mask->empty() && (*valid_mask)[p] == 0) || !radiance_at(p, &rad))
+        continue;
+      const Eigen::Vector3d d = direction_at(x, y);
+      if (!d.allFinite() || !InSkyFitRegion(d, sun, options)) continue;
       double az = std::atan2(d.x(), d.y());
       if (az < 0) az += 2 * kPi;
       const int ia = std::min(n_az - 1, static_cast<int>(az / (2 * kPi) * n_az));
       const int iz = std::min(n_z - 1, static_cast<int>((d.z() - z0) / (1 - z0) * n_z));
-      bins[static_cast<size_t>(iz) * n_az + ia].push_back({d, rad});
+      cell_of[p] = iz * n_az + ia;
+      omega[p] = static_cast<float>(PixelSolidAngle(intrinsics, x, y));
+    }
+  });
+  std::vector<size_t> count(n_cells, 0);
+  std::vector<double> cell_omega(n_cells, 0);
+  size_t total = 0;
+  for (size_t p = 0; p < np; ++p) {
+    if (cell_of[p] < 0) continue;
+    ++count[static_cast<size_t>(cell_of[p])];
+    cell_omega[static_cast<size_t>(cell_of[p])] += omega[p];
+    ++total;
+  }
+
+  // Equal shares: every cell keeps min(count, level) samples, the level the largest whose sum
+  // fits max_samples; the remainder one more each in cells with candidates left, in a random
+  // cell order.
+  std::mt19937_64 rng(options.seed);
+  std::vector<size_t> occupied;
+  for (size_t i = 0; i < n_cells; ++i) {
+    if (count[i] > 0) occupied.push_back(i);
+  }
+  std::shuffle(occupied.begin(), occupied.end(), rng);
+  const size_t want = std::min(total, static_cast<size_t>(options.max_samples));
+  auto kept_at = [&](size_t level) {
+    size_t sum = 0;
+    for (size_t i : occupied) sum += std::min(count[i], level);
+    return sum;
+  };
+  size_t lo = 0, hi = total == 0 ? 0 : *std::max_element(count.begin(), count.end());
+  while (lo < hi) {  // the largest level with kept_at(level) <= want
+    const size_t mid = (lo + hi + 1) / 2;
+    if (kept_at(mid) <= want) {
+      lo = mid;
+    } else {
+      hi = mid - 1;
+    }
+  }
+  std::vector<size_t> quota(n_cells, 0);
+  size_t extra = want - kept_at(lo);
+  for (size_t i : occupied) {
+    quota[i] = std::min(count[i], lo);
+    if (extra > 0 && count[i] > lo) ++quota[i], --extra;
+  }
+
+  // A cell that keeps every candidate weighs each by its solid angle. Otherwise its quota is
+  // drawn in proportion to solid angle, systematically in pixel order (thresholds at (j + u)
+  // cell solid angle / quota, u random per cell), each draw standing for that share of the
+  // cell's solid angle (a pixel drawn twice: twice the weight).
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<double> next(n_cells, 0), run(n_cells, 0);
+  for (size_t i : occupied) next[i] = u(rng) * cell_omega[i] / static_cast<double>(quota[i]);
+  std::vector<std::vector<SkySample>> bins(n_cells);
+  for (int y = 0; y < hdr.height; ++y) {
+    for (int x = 0; x < hdr.width; ++x) {
+      const size_t p = static_cast<size_t>(y) * hdr.width + x;
+      if (cell_of[p] < 0) continue;
+      const size_t c = static_cast<size_t>(cell_of[p]);
+      if (quota[c] == 0) continue;
+      double weight = 0;
+      if (quota[c] == count[c]) {
+        weight = omega[p];
+      } else {
+        const double share = cell_omega[c] / static_cast<double>(quota[c]);
+        run[c] += omega[p];
+        while (next[c] < run[c]) {
+          weight += share;
+          next[c] += share;
+        }
+      }
+      if (weight == 0) continue;
+      SkySample s;
+      s.dir = direction_at(x, y);
+      radiance_at(p, &s.radiance);
+      s.weight = weight;
+      bins[c].push_back(s);
     }
   }
 
-  // Round-robin over the occupied cells, in a random cell order, random order within cells.
-  std::mt19937_64 rng(options.seed);
-  std::vector<size_t> occupied;
-  for (size_t i = 0; i < bins.size(); ++i) {
-    if (!bins[i].empty()) {
-      occupied.push_back(i);
-      std::shuffle(bins[i].begin(), bins[i].end(), rng);
-    }
-  }
-  std::shuffle(occupied.begin(), occupied.end(), rng);
+  // Round-robin over the cells (random order), so that any prefix is spread evenly too.
   std::vector<SkySample> out;
-  const size_t want = static_cast<size_t>(options.max_samples);
-  for (size_t round = 0; out.size() < want; ++round) {
+  out.reserve(want);
+  for (size_t round = 0;; ++round) {
     bool any = false;
     for (size_t i : occupied) {
       if (round < bins[i].size()) {
         out.push_back(bins[i][round]);
         any = true;
-        if (out.size() == want) break;
       }
     }
     if (!any) break;
   }
+  return out;
+}
+
+bool InSkyFitRegion(const Eigen::Vector3d& dir, const Eigen::Vector3d& sun,
+                    const SkySampleOptions& options) {
+  return dir.z() >= std::sin(options.min_elevation_deg * kDeg) &&
+         dir.dot(sun) <= std::cos(options.min_sun_distance_deg * kDeg);
+}
+
+SkyCoverage MeasureSkyCoverage(const std::vector<SkySample>& samples) {
+  constexpr int kBands = 10, kAzimuths = 20;
+  std::vector<Eigen::Vector3d> cell_sum(kBands * kAzimuths, Eigen::Vector3d::Zero());
+  for (const SkySample& s : samples) {
+    double az = std::atan2(s.dir.x(), s.dir.y());
+    if (az < 0) az += 2 * kPi;
+    const int ia = std::min(kAzimuths - 1, static_cast<int>(az / (2 * kPi) * kAzimuths));
+    const int iz = std::clamp(static_cast<int>(s.dir.z() * kBands), 0, kBands - 1);
+    cell_sum[iz * kAzimuths + ia] += s.dir;
+  }
+  SkyCoverage out;
+  Eigen::Vector3d resultant = Eigen::Vector3d::Zero();
+  int cells = 0;
+  for (const Eigen::Vector3d& v : cell_sum) {
+    if (v.norm() == 0) continue;
+    resultant += v.normalized();
+    ++cells;
+  }
+  if (cells == 0) return out;
+  // Mean resultant length R of a uniform cap of radius r: (1 + cos r) / 2.
+  const double r = resultant.norm() / cells;
+  out.spread_deg = std::acos(std::clamp(2 * r - 1, -1.0, 1.0)) / kDeg;
+  std::vector<std::array<double, 3>> values;
+  values.reserve(samples.size());
+  for (const SkySample& s : samples)
+    values.push_back({s.radiance[0], s.radiance[1], s.radiance[2]});
+  std::sort(values.begin(), values.end());
+  const int distinct = static_cast<int>(std::unique(values.begin(), values.end()) - values.begin());
+  out.directions = std::min(cells, distinct);
+  return out;
+}
+
+std::string SkyCoverageProblem(const SkyCoverage& coverage, const SkyFitOptions& options) {
+  if (coverage.directions < options.min_directions) {
+    return Formatted(
+        "%d distinct directions, need at least %d: 3 per parameter of the model, so that the "
+        "error the fit reports is at least 1/sqrt(2) of its error on fresh measurements "
+        "(directions count once per 0.031 sr cell of the sky, about 10 x 10 deg, and once per "
+        "distinct radiance)",
+        coverage.directions, options.min_directions);
+  }
+  if (coverage.spread_deg < options.min_spread_deg) {
+    return Formatted(
+        "the directions cover too little of the sky: they are as concentrated as a cap of "
+        "radius %.0f deg, need at least %.0f deg (half the hemisphere): a fit to a smaller part "
+        "of the sky extrapolates eq. 9's zenith-to-horizon and sun-to-far-sky terms",
+        coverage.spread_deg, options.min_spread_deg);
+  }
+  return "";
+}
+
+std::vector<SkySample> ReadSkySamplesCsv(const std::string& path) {
+  const std::vector<std::string> lines = ReadTextLines(path, "a sky samples CSV");
+  std::vector<SkySample> out;
+  std::vector<int> line_of;
+  size_t fields = 0;  // of the first line with data: 5, or 6 with a leading index
+  bool first = true;
+  for (size_t n = 0; n < lines.size(); ++n) {
+    const std::string where = path + ":" + std::to_string(n + 1);
+    const std::string line = Trimmed(lines[n]);
+    if (line.empty() || line.front() == '#') continue;
+    std::vector<std::string> f;
+    for (size_t at = 0;;) {
+      const size_t comma = line.find(',', at);
+      f.push_back(
+          Trimmed(std::string_view(line).substr(at, comma == line.npos ? line.npos : comma - at)));
+      if (comma == line.npos) break;
+      at = comma + 1;
+    }
+    double v0 = 0;
+    const bool header = first && !ParseFullDouble(f[0], &v0);
+    first = false;
+    if (header) continue;
+    if (fields == 0) {
+      if (f.size() != 5 && f.size() != 6) {
+        throw Error(where + ": " + std::to_string(f.size()) +
+                    " comma-separated fields; a sky sample is 'azimuth_deg, elevation_deg, R, "
+                    "G, B', optionally after an index");
+      }
+      fields = f.size();
+    } else if (f.size() != fields) {
+      throw Error(where + ": " + std::to_string(f.size()) + " fields, the first line has " +
+                  std::to_string(fields));
+    }
+    static const char* const kNames[] = {"azimuth_deg", "elevation_deg", "R", "G", "B"};
+    const size_t off = fields - 5;
+    if (off == 1) {
+      double idx = 0;
+      if (!ParseFullDouble(f[0], &idx) || idx < 0 || idx != std::floor(idx))
+        throw Error(where + ": index '" + f[0] + "' is not a non-negative integer");
+    }
+    double v[5];
+    for (int k = 0; k < 5; ++k) {
+      const std::string& text = f[off + k];
+      if (!ParseFullDouble(text, &v[k]))
+        throw Error(where + ": " + kNames[k] + " '" + text + "' is not a number");
+      if (!std::isfinite(v[k])) throw Error(where + ": " + kNames[k] + " is not finite");
+    }
+    if (v[1] < 0 || v[1] > 90)
+      throw Error(where + ": elevation_deg " + f[off + 1] + " is outside [0, 90]");
+    for (int k = 2; k < 5; ++k) {
+      if (!(v[k] > 0))
+        throw Error(where + ": " + kNames[k] + " " + f[off + k] +
+                    " is not positive (the fit needs positive radiance in every channel)");
+    }
+    SkySample s;
+    s.dir = EnuFromAzEl(v[0], v[1]).normalized();
+    s.radiance = Eigen::Vector3d(v[2], v[3], v[4]);
+    for (size_t i = 0; i < out.size(); ++i) {
+      if (std::acos(std::clamp(out[i].dir.dot(s.dir), -1.0, 1.0)) < 0.01 * kDeg)
+        throw Error(where + ": the same direction as line " + std::to_string(line_of[i]) +
+                    " (within 0.01 deg)");
+    }
+    out.push_back(s);
+    line_of.push_back(static_cast<int>(n + 1));
+  }
+  if (out.empty()) throw Error(path + ": no sky directions (azimuth_deg, elevation_deg, R, G, B)");
   return out;
 }
 
@@ -421,15 +639,12 @@ SkyFitSummary FitSky(const std::vector<SkySample>& samples, const Eigen::Vector3
   const auto start = std::chrono::steady_clock::now();
   options.Validate();
   assert(out != nullptr);
-  if (static_cast<int>(samples.size()) < options.min_samples) {
-    throw Error("sky fit: " + std::to_string(samples.size()) + " samples, need at least " +
-                std::to_string(options.min_samples));
-  }
   if (!sun_dir.allFinite() || sun_dir.norm() < 1e-9) {
     throw Error("sky fit: the sun direction is not a direction");
   }
   const Eigen::Vector3d sun = sun_dir.normalized();
   Eigen::Vector3d min_y = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
+  double weight_sum = 0;
   for (size_t i = 0; i < samples.size(); ++i) {
     const SkySample& s = samples[i];
     if (!s.dir.allFinite() || std::abs(s.dir.norm() - 1) > 1e-6) {
@@ -445,7 +660,18 @@ SkyFitSummary FitSky(const std::vector<SkySample>& samples, const Eigen::Vector3
       }
       min_y[c] = std::min(min_y[c], s.radiance[c]);
     }
+    if (!std::isfinite(s.weight) || s.weight <= 0) {
+      throw Error("sky fit: sample " + std::to_string(i) + " weight " + std::to_string(s.weight) +
+                  " is not positive and finite");
+    }
+    weight_sum += s.weight;
   }
+  if (const std::string problem = SkyCoverageProblem(MeasureSkyCoverage(samples), options);
+      !problem.empty()) {
+    throw Error("sky fit: " + problem);
+  }
+  // Weights normalised to mean 1: the objective keeps the scale of unweighted samples.
+  const double weight_scale = static_cast<double>(samples.size()) / weight_sum;
 
   SkyFitSummary summary;
   summary.samples = static_cast<int>(samples.size());
@@ -460,7 +686,8 @@ SkyFitSummary FitSky(const std::vector<SkySample>& samples, const Eigen::Vector3
     ref[c] = 0.5 * min_y[c];
     points[c].reserve(samples.size());
     for (const SkySample& s : samples) {
-      points[c].push_back(internal::MakeSkyPoint(s.dir, sun, s.radiance[c] / ref[c], relative));
+      points[c].push_back(internal::MakeSkyPoint(s.dir, sun, s.radiance[c] / ref[c], relative,
+                                                 s.weight * weight_scale));
     }
   }
   std::array<StartResult, 3> best;
@@ -590,19 +817,21 @@ SkyFitSummary FitSky(const std::vector<SkySample>& samples, const Eigen::Vector3
     p.d = b.params[4];
     p.e = b.params[5];
     p.h = b.params[6];
-    std::vector<double> rel(points[c].size());
-    double sum = 0;
+    std::vector<double> rel(points[c].size()), w(points[c].size());
+    double sum = 0, wsum = 0;
     for (size_t i = 0; i < points[c].size(); ++i) {
       const double l = internal::SkyModelAt(b.params, points[c][i], nullptr);
       rel[i] = std::abs(l - points[c][i].y) / points[c][i].y;
-      sum += rel[i];
+      w[i] = points[c][i].w;
+      sum += w[i] * rel[i];
+      wsum += w[i];
     }
     cs.iterations = b.iterations;
     cs.initial_cost = b.initial_cost;
-    cs.rel_error_median = Quantile(rel, 0.5);
-    cs.rel_error_p90 = Quantile(rel, 0.9);
+    cs.rel_error_median = WeightedQuantile(rel, w, 0.5);
+    cs.rel_error_p90 = WeightedQuantile(rel, w, 0.9);
     cs.rel_error_max = *std::max_element(rel.begin(), rel.end());
-    cs.rel_error_mean = sum / rel.size();
+    cs.rel_error_mean = sum / wsum;
   }
 
   for (int c = 0; c < 3; ++c) {

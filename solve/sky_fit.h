@@ -17,6 +17,9 @@ namespace rouen {
 struct SkySample {
   Eigen::Vector3d dir;       // unit, ENU, above the horizon
   Eigen::Vector3d radiance;  // per channel, > 0
+  // How much of the sky the sample stands for in the fit's objective and error figures (> 0;
+  // only ratios matter): the solid angle (sr) for image pixels, 1 for measured directions.
+  double weight = 1;
 };
 
 struct SkySampleOptions {
@@ -28,15 +31,36 @@ struct SkySampleOptions {
   void Validate() const;  // throws rouen::Error explaining the bad field
 };
 
-// Sky samples from one radiance image: pixels above the minimum elevation, away from the sun,
-// valid in `valid_mask` (width x height, nonzero = valid; may be null), with finite positive
-// radiance in every channel; subsampled to at most max_samples spread evenly over solid angle
-// (equal-area cells in azimuth x sin(elevation), round-robin). Concatenate the results of
-// several photos to fit them together. Throws rouen::Error for a wrong image or mask.
+// Whether a unit ENU direction is in the sky a fit uses: at least min_elevation_deg high and
+// more than min_sun_distance_deg from the (unit) sun. The one rule for pixels and directions.
+bool InSkyFitRegion(const Eigen::Vector3d& dir, const Eigen::Vector3d& sun,
+                    const SkySampleOptions& options);
+
+// Sky samples from one radiance image: pixels in the sky fit region (InSkyFitRegion), valid in
+// `valid_mask` (width x height, nonzero = valid; may be null), with finite positive radiance in
+// every channel. Every such pixel is a candidate; at most max_samples are kept, spread evenly
+// over solid angle: equal-area cells in azimuth x sin(elevation) get equal shares (a cell with
+// fewer candidates gives all of them, each weighing its pixel's solid angle); within a cell
+// the share is drawn in proportion to solid angle, each draw weighing the cell's solid angle /
+// its share. So the samples weigh the sky by solid angle whatever the projection's pixel
+// density (an equirect's rows near the zenith hold many pixels per steradian) and however the
+// cap thins them; a pixel drawn twice comes once with twice the weight. Concatenate the results
+// of several photos to fit them together. Throws rouen::Error for a wrong image or mask.
 std::vector<SkySample> ExtractSkySamples(const Image& hdr, const std::vector<uint8_t>* valid_mask,
                                          const Intrinsics& intrinsics, const Pose& pose,
                                          const Eigen::Vector3d& sun_dir,
                                          const SkySampleOptions& options);
+
+// Measured sky directions from a CSV file as a sky scanner or a luminance meter records them:
+// one direction per line, `azimuth_deg, elevation_deg, R, G, B` (azimuth from north through
+// east, elevation in [0, 90], linear radiance per channel, finite and positive), or the same
+// after a leading integer index (`idx, azimuth_deg, elevation_deg, R, G, B`); the field count
+// is that of the first line with data, for every line. A first line whose first field is not a
+// number is a header; blank lines and lines starting with '#' are skipped. Weight 1 each. Throws
+// rouen::Error naming the file and line for a malformed line, a value that is not finite, a
+// radiance that is not positive, an elevation outside [0, 90], a direction within 0.01 deg of
+// an earlier line's, or a file without directions.
+std::vector<SkySample> ReadSkySamplesCsv(const std::string& path);
 
 // Which sky model FitSky fits. All three are stored as eq. 9 parameters (SkyParams).
 enum class SkyModelKind {
@@ -60,7 +84,17 @@ struct SkyFitOptions {
   SkyModelKind model = SkyModelKind::kSevenParam;
   SkyWeighting weighting = SkyWeighting::kRelative;
   int max_iterations = 200;  // Levenberg-Marquardt iterations per start
-  int min_samples = 20;
+  // Fewest distinct directions (SkyCoverage) a fit accepts: 3 per parameter of the model
+  // (7 for eq. 9). A least-squares fit of k parameters to n samples leaves an in-sample mean
+  // squared error (n - k) / (n + k) of its error at the same directions' fresh measurements;
+  // n >= 3k keeps that ratio at least 1/2, so the reported error understates the fit's by at
+  // most a factor sqrt(2).
+  int min_directions = 21;
+  // The directions must be spread at least as much as a uniform cap of this radius (deg)
+  // around their mean: 60 deg is half the hemisphere's solid angle. Eq. 9's gradation term
+  // differs between zenith and horizon and its scattering terms between the sun and the far
+  // sky; a fit to a smaller cap extrapolates them to the rest of the sky.
+  double min_spread_deg = 60;
   // Try the eight starting shapes (CIE general skies, Perez-like); false: CIE clear only.
   bool multiple_starts = true;
   // Extra starting shapes drawn at random (seeded) over the range clear to hazy skies span,
@@ -93,12 +127,29 @@ struct SkyFitOptions {
   void Validate() const;  // throws rouen::Error explaining the bad field
 };
 
+// How much of the sky a set of samples covers. Directions: the occupied cells of an
+// equal-area grid of the hemisphere (10 bands of sin(elevation) x 20 azimuths, 0.031 sr or
+// about 10 x 10 deg each), but no more than the distinct radiance triples among the samples
+// (an image painted from a few measured directions has many pixels, few measurements).
+// spread_deg: the radius of the uniform cap whose mean resultant length (1 + cos r) / 2
+// equals that of the occupied cells' directions (each cell once): 90 for the whole
+// hemisphere or more even spreads, 0 for a single cell.
+struct SkyCoverage {
+  int directions = 0;
+  double spread_deg = 0;
+};
+SkyCoverage MeasureSkyCoverage(const std::vector<SkySample>& samples);
+// Empty when `coverage` meets options.min_directions and options.min_spread_deg, else what is
+// missing and the rule, for an error message.
+std::string SkyCoverageProblem(const SkyCoverage& coverage, const SkyFitOptions& options);
+
 struct SkyChannelSummary {
-  int iterations = 0;           // of the winning start (screening + refinement)
-  int starts = 0;               // starting points tried
-  double initial_cost = 0;      // eq. 10 on all samples where the final refinement began
-  double final_cost = 0;        // eq. 10 (half the sum of squares, normalised radiance units)
-  double rel_error_median = 0;  // |model - y| / y over the samples
+  int iterations = 0;       // of the winning start (screening + refinement)
+  int starts = 0;           // starting points tried
+  double initial_cost = 0;  // eq. 10 on all samples where the final refinement began
+  double final_cost = 0;    // eq. 10 (half the sum of squares, normalised radiance units)
+  // |model - y| / y over the samples, each counted by its weight (solid angle)
+  double rel_error_median = 0;
   double rel_error_p90 = 0;
   double rel_error_max = 0;
   double rel_error_mean = 0;
@@ -122,8 +173,10 @@ struct SkyFitSummary {
 // general skies, Perez-like) are screened on ~2000 evenly thinned samples; the best two
 // distinct minima (the second only if its cost is within 25 % of the best's) are refined on all
 // samples and the lower cost wins.
-// Throws rouen::Error for too few samples, non-positive or non-finite radiance, directions
-// that are not unit or below the horizon, or a bad sun direction.
+// Each sample's term of the objective is multiplied by its weight (weights normalised to mean 1).
+// Throws rouen::Error for samples covering too little of the sky (SkyCoverageProblem),
+// non-positive or non-finite radiance or weight, directions that are not unit or below the
+// horizon, or a bad sun direction.
 // With options.norm_p != 2 the screened least-squares optimum and every starting shape are
 // instead screened and refined so under the p-norm objective (see SkyFitOptions::norm_p); the
 // per-channel relative-error figures in the summary are of that final fit.
@@ -137,7 +190,7 @@ SkyFitSummary FitSky(const std::vector<SkySample>& samples, const Eigen::Vector3
 std::vector<Eigen::Vector3d> SkyRelativeResiduals(const SkyModel& model,
                                                   const std::vector<SkySample>& samples);
 
-// Median, p90, max and mean of |residual| over the samples, per channel.
+// Median, p90, max and mean of |residual| over the samples, per channel (each sample once).
 struct SkyResidualStats {
   std::array<double, 3> median{}, p90{}, max{}, mean{};
 };

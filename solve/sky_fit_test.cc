@@ -253,7 +253,7 @@ TEST(FitSky, RejectsBadInput) {
   EXPECT_THROW(FitSky(bad, sun, SkyFitOptions{}, &m), Error);
   EXPECT_THROW(FitSky(good, Eigen::Vector3d::Zero(), SkyFitOptions{}, &m), Error);
   SkyFitOptions o;
-  o.min_samples = 3;
+  o.min_directions = 3;
   EXPECT_THROW(FitSky(good, sun, o, &m), Error);
   o = SkyFitOptions{};
   o.max_iterations = 0;

@@ -701,7 +701,6 @@ SkyModel IntermediateAsSkyModel(const IntermediateSky& sky, int grid_zenith, int
     SkyFitOptions fo;
     fo.weighting = SkyWeighting::kPaper;
     fo.norm_p = 2;
-    fo.min_samples = 20;
     SkyModel fitsky;
     FitSky(samples, sun, fo, &fitsky);
     // Polish per channel by relative least squares (what the summary reports), from FitSky's

@@ -22,15 +22,18 @@ struct SkyPoint {
   double cos2_gamma;  // cos^2 gamma
   double y;           // normalised radiance (>= 2)
   double s;           // 1 / sigma = log(y) / y (eq. 10), or 1 / y (relative weighting)
+  double w;           // the sample's weight in the objective (its solid angle, normalised)
 };
 
-// `relative`: sigma = y (plain relative residuals) instead of eq. 10's y / log y.
+// `relative`: sigma = y (plain relative residuals) instead of eq. 10's y / log y; `weight`
+// multiplies the sample's term of the objective.
 inline SkyPoint MakeSkyPoint(const Eigen::Vector3d& dir, const Eigen::Vector3d& sun, double y,
-                             bool relative = false) {
+                             bool relative = false, double weight = 1) {
   const double cos_xi = std::max(dir.z(), 0.01);
   const double cos_g = std::clamp(dir.dot(sun), -1.0, 1.0);
   const double gamma = std::max(std::acos(cos_g), 1e-6);
-  return {1.0 / cos_xi, std::log(gamma), cos_g * cos_g, y, relative ? 1.0 / y : std::log(y) / y};
+  return {1.0 / cos_xi, std::log(gamma), cos_g * cos_g, y, relative ? 1.0 / y : std::log(y) / y,
+          weight};
 }
 
 // Eq. 9 at a precomputed point with its analytic gradient (the fit's speed); the same values as
@@ -98,12 +101,12 @@ class SkyNormTransform {
   double half_p_, eps_, eps2_, eps_p_;
 };
 
-// Residual i = (y_i - Ls_i) / sigma_i with sigma_i = y_i / log y_i (eq. 10); one block of
-// seven parameters {Lz, a, b, c, d, e, h}. With `fixed_h` (Perez et al. 1993's five-parameter
-// form) the block has six parameters {Lz, a, b, c, d, e} and h = 1. With `norm_p` != 2 the
-// residual is SkyNormTransform's t(r_i), so that half the sum of squares is half sum rho(r_i).
-// FitSky's Levenberg-Marquardt (sky_fit.cc) evaluates it; a ceres::CostFunction so that Ceres's
-// gradient checker can test it.
+// Residual i = sqrt(w_i) (y_i - Ls_i) / sigma_i with sigma_i = y_i / log y_i (eq. 10) and w_i
+// the sample's weight; one block of seven parameters {Lz, a, b, c, d, e, h}. With `fixed_h` (Perez
+// et al. 1993's five-parameter form) the block has six parameters {Lz, a, b, c, d, e} and h = 1.
+// With `norm_p` != 2 the residual is sqrt(w_i) times SkyNormTransform's t(r_i), so that half the
+// sum of squares is half sum w_i rho(r_i). FitSky's Levenberg-Marquardt (sky_fit.cc) evaluates it;
+// a ceres::CostFunction so that Ceres's gradient checker can test it.
 class SkyCost : public ceres::CostFunction {
  public:
   explicit SkyCost(std::vector<SkyPoint> points, bool fixed_h = false, double norm_p = 2,
@@ -130,18 +133,21 @@ class SkyCost : public ceres::CostFunction {
       const double l = SkyModelAt(p, q, jac ? grad : nullptr);
       double dr = 1;  // d residual / d r
       norm_.Transform(q.s * (q.y - l), &residuals[i], &dr);
+      const double sw = std::sqrt(q.w);
+      residuals[i] *= sw;
       if (!std::isfinite(residuals[i])) return false;
       if (jac) {
-        for (int k = 0; k < n_; ++k) jac[i * n_ + k] = -dr * q.s * grad[k];
+        for (int k = 0; k < n_; ++k) jac[i * n_ + k] = -sw * dr * q.s * grad[k];
       }
     }
     return true;
   }
 
   // The normal equations of Levenberg-Marquardt in one pass, without storing the Jacobian J
-  // (rows j_i = d residual_i / d params): returns half the sum of squared residuals (+inf where
-  // one is not finite) and writes the Gauss-Newton matrix `h` = sum a_i j_i j_i^T (num_params()
-  // squared, row-major) and the gradient `g` = sum t_i j_i (num_params()), a_i = 1. With `irls`
+  // (rows j_i = d t_i / d params, t_i the residual before its weight): returns half the
+  // weighted sum of squared residuals, half sum w_i t_i^2 (+inf where one is not finite), and
+  // writes the Gauss-Newton matrix `h` = sum w_i a_i j_i j_i^T (num_params() squared,
+  // row-major) and the gradient `g` = sum w_i t_i j_i (num_params()), a_i = 1. With `irls`
   // (this cost's own norm_p being 2), the residuals r_i are first transformed by it, t_i =
   // t(r_i), and a_i = t_i dt_i / r_i: the weights of iteratively reweighted least squares, so
   // that h is that of the weighted squares a_i r_i^2 / 2 which majorise half rho(r_i) for p < 2.
@@ -165,13 +171,13 @@ class SkyCost : public ceres::CostFunction {
       } else {
         norm_.Transform(r, &t, &dt);
       }
-      sum += t * t;
+      sum += q.w * t * t;
       double j[kNumSkyParams];
       for (int k = 0; k < kNumSkyParams; ++k) j[k] = -dt * q.s * grad[k];
-      const double b = irls ? a * r : t;  // g += b j
+      const double b = q.w * (irls ? a * r : t);  // g += b j
       for (int k = 0, m = 0; k < kNumSkyParams; ++k) {
         gg[k] += b * j[k];
-        const double ajk = a * j[k];
+        const double ajk = q.w * a * j[k];
         for (int c = 0; c <= k; ++c) hl[m++] += ajk * j[c];
       }
     }
