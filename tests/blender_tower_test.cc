@@ -313,11 +313,13 @@ TEST_F(BlenderTowerTest, HeldOutAndTrainingPhotosExplained) {
       // The bar for photographs a model explains: 35 dB per view, for the training
       // times (a fit) and the held-out time under the lighting measured then.
       EXPECT_GE(meas, 35) << name;
-      // Under lighting predicted from the other times the held-out time is not at the issue's
-      // 35 dB yet (34.0 dB on the south-east view, E_se of its shaded east face 3% too bright);
-      // 32 dB is the bar the other Blender worlds' tests hold the prediction to.
+      // Under lighting predicted from the other times too, at the held-out time, within 2%
+      // median (the bars; 39.3-41.6 dB, 1.4-1.7% here. Before the sky fit weighed its
+      // samples by solid angle the south-east view scored 34.0 dB, 3.4%). Under the lighting
+      // measured then the north view's median is 2.07%: not asserted.
       if (slot == heldout) {
-        EXPECT_GE(pred, 32) << name;
+        EXPECT_GE(pred, 35) << name;
+        EXPECT_LE(p["predicted"]["median_rel_error"].get<double>(), 0.02) << name;
       }
     }
   }
