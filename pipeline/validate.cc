@@ -54,15 +54,8 @@ namespace {
 std::vector<ShadedTerms> ShadedTermsOf(const SolveResult& solved, const Lighting& measured,
                                        const SlotIrradiance& irr, const std::vector<int>& blocks,
                                        const std::function<void(const std::string&)>& log) {
-  Lighting sky_only = measured;
-  sky_only.ground.reset();  // the ground's light field is below the horizon too
-  EnvironmentMap& env = sky_only.env;
-  const int below = env.bands_below * env.sectors;
-  for (int k = 0; k < env.num_layers(); ++k)
-    for (int r = 0; r < below; ++r)
-      env.radiance[static_cast<size_t>(k) * env.num_regions() + r] = Eigen::Vector3d::Zero();
   Log(log, "the irradiance on the shaded faces by term (the sky alone once more)");
-  const SlotIrradiance sky = IrradianceFor(solved, sky_only);
+  const SlotIrradiance sky = IrradianceFor(solved, measured.SkyOnly());
   std::vector<ShadedTerms> out(1);
   out[0].block = "all";
   for (int b : blocks) {

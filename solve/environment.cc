@@ -84,6 +84,13 @@ void FillLayer(const SkyModel& sky, int sky_samples, int base, EnvironmentMap* m
 
 }  // namespace
 
+void ZeroBelowHorizon(EnvironmentMap* m) {
+  const int below = m->bands_below * m->sectors;
+  for (int k = 0; k < m->num_layers(); ++k)
+    for (int r = 0; r < below; ++r)
+      m->radiance[static_cast<size_t>(k) * m->num_regions() + r] = Eigen::Vector3d::Zero();
+}
+
 void FillBelowHorizon(EnvironmentMap* m, int layer) {
   const int S = m->sectors, nreg = m->num_regions();
   const size_t base = static_cast<size_t>(layer) * nreg;

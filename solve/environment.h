@@ -209,6 +209,9 @@ EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
 // below the horizon. BuildEnvironmentMap fills its maps so, and a predicted map the same way.
 void FillBelowHorizon(EnvironmentMap* m, int layer);
 
+// Every layer's regions below the horizon set to zero radiance: the map's sky alone.
+void ZeroBelowHorizon(EnvironmentMap* m);
+
 // The shadowed/sunlit radiance ratio of horizontal ground of roughness `ground_retro`
 // (solve/retro.h; 0: Lambert) under a sky of horizontal irradiance `e_sky`
 // (EnvironmentMap::HorizontalSkyIrradiance) and a sun of irradiance `sun_e` (radiance x solid

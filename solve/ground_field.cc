@@ -11,6 +11,7 @@
 
 #include "core/angles.h"
 #include "core/error.h"
+#include "core/stats.h"
 #include "solve/retro.h"
 
 namespace rouen {
@@ -179,13 +180,7 @@ GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const Ra
     for (int ch = 0; ch < 3; ++ch) {
       std::vector<float> x;
       for (const Eigen::Vector3f& a : v) x.push_back(a[ch]);
-      std::nth_element(x.begin(), x.begin() + x.size() / 2, x.end());
-      float m = x[x.size() / 2];
-      if (x.size() % 2 == 0) {
-        const float lo = *std::max_element(x.begin(), x.begin() + x.size() / 2);
-        m = 0.5f * (m + lo);
-      }
-      f.albedo[c][ch] = m;
+      f.albedo[c][ch] = Median(std::move(x));
     }
     f.observed[c] = 1;
     queue.push_back(c);
@@ -217,10 +212,7 @@ GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const Ra
       if (cx != 0 && cy != 0 && cx != f.nx - 1 && cy != f.ny - 1) continue;
       for (int ch = 0; ch < 3; ++ch) rim[ch].push_back(f.albedo[c][ch]);
     }
-    for (int ch = 0; ch < 3; ++ch) {
-      std::nth_element(rim[ch].begin(), rim[ch].begin() + rim[ch].size() / 2, rim[ch].end());
-      f.far_albedo[ch] = rim[ch][rim[ch].size() / 2];
-    }
+    for (int ch = 0; ch < 3; ++ch) f.far_albedo[ch] = Median(std::move(rim[ch]));
   }
   s.cells = n;
   s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -268,17 +260,6 @@ void to_json(nlohmann::json& j, const GroundFieldOptions& o) {
        {"min_radius_m", o.min_radius_m},
        {"max_cells", o.max_cells},
        {"sky_rays", o.sky_rays}};
-}
-
-void from_json(const nlohmann::json& j, GroundFieldOptions& o) {
-  if (!j.is_object()) throw Error("ground field options: expected an object");
-  o.enabled = j.value("enabled", o.enabled);
-  o.cell_m = j.value("cell_m", o.cell_m);
-  o.radius_factor = j.value("radius_factor", o.radius_factor);
-  o.min_radius_m = j.value("min_radius_m", o.min_radius_m);
-  o.max_cells = j.value("max_cells", o.max_cells);
-  o.sky_rays = j.value("sky_rays", o.sky_rays);
-  o.Validate();
 }
 
 void to_json(nlohmann::json& j, const GroundField& f) {

@@ -97,8 +97,8 @@ class GroundLight {
   std::vector<uint8_t> shadow_;  // per cell, 1: the model hides the sun from its centre
 };
 
+// The options as SolveConfigJson records them ([ground_field]; ApplySolveConfig reads them).
 void to_json(nlohmann::json& j, const GroundFieldOptions& o);
-void from_json(const nlohmann::json& j, GroundFieldOptions& o);  // validates; missing keys keep
 void to_json(nlohmann::json& j, const GroundField& f);
 void from_json(const nlohmann::json& j, GroundField& f);  // validates
 

@@ -116,8 +116,9 @@ TEST(GroundFieldTest, PanoramaPixelsBecomeTheGroundsAlbedoWhereTheModelLeavesThe
       const Eigen::Vector3d want(images[0].at(x, y, 0), images[0].at(x, y, 1),
                                  images[0].at(x, y, 2));
       const Eigen::Vector3d got = g.Arriving(eye, d);
-      if (want.maxCoeff() > 0 && got.maxCoeff() > 0)
+      if (want.maxCoeff() > 0 && got.maxCoeff() > 0) {
         EXPECT_NEAR(got.x() / want.x(), 1.0, 0.03) << x << " " << y;
+      }
     }
   }
 

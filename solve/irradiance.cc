@@ -40,6 +40,13 @@ double Lighting::SunAngularRadius() const {
   return std::acos(std::clamp(c, -1.0, 1.0));
 }
 
+Lighting Lighting::SkyOnly() const {
+  Lighting out = *this;
+  ZeroBelowHorizon(&out.env);
+  out.ground.reset();
+  return out;
+}
+
 Eigen::Vector3d Lighting::EscapedRadiance(const Eigen::Vector3d& dir, double z) const {
   if (use_env) return env.Radiance(dir, z);
   return dir.z() >= 0 ? sky.Radiance(dir) : Eigen::Vector3d::Zero();
@@ -327,11 +334,7 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
                                                 lighting.env.HorizontalSkyIrradiance());
       if (vector_flux) {
         ls.above_only = lighting.env;
-        const int below = ls.above_only.bands_below * ls.above_only.sectors;
-        for (int k = 0; k < ls.above_only.num_layers(); ++k)
-          for (int r = 0; r < below; ++r)
-            ls.above_only.radiance[static_cast<size_t>(k) * ls.above_only.num_regions() + r]
-                .setZero();
+        ZeroBelowHorizon(&ls.above_only);
       }
     }
     ls.ground_shadow = options.ground_shadow && lighting.use_env && !ls.ground && s.z() > 0 &&
@@ -489,12 +492,15 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
         for (size_t k = 0; k < escaped.size(); ++k) {
           const Eigen::Vector3d& d = escaped[k];
+          if (ls.ground && d.z() < 0) {  // the ground's light field instead of the map there
+            sum += ls.ground->Arriving(origin, d);
+            continue;
+          }
           // Lighting::EscapedRadiance, with the region found above.
           Eigen::Vector3d l = ls.lighting->use_env
                                   ? env.RegionRadiance(regions[k], p.position.z())
                                   : ls.lighting->EscapedRadiance(d, p.position.z());
           if (ls.shape) l = l.cwiseProduct(ls.shape->OfCell(cells[k]));
-          if (ls.ground && d.z() < 0) l = ls.ground->Arriving(origin, d);
           if (ls.ground_shadow && d.z() < -1e-3 && origin.z() > ground_z) {
             const Eigen::Vector3d q = origin + ((origin.z() - ground_z) / -d.z()) * d;
             if (model.Occluded(q + Eigen::Vector3d(0, 0, offset), s, 0.0)) {

@@ -38,6 +38,9 @@ struct Lighting {
   std::shared_ptr<const GroundField> ground;
 
   double SunAngularRadius() const;  // radians, from the solid angle
+  // The same lighting with nothing below the horizon: the map's regions there zero and no
+  // ground field (what the sky alone gives, for splitting the irradiance by term).
+  Lighting SkyOnly() const;
   // Radiance arriving at height z (ENU metres) from direction `dir` when nothing of the model
   // is in the way (no sun): the environment's region means (the specular lobes' light);
   // ComputeIrradiance spreads the sky regions by the sky's shape (SkyShape) too.

@@ -313,12 +313,7 @@ def main():
                                                     strength.default_value, tmpdir, name)
             print("mask check", name, checks["masks"][name], flush=True)
 
-    with open(os.path.join(out, "list.txt"), "w") as f:
-        f.write("\n".join(list_lines) + "\n")
-    with open(os.path.join(out, "cameras.json"), "w") as f:
-        json.dump(cameras, f, indent=1)
-    log["seconds_total"] = round(time.time() - t_start, 1)
-    log["seconds_rendering"] = round(sum(r["seconds"] for r in log["renders"]), 1)
+    base.write_import_files(out, list_lines, cameras, log, t_start)
     truth = {
         "what": "rouen Blender/Cycles validation world photographed from the ground (gen.py)",
         "frame": "east-north-up metres: x east, y north, z up (Blender's and rouen's world)",

@@ -596,6 +596,16 @@ def mask_check(ob, kind, k, pose, tris, building, others, world_node_strength, t
 # ---------------------------------------------------------------------------------------------
 
 
+def write_import_files(out, list_lines, cameras, log, t_start):
+    """list.txt and cameras.json for `rouen import`; the render log's totals."""
+    with open(os.path.join(out, "list.txt"), "w") as f:
+        f.write("\n".join(list_lines) + "\n")
+    with open(os.path.join(out, "cameras.json"), "w") as f:
+        json.dump(cameras, f, indent=1)
+    log["seconds_total"] = round(time.time() - t_start, 1)
+    log["seconds_rendering"] = round(sum(r["seconds"] for r in log["renders"]), 1)
+
+
 def render_sky_pano_float(out, rouen, slots, sky, cams, samples):
     """The mast sky panorama of each slot again, as the main loop renders it (same camera,
     samples and seed: 1000 * slot + its index among the slot's frames) but stored as float32,
@@ -770,12 +780,7 @@ def main():
                                                strength, tmpdir, name)
             print("mask check", name, checks["masks"][name], flush=True)
 
-    with open(os.path.join(out, "list.txt"), "w") as f:
-        f.write("\n".join(list_lines) + "\n")
-    with open(os.path.join(out, "cameras.json"), "w") as f:
-        json.dump(cameras, f, indent=1)
-    log["seconds_total"] = round(time.time() - t_start, 1)
-    log["seconds_rendering"] = round(sum(r["seconds"] for r in log["renders"]), 1)
+    write_import_files(out, list_lines, cameras, log, t_start)
     truth = {
         "what": "rouen Blender/Cycles validation world (gen.py)",
         "frame": "east-north-up metres: x east, y north, z up (Blender's and rouen's world)",
