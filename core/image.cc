@@ -97,13 +97,17 @@ void CheckExrHeader(std::ifstream& in, int64_t size, int32_t version, const std:
                     " left (a corrupt header)");
       }
       if (type == "chlist") {
-        // Channels: "name\0", int32 pixel type (0 uint, 1 half, 2 float), 12 more bytes.
-        // OpenImageIO 2.4 aborts the process on another pixel type.
+        // Channels: "name\0", int32 pixel type (0 uint, 1 half, 2 float), 12 more bytes; an
+        // empty name ends the list. OpenImageIO 2.4 aborts the process on another pixel type,
+        // and OpenEXR reads an entry the attribute's size cuts short on past that size.
         std::string list(claimed, '\0');
         if (!in.read(list.data(), claimed)) return;
-        for (size_t pos = 0; pos < list.size() && list[pos] != '\0';) {
-          const size_t end = list.find('\0', pos);
-          if (end == std::string::npos || end + 17 > list.size()) break;
+        for (size_t pos = 0; pos >= list.size() || list[pos] != '\0';) {
+          const size_t end = pos < list.size() ? list.find('\0', pos) : std::string::npos;
+          if (end == std::string::npos || end + 17 > list.size()) {
+            throw Error(path + ": OpenEXR channel list \"" + name + "\" ends inside an entry (" +
+                        std::to_string(claimed) + " bytes; a corrupt header)");
+          }
           const int32_t pixel_type = Le32(list.data() + end + 1);
           if (pixel_type < 0 || pixel_type > 2) {
             throw Error(path + ": OpenEXR channel \"" + list.substr(pos, end - pos) +

@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -284,6 +285,31 @@ TEST_F(ImageTest, ExrChannelOfUnknownPixelTypeIsRefused) {
               P("bad.exr") + ": OpenEXR channel \"B\" has unknown pixel type 3 (a corrupt header)");
   }
   EXPECT_THROW(ReadPhotoMetadata(P("bad.exr")), Error);
+}
+
+TEST_F(ImageTest, ExrChannelListEndingInsideAnEntryIsRefused) {
+  // Found by tests/fuzz/image_fuzz: a channel list whose declared size ends inside its last
+  // entry; OpenEXR reads that entry's pixel type from the bytes after it and OpenImageIO 2.4
+  // aborts on what it finds there.
+  WriteImage(P("ok.exr"), Ramp(4, 2, 3, PixelUnits::kRadiance, 1.f), StoredType::kHalf);
+  std::string bytes = ReadFileToString(P("ok.exr"));
+  const size_t chlist = bytes.find(std::string("chlist\0", 7));
+  ASSERT_NE(chlist, std::string::npos);
+  // Three entries of "X\0" + 16 bytes and the list's terminating '\0': 55 bytes; claim 52.
+  int32_t claimed = 0;
+  std::memcpy(&claimed, bytes.data() + chlist + 7, 4);  // little-endian, as x86 and ARM
+  ASSERT_EQ(claimed, 55);
+  bytes[chlist + 7] = 52;
+  WriteFileAtomic(P("cut.exr"), bytes);
+  try {
+    ReadImage(P("cut.exr"));
+    ADD_FAILURE();
+  } catch (const Error& e) {
+    EXPECT_EQ(std::string(e.what()), P("cut.exr") +
+                                         ": OpenEXR channel list \"channels\" ends inside an "
+                                         "entry (52 bytes; a corrupt header)");
+  }
+  EXPECT_THROW(ReadPhotoMetadata(P("cut.exr")), Error);
 }
 
 TEST_F(ImageTest, PngChunkClaimingMoreThanTheFileIsRefused) {
