@@ -1488,6 +1488,26 @@ double Area2XY(const std::vector<Eigen::Vector3d>& p) {
   return a;
 }
 
+// The planar cuts below take a convex polygon apart piece by piece; many small faces (a
+// modelled ground of tiles) or many overlapping slivers fragment it into more pieces at each
+// cut. Past this many pieces a cut gives up and keeps the polygon as it was: both cuts only
+// save work per point later, and an uncut shadow changes no point's irradiance.
+constexpr size_t kMaxCutPieces = 256;
+
+struct BoxXY {
+  Eigen::Vector2d lo, hi;
+  explicit BoxXY(const std::vector<Eigen::Vector3d>& p) : lo(p[0].head<2>()), hi(lo) {
+    for (const auto& v : p) {
+      lo = lo.cwiseMin(v.head<2>());
+      hi = hi.cwiseMax(v.head<2>());
+    }
+  }
+  bool Apart(const BoxXY& o) const {
+    return (lo.array() > o.hi.array()).any() || (o.lo.array() > hi.array()).any();
+  }
+};
+
+
 // The part of a convex polygon (in a plane z = const) left of the directed line a -> b, seen
 // from above (Sutherland-Hodgman, one edge).
 std::vector<Eigen::Vector3d> LeftOf(const std::vector<Eigen::Vector3d>& p, const Eigen::Vector3d& a,
@@ -1527,14 +1547,24 @@ std::vector<std::vector<Eigen::Vector3d>> ShadowBeyondGroundFaces(
     }
     if (flat && Area2XY(poly) > 0) ground.push_back(&poly);
   }
+  std::vector<BoxXY> ground_box;
+  for (const auto* q : ground) ground_box.emplace_back(*q);
   std::vector<std::vector<Eigen::Vector3d>> out, rest, next;
   for (const auto& g : shadow) {
-    rest.assign(1, g);
-    if (Area2XY(g) < 0) std::reverse(rest[0].begin(), rest[0].end());
-    for (const auto* q : ground) {
+    std::vector<Eigen::Vector3d> whole = g;
+    if (Area2XY(whole) < 0) std::reverse(whole.begin(), whole.end());
+    rest.assign(1, whole);
+    for (size_t k = 0; k < ground.size() && !rest.empty(); ++k) {
+      const auto* q = ground[k];
       next.clear();
-      for (const auto& p : rest) {
-        // p less q: the pieces right of each of q's edges, what is left going on to the next.
+      for (auto& p : rest) {
+        if (BoxXY(p).Apart(ground_box[k])) {
+          next.push_back(std::move(p));
+          continue;
+        }
+        // p less q: the pieces right of each of q's edges, what is left going on to the next;
+        // p whole when q leaves nothing of it inside (a line through p is no reason to cut it).
+        const size_t first = next.size();
         std::vector<Eigen::Vector3d> inner = p;
         for (size_t e = 0; e < q->size() && inner.size() >= 3; ++e) {
           const Eigen::Vector3d& a = (*q)[e];
@@ -1545,9 +1575,16 @@ std::vector<std::vector<Eigen::Vector3d>> ShadowBeyondGroundFaces(
           }
           inner = LeftOf(inner, a, b);
         }
+        if (inner.size() < 3 || !(Area2XY(inner) > 1e-12 * extent * extent)) {
+          next.resize(first);
+          next.push_back(std::move(p));
+        }
       }
       rest.swap(next);
-      if (rest.empty()) break;
+      if (rest.size() > kMaxCutPieces) {  // many faces fragment it: keep it whole
+        rest.assign(1, whole);
+        break;
+      }
     }
     for (auto& p : rest) out.push_back(std::move(p));
   }
@@ -1556,21 +1593,9 @@ std::vector<std::vector<Eigen::Vector3d>> ShadowBeyondGroundFaces(
 
 namespace {
 
-struct BoxXY {
-  Eigen::Vector2d lo, hi;
-  explicit BoxXY(const std::vector<Eigen::Vector3d>& p) : lo(p[0].head<2>()), hi(lo) {
-    for (const auto& v : p) {
-      lo = lo.cwiseMin(v.head<2>());
-      hi = hi.cwiseMax(v.head<2>());
-    }
-  }
-  bool Apart(const BoxXY& o) const {
-    return (lo.array() > o.hi.array()).any() || (o.lo.array() > hi.array()).any();
-  }
-};
-
 // Twice the area of the convex `h` (counter-clockwise) outside every polygon of `polys` but
-// polys[skip] (convex, counter-clockwise): h less each of them piece by piece.
+// polys[skip] (convex, counter-clockwise): h less each of them piece by piece; infinity when
+// that takes h into more than kMaxCutPieces pieces (taken as uncovered: nothing is merged).
 double UncoveredArea2(const std::vector<Eigen::Vector3d>& h,
                       const std::vector<std::vector<Eigen::Vector3d>>& polys,
                       const std::vector<BoxXY>& boxes, size_t skip) {
@@ -1580,7 +1605,8 @@ double UncoveredArea2(const std::vector<Eigen::Vector3d>& h,
     if (k == skip || hbox.Apart(boxes[k])) continue;
     const std::vector<Eigen::Vector3d>& q = polys[k];
     next.clear();
-    for (const auto& p : rest) {
+    for (auto& p : rest) {
+      const size_t first = next.size();
       std::vector<Eigen::Vector3d> inner = p;
       for (size_t e = 0; e < q.size() && inner.size() >= 3; ++e) {
         const Eigen::Vector3d& a = q[e];
@@ -1589,8 +1615,13 @@ double UncoveredArea2(const std::vector<Eigen::Vector3d>& h,
         if (outside.size() >= 3) next.push_back(std::move(outside));
         inner = LeftOf(inner, a, b);
       }
+      if (inner.size() < 3) {  // q misses p: p whole, not cut along q's lines
+        next.resize(first);
+        next.push_back(std::move(p));
+      }
     }
     rest.swap(next);
+    if (rest.size() > kMaxCutPieces) return std::numeric_limits<double>::infinity();
   }
   double area2 = 0;
   for (const auto& p : rest) area2 += Area2XY(p);
