@@ -11,6 +11,7 @@
 #include <tbb/parallel_for.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cctype>
 #include <chrono>
 #include <cmath>
@@ -246,6 +247,43 @@ void ScalingStudy() {
                 "the same solve with about twice the grid points");
 }
 
+// The modelled ground ([ground] radius_m) around the quick session's building, as a user
+// sets it: 30, 60 and 100 m against none, wall time and peak memory. The solve's peak is set
+// by other stages until the ground's points outgrow them, so the memory a ground point costs
+// is read at the largest radius: (peak - peak without ground) / points added, an upper bound.
+void GroundApronStudy() {
+  const Fixture& f = Shared();
+  const CliSolve none = SolveWithCli(f, "scene_ground0", "");
+  if (none.points == 0) {
+    std::printf("rouen solve (CLI): failed; is %s built?\n", ROUEN_BINARY);
+    return;
+  }
+  std::printf("rouen solve --quick, no modelled ground: %lld points %.1f s %.0f MB\n",
+              static_cast<long long>(none.points), none.seconds, none.peak_mb);
+  CliSolve widest;
+  for (int radius : {30, 60, 100}) {
+    const CliSolve r = SolveWithCli(f, "scene_ground" + std::to_string(radius),
+                                    "[ground]\nradius_m = " + std::to_string(radius) + "\n");
+    if (r.points <= none.points) {
+      std::printf("rouen solve --quick, [ground] radius_m = %d: failed or no ground points\n",
+                  radius);
+      return;
+    }
+    std::printf("rouen solve --quick, [ground] radius_m = %d: %lld points %.1f s %.0f MB\n", radius,
+                static_cast<long long>(r.points), r.seconds, r.peak_mb);
+    const std::string key = "solve.ground_apron_" + std::to_string(radius) + "m";
+    bench::Record(key + ".seconds", r.seconds, "s");
+    bench::Record(key + ".peak_memory_mb", r.peak_mb, "MB");
+    widest = r;
+  }
+  const double added = static_cast<double>(widest.points - none.points);
+  const double bytes = std::max(0.0, widest.peak_mb - none.peak_mb) * 1024 * 1024 / added;
+  std::printf("  at 100 m: %.0f points added, at most %.0f bytes of peak memory each\n", added,
+              bytes);
+  bench::Record("solve.ground_apron_100m.bytes_per_added_point", bytes, "bytes",
+                "upper bound: peak memory over the ground's grid points, against no ground");
+}
+
 // The whole `rouen demo` as a user runs it (a process of its own): simulated capture, solve,
 // validation and report, wall time and peak resident memory. The field's bar: 20 s.
 void DemoStudy() {
@@ -274,6 +312,7 @@ int main(int argc, char** argv) {
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
   rouen::Shared();
   rouen::ScalingStudy();
+  rouen::GroundApronStudy();
   rouen::DemoStudy();
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();

@@ -1507,7 +1507,6 @@ struct BoxXY {
   }
 };
 
-
 // The part of a convex polygon (in a plane z = const) left of the directed line a -> b, seen
 // from above (Sutherland-Hodgman, one edge).
 std::vector<Eigen::Vector3d> LeftOf(const std::vector<Eigen::Vector3d>& p, const Eigen::Vector3d& a,
