@@ -64,6 +64,15 @@ TEST(FilesTest, AtomicWriteReplacesAndLeavesNoTemporaries) {
   EXPECT_EQ(count, 1);
   EXPECT_THROW(WriteFileAtomic(d / "no_such_dir" / "a.txt", "x"), Error);
   EXPECT_THROW(ReadFileToString(d / "missing.txt"), Error);
+  // A folder where a file is expected: named, not std::ios_base::failure from its first read.
+  fs::create_directories(d / "session.json");
+  try {
+    ReadFileToString(d / "session.json");
+    ADD_FAILURE() << "a folder was read as a file";
+  } catch (const Error& e) {
+    EXPECT_EQ(std::string(e.what()), (d / "session.json").string() + ": is a folder, not a file");
+  }
+  fs::remove(d / "session.json");
   // CommitFile moves a finished temporary into place.
   const fs::path tmp = TempPathFor(d / "b.txt");
   EXPECT_NE(tmp.string().find(".tmp-"), std::string::npos);
