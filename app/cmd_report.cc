@@ -99,7 +99,7 @@ void RegisterReport(CLI::App& app) {
   c->add_option("--validate", a->validate_slot,
                 "Render the architecture photos of this slot and show them beside the photos "
                 "with error maps, as rouen validate does (needs --session)")
-      ->check(Within(0, 1000));
+      ->check(Within(0, kMaxSlot));
   c->add_option("--exclude-block", a->exclude_blocks,
                 "With --validate: a model block not scored, e.g. the ground (repeatable)");
   c->callback([a] { Run(*a); });

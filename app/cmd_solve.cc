@@ -114,7 +114,7 @@ void RegisterSolve(CLI::App& app) {
   c->add_option("--out", a->out, "Scene folder to write (new, or an earlier scene)");
   c->add_option("--holdout-slot", a->holdout,
                 "A slot whose architecture photos the albedos do not use (repeatable)")
-      ->check(Within(0, 1000));
+      ->check(Within(0, kMaxSlot));
   c->add_option("--work", a->work, "Working folder for calib/ (default: OUT.work)");
   c->add_flag("--quick", a->quick, "Fewer samples (faster, rougher)");
   c->add_flag("--force", a->force, "Solve even when OUT is up to date");

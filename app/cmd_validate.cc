@@ -159,7 +159,7 @@ void RegisterValidate(CLI::App& app) {
   c->add_option("--session", a->session, "The session the scene was solved from")->required();
   c->add_option("--slot", a->slot, "The slot whose photos to compare with")
       ->required()
-      ->check(Within(0, 1000));
+      ->check(Within(0, kMaxSlot));
   c->add_option("--exclude-block", a->exclude_blocks,
                 "A model block (OBJ group) not scored, e.g. the ground (repeatable)");
   c->add_option("--erode", a->erode_px, "Pixels dropped along silhouettes and block edges")

@@ -266,6 +266,10 @@ void from_json(const json& j, FrameRecord& f) {
       j, "group", "", [&](const json& x, const char* k) { return NeedString(x, k, what); });
   r.slot = Optional<int>(j, "slot", 0,
                          [&](const json& x, const char* k) { return NeedInt32(x, k, what); });
+  if (r.slot < 0 || r.slot > kMaxSlot) {
+    throw Error(std::string(what) + ": key \"slot\" must be a slot number 0.." +
+                std::to_string(kMaxSlot) + ", not " + std::to_string(r.slot));
+  }
   r.utc = NeedTime(j, "utc", what);
   r.hdr = Optional<bool>(j, "hdr", false,
                          [&](const json& x, const char* k) { return NeedBool(x, k, what); });
@@ -375,8 +379,8 @@ void ParseExtraTables(json extra, SessionInfo* r) {
       r->sky_masks[key] = m;
     }
   if (auto it = extra.find("heldout_slot"); it != extra.end() && !it->is_null()) {
-    if (!it->is_number_integer() || it->get<int64_t>() < 0 || it->get<int64_t>() > 1000)
-      throw Error(where + "heldout_slot must be a slot number 0..1000");
+    if (!it->is_number_integer() || it->get<int64_t>() < 0 || it->get<int64_t>() > kMaxSlot)
+      throw Error(where + "heldout_slot must be a slot number 0.." + std::to_string(kMaxSlot));
     r->heldout_slot = it->get<int>();
   }
   if (auto it = extra.find("capture_complete"); it != extra.end() && !it->is_null()) {

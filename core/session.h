@@ -51,6 +51,9 @@ struct GpsFix {
   bool valid() const { return mode >= 2; }
 };
 
+// The highest time-of-day slot index a session holds (slots are 0..kMaxSlot).
+constexpr int kMaxSlot = 1000;
+
 struct FrameRecord {
   int64_t id = 0;
   std::string device;

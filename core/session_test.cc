@@ -536,6 +536,12 @@ TEST_F(SessionTest, IntegersOutOfRangeAreRefusedNotTruncated) {
   j["slot"] = 4294967297LL;
   EXPECT_NE(error_of(j.dump()).find("\"slot\" is 4294967297, outside"), std::string::npos)
       << error_of(j.dump());
+  // Before, slot -1 was taken and `rouen status` died of SIGBUS indexing its slots with it.
+  j = good;
+  j["slot"] = -1;
+  EXPECT_EQ(error_of(j.dump()), "frame record: key \"slot\" must be a slot number 0..1000, not -1");
+  j["slot"] = kMaxSlot + 1;
+  EXPECT_NE(error_of(j.dump()).find("must be a slot number"), std::string::npos);
   j = good;
   j["gps"]["mode"] = 4294967299LL;
   EXPECT_NE(error_of(j.dump()).find("\"mode\" is 4294967299"), std::string::npos);
