@@ -19,7 +19,7 @@ namespace {
 
 struct ImportArgs {
   std::string photos, list, cameras, site, timezone, time, target = "architecture", out, model,
-                                                           sky_mask;
+                                                           surroundings, sky_mask;
 };
 
 void Run(const ImportArgs& a) {
@@ -44,6 +44,7 @@ void Run(const ImportArgs& a) {
     o.time = ParseTimeOption(a.time, "--time");
   }
   o.model = a.model;
+  o.surroundings = a.surroundings;
   o.sky_mask = a.sky_mask;
   o.log = [](const std::string& s) { std::fprintf(stderr, "rouen import: %s\n", s.c_str()); };
   const ImportSummary s = ImportPhotos(o, a.out);
@@ -79,6 +80,10 @@ void RegisterImport(CLI::App& app) {
       "(an object, or a pose file from `rouen calib pose`), files relative to the JSON:\n"
       "  {\"*\": {\"lens\": \"mycam.json\"}, \"group=west\": {\"pose\": \"west-pose.json\"}}\n"
       "--model copies the building (OBJ; its groups are the blocks) into the session;\n"
+      "--surroundings adds coarse geometry around it (OBJ: houses across the street, a city\n"
+      "model's or OpenStreetMap's footprints extruded to their heights): it shades the\n"
+      "building and hides its sky, and lights it as solved surfaces on a coarser grid\n"
+      "([surroundings] spacing_m), never scored by validate;\n"
       "--sky-mask auto segments the sky photos' sky, a mask image (nonzero = sky, the sky\n"
       "photos' size) keeps those pixels.\n"
       "The session is written to OUT.tmp-<pid> and renamed at the end; on error or Ctrl-C "
@@ -100,6 +105,9 @@ void RegisterImport(CLI::App& app) {
                 "Target of the photos: architecture (default), landscape, sky, sun, aureole, "
                 "calibration");
   c->add_option("--model", a->model, "The building's model (OBJ), copied into the session");
+  c->add_option("--surroundings", a->surroundings,
+                "Coarse geometry around the building (OBJ, its groups their own blocks), copied "
+                "into the session");
   c->add_option("--sky-mask", a->sky_mask,
                 "Sky photos' sky pixels: 'auto' (segmented) or a mask image (nonzero = sky)");
   c->add_option("--out", a->out, "Session folder to create")->required();

@@ -1,6 +1,7 @@
 #include "core/mesh.h"
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cassert>
 #include <charconv>
 #include <cmath>
@@ -61,6 +62,20 @@ double Mesh::Area(int t) const {
   const Eigen::Vector3i& tri = triangles[t];
   const Eigen::Vector3d& a = vertices[tri[0]];
   return 0.5 * (vertices[tri[1]] - a).cross(vertices[tri[2]] - a).norm();
+}
+
+void Mesh::Append(const Mesh& other) {
+  for (const std::string& name : other.block_names) {
+    if (std::find(block_names.begin(), block_names.end(), name) != block_names.end())
+      throw Error("block '" + name + "' is in both models (rename the group in one of them)");
+  }
+  const int v0 = static_cast<int>(vertices.size()), b0 = static_cast<int>(block_names.size());
+  vertices.insert(vertices.end(), other.vertices.begin(), other.vertices.end());
+  block_names.insert(block_names.end(), other.block_names.begin(), other.block_names.end());
+  for (size_t t = 0; t < other.triangles.size(); ++t) {
+    triangles.push_back(other.triangles[t] + Eigen::Vector3i::Constant(v0));
+    triangle_block.push_back(other.triangle_block[t] + b0);
+  }
 }
 
 int Mesh::AddBlock(const std::string& name) {

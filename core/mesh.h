@@ -20,6 +20,9 @@ struct Mesh {
   void AddTriangle(int a, int b, int c, int block);
   // Adds a planar convex polygon (vertices counter-clockwise seen from outside) as a fan.
   void AddPolygon(const std::vector<Eigen::Vector3d>& points, int block);
+  // Adds every triangle of `other` in blocks of their own, in `other`'s block order. Throws
+  // rouen::Error naming a block `other` shares with this mesh.
+  void Append(const Mesh& other);
 };
 
 // Throws rouen::Error with file and line for malformed input (bad indices, bad numbers,

@@ -165,5 +165,33 @@ TEST(MeshGeometryTest, NormalAreaPolygon) {
   EXPECT_EQ(m.triangle_block, (std::vector<int>{b, b}));
 }
 
+// Surroundings appended to a building: their triangles after the building's, their vertices
+// renumbered, their blocks after the building's; a block name in both is refused by name.
+TEST(MeshGeometryTest, AppendKeepsBothModelsAndRefusesASharedBlock) {
+  Mesh building;
+  building.AddPolygon({{0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}}, building.AddBlock("wall"));
+  Mesh around;
+  const int house = around.AddBlock("house");
+  around.AddBlock("unused");
+  around.AddPolygon({{0, 9, 0}, {0, 9, 3}, {2, 9, 3}}, house);
+  Mesh both = building;
+  both.Append(around);
+  EXPECT_EQ(both.block_names, (std::vector<std::string>{"wall", "house", "unused"}));
+  ASSERT_EQ(both.triangles.size(), 3u);
+  EXPECT_EQ(both.triangle_block, (std::vector<int>{0, 0, 1}));
+  EXPECT_EQ(both.triangles[2], Eigen::Vector3i(4, 5, 6));
+  EXPECT_TRUE(both.Normal(2).isApprox(around.Normal(0)));
+  Mesh clash;
+  clash.AddPolygon({{0, 5, 0}, {1, 5, 0}, {1, 5, 1}}, clash.AddBlock("wall"));
+  try {
+    both.Append(clash);
+    ADD_FAILURE() << "a shared block name was accepted";
+  } catch (const Error& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "block 'wall' is in both models (rename the group in one of them)");
+  }
+  EXPECT_EQ(both.triangles.size(), 3u);  // untouched
+}
+
 }  // namespace
 }  // namespace rouen

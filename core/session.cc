@@ -465,6 +465,7 @@ void to_json(json& j, const SessionInfo& s) {
       {"created_utc", s.created_utc},
       {"clock_offset_s", s.clock_offset_s},
       {"model", s.model},
+      {"surroundings", s.surroundings},
       {"notes", s.notes},
       {"extra", ExtraTables(s)}};
 }
@@ -492,6 +493,7 @@ void from_json(const json& j, SessionInfo& s) {
     return NeedNumber(x, k, what);
   });
   r.model = Optional<std::string>(j, "model", "", str);
+  r.surroundings = Optional<std::string>(j, "surroundings", "", str);
   r.notes = Optional<std::string>(j, "notes", "", str);
   auto it = j.find("extra");
   if (it != j.end() && !it->is_null()) {

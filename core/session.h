@@ -97,6 +97,9 @@ struct SessionInfo {
   std::string created_utc;
   double clock_offset_s = 0;  // GPS time minus laptop clock, applied to frame times
   std::string model;          // optional relative path to the building model (OBJ)
+  // Optional relative path to the surroundings (OBJ): coarse geometry around the building (a
+  // city model's or OpenStreetMap's footprints and heights), solved with it but not scored.
+  std::string surroundings;
   std::string notes;
   // The typed tables of session.json's "extra" (one parser and one printer: from_json and
   // to_json below), with their keys:

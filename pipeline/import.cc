@@ -494,6 +494,17 @@ ImportSummary ImportPhotos(const ImportOptions& o, const fs::path& out) {
   if (fs::exists(out) && !(fs::is_directory(out) && fs::is_empty(out)))
     throw Error(out_name + ": already exists; choose a new session folder");
   if (!o.model.empty()) CheckModel(o.model);
+  if (!o.surroundings.empty()) {
+    if (o.model.empty())
+      throw Error(o.surroundings.string() + ": surroundings need the building's model (--model)");
+    CheckModel(o.surroundings);
+    Mesh both = ReadObj(o.model.string());
+    try {
+      both.Append(ReadObj(o.surroundings.string()));
+    } catch (const Error& e) {
+      throw Error(o.surroundings.string() + " and " + o.model.string() + ": " + e.what());
+    }
+  }
 
   std::vector<std::string> notes;
   std::vector<Photo> photos = PlanImport(o, &notes);
@@ -534,6 +545,7 @@ ImportSummary ImportPhotos(const ImportOptions& o, const fs::path& out) {
     // The session names its model and sky mask; their files are copied into it.
     std::string mask_file;
     if (!o.model.empty()) info.model = "model.obj";
+    if (!o.surroundings.empty()) info.surroundings = "surroundings.obj";
     if (!o.sky_mask.empty()) {
       SkyMaskSpec spec;
       spec.automatic = o.sky_mask == "auto";
@@ -553,6 +565,8 @@ ImportSummary ImportPhotos(const ImportOptions& o, const fs::path& out) {
     }
     SessionWriter writer = SessionWriter::Create(tmp, info);
     if (!o.model.empty()) WriteFileAtomic(tmp / info.model, ReadFileToString(o.model));
+    if (!o.surroundings.empty())
+      WriteFileAtomic(tmp / info.surroundings, ReadFileToString(o.surroundings));
     if (!mask_file.empty()) WriteFileAtomic(tmp / mask_file, ReadFileToString(o.sky_mask));
     json sources = json::array();
     std::set<std::string> group_names;

@@ -54,7 +54,10 @@ struct ImportOptions {
   std::optional<UtcTime> time;          // for photos that carry no time at all
   Target target = Target::kArchitecture;
   std::filesystem::path model;  // the building (OBJ), copied into the session
-  std::string sky_mask;         // "", "auto" or a mask image copied into the session
+  // Coarse geometry around it (OBJ, e.g. footprints and heights from a city model), copied
+  // into the session as its surroundings (SessionInfo::surroundings); needs `model`.
+  std::filesystem::path surroundings;
+  std::string sky_mask;  // "", "auto" or a mask image copied into the session
   std::function<void(const std::string&)> log;  // notes
 };
 

@@ -91,7 +91,7 @@ SceneSolve SolveToScene(const Session& session, const PipelineOptions& options, 
   SceneModel scene;
   scene.site = SessionSite(session);
   scene.response = calib.response;
-  scene.grid_options = options.config.grid;
+  scene.grid_options = solved.grid_options;
   scene.ground = options.config.ground;
   scene.hemisphere = options.config.hemisphere;
   for (const SlotSolve& s : solved.slots)
@@ -102,6 +102,7 @@ SceneSolve SolveToScene(const Session& session, const PipelineOptions& options, 
   scene.env_stereo_slots = solved.env_stereo_slots;
   scene.ground_field = solved.ground_field;
   scene.model_file = "model.obj";
+  if (!session.info().surroundings.empty()) scene.surroundings_file = "surroundings.obj";
   for (const auto& [name, g] : calib.groups)
     scene.views[name] = SceneView{g.slot, TargetName(g.target), g.utc, g.intrinsics, g.pose};
   scene.holdout_slots = options.exclude_albedo_slots;
@@ -123,6 +124,10 @@ SceneSolve SolveToScene(const Session& session, const PipelineOptions& options, 
     // The session's model file itself, byte for byte: the grid is rebuilt from it.
     WriteFileAtomic(tmp / scene.model_file,
                     ReadFileToString(ResolveInside(session.dir(), session.info().model)));
+    if (!scene.surroundings_file.empty()) {
+      WriteFileAtomic(tmp / scene.surroundings_file,
+                      ReadFileToString(ResolveInside(session.dir(), session.info().surroundings)));
+    }
     WriteScene(tmp, scene);
     ReadScene(tmp);  // what render will read: whole and consistent
     FsyncDirectory(tmp);
@@ -203,6 +208,8 @@ LoadedScene LoadScene(const fs::path& dir, const std::function<void(const std::s
     r.config = ApplySolveConfig(r.scene.options["config"], r.config,
                                 (dir / "scene.json").string() + ": provenance.options.config");
   r.solved.albedo_options = r.config.albedo;
+  r.solved.surrounding_blocks = r.scene.surrounding_blocks;
+  r.solved.grid_options = r.scene.grid_options;
   r.solved.caster = std::make_unique<RayCaster>(r.solved.mesh);
   r.solved.hemisphere = BuildHemisphereCache(r.solved.grid, *r.solved.caster, r.scene.hemisphere);
   r.solved.albedo = std::move(r.scene.albedo);

@@ -399,16 +399,28 @@ void CheckSessionFrames(const Session& session) {
     Require(FrameValuesProblem(f), FrameWhere(session, f));
 }
 
-Mesh ReadSessionModel(const Session& session) {
-  return ReadSessionModel(session.dir(), session.info());
+Mesh ReadSessionModel(const Session& session, std::vector<std::string>* surroundings) {
+  return ReadSessionModel(session.dir(), session.info(), surroundings);
 }
 
-Mesh ReadSessionModel(const std::filesystem::path& dir, const SessionInfo& info) {
+Mesh ReadSessionModel(const std::filesystem::path& dir, const SessionInfo& info,
+                      std::vector<std::string>* surroundings) {
   if (info.model.empty())
     throw Error(dir.string() +
                 "/session.json: no building model ('model') given (rouen import --model "
                 "BUILDING.obj adds one; rouen status lists what the session lacks)");
-  return ReadObj(ResolveInside(dir, info.model).string());
+  Mesh mesh = ReadObj(ResolveInside(dir, info.model).string());
+  if (surroundings) surroundings->clear();
+  if (info.surroundings.empty()) return mesh;
+  const std::filesystem::path path = ResolveInside(dir, info.surroundings);
+  const Mesh around = ReadObj(path.string());
+  try {
+    mesh.Append(around);
+  } catch (const Error& e) {
+    throw Error(path.string() + ": " + e.what());
+  }
+  if (surroundings) *surroundings = around.block_names;
+  return mesh;
 }
 
 CalibResult CalibrateSession(const Session& session, const PipelineOptions& options) {
@@ -537,7 +549,15 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
                          const PipelineOptions& options) {
   SolveResult r;
   StageClock clock(options, &r.stages);
-  r.mesh = ReadSessionModel(session);
+  r.mesh = ReadSessionModel(session, &r.surrounding_blocks);
+  // The surroundings on their coarser grid, unless grid.block_spacing_m names a block.
+  r.grid_options = options.config.grid;
+  for (const std::string& b : r.surrounding_blocks)
+    r.grid_options.block_spacing_m.try_emplace(b, options.config.surroundings_spacing_m);
+  if (!r.surrounding_blocks.empty()) {
+    Log(options, "surroundings: " + std::to_string(r.surrounding_blocks.size()) + " blocks from " +
+                     session.info().surroundings + " (not scored)");
+  }
   // The panoramas' environment (§3.3) leaves out the pixels of the building only: what they see
   // of the modelled ground is the environment's ground, which rays escaping beyond it meet.
   std::unique_ptr<RayCaster> building_only;
@@ -734,7 +754,7 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   }
 
   // Surface grid and geometry-only visibility, computed once.
-  r.grid = BuildSurfaceGrid(r.mesh, options.config.grid);
+  r.grid = BuildSurfaceGrid(r.mesh, r.grid_options);
   r.hemisphere = BuildHemisphereCache(r.grid, *r.caster, options.config.hemisphere);
   Log(options, "surface grid: " + std::to_string(r.grid.size()) + " points");
   clock.Lap("surface grid and visibility");

@@ -89,12 +89,14 @@ void CheckSessionFrames(const Session& session);
 // What CheckSessionFrames finds wrong with one frame's values ("" when nothing).
 std::string FrameValuesProblem(const FrameRecord& f);
 
-// The session's building model (session.json "model", inside the session folder). Throws
-// rouen::Error naming session.json when there is none, or the model file when it is
-// malformed or has no faces.
-Mesh ReadSessionModel(const Session& session);
+// The session's building model (session.json "model", inside the session folder) with its
+// surroundings appended ("surroundings", when given; their block names in `surroundings`,
+// which may be null). Throws rouen::Error naming session.json when there is no model, or the
+// file that is malformed, has no faces, or shares a block name with the other.
+Mesh ReadSessionModel(const Session& session, std::vector<std::string>* surroundings = nullptr);
 // The same for a session folder `dir` whose session.json is `info`.
-Mesh ReadSessionModel(const std::filesystem::path& dir, const SessionInfo& info);
+Mesh ReadSessionModel(const std::filesystem::path& dir, const SessionInfo& info,
+                      std::vector<std::string>* surroundings = nullptr);
 
 struct SlotSolve {
   int slot = 0;
@@ -108,6 +110,8 @@ struct SlotSolve {
 struct SolveResult {
   std::vector<StageTime> stages;
   Mesh mesh;
+  std::vector<std::string> surrounding_blocks;  // the session's surroundings, in `mesh`
+  GridOptions grid_options;  // the config's, with the surroundings' spacing (SolveConfig)
   SurfaceGrid grid;
   std::unique_ptr<RayCaster> caster;
   HemisphereCache hemisphere;

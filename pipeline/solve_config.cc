@@ -145,6 +145,8 @@ const char* NameOf(E v, const std::vector<std::pair<const char*, E>>& names) {
 void SolveConfig::Validate() const {
   grid.Validate();
   ground.Validate();
+  if (!(surroundings_spacing_m >= 0.01 && surroundings_spacing_m <= 100))
+    throw Error("surroundings.spacing_m must be within 0.01..100 metres");
   hemisphere.Validate();
   if (response_max_brackets < 1 || response_max_brackets > 1000)
     throw Error("response.max_brackets must be within 1..1000");
@@ -179,6 +181,7 @@ json SolveConfigJson(const SolveConfig& c) {
             {"max_face_m", c.ground.max_face_m},
             {"block", c.ground.block},
             {"spacing_m", c.ground.spacing_m}}},
+          {"surroundings", {{"spacing_m", c.surroundings_spacing_m}}},
           {"hemisphere", {{"directions", c.hemisphere.directions}, {"seed", c.hemisphere.seed}}},
           {"response", {{"max_brackets", c.response_max_brackets}}},
           {"sky_fit",
@@ -276,6 +279,11 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
     f.Number("max_face_m", &c.ground.max_face_m, 0.01, 10000);
     f.String("block", &c.ground.block);
     f.Number("spacing_m", &c.ground.spacing_m, 0.01, 100);
+    f.Finish();
+  }
+  if (const json* t = root.Table("surroundings")) {
+    Fields f(*t, where, "surroundings");
+    f.Number("spacing_m", &c.surroundings_spacing_m, 0.01, 100);
     f.Finish();
   }
   if (const json* t = root.Table("hemisphere")) {

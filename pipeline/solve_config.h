@@ -23,6 +23,10 @@ struct SolveConfig {
   // gridded at ground.spacing_m unless grid.block_spacing_m names it), its albedo solved from
   // the photos. Off by default (radius_m 0).
   GroundApronOptions ground;
+  // The grid spacing on the session's surroundings (SessionInfo::surroundings: coarse
+  // geometry seen mostly from afar, solved only to light the building) unless
+  // grid.block_spacing_m names their block, metres.
+  double surroundings_spacing_m = 2.0;
   HemisphereOptions hemisphere;  // the irradiance's gathering pattern over that grid
   // LDR brackets the response curve is recovered from, spread evenly over the session.
   int response_max_brackets = 12;
@@ -52,8 +56,8 @@ nlohmann::json SolveConfigJson(const SolveConfig& config);
 // throw rouen::Error naming `where` and the key path (e.g. "solve.toml: sky_fit.norm_p").
 SolveConfig ApplySolveConfig(const nlohmann::json& j, SolveConfig base, const std::string& where);
 // The same from a TOML file (tables as in SolveConfigJson: [grid], [grid.block_spacing_m],
-// [ground], [hemisphere], [response], [sky_fit], [environment], [ground_field], [albedo],
-// [albedo.irradiance]).
+// [ground], [surroundings], [hemisphere], [response], [sky_fit], [environment], [ground_field],
+// [albedo], [albedo.irradiance]).
 SolveConfig ReadSolveConfigFile(const std::string& path, const SolveConfig& base);
 // The options a session's solve starts from: the defaults with the session's own
 // (session.json extra.solve_config, e.g. from its rig's [solve] table) applied; errors name

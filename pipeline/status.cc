@@ -397,6 +397,7 @@ nlohmann::json StatusToJson(const SessionStatus& s) {
   j["contents_verified"] = s.contents_verified;
   j["rig"] = s.info.rig;
   j["model"] = s.info.model;
+  j["surroundings"] = s.info.surroundings;
   j["site"] = {{"lat_deg", s.info.site.lat_deg},
                {"lon_deg", s.info.site.lon_deg},
                {"height_m", s.info.site.height_m},

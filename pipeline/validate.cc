@@ -23,13 +23,15 @@ std::vector<int> ScoredBlocks(const LoadedScene& scene, const std::vector<std::s
     throw Error(scene.dir.string() + ": the model has no block named '" + e +
                 "' (blocks: " + known + ")");
   }
-  // The ground the solve modelled (ground.radius_m) is not the building the paper scores.
-  const std::string modelled_ground =
-      scene.scene.ground.radius_m > 0 ? scene.scene.ground.block : "";
+  // The ground the solve modelled (ground.radius_m) and the session's surroundings are not the
+  // building the paper scores.
+  std::vector<std::string> left_out = exclude;
+  if (scene.scene.ground.radius_m > 0) left_out.push_back(scene.scene.ground.block);
+  const std::vector<std::string>& around = scene.scene.surrounding_blocks;
+  left_out.insert(left_out.end(), around.begin(), around.end());
   std::vector<int> blocks;
   for (int b = 0; b < static_cast<int>(names.size()); ++b)
-    if (std::find(exclude.begin(), exclude.end(), names[b]) == exclude.end() &&
-        names[b] != modelled_ground)
+    if (std::find(left_out.begin(), left_out.end(), names[b]) == left_out.end())
       blocks.push_back(b);
   if (blocks.empty()) throw Error(scene.dir.string() + ": every block of the model is excluded");
   return blocks;

@@ -21,7 +21,7 @@ namespace rouen {
 struct ValidateOptions {
   // Model blocks (OBJ groups) left out of the scored pixels, e.g. the ground around the
   // building, which photographs see at grazing angles. The ground a solve modelled itself
-  // (SolveConfig::ground) is never scored.
+  // (SolveConfig::ground) and the session's surroundings are never scored.
   std::vector<std::string> exclude_blocks;
   // The scored mask is eroded by this many pixels: silhouette and block-edge pixels mix two
   // surfaces in a photograph.

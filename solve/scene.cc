@@ -224,6 +224,19 @@ nlohmann::json WriteAlbedoAtlases(const std::filesystem::path& dir, const SceneM
 
 }  // namespace
 
+Mesh SceneMesh(const std::filesystem::path& dir, const SceneModel& scene, const Mesh* building) {
+  Mesh m = building ? *building : ReadObj(ResolveInside(dir, scene.model_file).string());
+  if (!scene.surroundings_file.empty()) {
+    const std::filesystem::path path = ResolveInside(dir, scene.surroundings_file);
+    try {
+      m.Append(ReadObj(path.string()));
+    } catch (const Error& e) {
+      throw Error(path.string() + ": " + e.what());
+    }
+  }
+  return WithGroundApron(std::move(m), scene.ground);
+}
+
 void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const Mesh* mesh) {
   if (scene.model_file.empty()) throw Error(dir.string() + ": scene has no model_file");
   std::filesystem::create_directories(dir);
@@ -257,6 +270,10 @@ void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const
   j["hemisphere"] = {{"directions", scene.hemisphere.directions}, {"seed", scene.hemisphere.seed}};
   j["model_file"] = scene.model_file;
   j["model_sha256"] = Sha256File(model_path);
+  if (!scene.surroundings_file.empty()) {
+    j["surroundings_file"] = scene.surroundings_file;
+    j["surroundings_sha256"] = Sha256File(ResolveInside(dir, scene.surroundings_file));
+  }
   j["points"] = n;
   nlohmann::json slots = nlohmann::json::array();
   for (const SlotModel& s : scene.slots) {
@@ -296,7 +313,7 @@ void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const
   std::vector<Eigen::Vector3d> info(n);
   for (size_t i = 0; i < n; ++i) info[i] = Eigen::Vector3d(a.observations[i], a.flags[i], 0);
   WriteImage((dir / "albedo_info.exr").string(), PackPointValues(info), StoredType::kFloat);
-  const Mesh m = WithGroundApron(mesh ? *mesh : ReadObj(model_path.string()), scene.ground);
+  const Mesh m = SceneMesh(dir, scene, mesh);
   // Per block by name: the retro parameter of the sun term (solve/retro.h; 0 is Lambert).
   nlohmann::json retro = nlohmann::json::object();
   for (int b = 0; b < static_cast<int>(m.block_names.size()); ++b) {
@@ -321,7 +338,7 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
     throw Error(json_path.string() + ": not valid JSON: " + e.what());
   }
   size_t points = 0;
-  std::string files[3], model_sha256;
+  std::string files[3], model_sha256, surroundings_sha256;
   nlohmann::json retro, sun_lobes, sky_lobes;
   try {
     scene.format_version = j.at("format_version").get<int>();
@@ -341,6 +358,10 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
     scene.hemisphere.Validate();
     scene.model_file = j.at("model_file").get<std::string>();
     model_sha256 = j.at("model_sha256").get<std::string>();
+    if (j.contains("surroundings_file")) {
+      scene.surroundings_file = j.at("surroundings_file").get<std::string>();
+      surroundings_sha256 = j.at("surroundings_sha256").get<std::string>();
+    }
     points = j.at("points").get<size_t>();
     for (const auto& s : j.at("slots")) {
       SlotModel m;
@@ -431,7 +452,16 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
     throw Error(json_path.string() + ": " + model_path.string() +
                 " is not the model the scene was solved with (its sha256 differs)");
   }
-  Mesh mesh = WithGroundApron(ReadObj(model_path.string()), scene.ground);
+  if (!scene.surroundings_file.empty() &&
+      Sha256File(ResolveInside(dir, scene.surroundings_file)) != surroundings_sha256) {
+    throw Error(json_path.string() + ": " + scene.surroundings_file +
+                " is not the surroundings the scene was solved with (its sha256 differs)");
+  }
+  Mesh mesh = SceneMesh(dir, scene);
+  if (!scene.surroundings_file.empty()) {
+    scene.surrounding_blocks =
+        ReadObj(ResolveInside(dir, scene.surroundings_file).string()).block_names;
+  }
   scene.albedo.retro.assign(mesh.block_names.size(), 0.0);
   for (const auto& [name, value] : retro.items()) {
     const auto it = std::find(mesh.block_names.begin(), mesh.block_names.end(), name);

@@ -75,6 +75,10 @@ struct SceneModel {
   // null without it.
   std::shared_ptr<const GroundField> ground_field;
   std::string model_file;  // OBJ, relative to the scene folder
+  // The surroundings the solve modelled with the building (an OBJ relative to the scene
+  // folder; "" for none): appended to model_file's mesh (Mesh::Append) before the ground.
+  std::string surroundings_file;
+  std::vector<std::string> surrounding_blocks;  // their blocks (read from the file)
   std::map<std::string, SceneView> views;
   std::vector<int> holdout_slots;  // slots whose architecture photos the albedos did not use
   // Provenance: a hash of everything the solve read (the session's files, the model, the
@@ -96,6 +100,11 @@ constexpr int kAlbedoImageWidth = 1024;
 // already be at dir/model_file (or be given as `mesh`, which is then written there).
 void WriteScene(const std::filesystem::path& dir, const SceneModel& scene,
                 const Mesh* mesh = nullptr);
+// The scene's mesh as the solve had it: dir/model_file (or `building`, when given), the
+// surroundings appended, the ground added. Throws rouen::Error naming a file that is missing,
+// malformed, or not the one scene.json was written with.
+Mesh SceneMesh(const std::filesystem::path& dir, const SceneModel& scene,
+               const Mesh* building = nullptr);
 // Reads and validates a scene folder; checks that the OBJ is the file the scene was written
 // with (scene.json keeps its sha256: grid points are numbered by triangle), rebuilds the grid
 // from it and checks that the albedo images hold exactly one value per grid point. Throws

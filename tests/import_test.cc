@@ -610,6 +610,7 @@ TEST(ImportTest, ModelSkyMaskNdFiltersAndCalibFiles) {
       "group=west": {"pose": "west-pose.json"},
       "e1.jpg": {"pose": {"rotation": [[1,0,0],[0,1,0],[0,0,1]], "position": [5, 0, 1.6]}}})");
   WriteText(dir / "tower.obj", "g tower\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  WriteText(dir / "houses.obj", "g house_1\nv 0 9 0\nv 0 9 3\nv 2 9 3\nf 1 2 3\n");
   WritePng(dir / "mask.png", 32, 24, 200);
   // The import's arguments with the given list and cameras files.
   const auto args = [&](const std::string& list, const std::string& cameras) {
@@ -618,12 +619,15 @@ TEST(ImportTest, ModelSkyMaskNdFiltersAndCalibFiles) {
   };
   const std::string common = args("list.txt", "cameras.json");
   const fs::path out = dir / "s";
-  Result r = RunRouen(common + " --model " + Q(dir / "tower.obj") + " --sky-mask " +
-                      Q(dir / "mask.png") + " --out " + Q(out));
+  Result r =
+      RunRouen(common + " --model " + Q(dir / "tower.obj") + " --surroundings " +
+               Q(dir / "houses.obj") + " --sky-mask " + Q(dir / "mask.png") + " --out " + Q(out));
   ASSERT_EQ(r.code, 0) << r.out;
   const Session s = Session::Load(out);
   EXPECT_EQ(s.info().model, "model.obj");
   EXPECT_EQ(ReadFileToString(out / "model.obj"), ReadFileToString(dir / "tower.obj"));
+  EXPECT_EQ(s.info().surroundings, "surroundings.obj");
+  EXPECT_EQ(ReadFileToString(out / "surroundings.obj"), ReadFileToString(dir / "houses.obj"));
   EXPECT_EQ(s.info().sky_masks.at("*").file, "sky_mask.png");
   EXPECT_EQ(ReadFileToString(out / "sky_mask.png"), ReadFileToString(dir / "mask.png"));
   const auto sources = SourcesById(s);
@@ -662,6 +666,12 @@ TEST(ImportTest, ModelSkyMaskNdFiltersAndCalibFiles) {
   expect_fail(common + " --model " + Q(dir / "none.obj"), "none.obj: no such model file");
   WriteText(dir / "empty.obj", "# nothing\n");
   expect_fail(common + " --model " + Q(dir / "empty.obj"), "empty.obj");
+  // Surroundings: never without the building, never sharing a block name with it.
+  expect_fail(common + " --surroundings " + Q(dir / "houses.obj"),
+              "houses.obj: surroundings need the building's model (--model)");
+  expect_fail(
+      common + " --model " + Q(dir / "tower.obj") + " --surroundings " + Q(dir / "tower.obj"),
+      "tower.obj: block 'tower' is in both models (rename the group in one of them)");
   WritePng(dir / "small.png", 8, 8, 200);
   expect_fail(common + " --sky-mask " + Q(dir / "small.png"), "small.png");
   WriteText(dir / "list2.txt", "sun1.jpg - target=sun nd=4.5,4\n");
