@@ -101,6 +101,7 @@ void RunResponse(const ResponseArgs& a) {
     throw Error("--method '" + a.method + "': expected debevec, robertson or mitsunaga");
   }
   OutputSet outputs;
+  outputs.Protect("--list", a.list);
   const std::string out = outputs.Add("--out", a.out, OutputKind::kFile);
   std::vector<Bracket> brackets{LoadBracket(ReadExposureList(a.list))};
   ResponseSummary summary;
@@ -116,6 +117,8 @@ void RunResponse(const ResponseArgs& a) {
 
 void RunHdr(const HdrArgs& a) {
   OutputSet outputs;
+  outputs.Protect("--list", a.list);
+  outputs.Protect("--response", a.response);
   const std::string out = outputs.Add("--out", a.out, OutputKind::kRadiance);
   ResponseCurve curve = ReadResponseCurve(a.response);
   Bracket b = LoadBracket(ReadExposureList(a.list));

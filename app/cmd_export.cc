@@ -33,6 +33,7 @@ struct ExportArgs {
 void RunExport(const ExportArgs& a) {
   const auto start = std::chrono::steady_clock::now();
   OutputSet outputs;
+  outputs.Protect("the scene", a.scene);
   const std::string tmp = outputs.Add("--gltf", a.gltf, OutputKind::kFile);
   GltfOptions options;
   options.texels_per_cell = a.texels_per_cell;
@@ -74,6 +75,7 @@ void RunEnvmap(const EnvmapArgs& a) {
   options.sky_model = a.sky_model;
   options.height_m = a.height;
   OutputSet outputs;
+  outputs.Protect("the scene", a.scene);
   const std::string tmp = outputs.Add("--out", a.out, OutputKind::kRadiance);
   auto say = [](const std::string& s) { Say(s, "envmap"); };
   const LoadedScene scene = LoadScene(a.scene, say);

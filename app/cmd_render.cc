@@ -64,6 +64,8 @@ void PrintMetrics(const std::string& what, const RenderMetrics& m) {
 // rouen render --texture-from: one image from the photograph's camera (arguments checked).
 void RunTextured(const RenderArgs& a, const RenderRequest& request) {
   OutputSet outputs;
+  outputs.Protect("the scene", a.scene);
+  outputs.Protect("--session", a.session);
   const std::string out = outputs.Add("--out", a.out, OutputKind::kRadiance);
   const std::string png = a.png.empty() ? "" : outputs.Add("--png", a.png, OutputKind::kImage);
   const std::string grid_out =
@@ -163,6 +165,8 @@ void Run(const RenderArgs& a) {
   // Outputs: one image (and PNG), or folders of frames named by their times (declared once
   // the scene has accepted every time, so a refused sequence creates no folder).
   OutputSet outputs;
+  outputs.Protect("the scene", a.scene);
+  outputs.Protect("--session", a.session);
   std::vector<std::string> out_files, png_files;
   if (!sequence) {
     out_files.push_back(outputs.Add("--out", a.out, OutputKind::kRadiance));

@@ -33,6 +33,10 @@ void Run(const ReportArgs& a) {
     throw Error("--validate needs --session: the photos to compare with are in the session");
   // The output before any work; the inputs named on the command line must exist.
   OutputSet outputs;
+  outputs.Protect("the scene", a.scene);
+  outputs.Protect("--session", a.session);
+  outputs.Protect("--work", a.work);
+  for (const std::string& m : a.metrics) outputs.Protect("--metrics", m);
   const std::string out = outputs.Add("--out", a.out, OutputKind::kFile);
   std::error_code ec;
   for (const std::string& m : a.metrics)

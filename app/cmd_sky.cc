@@ -180,6 +180,9 @@ void RunFit(const SkyFitArgs& a) {
   fo.min_spread_deg = a.min_spread;
   fo.Validate();
   OutputSet outputs;
+  outputs.Protect("--image", a.image);
+  outputs.Protect("--mask", a.mask);
+  outputs.Protect("--samples", a.samples);
   const std::string out = outputs.Add("--out", a.out, OutputKind::kFile);
   const std::string residuals =
       a.residuals.empty() ? "" : outputs.Add("--residuals", a.residuals, OutputKind::kRadiance);
@@ -297,6 +300,7 @@ void RunRender(const SkyRenderArgs& a) {
     throw Error("sky render: --width must be even and in [8, 16384], got " +
                 std::to_string(a.width));
   OutputSet outputs;
+  outputs.Protect("--fit", a.fit);
   const std::string out = outputs.Add("--out", a.out, OutputKind::kRadiance);
   nlohmann::json j;
   try {

@@ -53,6 +53,8 @@ void Run(const ValidateArgs& a) {
   // Outputs before any work: the JSON now, the images' folder now and its files once the
   // scene names the photos.
   OutputSet outputs;
+  outputs.Protect("the scene", a.scene);
+  outputs.Protect("--session", a.session);
   const std::string json = a.json.empty() ? "" : outputs.Add("--json", a.json, OutputKind::kFile);
   if (!a.images.empty()) CheckWritableFolder("--images", a.images);
   auto say = [](const std::string& s) { std::fprintf(stderr, "validate: %s\n", s.c_str()); };

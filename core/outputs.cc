@@ -49,6 +49,33 @@ OutputSet::~OutputSet() {
   for (const Entry& e : entries_) RemoveQuietly(e.temp);
 }
 
+namespace {
+
+// Whether `path` is `input` or lies inside it (both canonical).
+bool WithinInput(const fs::path& path, const fs::path& input) {
+  auto p = path.begin();
+  for (auto i = input.begin(); i != input.end(); ++i, ++p) {
+    if (p == path.end() || *p != *i) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+void OutputSet::Protect(const std::string& what, const std::string& path) {
+  if (path.empty()) return;
+  std::error_code ec;
+  const fs::path canonical = fs::weakly_canonical(path, ec);
+  if (ec) return;  // an input that cannot be resolved is reported by its reader
+  for (const Entry& e : entries_) {
+    std::error_code ec2;
+    if (WithinInput(fs::weakly_canonical(e.path, ec2), canonical))
+      throw Error(e.what + " " + e.path + ": would overwrite " + what + " " + path +
+                  ", an input of this command; write it elsewhere");
+  }
+  inputs_.push_back({what, path, canonical.string()});
+}
+
 std::string OutputSet::Add(const std::string& what, const std::string& path, OutputKind kind) {
   if (path.empty()) throw Error(what + ": no file name given");
   const std::string where = what + " " + path;
@@ -57,6 +84,10 @@ std::string OutputSet::Add(const std::string& what, const std::string& path, Out
   if (fs::is_directory(p, ec) || !p.has_filename())
     throw Error(where + ": is a folder; give a file name (e.g. " +
                 (p / (kind == OutputKind::kFile ? "out.json" : "out.exr")).string() + ")");
+  if (fs::exists(fs::symlink_status(p, ec)) && !fs::is_regular_file(p, ec))
+    throw Error(where +
+                ": is not a regular file (a device or a pipe), which the output would "
+                "replace; give a file name");
   const fs::path dir = p.has_parent_path() ? p.parent_path() : fs::path(".");
   if (!fs::exists(dir, ec)) throw Error(where + ": no such folder " + dir.string());
   if (!fs::is_directory(dir, ec)) throw Error(where + ": " + dir.string() + " is not a folder");
@@ -68,6 +99,11 @@ std::string OutputSet::Add(const std::string& what, const std::string& path, Out
     throw Error(where + ": no image format to write for '" +
                 (ext.empty() ? std::string("no extension") : ext) + "' (use .png)");
   const fs::path canonical = fs::weakly_canonical(p, ec);
+  for (const Input& in : inputs_) {
+    if (WithinInput(canonical, in.canonical))
+      throw Error(where + ": would overwrite " + in.what + " " + in.path +
+                  ", an input of this command; write it elsewhere");
+  }
   for (const Entry& e : entries_) {
     std::error_code ec2;
     if (fs::weakly_canonical(e.path, ec2) == canonical)

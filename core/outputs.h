@@ -32,9 +32,15 @@ class OutputSet {
   OutputSet(const OutputSet&) = delete;
   OutputSet& operator=(const OutputSet&) = delete;
 
+  // Declares an input of the command (a file, or a folder such as a scene or a session) that
+  // no output may replace or be written into; `what` names it in messages. Empty: nothing.
+  // Throws rouen::Error when an output already declared is that file or inside that folder.
+  void Protect(const std::string& what, const std::string& path);
   // Declares an output; `what` names it in messages (an option: "--out"). Throws
-  // rouen::Error when `path` is empty or a folder, when its folder is missing or not
-  // writable, when the format does not suit `kind`, or when another output has the same path.
+  // rouen::Error when `path` is empty or a folder, when it exists and is not a regular file
+  // (a device, a pipe: renaming over it would replace it), when its folder is missing or not
+  // writable, when the format does not suit `kind`, when another output has the same path, or
+  // when it is a protected input or lies inside one (Protect).
   // Returns the temporary to write it to: "<path>.tmp-<pid>-<n><extension>", so writers that
   // choose a format by extension choose the right one.
   std::string Add(const std::string& what, const std::string& path, OutputKind kind);
@@ -47,6 +53,10 @@ class OutputSet {
     std::string what, path, temp;
   };
   std::vector<Entry> entries_;
+  struct Input {
+    std::string what, path, canonical;
+  };
+  std::vector<Input> inputs_;
   bool committed_ = false;
 };
 

@@ -1,6 +1,7 @@
 #include "core/outputs.h"
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <filesystem>
@@ -92,6 +93,54 @@ TEST_F(OutputsTest, RefusesBeforeAnyWorkNamingTheOption) {
             }).find("the same file as --out"),
             std::string::npos);
   EXPECT_EQ(Entries(), 2);  // "file" and the reserved temporary of same.exr
+}
+
+// An output never replaces what the command reads: a protected file, or a file inside a
+// protected folder (a scene, a session), whichever is declared first; nor a device or a pipe,
+// which renaming the finished temporary over would turn into a regular file.
+TEST_F(OutputsTest, OutputsNeverReplaceInputsDevicesOrPipes) {
+  const fs::path scene = dir_ / "scene";
+  fs::create_directories(scene / "sub");
+  WriteFileAtomic(scene / "scene.json", "{}");
+  WriteFileAtomic(dir_ / "list.txt", "a.jpg 1\n");
+  {
+    OutputSet out;
+    out.Protect("the scene", scene.string());
+    out.Protect("--list", (dir_ / "list.txt").string());
+    out.Protect("--session", "");  // not given: nothing
+    for (const fs::path& p :
+         {scene / "scene.json", scene / "sub" / "new.json", scene / "sub" / ".." / "scene.json"}) {
+      EXPECT_EQ(ErrorOf([&] { out.Add("--out", p.string(), OutputKind::kFile); }),
+                "--out " + p.string() + ": would overwrite the scene " + scene.string() +
+                    ", an input of this command; write it elsewhere");
+    }
+    EXPECT_NE(ErrorOf([&] {
+                out.Add("--out", (dir_ / "list.txt").string(), OutputKind::kFile);
+              }).find("would overwrite --list"),
+              std::string::npos);
+    // Beside the scene (a name that only begins like it) is fine.
+    EXPECT_EQ(
+        ErrorOf([&] { out.Add("--out", (dir_ / "scene2.json").string(), OutputKind::kFile); }), "");
+  }
+  {
+    OutputSet out;  // the output declared first, the input after
+    out.Add("--out", (scene / "report.html").string(), OutputKind::kFile);
+    EXPECT_NE(ErrorOf([&] { out.Protect("the scene", scene.string()); }).find("would overwrite"),
+              std::string::npos);
+  }
+  EXPECT_EQ(ReadFileToString(scene / "scene.json"), "{}");
+  EXPECT_FALSE(fs::exists(scene / "report.html"));
+  OutputSet out;
+  EXPECT_EQ(ErrorOf([&] { out.Add("--out", "/dev/null", OutputKind::kFile); }),
+            "--out /dev/null: is not a regular file (a device or a pipe), which the output would "
+            "replace; give a file name");
+  const fs::path fifo = dir_ / "pipe.json";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  EXPECT_NE(ErrorOf([&] {
+              out.Add("--out", fifo.string(), OutputKind::kFile);
+            }).find("is not a regular file"),
+            std::string::npos);
+  EXPECT_TRUE(fs::is_fifo(fifo));
 }
 
 TEST_F(OutputsTest, CommitRefusesAnOutputNeverWritten) {
