@@ -197,6 +197,16 @@ Mesh ParseObj(std::string_view text, const std::string& path) {
   return mesh;
 }
 
+std::vector<std::string> AppendObj(const std::string& path, Mesh* mesh) {
+  Mesh other = ReadObj(path);
+  try {
+    mesh->Append(other);
+  } catch (const Error& e) {
+    throw Error(path + ": " + e.what());
+  }
+  return std::move(other.block_names);
+}
+
 void WriteObj(const std::string& path, const Mesh& mesh) {
   std::string out = "# rouen mesh: " + std::to_string(mesh.vertices.size()) + " vertices, " +
                     std::to_string(mesh.triangles.size()) + " triangles\n";

@@ -31,6 +31,9 @@ struct Mesh {
 Mesh ReadObj(const std::string& path);
 // The same from the text of an OBJ file; `name` (the file) is used in messages.
 Mesh ParseObj(std::string_view text, const std::string& name);
+// Reads the OBJ at `path` (ReadObj) and appends it to `mesh` (Mesh::Append); returns its block
+// names. Throws rouen::Error naming `path` for a malformed file or a block `mesh` has too.
+std::vector<std::string> AppendObj(const std::string& path, Mesh* mesh);
 void WriteObj(const std::string& path, const Mesh& mesh);
 
 }  // namespace rouen

@@ -431,12 +431,22 @@ void AttachCameras(const fs::path& cameras_file, std::vector<Photo>& photos) {
   }
 }
 
-// The building model, checked (it must parse and have faces) before it is copied.
-void CheckModel(const fs::path& model) {
+void RequireModelFile(const fs::path& model) {
   std::error_code ec;
   if (!fs::is_regular_file(model, ec)) throw Error(model.string() + ": no such model file");
-  const Mesh mesh = ReadObj(model.string());
-  if (mesh.triangles.empty()) throw Error(model.string() + ": the model has no faces");
+}
+
+// The building model and its surroundings (either may be empty), checked before they are
+// copied: each must parse and have faces (ReadObj), and no block may be in both.
+void CheckModels(const fs::path& model, const fs::path& surroundings) {
+  if (!surroundings.empty() && model.empty())
+    throw Error(surroundings.string() + ": surroundings need the building's model (--model)");
+  if (model.empty()) return;
+  RequireModelFile(model);
+  Mesh mesh = ReadObj(model.string());
+  if (surroundings.empty()) return;
+  RequireModelFile(surroundings);
+  AppendObj(surroundings.string(), &mesh);
 }
 
 // A sky mask file must be the size of every sky photo (the mask applies to each).
@@ -493,18 +503,7 @@ ImportSummary ImportPhotos(const ImportOptions& o, const fs::path& out) {
     throw Error(out_name + ": give the session folder's name, not a trailing '/'");
   if (fs::exists(out) && !(fs::is_directory(out) && fs::is_empty(out)))
     throw Error(out_name + ": already exists; choose a new session folder");
-  if (!o.model.empty()) CheckModel(o.model);
-  if (!o.surroundings.empty()) {
-    if (o.model.empty())
-      throw Error(o.surroundings.string() + ": surroundings need the building's model (--model)");
-    CheckModel(o.surroundings);
-    Mesh both = ReadObj(o.model.string());
-    try {
-      both.Append(ReadObj(o.surroundings.string()));
-    } catch (const Error& e) {
-      throw Error(o.surroundings.string() + " and " + o.model.string() + ": " + e.what());
-    }
-  }
+  CheckModels(o.model, o.surroundings);
 
   std::vector<std::string> notes;
   std::vector<Photo> photos = PlanImport(o, &notes);

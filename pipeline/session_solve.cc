@@ -410,16 +410,10 @@ Mesh ReadSessionModel(const std::filesystem::path& dir, const SessionInfo& info,
                 "/session.json: no building model ('model') given (rouen import --model "
                 "BUILDING.obj adds one; rouen status lists what the session lacks)");
   Mesh mesh = ReadObj(ResolveInside(dir, info.model).string());
-  if (surroundings) surroundings->clear();
-  if (info.surroundings.empty()) return mesh;
-  const std::filesystem::path path = ResolveInside(dir, info.surroundings);
-  const Mesh around = ReadObj(path.string());
-  try {
-    mesh.Append(around);
-  } catch (const Error& e) {
-    throw Error(path.string() + ": " + e.what());
-  }
-  if (surroundings) *surroundings = around.block_names;
+  std::vector<std::string> blocks;
+  if (!info.surroundings.empty())
+    blocks = AppendObj(ResolveInside(dir, info.surroundings).string(), &mesh);
+  if (surroundings) *surroundings = std::move(blocks);
   return mesh;
 }
 

@@ -224,16 +224,13 @@ nlohmann::json WriteAlbedoAtlases(const std::filesystem::path& dir, const SceneM
 
 }  // namespace
 
-Mesh SceneMesh(const std::filesystem::path& dir, const SceneModel& scene, const Mesh* building) {
+Mesh SceneMesh(const std::filesystem::path& dir, const SceneModel& scene, const Mesh* building,
+               std::vector<std::string>* surroundings) {
   Mesh m = building ? *building : ReadObj(ResolveInside(dir, scene.model_file).string());
-  if (!scene.surroundings_file.empty()) {
-    const std::filesystem::path path = ResolveInside(dir, scene.surroundings_file);
-    try {
-      m.Append(ReadObj(path.string()));
-    } catch (const Error& e) {
-      throw Error(path.string() + ": " + e.what());
-    }
-  }
+  std::vector<std::string> blocks;
+  if (!scene.surroundings_file.empty())
+    blocks = AppendObj(ResolveInside(dir, scene.surroundings_file).string(), &m);
+  if (surroundings) *surroundings = std::move(blocks);
   return WithGroundApron(std::move(m), scene.ground);
 }
 
@@ -457,11 +454,7 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
     throw Error(json_path.string() + ": " + scene.surroundings_file +
                 " is not the surroundings the scene was solved with (its sha256 differs)");
   }
-  Mesh mesh = SceneMesh(dir, scene);
-  if (!scene.surroundings_file.empty()) {
-    scene.surrounding_blocks =
-        ReadObj(ResolveInside(dir, scene.surroundings_file).string()).block_names;
-  }
+  Mesh mesh = SceneMesh(dir, scene, nullptr, &scene.surrounding_blocks);
   scene.albedo.retro.assign(mesh.block_names.size(), 0.0);
   for (const auto& [name, value] : retro.items()) {
     const auto it = std::find(mesh.block_names.begin(), mesh.block_names.end(), name);

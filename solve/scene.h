@@ -101,10 +101,10 @@ constexpr int kAlbedoImageWidth = 1024;
 void WriteScene(const std::filesystem::path& dir, const SceneModel& scene,
                 const Mesh* mesh = nullptr);
 // The scene's mesh as the solve had it: dir/model_file (or `building`, when given), the
-// surroundings appended, the ground added. Throws rouen::Error naming a file that is missing,
-// malformed, or not the one scene.json was written with.
+// surroundings appended (their block names in `surroundings`, which may be null), the ground
+// added. Throws rouen::Error naming a file that is missing or malformed.
 Mesh SceneMesh(const std::filesystem::path& dir, const SceneModel& scene,
-               const Mesh* building = nullptr);
+               const Mesh* building = nullptr, std::vector<std::string>* surroundings = nullptr);
 // Reads and validates a scene folder; checks that the OBJ is the file the scene was written
 // with (scene.json keeps its sha256: grid points are numbered by triangle), rebuilds the grid
 // from it and checks that the albedo images hold exactly one value per grid point. Throws

@@ -25,8 +25,9 @@
 #
 # Shared code: ../blender_world/gen.py (imported as `base`: frames, rouen's camera
 # conventions, Nishita sky, render settings, masks, sun checks, import files) and
-# ../blender_tower/gen.py (imported as `tower`: check_outward, light_pass_output, the rough
-# ground's material). Neither is copied or changed.
+# ../blender_tower/gen.py (imported as `tower`: check_outward, build_scene, light_pass_output
+# for the diffuse and the glossy passes, the sun and mask checks, finish, the rough ground's
+# material).
 import argparse
 import importlib.util
 import json
@@ -353,48 +354,6 @@ def sun_dir_of(sun):
 # Blender scene.
 
 
-def build_scene(blocks):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    mats = {n: base.material(n, s) for n, s in {**BLOCK_MATERIALS, **SURROUNDING_MATERIALS}.items()}
-    building = [base.mesh_object("building_" + n, p, mats[n]) for n, p in blocks.items()]
-    others = []
-    for name, (mat, geo) in SURROUNDINGS.items():
-        if "box" in geo:
-            x0, x1, y0, y1, z0, z1 = geo["box"]
-            polys = ([[(x0, y0, z0), (x1, y0, z0), (x1, y1, z0), (x0, y1, z0)]] if z0 == z1 else
-                     base.box_polygons(x0, x1, y0, y1, z0, z1))
-            others.append(base.mesh_object(name, polys, mats[mat]))
-        else:
-            x, y, r, z = geo["tree"]
-            others.extend(base.tree_object(name, x, y, mats["crown"], mats["trunk"], trunk_r=0.4,
-                                           trunk_h=z - 0.5 * r, crown_r=r, crown_z=z))
-    sky = base.nishita_world(SITE["height_m"])
-    base.setup_render()
-    return building, others, sky
-
-
-def gloss_pass_output(tmpdir):
-    """A second File Output node (as tower.light_pass_output) for the Glossy Direct and
-    Indirect passes; unmuted for the glint view only."""
-    sc = bpy.context.scene
-    vl = sc.view_layers[0]
-    vl.use_pass_glossy_direct = True
-    vl.use_pass_glossy_indirect = True
-    nt = sc.node_tree
-    rl = nt.nodes["Render Layers"]
-    fo = nt.nodes.new("CompositorNodeOutputFile")
-    fo.base_path = tmpdir
-    fo.format.file_format = "OPEN_EXR"
-    fo.format.color_mode = "RGB"
-    fo.format.color_depth = "16"
-    fo.format.exr_codec = "PXR24"
-    fo.file_slots.clear()
-    for slot, out in (("glossdir", "GlossDir"), ("glossind", "GlossInd")):
-        fo.file_slots.new(slot)
-        nt.links.new(rl.outputs[out], fo.inputs[slot])
-    return fo
-
-
 def roof_node_settings():
     """What Cycles renders the roof with (recorded in truth.json)."""
     m = bpy.data.materials["roof"].node_tree.nodes["Principled BSDF"]
@@ -506,9 +465,10 @@ def main():
     base.write_obj(os.path.join(out, "building.obj"), blocks)
     write_surroundings_obj(os.path.join(out, "surroundings.obj"))
     tris = base.triangles(blocks)
-    building, others, sky = build_scene(blocks)
+    building, others, sky = tower.build_scene(blocks, BLOCK_MATERIALS, SURROUNDING_MATERIALS,
+                                              SURROUNDINGS)
     passes = tower.light_pass_output(tmpdir)
-    gloss = gloss_pass_output(tmpdir)
+    gloss = tower.light_pass_output(tmpdir, "glossy")
     samples = {n: max(1, int(round(s * a.scale))) for n, s in SAMPLES.items()}
 
     cams = {}
@@ -573,24 +533,12 @@ def main():
         truth_times.append({"slot": s, "local": f"{DATE}T{local}:00{ZONE}", "utc": utc,
                             "heldout": s == HELDOUT, "rouen_sun": sun, "frames": frames})
         if not a.no_checks:
-            pose = cameras[frames["sun"]]["pose"]
-            img = base.read_exr(os.path.join(out, frames["sun"]))
-            pred = base.project(sun_k, np.array(pose["rotation"]).T @ sun_dir)
-            cu, cv, off, peak = base.sun_centroid(img, sun_k, pose["rotation"], sun_dir,
-                                                  sun["angular_radius_deg"])
-            checks["sun_frames"].append({"slot": s, "rouen_pixel": [float(pred[0]), float(pred[1])],
-                                         "disc_centroid_pixel": [cu, cv], "offset_deg": off,
-                                         "peak_radiance": peak})
-            print("sun check:", checks["sun_frames"][-1], flush=True)
+            checks["sun_frames"].append(tower.sun_frame_check(
+                out, frames["sun"], sun_k, cameras[frames["sun"]]["pose"], sun_dir, sun, s))
 
     passes.mute = gloss.mute = True
     if not a.no_checks:
-        strength = bpy.context.scene.world.node_tree.nodes["Background"].inputs["Strength"]
-        for name, (ob, kind, k, _) in cams.items():
-            pose = cameras[f"group={name}"]["pose"]
-            checks["masks"][name] = base.mask_check(ob, kind, k, pose, tris, building, others,
-                                                    strength.default_value, tmpdir, name)
-            print("mask check", name, checks["masks"][name], flush=True)
+        checks["masks"] = tower.mask_checks(cams, cameras, tris, building, others, tmpdir)
 
     base.write_import_files(out, list_lines, cameras, log, t_start)
     # CPU seconds of the whole process (its threads): on 2 idle cores the wall time is about
@@ -641,14 +589,7 @@ def main():
         "sun_line_of_sight": sun_sight,
         "render": log,
     }
-    with open(os.path.join(out, "truth.json"), "w") as f:
-        json.dump(truth, f, indent=1)
-    if not a.no_checks:
-        with open(os.path.join(out, "checks.json"), "w") as f:
-            json.dump(checks, f, indent=1)
-    shutil.rmtree(tmpdir)
-    print(f"done in {time.time() - t_start:.0f} s; render seconds {log['seconds_rendering']:.0f}",
-          flush=True)
+    tower.finish(out, truth, None if a.no_checks else checks, tmpdir, t_start)
 
 
 if __name__ == "__main__":

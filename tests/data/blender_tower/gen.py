@@ -174,12 +174,15 @@ def check_outward(blocks):
                 raise RuntimeError(f"block {name}: polygon {poly} faces into the building")
 
 
-def build_scene(blocks):
+def build_scene(blocks, block_materials=BLOCK_MATERIALS,
+                surrounding_materials=SURROUNDING_MATERIALS, surroundings=SURROUNDINGS):
+    """The Blender scene: the blocks, the surroundings (boxes and trees, "box"/"tree" entries as
+    SURROUNDINGS), Nishita's sky at base.SITE's height, the render settings."""
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    mats = {n: base.material(n, s) for n, s in {**BLOCK_MATERIALS, **SURROUNDING_MATERIALS}.items()}
+    mats = {n: base.material(n, s) for n, s in {**block_materials, **surrounding_materials}.items()}
     building = [base.mesh_object("building_" + n, p, mats[n]) for n, p in blocks.items()]
     others = []
-    for name, (mat, geo) in SURROUNDINGS.items():
+    for name, (mat, geo) in surroundings.items():
         if "box" in geo:
             x0, x1, y0, y1, z0, z1 = geo["box"]
             polys = ([[(x0, y0, z0), (x1, y0, z0), (x1, y1, z0), (x0, y1, z0)]] if z0 == z1 else
@@ -189,18 +192,23 @@ def build_scene(blocks):
             x, y, r, z = geo["tree"]
             others.extend(base.tree_object(name, x, y, mats["crown"], mats["trunk"], trunk_r=0.4,
                                            trunk_h=z - 0.5 * r, crown_r=r, crown_z=z))
-    sky = base.nishita_world(SITE["height_m"])
+    sky = base.nishita_world(base.SITE["height_m"])
     base.setup_render()
     return building, others, sky
 
 
-def light_pass_output(tmpdir):
-    """Compositor: the render as it is, and a File Output node writing the Diffuse Direct and
-    Indirect passes (half float, PXR24) into tmpdir; muted except for architecture frames."""
+LIGHT_PASSES = {"diffuse": (("diffdir", "DiffDir"), ("diffind", "DiffInd")),
+                "glossy": (("glossdir", "GlossDir"), ("glossind", "GlossInd"))}
+
+
+def light_pass_output(tmpdir, kind="diffuse"):
+    """Compositor: the render as it is, and a File Output node writing the Direct and Indirect
+    passes of `kind` (diffuse or glossy; half float, PXR24) into tmpdir as <slot><frame>.exr,
+    slots as LIGHT_PASSES; the caller mutes it for the frames that need none."""
     sc = bpy.context.scene
     vl = sc.view_layers[0]
-    vl.use_pass_diffuse_direct = True
-    vl.use_pass_diffuse_indirect = True
+    setattr(vl, f"use_pass_{kind}_direct", True)
+    setattr(vl, f"use_pass_{kind}_indirect", True)
     sc.use_nodes = True
     nt = sc.node_tree
     rl = nt.nodes["Render Layers"]
@@ -211,10 +219,46 @@ def light_pass_output(tmpdir):
     fo.format.color_depth = "16"
     fo.format.exr_codec = "PXR24"
     fo.file_slots.clear()
-    for slot, out in (("diffdir", "DiffDir"), ("diffind", "DiffInd")):
+    for slot, out in LIGHT_PASSES[kind]:
         fo.file_slots.new(slot)
         nt.links.new(rl.outputs[out], fo.inputs[slot])
     return fo
+
+
+def sun_frame_check(out, frame, sun_k, pose, sun_dir, sun, slot):
+    """rouen's sun against the disc Cycles rendered in the sun frame `frame` (checks.json)."""
+    img = base.read_exr(os.path.join(out, frame))
+    pred = base.project(sun_k, np.array(pose["rotation"]).T @ sun_dir)
+    cu, cv, off, peak = base.sun_centroid(img, sun_k, pose["rotation"], sun_dir,
+                                          sun["angular_radius_deg"])
+    check = {"slot": slot, "rouen_pixel": [float(pred[0]), float(pred[1])],
+             "disc_centroid_pixel": [cu, cv], "offset_deg": off, "peak_radiance": peak}
+    print("sun check:", check, flush=True)
+    return check
+
+
+def mask_checks(cams, cameras, tris, building, others, tmpdir):
+    """Every camera's building mask in Blender against rouen's camera model (checks.json)."""
+    strength = bpy.context.scene.world.node_tree.nodes["Background"].inputs["Strength"]
+    masks = {}
+    for name, (ob, kind, k, _) in cams.items():
+        pose = cameras[f"group={name}"]["pose"]
+        masks[name] = base.mask_check(ob, kind, k, pose, tris, building, others,
+                                      strength.default_value, tmpdir, name)
+        print("mask check", name, masks[name], flush=True)
+    return masks
+
+
+def finish(out, truth, checks, tmpdir, t_start):
+    """truth.json, checks.json (none when `checks` is None), the temporary folder removed."""
+    with open(os.path.join(out, "truth.json"), "w") as f:
+        json.dump(truth, f, indent=1)
+    if checks is not None:
+        with open(os.path.join(out, "checks.json"), "w") as f:
+            json.dump(checks, f, indent=1)
+    shutil.rmtree(tmpdir)
+    print(f"done in {time.time() - t_start:.0f} s; render seconds "
+          f"{truth['render']['seconds_rendering']:.0f}", flush=True)
 
 
 def main():
@@ -294,24 +338,12 @@ def main():
         truth_times.append({"slot": s, "local": f"{DATE}T{local}:00{ZONE}", "utc": utc,
                             "heldout": s == HELDOUT, "rouen_sun": sun, "frames": frames})
         if not a.no_checks:
-            pose = cameras[frames["sun"]]["pose"]
-            img = base.read_exr(os.path.join(out, frames["sun"]))
-            pred = base.project(sun_k, np.array(pose["rotation"]).T @ sun_dir)
-            cu, cv, off, peak = base.sun_centroid(img, sun_k, pose["rotation"], sun_dir,
-                                                  sun["angular_radius_deg"])
-            checks["sun_frames"].append({"slot": s, "rouen_pixel": [float(pred[0]), float(pred[1])],
-                                         "disc_centroid_pixel": [cu, cv], "offset_deg": off,
-                                         "peak_radiance": peak})
-            print("sun check:", checks["sun_frames"][-1], flush=True)
+            checks["sun_frames"].append(sun_frame_check(
+                out, frames["sun"], sun_k, cameras[frames["sun"]]["pose"], sun_dir, sun, s))
 
     passes.mute = True
     if not a.no_checks:
-        strength = bpy.context.scene.world.node_tree.nodes["Background"].inputs["Strength"]
-        for name, (ob, kind, k, _) in cams.items():
-            pose = cameras[f"group={name}"]["pose"]
-            checks["masks"][name] = base.mask_check(ob, kind, k, pose, tris, building, others,
-                                                    strength.default_value, tmpdir, name)
-            print("mask check", name, checks["masks"][name], flush=True)
+        checks["masks"] = mask_checks(cams, cameras, tris, building, others, tmpdir)
 
     base.write_import_files(out, list_lines, cameras, log, t_start)
     truth = {
@@ -336,14 +368,7 @@ def main():
                     "pano_eye": PANO_EYE, "sun_eye": PANO_EYE, "sun_hfov_deg": SUN_HFOV_DEG},
         "render": log,
     }
-    with open(os.path.join(out, "truth.json"), "w") as f:
-        json.dump(truth, f, indent=1)
-    if not a.no_checks:
-        with open(os.path.join(out, "checks.json"), "w") as f:
-            json.dump(checks, f, indent=1)
-    shutil.rmtree(tmpdir)
-    print(f"done in {time.time() - t_start:.0f} s; render seconds {log['seconds_rendering']:.0f}",
-          flush=True)
+    finish(out, truth, None if a.no_checks else checks, tmpdir, t_start)
 
 
 if __name__ == "__main__":
