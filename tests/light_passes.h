@@ -1,0 +1,45 @@
+// rouen's irradiance against Cycles' light passes, for the Blender worlds of tests/data whose
+// views carry Diffuse Direct and Indirect passes (passes/t<slot>_<group>_diff{dir,ind}.exr:
+// the diffuse light without the albedo, the true irradiance of every pixel's surface) and a
+// truth.json with each block's roughness and each time's slot.
+#ifndef ROUEN_TESTS_LIGHT_PASSES_H_
+#define ROUEN_TESTS_LIGHT_PASSES_H_
+
+#include <Eigen/Core>
+#include <filesystem>
+#include <map>
+#include <string>
+
+namespace rouen::light_passes {
+
+// Sums over a set of visible grid points: Cycles' passes x pi and rouen's terms in the same
+// units (the block's Burley factor for the sun, its ambient factor for the rest).
+struct TermSums {
+  int points = 0;
+  Eigen::Vector3d truth_direct = Eigen::Vector3d::Zero(), truth_indirect = Eigen::Vector3d::Zero();
+  Eigen::Vector3d sun = Eigen::Vector3d::Zero(), sky = Eigen::Vector3d::Zero(),
+                  env = Eigen::Vector3d::Zero(), bounce = Eigen::Vector3d::Zero();
+  void Add(const TermSums& o);
+  // rouen / Cycles per channel: all the light (sun, sky, environment, interreflection
+  // against Diffuse Direct + Indirect), and the sun and sky against the direct light alone.
+  // rouen's sky is what arrives from above the horizon, the landscape photographed there
+  // included, which Cycles counts as indirect: only the total compares like with like.
+  Eigen::Vector3d TotalRatio() const;
+  Eigen::Vector3d DirectRatio() const;
+  Eigen::Vector3d Share(const Eigen::Vector3d& term) const;
+};
+
+// rouen's irradiance at the grid points the views see whole, term by term, against Cycles'
+// Diffuse Direct and Indirect passes of the world in `data`, under each slot's measured
+// lighting of the scene in `scene_dir` (`predicted`: the lighting predicted for the slot's
+// time from the other slots, §5): keyed "<slot> <block> sunlit|shaded" and
+// "all <block> sunlit|shaded" (pooled over the slots), each printed. Only the blocks of
+// truth.json's "blocks" (the building) are summed, never the surroundings. Fails the calling
+// test (gtest) on a missing pass or camera.
+std::map<std::string, TermSums> TermTable(const std::filesystem::path& data,
+                                          const std::filesystem::path& scene_dir,
+                                          bool predicted = false);
+
+}  // namespace rouen::light_passes
+
+#endif  // ROUEN_TESTS_LIGHT_PASSES_H_
