@@ -152,7 +152,8 @@ void RegisterEnvmap(CLI::App& app) {
               "Above the horizon, the sky model (smooth) instead of the environment's regions");
   c->add_option("--height", a->height,
                 "Height (ENU metres) the environment is seen from, between its layers (default: "
-                "the lowest panorama's)");
+                "the lowest panorama's)")
+      ->check(Within(-1e4, 1e4, "m"));
   AddPredictionOptions(c, &a->prediction, kUseHeldOutOption | kSkyInterpOption | kPbsOption, slot);
   c->callback([a, slot] {
     a->have_slot = slot->count() > 0;

@@ -114,11 +114,19 @@ void RegisterSun(CLI::App& app) {
       c->add_option("--lat", a->lat, "Latitude, degrees north")->check(Obeys(LatitudeProblem));
   CLI::Option* lon = c->add_option("--lon", a->lon, "Longitude, degrees east (west is negative)")
                          ->check(Obeys(LongitudeProblem));
-  c->add_option("--height", a->height, "Height above the WGS84 ellipsoid, metres (-500..9000)")
-      ->check(Obeys(HeightProblem));
-  c->add_option("--time", a->time, "ISO 8601 time with a zone, e.g. 2026-08-25T13:30:00Z");
-  c->add_option("--batch", a->batch, "CSV file with columns utc,lat,lon,elev_m");
-  c->add_flag("--json", a->json, "Print JSON");
+  CLI::Option* height =
+      c->add_option("--height", a->height, "Height above the WGS84 ellipsoid, metres (-500..9000)")
+          ->check(Obeys(HeightProblem));
+  CLI::Option* time =
+      c->add_option("--time", a->time, "ISO 8601 time with a zone, e.g. 2026-08-25T13:30:00Z");
+  CLI::Option* json = c->add_flag("--json", a->json, "Print JSON");
+  // The file gives each line's time and site, and the output is CSV: one or the other.
+  c->add_option("--batch", a->batch, "CSV file with columns utc,lat,lon,elev_m")
+      ->excludes(lat)
+      ->excludes(lon)
+      ->excludes(height)
+      ->excludes(time)
+      ->excludes(json);
   // From no air (0: no refraction) past the highest sea-level pressure (1084 mbar); from
   // below the coldest to above the hottest air measured (-89 C, 57 C).
   c->add_option("--pressure", a->pressure, "Air pressure for refraction, mbar")

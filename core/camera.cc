@@ -8,6 +8,8 @@
 
 #include "core/angles.h"
 #include "core/error.h"
+#include "core/json_text.h"
+#include "core/limits.h"
 #include "core/solar.h"
 
 namespace rouen {
@@ -337,6 +339,7 @@ void from_json(const nlohmann::json& j, Pose& p) {
     r.position[i] = (*pos)[i].get<double>();
   }
   if (!r.rotation.allFinite() || !r.position.allFinite()) throw Error("pose: non-finite values");
+  for (int i = 0; i < 3; ++i) Require(CoordinateProblem(r.position[i]), "pose: \"position\"");
   const double ortho = (r.rotation.transpose() * r.rotation - Eigen::Matrix3d::Identity()).norm();
   if (ortho > 1e-6 || r.rotation.determinant() < 0) {
     throw Error("pose: \"rotation\" is not a proper rotation (orthonormality error " +
@@ -346,12 +349,7 @@ void from_json(const nlohmann::json& j, Pose& p) {
 }
 
 Pose ParsePose(std::string_view text, const std::string& name) {
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(text);
-  } catch (const nlohmann::json::exception& e) {
-    throw Error(name + ": not valid JSON (" + e.what() + ")");
-  }
+  const nlohmann::json j = ParseJsonText(text, name);
   try {
     return j.get<Pose>();
   } catch (const Error& e) {

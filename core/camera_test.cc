@@ -258,6 +258,17 @@ TEST(CameraTest, BadJsonNamesTheKey) {
   pj = Pose();
   pj["rotation"][0][0] = 2.0;  // not orthonormal
   EXPECT_THROW(pj.get<Pose>(), Error);
+  // A camera 1e300 m out: before, Embree's ray check aborted rouen render.
+  pj = Pose();
+  pj["position"][1] = 1e300;
+  try {
+    pj.get<Pose>();
+    ADD_FAILURE();
+  } catch (const Error& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "pose: \"position\": coordinate 1e+300 m is outside -100000..100000 m of the "
+              "site's east-north-up frame");
+  }
   EXPECT_THROW(nlohmann::json::array().get<Pose>(), Error);
 }
 

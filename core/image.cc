@@ -164,6 +164,58 @@ void CheckPngChunks(std::ifstream& in, int64_t size, const std::string& path) {
   }
 }
 
+// A JPEG's segments from its start to its end-of-image marker: a file cut short (its scan data
+// running into the end of the file) is refused, which libjpeg would fill with grey and only
+// warn about. Data after the end-of-image marker (a phone's motion clip) is left alone.
+void CheckJpegSegments(std::ifstream& in, int64_t size, const std::string& path) {
+  std::string data(static_cast<size_t>(size), '\0');
+  in.clear();
+  in.seekg(0);
+  in.read(data.data(), size);
+  const size_t n = static_cast<size_t>(in.gcount());
+  auto byte = [&](size_t i) { return static_cast<unsigned char>(data[i]); };
+  auto cut = [&](const std::string& what) {
+    throw Error(path + ": JPEG " + what + " (a truncated or corrupt file)");
+  };
+  const std::string ends = "ends before its end-of-image marker";
+  size_t i = 2;  // after the start-of-image marker
+  while (true) {
+    if (i >= n) cut(ends);
+    if (byte(i) != 0xFF) cut("has no marker at byte " + std::to_string(i));
+    while (i < n && byte(i) == 0xFF) ++i;  // fill bytes
+    if (i >= n) cut(ends);
+    const unsigned char marker = byte(i++);
+    if (marker == 0xD9) return;                                          // end of image
+    if ((marker >= 0xD0 && marker <= 0xD7) || marker == 0x01) continue;  // no length
+    if (i + 2 > n) cut(ends);
+    const size_t length = size_t{byte(i)} << 8 | byte(i + 1);
+    if (length < 2 || i + length > n)
+      cut("segment at byte " + std::to_string(i - 2) + " claims " + std::to_string(length) +
+          " bytes; the file has " + std::to_string(n - i) + " left");
+    i += length;
+    if (marker != 0xDA) continue;
+    // Start of scan: its entropy-coded data runs to the next marker that is neither a stuffed
+    // 0xFF00 nor a restart marker.
+    while (true) {
+      if (i + 1 >= n) cut(ends);
+      if (byte(i) != 0xFF) {
+        ++i;
+        continue;
+      }
+      const unsigned char next = byte(i + 1);
+      if (next == 0x00 || (next >= 0xD0 && next <= 0xD7)) {
+        i += 2;
+        continue;
+      }
+      if (next == 0xFF) {
+        ++i;
+        continue;
+      }
+      break;
+    }
+  }
+}
+
 // The OpenImageIO reader for a file, from its name (RAW formats, Targa: no magic number) or its
 // first bytes; empty when rouen does not read that format.
 std::string ReaderFor(const std::string& path, std::string_view head) {
@@ -207,6 +259,8 @@ std::unique_ptr<OIIO::ImageInput> OpenImageFile(const std::string& path, const c
     CheckPngChunks(in, size, path);
   } else if (reader == "bmp") {
     CheckBmpHeader(in, path);
+  } else if (reader == "jpeg") {
+    CheckJpegSegments(in, size, path);
   }
   // Only that reader: OpenImageIO would otherwise hand a file its reader refuses to every
   // other one it has (movies, DICOM, SGI, ...), far more code than rouen's formats need.
@@ -250,6 +304,16 @@ bool ReadRowBands(OIIO::ImageInput& in, OIIO::TypeDesc type,
 }
 
 }  // namespace internal
+
+ImageSize ReadImageSize(const std::string& path) {
+  OIIO::ImageSpec config;
+  config.attribute("oiio:UnassociatedAlpha", 1);
+  auto in = internal::OpenImageFile(path, "image", &config);
+  const OIIO::ImageSpec spec = in->spec();
+  CheckImageSize(path, spec.width, spec.height, spec.nchannels);
+  in->close();
+  return {spec.width, spec.height, spec.nchannels};
+}
 
 Image ReadImage(const std::string& path, bool keep_alpha) {
   // Colour values as stored: no premultiplication by an alpha channel (dropped unless kept).

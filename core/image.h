@@ -51,6 +51,12 @@ void CheckImageSize(const std::string& path, int width, int height, int channels
 // (also for a file claiming more than kMaxImageSide / kMaxImagePixels / kMaxImageChannels).
 // An alpha channel (RGBA, gray + alpha) is dropped unless `keep_alpha`; colours come as stored.
 Image ReadImage(const std::string& path, bool keep_alpha = false);
+// The size ReadImage would give `path`, from its header alone (checked as ReadImage checks it).
+// Throws rouen::Error naming the file.
+struct ImageSize {
+  int width = 0, height = 0, channels = 0;
+};
+ImageSize ReadImageSize(const std::string& path);
 // A mask image (any format ReadImage reads): width x height entries, 1 where some channel is
 // nonzero. Throws rouen::Error naming the file when it is unreadable or not width x height
 // (`for_what` names the image it must match).

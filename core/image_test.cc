@@ -340,6 +340,34 @@ TEST_F(ImageTest, PngChunkClaimingMoreThanTheFileIsRefused) {
   EXPECT_EQ(ReadImage(P("ok.png")).width, 4);  // a whole PNG passes
 }
 
+// A JPEG cut short decoded without a word before (libjpeg fills the rest with grey and warns):
+// a response fit on such a bracket came out 8x worse. It is refused, naming the file; a whole
+// JPEG, and one with data after its end (a phone's motion clip), read.
+TEST_F(ImageTest, ATruncatedJpegIsRefused) {
+  Image im(64, 48, 3, PixelUnits::kDigital, 0.f);
+  for (int y = 0; y < im.height; ++y)
+    for (int x = 0; x < im.width; ++x)
+      for (int c = 0; c < 3; ++c)
+        im.at(x, y, c) = static_cast<float>((x * 7 + y * 13 + c * 50) % 256);
+  WriteImage(P("ok.jpg"), im, StoredType::kUint8);
+  const std::string good = ReadFileToString(P("ok.jpg"));
+  ASSERT_EQ(good.substr(good.size() - 2), "\xff\xd9");
+  WriteFileAtomic(P("trailer.jpg"), good + std::string(100, '\x42'));
+  EXPECT_EQ(ReadImage(P("ok.jpg")).width, 64);
+  EXPECT_EQ(ReadImage(P("trailer.jpg")).height, 48);
+  for (const size_t keep : {good.size() * 6 / 10, good.size() - 2, size_t{300}}) {
+    WriteFileAtomic(P("cut.jpg"), good.substr(0, keep));
+    try {
+      ReadImage(P("cut.jpg"));
+      ADD_FAILURE() << keep;
+    } catch (const Error& e) {
+      const std::string msg = e.what();
+      EXPECT_EQ(msg.rfind(P("cut.jpg") + ": JPEG ", 0), 0u) << msg;
+      EXPECT_NE(msg.find("(a truncated or corrupt file)"), std::string::npos) << msg;
+    }
+  }
+}
+
 TEST_F(ImageTest, RunLengthEncodedBmpIsRefusedNamingTheFile) {
   // Found by tests/fuzz/image_fuzz: a 76-byte 24-bit BMP whose header says RLE8 made
   // OpenImageIO's decoder read out of bounds (a crash). RLE bitmaps are refused before it runs;

@@ -1,5 +1,10 @@
 #include "core/json_text.h"
 
+#include <set>
+#include <vector>
+
+#include "core/error.h"
+
 namespace rouen {
 namespace {
 
@@ -48,6 +53,25 @@ std::string JsonText(const nlohmann::json& j) {
   std::string out;
   Write(j, 0, &out);
   return out + "\n";
+}
+
+nlohmann::json ParseJsonText(std::string_view text, const std::string& name) {
+  const std::string prefix = name.empty() ? "" : name + ": ";
+  std::vector<std::set<std::string>> keys;  // per open object
+  const nlohmann::json::parser_callback_t check = [&](int, nlohmann::json::parse_event_t event,
+                                                      nlohmann::json& parsed) {
+    using E = nlohmann::json::parse_event_t;
+    if (event == E::object_start) keys.emplace_back();
+    if (event == E::object_end && !keys.empty()) keys.pop_back();
+    if (event == E::key && !keys.empty() && !keys.back().insert(parsed.get<std::string>()).second)
+      throw Error(prefix + "key " + parsed.dump() + " given twice in one object");
+    return true;
+  };
+  try {
+    return nlohmann::json::parse(text, check);
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(prefix + "not valid JSON: " + e.what());
+  }
 }
 
 }  // namespace rouen

@@ -6,9 +6,16 @@
 
 #include <nlohmann/json.hpp>
 #include <string>
+#include <string_view>
 
 namespace rouen {
 
 std::string JsonText(const nlohmann::json& j);
+
+// A JSON file people write by hand, parsed: a key given twice in one object is refused (a
+// contradiction, where the parser would keep the last), as is text that is not JSON. Throws
+// rouen::Error "NAME: not valid JSON: ..." or "NAME: key "K" given twice in one object" (without
+// "NAME: " when `name` is empty).
+nlohmann::json ParseJsonText(std::string_view text, const std::string& name);
 
 }  // namespace rouen

@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <string>
 
+#include "core/error.h"
+
 namespace rouen {
 namespace {
 
@@ -31,6 +33,26 @@ TEST(JsonText, ParsesBackAndKeepsNumberArraysOnOneLine) {
   EXPECT_LT(lines, 30) << text.substr(0, 400);
   EXPECT_NE(text.find("\"curve\": [1,2.5,-0.0,"), std::string::npos) << text.substr(0, 400);
   EXPECT_NE(text.find("\"normal\": [0.0,0.6,0.8]"), std::string::npos);
+}
+
+// A key given twice in one object is a contradiction: refused, naming the file and the key. The
+// same key in different objects is not.
+TEST(JsonTextTest, AKeyGivenTwiceInOneObjectIsRefused) {
+  auto error_of = [](const std::string& text, const std::string& name) -> std::string {
+    try {
+      ParseJsonText(text, name);
+    } catch (const Error& e) {
+      return e.what();
+    }
+    return "";
+  };
+  EXPECT_EQ(error_of(R"({"model": "a.obj", "model": "b.obj"})", "s/session.json"),
+            "s/session.json: key \"model\" given twice in one object");
+  EXPECT_EQ(error_of(R"({"extra": {"slot": 1, "x": [{"slot": 2, "slot": 3}]}})", ""),
+            "key \"slot\" given twice in one object");
+  EXPECT_EQ(error_of(R"({"a": {"k": 1}, "b": {"k": 2}, "k": [{"k": 3}, {"k": 4}]})", "f"), "");
+  EXPECT_EQ(ParseJsonText(R"({"a": {"k": 1}})", "f")["a"]["k"], 1);
+  EXPECT_EQ(error_of("{\"a\": ", "f.json").rfind("f.json: not valid JSON: ", 0), 0u);
 }
 
 }  // namespace

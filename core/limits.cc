@@ -33,6 +33,11 @@ std::string LongitudeProblem(double deg) {
                    " (east positive)");
 }
 
+std::string CoordinateProblem(double m) {
+  return OutsideOf(m, -kMaxCoordinateM, kMaxCoordinateM, "coordinate", " m",
+                   " of the site's east-north-up frame");
+}
+
 std::string HeightProblem(double m) {
   return OutsideOf(m, kMinHeightM, kMaxHeightM, "height", " m", " above the WGS84 ellipsoid");
 }

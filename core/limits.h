@@ -18,6 +18,10 @@ inline constexpr double kMinHeightM = -500, kMaxHeightM = 9000;
 inline constexpr double kMinExposureS = 1e-9, kMaxExposureS = 86400;
 // Optical density of an ND filter: 0 (none) to 10 (transmission 1e-10).
 inline constexpr double kMaxNdDensity = 10;
+// A position in the site's east-north-up frame (a camera, a model's vertex): within 100 km of
+// its origin on each axis. Beyond, single-precision ray tracing (Embree) loses the building's
+// detail, and far beyond it fails.
+inline constexpr double kMaxCoordinateM = 1e5;
 
 // Each returns "" when the value is within its range, else the problem, e.g. "height 1e+15
 // m is outside -500..9000 m above the WGS84 ellipsoid".
@@ -26,6 +30,7 @@ std::string LongitudeProblem(double deg);
 std::string HeightProblem(double m);
 std::string ExposureProblem(double seconds);
 std::string NdDensityProblem(double density);
+std::string CoordinateProblem(double m);
 
 // Throws rouen::Error "<where>: <problem>" when `problem` is not empty.
 void Require(const std::string& problem, const std::string& where);

@@ -11,6 +11,7 @@
 
 #include "core/error.h"
 #include "core/files.h"
+#include "core/limits.h"
 #include "core/text.h"
 
 namespace rouen {
@@ -129,6 +130,8 @@ Mesh ParseObj(std::string_view text, const std::string& path) {
         if (!ParseDouble(tok[i + 1], &v[i])) {
           fail("bad number \"" + std::string(tok[i + 1]) + "\" in vertex");
         }
+        const std::string problem = CoordinateProblem(v[i]);
+        if (!problem.empty()) fail("vertex: " + problem);
       }
       mesh.vertices.push_back(v);
     } else if (kw == "f") {

@@ -100,6 +100,7 @@ TEST_F(MeshTest, ErrorsNameFileAndLine) {
   ExpectError("v 0 0 0\nv 1 0 0\nf 1 2 2\n", 3, "degenerate");
   ExpectError("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 a\n", 4, "bad vertex index");
   ExpectError("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1e999 0 0\n", 4, "bad number");
+  ExpectError("v 0 0 0\nv 1 0 0\nv 0 1e300 0\n", 3, "vertex: coordinate 1e+300 m is outside");
   EXPECT_THROW(ReadObj((dir_ / "missing.obj").string()), Error);
 }
 

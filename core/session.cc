@@ -16,6 +16,7 @@
 
 #include "core/error.h"
 #include "core/files.h"
+#include "core/json_text.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -270,6 +271,22 @@ void from_json(const json& j, FrameRecord& f) {
     throw Error(std::string(what) + ": key \"slot\" must be a slot number 0.." +
                 std::to_string(kMaxSlot) + ", not " + std::to_string(r.slot));
   }
+  // The bracket a frame is merged into is its group's: the group's slot and target must be the
+  // frame's own, or the frame would land in another time's or target's bracket.
+  if (!r.group.empty()) {
+    BracketKey k;
+    try {
+      k = ParseBracketName(r.group);
+    } catch (const Error& e) {
+      throw Error(std::string(what) + ": key \"group\": " + e.what());
+    }
+    if (k.slot != r.slot)
+      throw Error(std::string(what) + ": group \"" + r.group + "\" is slot " +
+                  std::to_string(k.slot) + "'s but key \"slot\" is " + std::to_string(r.slot));
+    if (k.target != r.target)
+      throw Error(std::string(what) + ": group \"" + r.group + "\" is of target " +
+                  TargetName(k.target) + " but key \"target\" is " + TargetName(r.target));
+  }
   r.utc = NeedTime(j, "utc", what);
   r.hdr = Optional<bool>(j, "hdr", false,
                          [&](const json& x, const char* k) { return NeedBool(x, k, what); });
@@ -521,12 +538,7 @@ std::vector<JournalLine> SplitJournal(std::string_view text) {
 }
 
 FrameRecord ParseJournalLine(std::string_view line) {
-  json j;
-  try {
-    j = json::parse(line);
-  } catch (const json::exception& e) {
-    throw Error(std::string("not valid JSON: ") + e.what());
-  }
+  const json j = ParseJsonText(line, "");
   try {
     return j.get<FrameRecord>();
   } catch (const json::exception& e) {
@@ -535,12 +547,7 @@ FrameRecord ParseJournalLine(std::string_view line) {
 }
 
 SessionInfo ParseSessionInfo(std::string_view text, const std::string& name) {
-  json j;
-  try {
-    j = json::parse(text);
-  } catch (const json::exception& e) {
-    throw Error(name + ": not valid JSON: " + e.what());
-  }
+  const json j = ParseJsonText(text, name);
   try {
     return j.get<SessionInfo>();
   } catch (const Error& e) {

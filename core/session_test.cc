@@ -46,7 +46,7 @@ class SessionTest : public ::testing::Test {
     FrameRecord f;
     f.device = "sim0";
     f.target = target;
-    f.group = "slot1/architecture/view1";
+    f.group = BracketName(1, target, 1);
     f.slot = 1;
     f.utc = ParseIso8601("2024-06-21T09:15:00.123456789Z");
     f.hdr = hdr;
@@ -542,6 +542,20 @@ TEST_F(SessionTest, IntegersOutOfRangeAreRefusedNotTruncated) {
   EXPECT_EQ(error_of(j.dump()), "frame record: key \"slot\" must be a slot number 0..1000, not -1");
   j["slot"] = kMaxSlot + 1;
   EXPECT_NE(error_of(j.dump()).find("must be a slot number"), std::string::npos);
+  // A frame files into its group's bracket: the group's slot and target are the frame's, and a
+  // group names a view. Before, slot 2 with group slot1/... merged into slot 1's bracket.
+  j = good;
+  j["slot"] = 2;
+  EXPECT_EQ(error_of(j.dump()),
+            "frame record: group \"slot1/sky/view1\" is slot 1's but key \"slot\" is 2");
+  j = good;
+  j["target"] = "sun";
+  EXPECT_EQ(error_of(j.dump()),
+            "frame record: group \"slot1/sky/view1\" is of target sky but key \"target\" is sun");
+  j = good;
+  j["group"] = "slot1/sky";
+  EXPECT_NE(error_of(j.dump()).find("key \"group\": bracket \"slot1/sky\""), std::string::npos)
+      << error_of(j.dump());
   j = good;
   j["gps"]["mode"] = 4294967299LL;
   EXPECT_NE(error_of(j.dump()).find("\"mode\" is 4294967299"), std::string::npos);

@@ -17,6 +17,7 @@
 #include "core/exif.h"
 #include "core/files.h"
 #include "core/image.h"
+#include "core/json_text.h"
 #include "core/lens.h"
 #include "core/limits.h"
 #include "core/list_file.h"
@@ -138,8 +139,12 @@ std::vector<ListEntry> ReadImportList(const std::string& list) {
       Require(ExposureProblem(s), where);
       e.seconds = s;
     }
+    std::set<std::string> keys;  // group=, nd=, target=: each at most once
     for (size_t i = 2; i < words.size(); ++i) {
       const std::string& w = words[i];
+      const size_t eq = w.find('=');
+      if (eq != std::string::npos && !keys.insert(w.substr(0, eq + 1)).second)
+        throw Error(where + ": " + w.substr(0, eq + 1) + " given twice");
       if (w.rfind("group=", 0) == 0) {
         e.group = w.substr(6);
         if (e.group.empty() || e.group.find('/') != std::string::npos)
@@ -147,7 +152,6 @@ std::vector<ListEntry> ReadImportList(const std::string& list) {
       } else if (w.rfind("nd=", 0) == 0) {
         ParseNd(w.substr(3), where, &e);
       } else if (w.rfind("target=", 0) == 0) {
-        if (!e.targets.empty()) throw Error(where + ": target= given twice");
         std::stringstream ts(w.substr(7));
         std::string t;
         while (std::getline(ts, t, '+')) {
@@ -363,12 +367,7 @@ Pose CameraPose(const json& v, const fs::path& base) {
 
 void AttachCameras(const fs::path& cameras_file, std::vector<Photo>& photos) {
   const std::string file = cameras_file.string();
-  json j;
-  try {
-    j = json::parse(ReadFileToString(cameras_file));
-  } catch (const json::exception& e) {
-    throw Error(file + ": not valid JSON: " + e.what());
-  }
+  const json j = ParseJsonText(ReadFileToString(cameras_file), file);
   if (!j.is_object())
     throw Error(file +
                 ": expected an object mapping image names (or \"group=NAME\", or \"*\") to "

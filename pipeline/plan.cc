@@ -11,6 +11,7 @@
 
 #include "core/error.h"
 #include "core/files.h"
+#include "core/json_text.h"
 #include "core/limits.h"
 #include "core/text.h"
 #include "solve/grid.h"
@@ -76,12 +77,7 @@ void Log(const std::function<void(const std::string&)>& log, const std::string& 
 
 std::vector<PlanView> ReadPlanViews(const fs::path& file) {
   if (!fs::is_regular_file(file)) throw Error(file.string() + ": no such views file");
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(ReadFileToString(file));
-  } catch (const nlohmann::json::exception& e) {
-    throw Error(file.string() + ": not valid JSON: " + e.what());
-  }
+  const nlohmann::json j = ParseJsonText(ReadFileToString(file), file.string());
   const nlohmann::json& list = j.is_object() && j.contains("views") ? j["views"] : j;
   if (!list.is_array() || list.empty())
     throw Error(file.string() +

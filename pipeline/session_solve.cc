@@ -19,6 +19,7 @@
 #include "core/error.h"
 #include "core/files.h"
 #include "core/limits.h"
+#include "core/memory.h"
 #include "core/temporaries.h"
 #include "core/text.h"
 #include "core/version.h"
@@ -756,6 +757,13 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   }
 
   // Surface grid and geometry-only visibility, computed once.
+  // Memory known before the grid is made: about 4.3 KB per point over the whole solve
+  // (bench/scene_bench.cc: the demo's 319,000 points at 0.15 m took 1.37 GB).
+  constexpr int64_t kSolveBytesPerGridPoint = 4400;
+  const int64_t points = CountGridPoints(r.mesh, r.grid_options);
+  CheckMemory(points * kSolveBytesPerGridPoint,
+              "the solve's surface grid of " + std::to_string(points) + " points",
+              "a larger grid.spacing_m, or grid.block_spacing_m coarser on the largest blocks");
   r.grid = BuildSurfaceGrid(r.mesh, r.grid_options);
   r.hemisphere = BuildHemisphereCache(r.grid, *r.caster, options.config.hemisphere);
   Log(options, "surface grid: " + std::to_string(r.grid.size()) + " points");

@@ -11,6 +11,7 @@
 #include "core/angles.h"
 #include "core/error.h"
 #include "core/hash_random.h"
+#include "core/memory.h"
 #include "solve/retro.h"
 #include "solve/specular.h"
 
@@ -84,7 +85,12 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
                 " triangles, the mesh has " + std::to_string(mesh.triangles.size()));
   }
   const int w = intrinsics.width, h = intrinsics.height, ss = options.supersample;
-  Image out(w, h, options.alpha ? 4 : 3, PixelUnits::kRadiance, 0.f);
+  const int channels = options.alpha ? 4 : 3;
+  // The image, its copy for the file and the adaptive sampling's corner keys.
+  CheckMemory(static_cast<int64_t>(w + 1) * (h + 1) * (2 * 4 * channels + 8),
+              "render: a " + std::to_string(w) + "x" + std::to_string(h) + " image",
+              "a smaller --size");
+  Image out(w, h, channels, PixelUnits::kRadiance, 0.f);
   const Eigen::Vector3d s = lighting.sun_dir.normalized();
   const Eigen::Vector3d sun_e = lighting.sun_radiance * lighting.sun_solid_angle_sr;
   const double cos_sun_radius = std::cos(lighting.SunAngularRadius());

@@ -101,41 +101,62 @@ void from_json(const nlohmann::json& j, GridOptions& o) {
   o.Validate();
 }
 
+namespace {
+
+// Triangle t's subdivisions per edge (n: n^2 grid points), 0 for a degenerate or malformed one.
+int Subdivisions(const Mesh& mesh, int t, const GridOptions& options) {
+  const Eigen::Vector3i& f = mesh.triangles[t];
+  if (f.minCoeff() < 0 || f.maxCoeff() >= static_cast<int>(mesh.vertices.size())) return 0;
+  const Eigen::Vector3d& a = mesh.vertices[f[0]];
+  const Eigen::Vector3d& b = mesh.vertices[f[1]];
+  const Eigen::Vector3d& c = mesh.vertices[f[2]];
+  const double area = 0.5 * (b - a).cross(c - a).norm();
+  const double longest = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
+  if (!std::isfinite(area) || !(area > 1e-12 * longest * longest) || !(longest > 0)) return 0;
+  const int block = t < static_cast<int>(mesh.triangle_block.size()) ? mesh.triangle_block[t] : -1;
+  const std::string name = block >= 0 && block < static_cast<int>(mesh.block_names.size())
+                               ? mesh.block_names[block]
+                               : "";
+  const double spacing = options.SpacingFor(name);
+  const double size = options.subdivision == GridSubdivision::kLongestEdge
+                          ? longest
+                          : std::sqrt(4.0 * area / std::sqrt(3.0));
+  return std::clamp(static_cast<int>(std::ceil(size / spacing - 1e-9)), 1, options.max_subdivision);
+}
+
+}  // namespace
+
+int64_t CountGridPoints(const Mesh& mesh, const GridOptions& options) {
+  options.Validate();
+  int64_t points = 0;
+  for (int t = 0; t < static_cast<int>(mesh.triangles.size()); ++t) {
+    const int64_t n = Subdivisions(mesh, t, options);
+    points += n * n;
+  }
+  return points;
+}
+
 SurfaceGrid BuildSurfaceGrid(const Mesh& mesh, const GridOptions& options) {
   options.Validate();
   SurfaceGrid grid;
   const int num_tris = static_cast<int>(mesh.triangles.size());
-  const int nv = static_cast<int>(mesh.vertices.size());
   grid.triangle_first.assign(num_tris + 1, 0);
   grid.triangle_n.assign(num_tris, 0);
   for (int t = 0; t < num_tris; ++t) {
     grid.triangle_first[t] = grid.size();
-    const Eigen::Vector3i& f = mesh.triangles[t];
-    if (f.minCoeff() < 0 || f.maxCoeff() >= nv) {
+    const int n = Subdivisions(mesh, t, options);
+    if (n == 0) {
       ++grid.skipped_triangles;
       continue;
     }
+    const Eigen::Vector3i& f = mesh.triangles[t];
     const Eigen::Vector3d& a = mesh.vertices[f[0]];
     const Eigen::Vector3d& b = mesh.vertices[f[1]];
     const Eigen::Vector3d& c = mesh.vertices[f[2]];
     const Eigen::Vector3d cross = (b - a).cross(c - a);
     const double area = 0.5 * cross.norm();
-    const double longest = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
-    if (!std::isfinite(area) || !(area > 1e-12 * longest * longest) || !(longest > 0)) {
-      ++grid.skipped_triangles;
-      continue;
-    }
     const int block =
         t < static_cast<int>(mesh.triangle_block.size()) ? mesh.triangle_block[t] : -1;
-    const std::string name = block >= 0 && block < static_cast<int>(mesh.block_names.size())
-                                 ? mesh.block_names[block]
-                                 : "";
-    const double spacing = options.SpacingFor(name);
-    const double size = options.subdivision == GridSubdivision::kLongestEdge
-                            ? longest
-                            : std::sqrt(4.0 * area / std::sqrt(3.0));
-    const int n =
-        std::clamp(static_cast<int>(std::ceil(size / spacing - 1e-9)), 1, options.max_subdivision);
     grid.triangle_n[t] = n;
     const Eigen::Vector3d normal = cross.normalized();
     const double cell_area = area / (static_cast<double>(n) * n);

@@ -71,5 +71,7 @@ struct SurfaceGrid {
 // Deterministic: the same mesh and options give the same points in the same order (by
 // triangle, then by sub-triangle). Degenerate triangles get no points and are counted.
 SurfaceGrid BuildSurfaceGrid(const Mesh& mesh, const GridOptions& options);
+// The number of points BuildSurfaceGrid would make, without making them.
+int64_t CountGridPoints(const Mesh& mesh, const GridOptions& options);
 
 }  // namespace rouen

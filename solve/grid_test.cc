@@ -131,6 +131,11 @@ TEST(GridTest, DeterministicWithBlockOverride) {
   EXPECT_EQ(a.triangle_n[0], 15);
   EXPECT_EQ(a.triangle_n[2], static_cast<int>(std::ceil(std::hypot(2.0, 2.0) / 0.5)));  // top
   EXPECT_EQ(a.triangle_n[4], static_cast<int>(std::ceil(std::hypot(2.0, 5.0) / 0.5)));  // south
+  // The count the solve checks its memory with, before making the grid.
+  EXPECT_EQ(CountGridPoints(m, o), a.size());
+  o.spacing_m = 0.01;  // the documented minimum: counted, not made
+  EXPECT_GT(CountGridPoints(m, o), 200 * 200 * 10);
+  o.spacing_m = 0.5;
   // Options survive JSON.
   const GridOptions back = nlohmann::json(o).get<GridOptions>();
   EXPECT_EQ(back.subdivision, GridSubdivision::kLongestEdge);

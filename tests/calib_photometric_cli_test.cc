@@ -416,9 +416,11 @@ TEST(CalibrateSessionTest, MixingLdrAndHdrInOneBracketIsAnError) {
   {
     SessionWriter wr = SessionWriter::Create(dir / "session", info);
     std::mt19937_64 rng(1);
-    wr.Append(Frame("g", Target::kArchitecture, 1, 0, k, "2024-06-21T07:00:00Z"),
-              testing::Expose(scene, 1, 0, &rng));
-    FrameRecord f = Frame("g", Target::kArchitecture, 1, 0, k, "2024-06-21T07:00:01Z");
+    wr.Append(
+        Frame("slot0/architecture/view0", Target::kArchitecture, 1, 0, k, "2024-06-21T07:00:00Z"),
+        testing::Expose(scene, 1, 0, &rng));
+    FrameRecord f =
+        Frame("slot0/architecture/view0", Target::kArchitecture, 1, 0, k, "2024-06-21T07:00:01Z");
     f.hdr = true;
     wr.Append(f, scene);
   }

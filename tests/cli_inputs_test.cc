@@ -203,6 +203,10 @@ TEST(CliInputs, RenderArgumentErrorsComeFirstAndNameTheOption) {
   ExpectError(RunRouen(base + " --slot 0 --time 2026-08-25T20:30:00Z"), {"--slot", "--time"});
   ExpectError(RunRouen(base + " --slot 0 --png " + Q(dir / "missing" / "r.png")),
               {"--png", "no such folder"});
+  // NaN is not "no height given".
+  ExpectError(
+      RunRouen("envmap " + Q(dir / "none") + " --slot 0 --height nan --out " + Q(dir / "e.exr")),
+      {"--height", "'nan' is not a number within"});
   fs::path work_file = dir / "work";
   WriteFileAtomic(work_file, "a file, not a folder\n");
   ExpectError(RunRouen("solve " + Q(dir / "none") + " --out " + Q(dir / "s.scene") + " --work " +

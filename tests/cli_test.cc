@@ -143,6 +143,11 @@ TEST(CliTest, SunBadInputNamesTheProblem) {
   Result nolon = RunRouen("sun --lat 37 --time 2026-08-25T12:00:00Z");  // --lon forgotten
   EXPECT_NE(nolon.code, 0);
   EXPECT_NE(nolon.out.find("--lon"), std::string::npos) << nolon.out;
+  // --batch gives every line's time and site: a --time beside it contradicts it.
+  Result both =
+      RunRouen("sun --batch " + (dir / "bad.csv").string() + " --time 2026-08-25T12:00:00Z");
+  EXPECT_NE(both.code, 0);
+  EXPECT_NE(both.out.find("--time excludes --batch"), std::string::npos) << both.out;
   fs::remove_all(dir);
 }
 

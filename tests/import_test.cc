@@ -678,6 +678,11 @@ TEST(ImportTest, ModelSkyMaskNdFiltersAndCalibFiles) {
   expect_fail(args("list2.txt", "cameras.json"), "list2.txt:1: nd=4.5,4: expected");
   WriteText(dir / "list2.txt", "sun1.jpg - target=sun nd=-1\n");
   expect_fail(args("list2.txt", "cameras.json"), "list2.txt:1");
+  // A key given twice on a line is a contradiction, not "the last one wins".
+  WriteText(dir / "list2.txt", "sun1.jpg - target=sun nd=1 nd=2\n");
+  expect_fail(args("list2.txt", "cameras.json"), "list2.txt:1: nd= given twice");
+  WriteText(dir / "list2.txt", "sun1.jpg - group=a target=sun group=b\n");
+  expect_fail(args("list2.txt", "cameras.json"), "list2.txt:1: group= given twice");
   WriteText(dir / "cameras2.json", R"({"group=north": {"lens": "lens.json"}})");
   expect_fail(args("list.txt", "cameras2.json"), "\"group=north\": no listed photo has that group");
   WriteText(dir / "cameras2.json", R"({"*": {"lens": "missing-lens.json"}})");
