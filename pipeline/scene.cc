@@ -34,9 +34,35 @@ fs::path SiblingTemporary(const fs::path& out, const std::string& suffix = "") {
 
 }  // namespace
 
-void CheckSceneOutput(const fs::path& out) {
+namespace {
+
+// Whether `inner` is `outer` or lies inside it (both made absolute and normal, symbolic links
+// of the parts that exist resolved).
+bool IsInside(const fs::path& inner, const fs::path& outer) {
+  std::error_code ec;
+  const fs::path a = fs::weakly_canonical(fs::absolute(inner), ec).lexically_normal();
+  const fs::path b = fs::weakly_canonical(fs::absolute(outer), ec).lexically_normal();
+  auto ai = a.begin();
+  for (auto bi = b.begin(); bi != b.end(); ++bi, ++ai) {
+    if (bi->empty()) continue;  // a trailing separator
+    if (ai == a.end() || *ai != *bi) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+void CheckSceneOutput(const fs::path& out, const fs::path& session) {
   std::error_code ec;
   if (out.filename().empty()) throw Error(out.string() + ": a scene folder needs a name");
+  if (!session.empty()) {
+    if (IsInside(out, session))
+      throw Error(out.string() + ": lies inside the session " + session.string() +
+                  ", whose files the solve reads; write the scene beside the session");
+    if (IsInside(session, out))
+      throw Error(out.string() + ": holds the session " + session.string() +
+                  "; write the scene beside the session");
+  }
   if (!fs::exists(out, ec)) {
     const fs::path parent = out.parent_path().empty() ? fs::path(".") : out.parent_path();
     if (!fs::is_directory(parent, ec))
@@ -47,6 +73,17 @@ void CheckSceneOutput(const fs::path& out) {
   if (!fs::exists(out / "scene.json", ec) && !fs::is_empty(out, ec))
     throw Error(out.string() +
                 ": exists and is not a scene folder (no scene.json); give a new folder");
+  if (session.empty() || !fs::is_regular_file(out / "scene.json", ec)) return;
+  std::string from;
+  try {
+    const nlohmann::json j = nlohmann::json::parse(ReadFileToString(out / "scene.json"));
+    from = j.at("provenance").value("session", "");
+  } catch (const std::exception&) {
+    return;  // an unreadable scene is solved again and replaced
+  }
+  if (!from.empty() && fs::is_directory(from, ec) && !fs::equivalent(from, session, ec))
+    throw Error(out.string() + ": is the scene of another session (" + from +
+                "); give a new folder, or remove it first");
 }
 
 nlohmann::json SolveOptionsJson(const PipelineOptions& options) {
@@ -65,7 +102,7 @@ std::string SolveInputsSha256(const Session& session, const PipelineOptions& opt
 
 SceneSolve SolveToScene(const Session& session, const PipelineOptions& options, const fs::path& out,
                         bool force) {
-  CheckSceneOutput(out);
+  CheckSceneOutput(out, session.dir());
   SceneSolve result;
   result.inputs_sha256 = SolveInputsSha256(session, options);
   std::error_code ec;
@@ -107,6 +144,7 @@ SceneSolve SolveToScene(const Session& session, const PipelineOptions& options, 
     scene.views[name] = SceneView{g.slot, TargetName(g.target), g.utc, g.intrinsics, g.pose};
   scene.holdout_slots = options.exclude_albedo_slots;
   scene.inputs_sha256 = result.inputs_sha256;
+  scene.session_dir = fs::absolute(session.dir(), ec).lexically_normal().string();
   scene.rouen_version = RouenVersion();
   scene.options = SolveOptionsJson(options);
   result.stages = calib.stages;
@@ -166,10 +204,15 @@ SolveConfig RequestedSolveConfig(const SolveFolderRequest& request, const Sessio
 SceneSolve SolveSessionFolder(const SolveFolderRequest& request) {
   fs::path out = request.out.lexically_normal();
   if (!out.has_filename()) out = out.parent_path();  // "s.scene/" -> "s.scene"
-  CheckSceneOutput(out);
   fs::path session_dir = request.session.lexically_normal();
   if (!session_dir.has_filename()) session_dir = session_dir.parent_path();
+  CheckSceneOutput(out, session_dir);
   const fs::path work = request.work.empty() ? fs::path(out.string() + ".work") : request.work;
+  if (IsInside(work, session_dir) || IsInside(session_dir, work))
+    throw Error(
+        (request.work.empty() ? "the working folder " : "--work ") + work.string() +
+        (IsInside(work, session_dir) ? ": lies inside the session " : ": holds the session ") +
+        session_dir.string() + ", whose files the solve reads; give a folder beside it");
   CheckWritableFolder(request.work.empty() ? "the working folder" : "--work", work.string());
   // The user's options are checked before the session is read.
   RequestedSolveConfig(request, SessionInfo{}, "the defaults");
@@ -178,7 +221,7 @@ SceneSolve SolveSessionFolder(const SolveFolderRequest& request) {
   // What the solve reads besides the frames, checked before the long work.
   CheckSessionFrames(session);
   SessionSite(session);
-  ReadSessionModel(session);
+  const Mesh model = ReadSessionModel(session);
   int nslots = 0;
   for (const FrameRecord& f : session.frames()) nslots = std::max(nslots, f.slot + 1);
   for (int h : request.holdout_slots)
@@ -189,6 +232,20 @@ SceneSolve SolveSessionFolder(const SolveFolderRequest& request) {
   PipelineOptions po;
   po.config =
       RequestedSolveConfig(request, session.info(), (session_dir / "session.json").string());
+  // A grid spacing for a block the model does not have is a mistake (a misspelt block), not a
+  // choice to ignore; the defaults' own entries and the modelled ground's block excepted.
+  const SolveConfig defaults = DefaultSolveConfig(request.quick);
+  for (const auto& [block, spacing] : po.config.grid.block_spacing_m) {
+    if (defaults.grid.block_spacing_m.count(block) ||
+        (po.config.ground.radius_m > 0 && block == po.config.ground.block) ||
+        std::count(model.block_names.begin(), model.block_names.end(), block))
+      continue;
+    std::string names;
+    for (const std::string& b : model.block_names) names += (names.empty() ? "" : ", ") + b;
+    throw Error("grid.block_spacing_m." + block + ": the model (" +
+                (session_dir / session.info().model).string() + ") has no block '" + block +
+                "'; its blocks: " + names);
+  }
   po.work_dir = work;
   po.exclude_albedo_slots = request.holdout_slots;
   po.log = request.log;

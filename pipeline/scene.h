@@ -21,9 +21,12 @@
 namespace rouen {
 
 // Checks, before any work, that `out` can become a scene folder: it does not exist, or is an
-// earlier scene (it holds scene.json) that a complete new one will replace. Throws rouen::Error
-// naming `out`.
-void CheckSceneOutput(const std::filesystem::path& out);
+// earlier scene (it holds scene.json) that a complete new one will replace. With `session` (the
+// session folder solved into it), also that `out` neither lies inside the session (its
+// outputs would become its inputs) nor holds it, and that an earlier scene there is not
+// another session's (scene.json's provenance.session, a folder that still exists). Throws
+// rouen::Error naming `out`.
+void CheckSceneOutput(const std::filesystem::path& out, const std::filesystem::path& session = {});
 
 // The solve's options as the scene records them (and as its inputs hash covers them): those
 // that change the result, not where intermediate files go or how progress is told.

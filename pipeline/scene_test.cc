@@ -58,6 +58,43 @@ TEST_F(SceneStageTest, ASceneIsWrittenOnlyWhereNothingElseIsLost) {
                 (dir_ / "missing").string() + " does not exist");
 }
 
+// A scene never lands inside its session (every solve would then read its own outputs), nor
+// around it, nor over another session's scene.
+TEST_F(SceneStageTest, ASceneIsNeverWrittenIntoASessionOrOverAnotherSessionsScene) {
+  const fs::path session = dir_ / "s", other = dir_ / "t";
+  fs::create_directories(session / "frames");
+  fs::create_directories(other);
+  EXPECT_EQ(ErrorOf([&] { CheckSceneOutput(dir_ / "s.scene", session); }), "");
+  EXPECT_EQ(ErrorOf([&] { CheckSceneOutput(session / "scene", session); }),
+            (session / "scene").string() + ": lies inside the session " + session.string() +
+                ", whose files the solve reads; write the scene beside the session");
+  // Spelled another way, through a link to the session.
+  fs::create_symlink(session, dir_ / "link");
+  EXPECT_NE(ErrorOf([&] { CheckSceneOutput(dir_ / "link" / "frames" / "x", session); }), "");
+  EXPECT_EQ(ErrorOf([&] { CheckSceneOutput(dir_, session); }),
+            dir_.string() + ": holds the session " + session.string() +
+                "; write the scene beside the session");
+  // An earlier scene of this session is replaced; one of another session is not.
+  fs::create_directories(dir_ / "t.scene");
+  WriteFileAtomic(dir_ / "t.scene" / "scene.json",
+                  "{\"provenance\": {\"session\": \"" + other.string() + "\"}}");
+  EXPECT_EQ(ErrorOf([&] { CheckSceneOutput(dir_ / "t.scene", other); }), "");
+  EXPECT_EQ(ErrorOf([&] { CheckSceneOutput(dir_ / "t.scene", session); }),
+            (dir_ / "t.scene").string() + ": is the scene of another session (" + other.string() +
+                "); give a new folder, or remove it first");
+  // That session gone (moved or deleted), the scene may be replaced.
+  fs::remove_all(other);
+  EXPECT_EQ(ErrorOf([&] { CheckSceneOutput(dir_ / "t.scene", session); }), "");
+  // The working folder neither, checked before the session is read.
+  SolveFolderRequest request;
+  request.session = session;
+  request.out = dir_ / "s.scene";
+  request.work = session / "work";
+  EXPECT_EQ(ErrorOf([&] { SolveSessionFolder(request); }),
+            "--work " + (session / "work").string() + ": lies inside the session " +
+                session.string() + ", whose files the solve reads; give a folder beside it");
+}
+
 TEST_F(SceneStageTest, LoadingSomethingThatIsNotASceneSaysSo) {
   EXPECT_EQ(ErrorOf([&] { LoadScene(dir_ / "none"); }),
             (dir_ / "none").string() + ": no such scene folder (rouen solve writes one)");

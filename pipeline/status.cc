@@ -8,9 +8,11 @@
 
 #include "core/error.h"
 #include "core/files.h"
+#include "core/image.h"
 #include "core/mesh.h"
 #include "pipeline/capture_session.h"
 #include "pipeline/session_solve.h"
+#include "pipeline/solve_config.h"
 
 namespace rouen {
 namespace fs = std::filesystem;
@@ -147,11 +149,28 @@ std::vector<FrameRecord> ReadJournal(const fs::path& dir, const Fixes& fixes, bo
           FrameWhere(dir, f) + ": the file " + path.string() + " is missing", fixes.Restore());
     } else if (verify) {
       const std::string actual = Sha256File(path);
-      if (actual != f.sha256)
+      if (actual != f.sha256) {
         Add(s, StatusProblemKind::kChecksum, true,
             FrameWhere(dir, f) + ": sha256 " + actual + ", journalled " + f.sha256 +
                 " (the file was changed or damaged after capture)",
             fixes.Restore());
+      } else {
+        // The image as the solve reads it: its header, and the size its intrinsics give.
+        try {
+          const ImageSize size = ReadImageSize(path.string());
+          if (f.intrinsics &&
+              (size.width != f.intrinsics->width || size.height != f.intrinsics->height))
+            Add(s, StatusProblemKind::kFrameImage, true,
+                FrameWhere(dir, f) + ": the image is " + std::to_string(size.width) + "x" +
+                    std::to_string(size.height) + " but its intrinsics are " +
+                    std::to_string(f.intrinsics->width) + "x" +
+                    std::to_string(f.intrinsics->height),
+                fixes.Geometry());
+        } catch (const Error& e) {
+          Add(s, StatusProblemKind::kFrameImage, true, FrameWhere(dir, f) + ": " + e.what(),
+              fixes.Restore());
+        }
+      }
     }
     const std::string value = FrameValuesProblem(f);
     if (!value.empty())
@@ -203,6 +222,12 @@ const char* StatusProblemName(StatusProblemKind kind) {
       return "checksum";
     case StatusProblemKind::kFrameValue:
       return "frame_value";
+    case StatusProblemKind::kFrameImage:
+      return "frame_image";
+    case StatusProblemKind::kSolveConfig:
+      return "solve_config";
+    case StatusProblemKind::kSkyMask:
+      return "sky_mask";
     case StatusProblemKind::kNoFrames:
       return "no_frames";
     case StatusProblemKind::kMixedBracket:
@@ -369,6 +394,30 @@ SessionStatus ReadSessionStatus(const fs::path& dir, const StatusOptions& option
     SessionSite(dir, s.info, frames);
   } catch (const Error& e) {
     Add(&s, StatusProblemKind::kSite, true, e.what(), fixes.Site());
+  }
+  // The options the solve starts from, read as it reads them.
+  try {
+    SessionSolveConfig(s.info, info_path.string(), false);
+  } catch (const Error& e) {
+    Add(&s, StatusProblemKind::kSolveConfig, true, e.what(),
+        "correct or remove extra.solve_config in " + info_path.string() +
+            " (rouen solve --print-config shows every key and its range)");
+  }
+  // Each sky photo's mask file, read as the solve reads it (at the bracket's size).
+  for (const auto& [name, fr] : merged) {
+    const FrameRecord& first = *fr.front();
+    if (first.target != Target::kSky || !first.intrinsics) continue;
+    const SkyMaskSpec* spec = s.info.FindSkyMask(name);
+    if (!spec || spec->automatic) continue;
+    try {
+      ReadMask(ResolveInside(dir, spec->file).string(), first.intrinsics->width,
+               first.intrinsics->height, "the merged " + name);
+    } catch (const Error& e) {
+      Add(&s, StatusProblemKind::kSkyMask, true,
+          info_path.string() + ": extra.sky_masks: " + e.what(),
+          "give a mask image inside the session folder, the sky photo's size (rouen import "
+          "--sky-mask FILE), or \"auto\"");
+    }
   }
 
   // What the reading above could miss, Session::Load (which the solve starts with) finds.

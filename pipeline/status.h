@@ -46,6 +46,7 @@ enum class StatusProblemKind {
   kMissingFile,        // a journalled frame file is not there
   kChecksum,           // a frame file's sha256 is not the journalled one
   kFrameValue,         // exposure, ND density or gain out of range (CheckSessionFrames)
+  kFrameImage,         // a frame's image unreadable, or not the size its intrinsics give
   kNoFrames,           // an empty journal
   kMixedBracket,       // LDR and HDR frames in one bracket
   kNoModel,            // session.json names no building model
@@ -56,6 +57,8 @@ enum class StatusProblemKind {
   kNoResponse,         // LDR brackets, but none of the building or landscape in 2+ exposures
   kCaptureUnfinished,  // the last capture run stopped before the end of its plan
   kJournalNote,        // a last journal line cut short by a crash (ignored, as the solve does)
+  kSolveConfig,        // session.json's extra.solve_config, which the solve starts from
+  kSkyMask,            // a sky mask file (extra.sky_masks) missing, outside or not the sky's size
 };
 // "journal", "missing_file", "checksum", ..., as the JSON report names the kinds.
 const char* StatusProblemName(StatusProblemKind kind);

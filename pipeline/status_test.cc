@@ -11,6 +11,7 @@
 
 #include "core/error.h"
 #include "core/files.h"
+#include "core/image.h"
 #include "core/mesh.h"
 #include "pipeline/capture_session.h"
 
@@ -209,6 +210,60 @@ TEST_F(StatusTest, FramesWithoutPoseOrOneExposureOrBadValuesBlockTheSolve) {
   ASSERT_NE(Find(s, StatusProblemKind::kFrameValue), nullptr);
   EXPECT_NE(Find(s, StatusProblemKind::kFrameValue)->what.find("gain -1 is not positive"),
             std::string::npos);
+}
+
+// What the solve refuses before any work, status reports: session.json's solve options, a sky
+// mask file outside the session, missing or not the sky photo's size, and a frame whose image
+// is not the size its intrinsics give.
+TEST_F(StatusTest, WhatTheSolveRefusesAtOnceBlocksItHere) {
+  SessionInfo info = ParseSessionInfo(ReadFileToString(dir_ / "session.json"), "session.json");
+  info.solve_config = {{"grid", {{"spacing_m", -3}}}};
+  WriteFileAtomic(dir_ / "session.json", nlohmann::json(info).dump(2));
+  SessionStatus s = ReadSessionStatus(dir_);
+  EXPECT_EQ(Blocking(s), std::vector<StatusProblemKind>{StatusProblemKind::kSolveConfig});
+  EXPECT_NE(Find(s, StatusProblemKind::kSolveConfig)->what.find("grid.spacing_m"),
+            std::string::npos)
+      << Find(s, StatusProblemKind::kSolveConfig)->what;
+
+  info.solve_config = nlohmann::json::object();
+  for (const std::string& file : {std::string("../mask.png"), std::string("nosuch.png")}) {
+    SkyMaskSpec mask;
+    mask.file = file;
+    info.sky_masks = {{"*", mask}};
+    WriteFileAtomic(dir_ / "session.json", nlohmann::json(info).dump(2));
+    s = ReadSessionStatus(dir_);
+    EXPECT_EQ(Blocking(s), std::vector<StatusProblemKind>{StatusProblemKind::kSkyMask}) << file;
+  }
+  WriteImage((dir_ / "mask.png").string(), Image(5, 4, 1, PixelUnits::kDigital, 255.f),
+             StoredType::kUint8);
+  SkyMaskSpec mask;
+  mask.file = "mask.png";
+  info.sky_masks = {{"*", mask}};
+  WriteFileAtomic(dir_ / "session.json", nlohmann::json(info).dump(2));
+  s = ReadSessionStatus(dir_);
+  ASSERT_EQ(Blocking(s), std::vector<StatusProblemKind>{StatusProblemKind::kSkyMask});
+  EXPECT_NE(Find(s, StatusProblemKind::kSkyMask)->what.find("mask.png"), std::string::npos);
+  WriteImage((dir_ / "mask.png").string(), Image(4, 4, 1, PixelUnits::kDigital, 255.f),
+             StoredType::kUint8);
+  EXPECT_TRUE(ReadSessionStatus(dir_).Solvable());
+
+  // A frame's intrinsics claim another size than its image's.
+  const std::string text = ReadFileToString(dir_ / "frames.jsonl");
+  std::string out;
+  size_t pos = 0;
+  while (pos < text.size()) {
+    const size_t end = text.find('\n', pos);
+    FrameRecord f = ParseJournalLine(text.substr(pos, end - pos));
+    pos = end + 1;
+    if (f.id == 1) f.intrinsics->width = 5;
+    out += nlohmann::json(f).dump() + "\n";
+  }
+  WriteFileAtomic(dir_ / "frames.jsonl", out);
+  s = ReadSessionStatus(dir_);
+  ASSERT_EQ(Blocking(s), std::vector<StatusProblemKind>{StatusProblemKind::kFrameImage});
+  EXPECT_NE(Find(s, StatusProblemKind::kFrameImage)->what.find("is 4x4 but its intrinsics are 5x4"),
+            std::string::npos)
+      << Find(s, StatusProblemKind::kFrameImage)->what;
 }
 
 TEST_F(StatusTest, AnUnfinishedCaptureIsANoteNotABlock) {

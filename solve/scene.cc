@@ -298,6 +298,7 @@ void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const
   if (scene.ground_field) j["environment"]["ground_field"] = *scene.ground_field;
   j["timings"] = scene.timings;
   j["provenance"] = {{"inputs_sha256", scene.inputs_sha256},
+                     {"session", scene.session_dir},
                      {"rouen_version", scene.rouen_version},
                      {"options", scene.options}};
   j["albedo"] = {{"sun", "albedo_sun.exr"},
@@ -423,6 +424,7 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
     if (j.contains("provenance")) {
       const auto& p = j.at("provenance");
       scene.inputs_sha256 = p.at("inputs_sha256").get<std::string>();
+      scene.session_dir = p.value("session", "");
       scene.rouen_version = p.at("rouen_version").get<std::string>();
       scene.options = p.at("options");
       if (!scene.options.is_object()) throw Error("provenance.options is not an object");

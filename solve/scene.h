@@ -85,6 +85,7 @@ struct SceneModel {
   // options), which a later solve compares to know whether there is work; the version of
   // rouen that wrote the scene; the solve's options as the pipeline records them.
   std::string inputs_sha256;
+  std::string session_dir;  // the session folder solved (absolute), "" for older scenes
   std::string rouen_version;
   nlohmann::json options = nlohmann::json::object();
   // Seconds per stage of the solve that wrote it: [{"stage": ..., "seconds": ...}] (or null).

@@ -163,6 +163,19 @@ TEST_F(BlenderTowerTest, HeldOutAndTrainingPhotosExplained) {
   }
 }
 
+// A grid spacing for a block the model lacks (a misspelt block) is refused before any work,
+// naming the blocks there are.
+TEST_F(BlenderTowerTest, ABlockSpacingForNoBlockIsRefused) {
+  const fs::path config = *dir_ / "misspelt.toml";
+  WriteFileAtomic(config, "[grid.block_spacing_m]\nbelfy = 0.3\n");
+  const Result r = RunRouen("solve " + Q(Session()) + " --out " + Q(*dir_ / "misspelt_scene") +
+                            " --config " + Q(config));
+  EXPECT_NE(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("grid.block_spacing_m.belfy: the model"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("its blocks: base, shaft, belfry, roof"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(*dir_ / "misspelt_scene"));
+}
+
 // The ground as a light field ([ground_field] enabled): the panorama's ground re-projected and
 // seen from where each point stands. On the shaft's shaded faces -- the light the issue is
 // about -- the default overestimates red by 7-9% at every time (the rough ground is brighter
