@@ -78,6 +78,21 @@ void DropJournalLines(const fs::path& dir, const std::function<bool(const FrameR
   WriteFileAtomic(dir / "frames.jsonl", kept);
 }
 
+// The journal with every line's record changed by `change`.
+void RewriteJournal(const fs::path& dir, const std::function<void(FrameRecord&)>& change) {
+  const std::string text = ReadFileToString(dir / "frames.jsonl");
+  std::string out;
+  size_t pos = 0;
+  while (pos < text.size()) {
+    const size_t end = text.find('\n', pos);
+    FrameRecord f = ParseJournalLine(text.substr(pos, end - pos));
+    pos = end + 1;
+    change(f);
+    out += nlohmann::json(f).dump() + "\n";
+  }
+  WriteFileAtomic(dir / "frames.jsonl", out);
+}
+
 std::vector<StatusProblemKind> Blocking(const SessionStatus& s) {
   std::vector<StatusProblemKind> out;
   for (const StatusProblem& p : s.problems)
@@ -183,22 +198,14 @@ TEST_F(StatusTest, FramesWithoutPoseOrOneExposureOrBadValuesBlockTheSolve) {
   // Journal lines rewritten: the architecture bracket loses its poses, the landscape bracket
   // its second exposure (then no bracket can give the response curve), a sky frame gets a
   // negative gain.
-  const std::string text = ReadFileToString(dir_ / "frames.jsonl");
-  std::string out;
-  size_t pos = 0;
-  while (pos < text.size()) {
-    const size_t end = text.find('\n', pos);
-    FrameRecord f = ParseJournalLine(text.substr(pos, end - pos));
-    pos = end + 1;
+  RewriteJournal(dir_, [](FrameRecord& f) {
     if (f.target == Target::kArchitecture) {
       f.pose.reset();
       f.exposure_s = 1e-3;
     }
     if (f.target == Target::kLandscape) f.exposure_s = 1e-3;
     if (f.target == Target::kSky && f.id == 5) f.gain = -1;
-    out += nlohmann::json(f).dump() + "\n";
-  }
-  WriteFileAtomic(dir_ / "frames.jsonl", out);
+  });
   const SessionStatus s = ReadSessionStatus(dir_);
   EXPECT_FALSE(s.Solvable());
   ASSERT_NE(Find(s, StatusProblemKind::kNoGeometry), nullptr);
@@ -248,17 +255,9 @@ TEST_F(StatusTest, WhatTheSolveRefusesAtOnceBlocksItHere) {
   EXPECT_TRUE(ReadSessionStatus(dir_).Solvable());
 
   // A frame's intrinsics claim another size than its image's.
-  const std::string text = ReadFileToString(dir_ / "frames.jsonl");
-  std::string out;
-  size_t pos = 0;
-  while (pos < text.size()) {
-    const size_t end = text.find('\n', pos);
-    FrameRecord f = ParseJournalLine(text.substr(pos, end - pos));
-    pos = end + 1;
+  RewriteJournal(dir_, [](FrameRecord& f) {
     if (f.id == 1) f.intrinsics->width = 5;
-    out += nlohmann::json(f).dump() + "\n";
-  }
-  WriteFileAtomic(dir_ / "frames.jsonl", out);
+  });
   s = ReadSessionStatus(dir_);
   ASSERT_EQ(Blocking(s), std::vector<StatusProblemKind>{StatusProblemKind::kFrameImage});
   EXPECT_NE(Find(s, StatusProblemKind::kFrameImage)->what.find("is 4x4 but its intrinsics are 5x4"),

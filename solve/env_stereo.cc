@@ -968,17 +968,11 @@ GroundRetroFit FitGroundRetro(const std::vector<EnvObservation>& per_time,
   out.cost_lambert = cost[zero];
   out.retro = grid[best];
   out.cost = cost[best];
-  if (best > 0 && best + 1 < grid.size()) {
-    const double curvature = cost[best - 1] - 2 * cost[best] + cost[best + 1];
-    if (curvature > 0) {
-      const double r =
-          grid[best] +
-          std::clamp(0.5 * kStep * (cost[best - 1] - cost[best + 1]) / curvature, -kStep, kStep);
-      const double c = cost_at(r);
-      if (c < out.cost) {
-        out.retro = r;
-        out.cost = c;
-      }
+  if (const std::optional<double> r = ParabolaVertex(grid, cost, best, kStep)) {
+    const double c = cost_at(*r);
+    if (c < out.cost) {
+      out.retro = *r;
+      out.cost = c;
     }
   }
   if (!(out.cost < (1 - min_gain) * out.cost_lambert)) {

@@ -186,17 +186,11 @@ RetroConsistency FitRetroByConsistency(std::vector<GroundPixel> sample, const Gr
   const size_t best =
       static_cast<size_t>(std::min_element(cost.begin(), cost.end()) - cost.begin());
   double retro = grid[best], c = cost[best];
-  if (best > 0 && best + 1 < grid.size()) {
-    const double curvature = cost[best - 1] - 2 * cost[best] + cost[best + 1];
-    if (curvature > 0) {
-      const double r =
-          grid[best] +
-          std::clamp(0.5 * kStep * (cost[best - 1] - cost[best + 1]) / curvature, -kStep, kStep);
-      const double cr = cost_at(r, nullptr);
-      if (cr < c) {
-        retro = r;
-        c = cr;
-      }
+  if (const std::optional<double> r = ParabolaVertex(grid, cost, best, kStep)) {
+    const double cr = cost_at(*r, nullptr);
+    if (cr < c) {
+      retro = *r;
+      c = cr;
     }
   }
   if (c < out.cost) {

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <nlohmann/json.hpp>
 
@@ -58,35 +59,56 @@ Image RenderPanorama(const RayCaster& model, const Eigen::Vector3d& eye, const I
   return im;
 }
 
-TEST(GroundFieldTest, PanoramaPixelsBecomeTheGroundsAlbedoWhereTheModelLeavesThem) {
-  Mesh m;
-  testing::AddBox(&m, {-5, -5, 0}, {5, 5, 30}, m.AddBlock("tower"));
-  const RayCaster model(m);
+// A 30 m tower, and at two times an equirect panorama at eye height 30 m south of it of the
+// ground around it (RenderPanorama), as the field's times.
+class GroundFieldPanoramaTest : public ::testing::Test {
+ protected:
+  static constexpr double kSunE = 100;
+  GroundFieldPanoramaTest() {
+    k.projection = Projection::kEquirect;
+    k.width = 360;
+    k.height = 180;
+    options.cell_m = 1;
+    options.min_radius_m = 40;
+    options.radius_factor = 1;
+  }
+  static Mesh Tower() {
+    Mesh m;
+    testing::AddBox(&m, {-5, -5, 0}, {5, 5, 30}, m.AddBlock("tower"));
+    return m;
+  }
+  // The panoramas under suns[0] and suns[1]; the other arguments as RenderPanorama's.
+  void Render(const std::array<Eigen::Vector3d, 2>& suns, double retro,
+              const GroundField* field = nullptr, double sky_e = 0, double unmodelled = 0) {
+    images.clear();
+    images.reserve(2);  // the times point into it
+    times.assign(2, GroundFieldTime{});
+    for (int t = 0; t < 2; ++t) {
+      images.push_back(RenderPanorama(model, pose.position, k, pose, suns[t], kSunE, retro, field,
+                                      sky_e, unmodelled));
+      times[t].panoramas.push_back({&images[t], k, pose});
+      times[t].sun_dir = suns[t];
+      times[t].sun_e = Eigen::Vector3d::Constant(kSunE);
+      times[t].sky_e = Eigen::Vector3d::Constant(sky_e);
+    }
+  }
+  const Mesh mesh = Tower();
+  const RayCaster model{mesh};
   Intrinsics k;
-  k.projection = Projection::kEquirect;
-  k.width = 360;
-  k.height = 180;
-  const Eigen::Vector3d eye(0, -30, 1.7);
-  const Pose pose = Pose::Level(eye, 0, 0);
-  const double retro = 0.5, sun_e = 100;
-  // Two times: the tower's shadow falls north-west, then north-east; no sky light, so ground in
-  // the shadow gives nothing and is seen sunlit at the other time.
+  const Pose pose = Pose::Level({0, -30, 1.7}, 0, 0);
+  GroundFieldOptions options;
   std::vector<Image> images;
   std::vector<GroundFieldTime> times;
-  for (const Eigen::Vector3d& sun : {SunAt(120, 35), SunAt(230, 40)})
-    images.push_back(RenderPanorama(model, eye, k, pose, sun, sun_e, retro));
-  const Eigen::Vector3d suns[2] = {SunAt(120, 35), SunAt(230, 40)};
-  for (int t = 0; t < 2; ++t) {
-    GroundFieldTime gt;
-    gt.panoramas.push_back({&images[t], k, pose});
-    gt.sun_dir = suns[t];
-    gt.sun_e = Eigen::Vector3d::Constant(sun_e);
-    times.push_back(gt);
-  }
-  GroundFieldOptions o;
-  o.cell_m = 1;
-  o.min_radius_m = 40;
-  o.radius_factor = 1;
+};
+
+TEST_F(GroundFieldPanoramaTest, PanoramaPixelsBecomeTheGroundsAlbedoWhereTheModelLeavesThem) {
+  const Eigen::Vector3d eye = pose.position;
+  const double retro = 0.5;
+  // Two times: the tower's shadow falls north-west, then north-east; no sky light, so ground in
+  // the shadow gives nothing and is seen sunlit at the other time.
+  const std::array<Eigen::Vector3d, 2> suns = {SunAt(120, 35), SunAt(230, 40)};
+  Render(suns, retro);
+  GroundFieldOptions o = options;
   o.fit_retro = false;
   GroundFieldSummary s;
   const GroundField f = BuildGroundField(times, model, retro, o, &s);
@@ -115,7 +137,7 @@ TEST(GroundFieldTest, PanoramaPixelsBecomeTheGroundsAlbedoWhereTheModelLeavesThe
   EXPECT_LT(f.sky_visibility[f.Cell(0.5, -5.5)], 0.7);
 
   // Lit at the first time, the field gives the panorama's pixels back, the shadow included.
-  const GroundLight g(f, model, suns[0], Eigen::Vector3d::Constant(sun_e), Eigen::Vector3d::Zero());
+  const GroundLight g(f, model, suns[0], Eigen::Vector3d::Constant(kSunE), Eigen::Vector3d::Zero());
   for (int y = 95; y < 180; y += 7) {
     for (int x = 0; x < 360; x += 11) {
       const Eigen::Vector3d d = pose.rotation * Unproject(k, Eigen::Vector2d(x + 0.5, y + 0.5));
@@ -172,30 +194,10 @@ TEST(GroundFieldTest, BadInputIsRefusedByName) {
 // Lambertian: the cells seen at both times disagree unless the retro is right, and the fit finds
 // it. The cost is V-shaped about the truth (exact pixels), sampled every 0.25 and refined by a
 // parabola through three samples: within a fifth of a step, 0.05.
-TEST(GroundFieldTest, TheGroundsRetroIsFittedFromThePanoramas) {
-  Mesh m;
-  testing::AddBox(&m, {-5, -5, 0}, {5, 5, 30}, m.AddBlock("tower"));
-  const RayCaster model(m);
-  Intrinsics k;
-  k.projection = Projection::kEquirect;
-  k.width = 360;
-  k.height = 180;
-  const Pose pose = Pose::Level({0, -30, 1.7}, 0, 0);
-  const double truth = 0.8, sun_e = 100;
-  const Eigen::Vector3d suns[2] = {SunAt(120, 35), SunAt(230, 40)};
-  std::vector<Image> images;
-  for (const Eigen::Vector3d& sun : suns)
-    images.push_back(RenderPanorama(model, pose.position, k, pose, sun, sun_e, truth));
-  std::vector<GroundFieldTime> times(2);
-  for (int t = 0; t < 2; ++t) {
-    times[t].panoramas.push_back({&images[t], k, pose});
-    times[t].sun_dir = suns[t];
-    times[t].sun_e = Eigen::Vector3d::Constant(sun_e);
-  }
-  GroundFieldOptions o;
-  o.cell_m = 1;
-  o.min_radius_m = 40;
-  o.radius_factor = 1;
+TEST_F(GroundFieldPanoramaTest, TheGroundsRetroIsFittedFromThePanoramas) {
+  const double truth = 0.8;
+  Render({SunAt(120, 35), SunAt(230, 40)}, truth);
+  GroundFieldOptions o = options;
   GroundFieldSummary s;
   const GroundField f = BuildGroundField(times, model, 0.0, o, &s);
   EXPECT_EQ(s.retro_given, 0.0);
@@ -215,39 +217,16 @@ TEST(GroundFieldTest, TheGroundsRetroIsFittedFromThePanoramas) {
 // truth, and that albedo lit by the sun at another time far too bright. A cell the sun reached
 // at some time keeps the albedo read in sun, exact here; the shadow moves between the two
 // times, so many cells are seen both ways.
-TEST(GroundFieldTest, ACellSeenSunlitKeepsTheAlbedoReadInSun) {
-  Mesh m;
-  testing::AddBox(&m, {-5, -5, 0}, {5, 5, 30}, m.AddBlock("tower"));
-  const RayCaster model(m);
-  Intrinsics k;
-  k.projection = Projection::kEquirect;
-  k.width = 360;
-  k.height = 180;
-  const Pose pose = Pose::Level({0, -30, 1.7}, 0, 0);
-  const double retro = 0.5, sun_e = 100, sky_e = 20;
+TEST_F(GroundFieldPanoramaTest, ACellSeenSunlitKeepsTheAlbedoReadInSun) {
+  const double retro = 0.5, sky_e = 20;
   // The tower's shadow falls towards the panorama, south-south-west then south-south-east.
-  const Eigen::Vector3d suns[2] = {SunAt(20, 35), SunAt(340, 35)};
-  GroundFieldOptions o;
-  o.cell_m = 1;
-  o.min_radius_m = 40;
-  o.radius_factor = 1;
+  const std::array<Eigen::Vector3d, 2> suns = {SunAt(20, 35), SunAt(340, 35)};
+  GroundFieldOptions o = options;
   o.fit_retro = false;
   // The field's cells and sky visibility, for the renders' sky light.
-  std::vector<Image> images;
-  images.reserve(2);  // the times point into it
-  std::vector<GroundFieldTime> times(2);
-  for (int t = 0; t < 2; ++t) {
-    images.push_back(RenderPanorama(model, pose.position, k, pose, suns[t], sun_e, retro));
-    times[t].panoramas.push_back({&images[t], k, pose});
-    times[t].sun_dir = suns[t];
-    times[t].sun_e = Eigen::Vector3d::Constant(sun_e);
-  }
+  Render(suns, retro);
   const GroundField cells = BuildGroundField(times, model, retro, o);
-  for (int t = 0; t < 2; ++t) {
-    images[t] =
-        RenderPanorama(model, pose.position, k, pose, suns[t], sun_e, retro, &cells, sky_e, 1.0);
-    times[t].sky_e = Eigen::Vector3d::Constant(sky_e);
-  }
+  Render(suns, retro, &cells, sky_e, 1.0);
   const GroundField f = BuildGroundField(times, model, retro, o);
   int both = 0, shade_only = 0, shade_high = 0;
   for (int c = 0; c < f.nx * f.ny; ++c) {

@@ -42,4 +42,13 @@ double AmbientRetroFactor(double retro, const Eigen::Vector3d& n, const Eigen::V
   return std::max(0.0, 1 + e_a_sl + sv * (e_a + e_a2_sl));
 }
 
+std::optional<double> ParabolaVertex(const std::vector<double>& grid,
+                                     const std::vector<double>& cost, size_t best, double step) {
+  if (best == 0 || best + 1 >= grid.size() || cost.size() != grid.size()) return std::nullopt;
+  const double curvature = cost[best - 1] - 2 * cost[best] + cost[best + 1];
+  if (!(curvature > 0)) return std::nullopt;
+  return grid[best] +
+         std::clamp(0.5 * step * (cost[best - 1] - cost[best + 1]) / curvature, -step, step);
+}
+
 }  // namespace rouen

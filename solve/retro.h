@@ -9,6 +9,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <optional>
 #include <vector>
 
 namespace rouen {
@@ -36,6 +37,12 @@ struct SunShading {
   std::vector<Eigen::Vector3d> sun_dirs;  // unit ENU, per slot
   std::vector<double> retro;              // per block; blocks beyond its end are Lambertian
 };
+
+// One refinement of a grid search over the retro parameter with an even `step`: the vertex of
+// the parabola through the costs at grid[best - 1], grid[best] and grid[best + 1], within one
+// step of grid[best]; none at the grid's ends or where the costs do not curve upwards.
+std::optional<double> ParabolaVertex(const std::vector<double>& grid,
+                                     const std::vector<double>& cost, size_t best, double step);
 
 // retro[block], or 0 (Lambert) for a block without an entry or -1 (no block).
 inline double BlockRetro(const std::vector<double>& retro, int block) {

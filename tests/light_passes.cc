@@ -8,16 +8,19 @@
 #include <cstdio>
 #include <iostream>
 #include <nlohmann/json.hpp>
+#include <string>
 #include <vector>
 
 #include "core/angles.h"
 #include "core/camera.h"
 #include "core/files.h"
 #include "core/image.h"
+#include "core/stats.h"
 #include "pipeline/scene.h"
 #include "pipeline/session_solve.h"
 #include "solve/grid.h"
 #include "solve/retro.h"
+#include "solve/scene.h"
 
 namespace rouen::light_passes {
 
@@ -191,6 +194,35 @@ std::map<std::string, TermSums> TermTable(const fs::path& data, const fs::path& 
                 << ", direct light " << Rgb(m.DirectRatio()) << "\n";
   }
   return table;
+}
+
+std::vector<BlockAlbedo> BlockAlbedos(const fs::path& data, const fs::path& scene_dir) {
+  const nlohmann::json truth = nlohmann::json::parse(ReadFileToString(data / "truth.json"));
+  Mesh mesh;
+  SurfaceGrid grid;
+  const SceneModel model = ReadScene(scene_dir, &mesh, &grid);
+  std::vector<BlockAlbedo> out;
+  for (size_t b = 0; b < mesh.block_names.size(); ++b) {
+    if (!truth["blocks"].contains(mesh.block_names[b])) continue;  // the surroundings
+    const nlohmann::json& t = truth["blocks"][mesh.block_names[b]];
+    for (int c = 0; c < 3; ++c) {
+      std::vector<double> sun, se;
+      for (size_t i = 0; i < grid.points.size(); ++i) {
+        if (grid.points[i].block != static_cast<int>(b) || model.albedo.observations[i] == 0)
+          continue;
+        sun.push_back(model.albedo.rho_sun[i][c]);
+        se.push_back(model.albedo.rho_se[i][c]);
+      }
+      EXPECT_GT(sun.size(), 100u) << mesh.block_names[b];
+      BlockAlbedo a{
+          mesh.block_names[b], c,         t["glossy"].get<bool>(), t["base_color"][c].get<double>(),
+          Median(sun),         Median(se)};
+      std::printf("%s channel %d: base colour %.3f, median rho_sun %.3f, rho_se %.3f\n",
+                  a.block.c_str(), c, a.base, a.rho_sun, a.rho_se);
+      out.push_back(a);
+    }
+  }
+  return out;
 }
 
 }  // namespace rouen::light_passes

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <map>
 #include <string>
+#include <vector>
 
 namespace rouen::light_passes {
 
@@ -39,6 +40,19 @@ struct TermSums {
 std::map<std::string, TermSums> TermTable(const std::filesystem::path& data,
                                           const std::filesystem::path& scene_dir,
                                           bool predicted = false);
+
+// Per block of truth.json's "blocks" (never the surroundings) and channel: the base colour and
+// the median pseudo-albedos (sun; sky and environment) over the block's observed grid points of
+// the scene in `scene_dir`, each printed. Fails the calling test (gtest) on a block with 100
+// observed points or fewer.
+struct BlockAlbedo {
+  std::string block;
+  int channel = 0;
+  bool glossy = false;
+  double base = 0, rho_sun = 0, rho_se = 0;
+};
+std::vector<BlockAlbedo> BlockAlbedos(const std::filesystem::path& data,
+                                      const std::filesystem::path& scene_dir);
 
 }  // namespace rouen::light_passes
 
