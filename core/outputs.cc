@@ -49,18 +49,17 @@ OutputSet::~OutputSet() {
   for (const Entry& e : entries_) RemoveQuietly(e.temp);
 }
 
-namespace {
-
-// Whether `path` is `input` or lies inside it (both canonical).
-bool WithinInput(const fs::path& path, const fs::path& input) {
-  auto p = path.begin();
-  for (auto i = input.begin(); i != input.end(); ++i, ++p) {
-    if (p == path.end() || *p != *i) return false;
+bool IsWithin(const fs::path& path, const fs::path& folder) {
+  std::error_code ec;
+  const fs::path a = fs::weakly_canonical(fs::absolute(path), ec).lexically_normal();
+  const fs::path b = fs::weakly_canonical(fs::absolute(folder), ec).lexically_normal();
+  auto ai = a.begin();
+  for (auto bi = b.begin(); bi != b.end(); ++bi, ++ai) {
+    if (bi->empty()) continue;  // a trailing separator
+    if (ai == a.end() || *ai != *bi) return false;
   }
   return true;
 }
-
-}  // namespace
 
 void OutputSet::Protect(const std::string& what, const std::string& path) {
   if (path.empty()) return;
@@ -68,8 +67,7 @@ void OutputSet::Protect(const std::string& what, const std::string& path) {
   const fs::path canonical = fs::weakly_canonical(path, ec);
   if (ec) return;  // an input that cannot be resolved is reported by its reader
   for (const Entry& e : entries_) {
-    std::error_code ec2;
-    if (WithinInput(fs::weakly_canonical(e.path, ec2), canonical))
+    if (IsWithin(e.path, canonical))
       throw Error(e.what + " " + e.path + ": would overwrite " + what + " " + path +
                   ", an input of this command; write it elsewhere");
   }
@@ -100,7 +98,7 @@ std::string OutputSet::Add(const std::string& what, const std::string& path, Out
                 (ext.empty() ? std::string("no extension") : ext) + "' (use .png)");
   const fs::path canonical = fs::weakly_canonical(p, ec);
   for (const Input& in : inputs_) {
-    if (WithinInput(canonical, in.canonical))
+    if (IsWithin(canonical, in.canonical))
       throw Error(where + ": would overwrite " + in.what + " " + in.path +
                   ", an input of this command; write it elsewhere");
   }

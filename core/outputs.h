@@ -5,10 +5,15 @@
 // covered by core/temporaries.h (Add records each output's folder there).
 #pragma once
 
+#include <filesystem>
 #include <string>
 #include <vector>
 
 namespace rouen {
+
+// Whether `path` is `folder` or lies inside it, both made absolute and normal with the symbolic
+// links of their existing parts resolved.
+bool IsWithin(const std::filesystem::path& path, const std::filesystem::path& folder);
 
 enum class OutputKind {
   kFile,      // any content (JSON, text)

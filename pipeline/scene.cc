@@ -34,32 +34,14 @@ fs::path SiblingTemporary(const fs::path& out, const std::string& suffix = "") {
 
 }  // namespace
 
-namespace {
-
-// Whether `inner` is `outer` or lies inside it (both made absolute and normal, symbolic links
-// of the parts that exist resolved).
-bool IsInside(const fs::path& inner, const fs::path& outer) {
-  std::error_code ec;
-  const fs::path a = fs::weakly_canonical(fs::absolute(inner), ec).lexically_normal();
-  const fs::path b = fs::weakly_canonical(fs::absolute(outer), ec).lexically_normal();
-  auto ai = a.begin();
-  for (auto bi = b.begin(); bi != b.end(); ++bi, ++ai) {
-    if (bi->empty()) continue;  // a trailing separator
-    if (ai == a.end() || *ai != *bi) return false;
-  }
-  return true;
-}
-
-}  // namespace
-
 void CheckSceneOutput(const fs::path& out, const fs::path& session) {
   std::error_code ec;
   if (out.filename().empty()) throw Error(out.string() + ": a scene folder needs a name");
   if (!session.empty()) {
-    if (IsInside(out, session))
+    if (IsWithin(out, session))
       throw Error(out.string() + ": lies inside the session " + session.string() +
                   ", whose files the solve reads; write the scene beside the session");
-    if (IsInside(session, out))
+    if (IsWithin(session, out))
       throw Error(out.string() + ": holds the session " + session.string() +
                   "; write the scene beside the session");
   }
@@ -208,11 +190,11 @@ SceneSolve SolveSessionFolder(const SolveFolderRequest& request) {
   if (!session_dir.has_filename()) session_dir = session_dir.parent_path();
   CheckSceneOutput(out, session_dir);
   const fs::path work = request.work.empty() ? fs::path(out.string() + ".work") : request.work;
-  if (IsInside(work, session_dir) || IsInside(session_dir, work))
-    throw Error(
-        (request.work.empty() ? "the working folder " : "--work ") + work.string() +
-        (IsInside(work, session_dir) ? ": lies inside the session " : ": holds the session ") +
-        session_dir.string() + ", whose files the solve reads; give a folder beside it");
+  const bool work_inside = IsWithin(work, session_dir);
+  if (work_inside || IsWithin(session_dir, work))
+    throw Error((request.work.empty() ? "the working folder " : "--work ") + work.string() +
+                (work_inside ? ": lies inside the session " : ": holds the session ") +
+                session_dir.string() + ", whose files the solve reads; give a folder beside it");
   CheckWritableFolder(request.work.empty() ? "the working folder" : "--work", work.string());
   // The user's options are checked before the session is read.
   RequestedSolveConfig(request, SessionInfo{}, "the defaults");
