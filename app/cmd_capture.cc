@@ -20,7 +20,7 @@ namespace {
 
 struct CaptureArgs {
   std::string rig, out, from, target = "all";
-  bool resume = false, quick = false, no_prompt = false, new_slot = false;
+  bool resume = false, quick = false, no_prompt = false, new_slot = false, allow_night = false;
 };
 
 // Field rigs: the operator aims the camera and fits the ND filter, then presses Enter.
@@ -86,6 +86,7 @@ void Run(const CaptureArgs& a) {
   RigDevices dev = OpenRig(rig, open);
   for (const std::string& n : dev.notes) std::fprintf(stderr, "%s\n", n.c_str());
   if (a.target != "all") dev.plan.targets = {ParseTarget(a.target)};
+  dev.plan.allow_night = a.allow_night;
   CaptureSessionOptions opts;
   opts.resume = a.resume;
   opts.new_slot = a.new_slot;
@@ -189,6 +190,9 @@ void RegisterCapture(CLI::App& app) {
   c->add_flag("--new-slot", a->new_slot,
               "Field rigs: add this run to the session in --out as a new time of day")
       ->excludes("--resume");
+  c->add_flag("--allow-night", a->allow_night,
+              "Capture though the sun is below the horizon (a rehearsal of the rig at night or "
+              "indoors; its sun, sky and landscape frames serve no solve)");
   c->add_flag("--quick", a->quick, "Simulated rigs: smaller images, fewer lighting samples");
   c->add_flag("--no-prompt", a->no_prompt,
               "Field rigs: do not stop to ask the operator to aim or fit the ND filter");

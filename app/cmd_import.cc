@@ -51,6 +51,15 @@ void Run(const ImportArgs& a) {
   std::printf("%s: imported %d photos (%d HDR) into %d bracket%s in %d slot%s\n", a.out.c_str(),
               s.photos, s.hdr, s.brackets, s.brackets == 1 ? "" : "s", s.slots,
               s.slots == 1 ? "" : "s");
+  if (!s.night.empty()) {
+    std::string some;
+    for (size_t k = 0; k < s.night.size() && k < 3; ++k) some += "\n  " + s.night[k];
+    std::fprintf(stderr,
+                 "rouen import: warning: %zu of the photos were taken with the sun below the "
+                 "horizon at --site:%s%s\n(a camera clock or --timezone off by hours, or the wrong "
+                 "site; calibration photos may be taken at night, a slot the solve uses may not)\n",
+                 s.night.size(), some.c_str(), s.night.size() > 3 ? "\n  ..." : "");
+  }
   std::printf("next: rouen status %s\n", a.out.c_str());
 }
 

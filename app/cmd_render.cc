@@ -202,8 +202,8 @@ void Run(const RenderArgs& a) {
   // the sRGB encoding.
   const ResponseCurve& response = scene.scene.response;
   if (sequence) {
-    fs::create_directories(a.out);
-    if (!a.png.empty()) fs::create_directories(a.png);
+    outputs.CreateFolder("--out", a.out);
+    if (!a.png.empty()) outputs.CreateFolder("--png", a.png);
     for (UtcTime t : times) {
       out_files.push_back(outputs.Add("--out",
                                       (fs::path(a.out) / (SequenceFrameName(t) + ".exr")).string(),

@@ -66,7 +66,7 @@ void Run(const ValidateArgs& a) {
   };
   std::vector<ImageFiles> files;
   if (!a.images.empty()) {
-    fs::create_directories(a.images);
+    outputs.CreateFolder("--images", a.images);
     for (const auto& [name, v] : scene.scene.views) {
       if (v.slot != a.slot || v.target != "architecture") continue;
       const std::string base = (fs::path(a.images) / SafeName(name)).string();

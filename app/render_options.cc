@@ -66,11 +66,11 @@ void AddCameraOptions(CLI::App* c, CameraArgs* a) {
   c->add_option("--pose", a->pose, "Camera pose JSON (with --lens)");
   c->add_option("--look-at", a->look_at, "A new camera looking at this point X,Y,Z (metres, ENU)");
   c->add_option("--from-point", a->from_point, "... from this point X,Y,Z (with --look-at)");
-  c->add_option("--fov", a->fov_deg, "Horizontal field of view of the --look-at camera (deg)")
-      ->check(Within(1, 170, "deg"))
-      ->capture_default_str();
-  c->add_option("--size", a->size, "Image size WIDTHxHEIGHT of the --look-at camera")
-      ->capture_default_str();
+  c->add_option("--fov", a->fov_deg,
+                "Horizontal field of view of the --look-at camera (deg; default 50)")
+      ->check(Within(1, 170, "deg"));
+  c->add_option("--size", a->size,
+                "Image size WIDTHxHEIGHT of the --look-at camera (default 640x480)");
 }
 
 std::pair<int, int> ParseImageSize(const std::string& text, const std::string& option) {
@@ -91,14 +91,17 @@ bool CameraFromArgs(const CameraArgs& a, Intrinsics* intrinsics, Pose* pose) {
           static_cast<int>(!a.look_at.empty()) >
       1)
     throw Error("give one camera: --view, --lens/--pose or --look-at/--from-point");
+  if (a.look_at.empty() && (!a.size.empty() || a.fov_deg > 0))
+    throw Error(std::string(a.size.empty() ? "--fov" : "--size") +
+                " sets the --look-at camera; --view and --lens keep their camera's own");
   if (!a.look_at.empty()) {
     const std::vector<double> target = ParseNumberList(a.look_at, 3, "--look-at");
     const std::vector<double> eye = ParseNumberList(a.from_point, 3, "--from-point");
     const Eigen::Vector3d t(target[0], target[1], target[2]), e(eye[0], eye[1], eye[2]);
     if ((t - e).norm() < 1e-6)
       throw Error("--look-at and --from-point are the same point: no direction to look in");
-    const auto [w, h] = ParseImageSize(a.size, "--size");
-    *intrinsics = Intrinsics::PinholeFov(w, h, a.fov_deg);
+    const auto [w, h] = ParseImageSize(a.size.empty() ? "640x480" : a.size, "--size");
+    *intrinsics = Intrinsics::PinholeFov(w, h, a.fov_deg > 0 ? a.fov_deg : 50);
     *pose = Pose::LookAt(e, t);
     return true;
   }

@@ -32,8 +32,9 @@ void ApplyPrediction(const PredictionArgs& args, RelightOptions* relight);
 // (--view), a lens and a pose file (--lens/--pose), or a pinhole camera at --from-point looking
 // at --look-at (ENU metres) with --fov and --size.
 struct CameraArgs {
-  std::string view, lens, pose, look_at, from_point, size = "640x480";
-  double fov_deg = 50;
+  std::string view, lens, pose, look_at, from_point;
+  std::string size;    // empty: 640x480
+  double fov_deg = 0;  // 0: 50 deg
 };
 void AddCameraOptions(CLI::App* command, CameraArgs* args);
 // "WIDTHxHEIGHT" within core/image.h's limits; throws rouen::Error naming `option`.

@@ -196,10 +196,7 @@ void CaptureController::Meter(const CapturedFrame& frame, Target target, double*
   Eigen::Vector3d sun_cam;
   double cos_excl = std::cos(plan_.sun_exclusion_deg * kPi / 180);
   if (exclude_sun) {
-    Site site = last_fix_ && last_fix_->valid()
-                    ? Site{last_fix_->lat_deg, last_fix_->lon_deg, last_fix_->height_m}
-                    : fallback_site_;
-    SunPosition sp = ComputeSunPosition(frame.utc, site);
+    SunPosition sp = ComputeSunPosition(frame.utc, CurrentSite());
     sun_cam = frame.pose->rotation.transpose() * sp.DirectionEnu();
   }
   // A fisheye's image circle (inscribed): outside it the sensor sees the lens barrel.
@@ -235,6 +232,30 @@ void CaptureController::Meter(const CapturedFrame& frame, Target target, double*
   *max_dn = mx;
 }
 
+Site CaptureController::CurrentSite() const {
+  return last_fix_ && last_fix_->valid()
+             ? Site{last_fix_->lat_deg, last_fix_->lon_deg, last_fix_->height_m}
+             : fallback_site_;
+}
+
+void CheckPlanDaylight(const CapturePlan& plan, const std::vector<UtcTime>& times,
+                       const Site& site) {
+  const bool daylight = std::any_of(plan.targets.begin(), plan.targets.end(), [](Target t) {
+    return t == Target::kSun || t == Target::kAureole || t == Target::kSky ||
+           t == Target::kLandscape;
+  });
+  if (!daylight || plan.allow_night) return;
+  for (size_t k = 0; k < times.size(); ++k) {
+    const std::string night = SunDownProblem(times[k], site);
+    if (night.empty()) continue;
+    throw Error(
+        "slot " + std::to_string(plan.first_slot + static_cast<int>(k)) + " at " +
+        times[k].Iso8601(0) + ": " + night +
+        "; its sun, sky and landscape photographs need daylight: capture between sunrise "
+        "and sunset (rouen plan lists the day's times), or pass --allow-night for a rehearsal");
+  }
+}
+
 FrameRecord CaptureController::Journal(SessionWriter& writer, const CapturedFrame& frame, int slot,
                                        Target target, const std::string& group) {
   FrameRecord r;
@@ -251,10 +272,8 @@ FrameRecord CaptureController::Journal(SessionWriter& writer, const CapturedFram
   r.intrinsics = frame.intrinsics;
   r.pose = frame.pose;
   PollGps(writer);
-  Site site = fallback_site_;
   if (last_fix_ && last_fix_->valid()) {
     r.gps = *last_fix_;
-    site = Site{last_fix_->lat_deg, last_fix_->lon_deg, last_fix_->height_m};
     progress_.gps_status =
         gps_error_.empty()
             ? "3D fix, " + std::to_string(last_fix_->satellites) + " satellites"
@@ -262,7 +281,7 @@ FrameRecord CaptureController::Journal(SessionWriter& writer, const CapturedFram
   } else if (progress_.gps_status.rfind("error", 0) != 0) {
     progress_.gps_status = "no fix (fallback site)";
   }
-  SunPosition sp = ComputeSunPosition(r.utc, site);
+  SunPosition sp = ComputeSunPosition(r.utc, CurrentSite());
   r.sun_azimuth_deg = sp.azimuth_deg;
   r.sun_elevation_deg = sp.elevation_deg;
   FrameRecord out = writer.Append(r, frame.image);
@@ -401,6 +420,12 @@ CaptureSummary CaptureController::Run(SessionWriter& writer,
   progress_.slots = plan_.first_slot + static_cast<int>(plan_.slots.size());
   progress_.frames_total = static_cast<int>(writer.frames().size());
   PollGps(writer);
+  // Refused before the first frame: a field rig's one slot is now, a simulated rig's its plan.
+  if (dev_.clock->IsLaptopClock())
+    CheckPlanDaylight(plan_, {dev_.clock->Now().PlusSeconds(writer.info().clock_offset_s)},
+                      CurrentSite());
+  else
+    CheckPlanDaylight(plan_, plan_.slots, CurrentSite());
 
   // Resume: every group already journalled is complete except the last one, which was in
   // flight when the previous run stopped and is captured again.

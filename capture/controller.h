@@ -42,6 +42,9 @@ struct CapturePlan {
   double start_exposure_s = 1.0 / 250;
   double sun_exclusion_deg = 4.0;  // pixels this close to the sun are not "of interest"
   BracketOptions bracket;
+  // A rehearsal at night or indoors (a rig tried out the evening before): the frames serve no
+  // solve, and the daylight check (CheckPlanDaylight) is skipped. Not stored with the plan.
+  bool allow_night = false;
   void Validate() const;
 };
 
@@ -104,6 +107,7 @@ class CaptureController {
                       const std::string& group);
   void Notify(double exposure_s, double saturated_fraction);
   void PollGps(SessionWriter& writer);
+  Site CurrentSite() const;  // the last GPS fix's, else the fallback
   // After a DeviceError: reopens the camera per the policy; false when capture must stop.
   bool Recover(const DeviceError& e, const std::string& group, CaptureSummary& summary);
   // Fractions of saturated and dark pixels among the pixels of interest.
@@ -121,6 +125,14 @@ class CaptureController {
   DeviceLossOptions loss_;
   ClockOffsetEstimator clock_offset_;
 };
+
+// Throws rouen::Error when the plan photographs the sun, its aureole, the sky or the landscape
+// (§3 measures the sun in every slot) and the sun's whole disc is below the horizon at `site`
+// at one of `times` (slot plan.first_slot + k), naming the slot, its time and the sun's
+// elevation: a capture at night would journal frames no solve can use. Nothing when
+// plan.allow_night.
+void CheckPlanDaylight(const CapturePlan& plan, const std::vector<UtcTime>& times,
+                       const Site& site);
 
 // The plan as stored in session.json ("plan"), so a replay runs the recorded plan.
 nlohmann::json PlanToJson(const CapturePlan& plan);

@@ -526,8 +526,8 @@ class VanishingGps : public Gps {
     if (polls++ >= good_polls) throw DeviceError("gps0: /dev/ttyACM0: no such device");
     GpsFix f;
     f.utc = ParseIso8601("2026-08-25T20:00:00Z").PlusSeconds(polls);
-    f.lat_deg = 48.4431;
-    f.lon_deg = 1.0892;
+    f.lat_deg = 37.8722;  // Berkeley, as the plan's time (13:00 PDT)
+    f.lon_deg = -122.2578;
     f.height_m = 140;
     f.mode = 3;
     f.satellites = 8;
@@ -553,7 +553,7 @@ TEST(ControllerTest, GpsLostMidCaptureKeepsTheLastFixAndSaysSo) {
   ASSERT_GT(done.frames().size(), static_cast<size_t>(gps.good_polls));
   for (const FrameRecord& f : done.frames()) {
     ASSERT_TRUE(f.gps.has_value()) << f.file;
-    EXPECT_DOUBLE_EQ(f.gps->lat_deg, 48.4431);
+    EXPECT_DOUBLE_EQ(f.gps->lat_deg, 37.8722);
   }
   ASSERT_FALSE(statuses.empty());
   EXPECT_NE(statuses.back().find("no such device"), std::string::npos) << statuses.back();

@@ -61,6 +61,47 @@ bool IsWithin(const fs::path& path, const fs::path& folder) {
   return true;
 }
 
+std::string EnclosingSessionOrScene(const fs::path& path, std::string* kind) {
+  std::error_code ec;
+  for (fs::path d = fs::absolute(path, ec); !d.empty(); d = d.parent_path()) {
+    if (fs::is_regular_file(d / "session.json", ec) ||
+        fs::is_regular_file(d / "frames.jsonl", ec)) {
+      *kind = "session";
+      return d.string();
+    }
+    if (fs::is_regular_file(d / "scene.json", ec)) {
+      *kind = "scene";
+      return d.string();
+    }
+    if (d == d.parent_path()) break;
+  }
+  return "";
+}
+
+namespace {
+
+// Refuses `path` (a file or a folder to write) when it is a protected input or lies inside
+// one, or lies inside a session or a scene folder.
+void CheckOutputPlace(const std::string& where, const fs::path& canonical,
+                      const std::vector<std::pair<std::string, std::string>>& inputs) {
+  for (const auto& [what, input] : inputs) {
+    if (IsWithin(canonical, input))
+      throw Error(where + ": would overwrite " + what + ", an input of this command; write it " +
+                  "elsewhere");
+  }
+  // Sessions and scenes are written only by the commands that make them (capture, import and
+  // calib; solve), each file with its hash or provenance: anything else there is refused.
+  std::string kind;
+  const std::string holder = EnclosingSessionOrScene(canonical, &kind);
+  if (!holder.empty())
+    throw Error(where + ": lies inside the " + kind + " " + holder + " (it holds " +
+                (kind == "scene" ? "scene.json), which only rouen solve writes"
+                                 : "session.json), which only capture, import and calib write") +
+                "; write it elsewhere");
+}
+
+}  // namespace
+
 void OutputSet::Protect(const std::string& what, const std::string& path) {
   if (path.empty()) return;
   std::error_code ec;
@@ -97,11 +138,7 @@ std::string OutputSet::Add(const std::string& what, const std::string& path, Out
     throw Error(where + ": no image format to write for '" +
                 (ext.empty() ? std::string("no extension") : ext) + "' (use .png)");
   const fs::path canonical = fs::weakly_canonical(p, ec);
-  for (const Input& in : inputs_) {
-    if (IsWithin(canonical, in.canonical))
-      throw Error(where + ": would overwrite " + in.what + " " + in.path +
-                  ", an input of this command; write it elsewhere");
-  }
+  CheckOutputPlace(where, canonical, InputNames());
   for (const Entry& e : entries_) {
     std::error_code ec2;
     if (fs::weakly_canonical(e.path, ec2) == canonical)
@@ -115,6 +152,21 @@ std::string OutputSet::Add(const std::string& what, const std::string& path, Out
   ::close(fd);
   entries_.push_back({what, path, temp});
   return temp;
+}
+
+std::vector<std::pair<std::string, std::string>> OutputSet::InputNames() const {
+  std::vector<std::pair<std::string, std::string>> out;
+  for (const Input& in : inputs_) out.push_back({in.what + " " + in.path, in.canonical});
+  return out;
+}
+
+void OutputSet::CreateFolder(const std::string& what, const std::string& dir) {
+  const std::string where = what + " " + dir;
+  std::error_code ec;
+  CheckOutputPlace(where, fs::weakly_canonical(dir, ec), InputNames());
+  CheckWritableFolder(what, dir);
+  fs::create_directories(dir, ec);
+  if (ec) throw Error(where + ": cannot create the folder: " + ec.message());
 }
 
 void OutputSet::Commit() {

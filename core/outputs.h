@@ -7,6 +7,7 @@
 
 #include <filesystem>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace rouen {
@@ -14,6 +15,11 @@ namespace rouen {
 // Whether `path` is `folder` or lies inside it, both made absolute and normal with the symbolic
 // links of their existing parts resolved.
 bool IsWithin(const std::filesystem::path& path, const std::filesystem::path& folder);
+
+// The session or scene folder `path` lies in (the nearest folder above it, or `path` itself,
+// that holds a session's session.json or frames.jsonl, or a scene's scene.json), and `kind`
+// "session" or "scene"; none: "". Only the commands that make such a folder write in it.
+std::string EnclosingSessionOrScene(const std::filesystem::path& path, std::string* kind);
 
 enum class OutputKind {
   kFile,      // any content (JSON, text)
@@ -45,10 +51,16 @@ class OutputSet {
   // rouen::Error when `path` is empty or a folder, when it exists and is not a regular file
   // (a device, a pipe: renaming over it would replace it), when its folder is missing or not
   // writable, when the format does not suit `kind`, when another output has the same path, or
-  // when it is a protected input or lies inside one (Protect).
+  // when it is a protected input or lies inside one (Protect), or when it lies inside a session
+  // or scene folder (one holding session.json or frames.jsonl, or scene.json), which only the
+  // commands that make them write.
   // Returns the temporary to write it to: "<path>.tmp-<pid>-<n><extension>", so writers that
   // choose a format by extension choose the right one.
   std::string Add(const std::string& what, const std::string& path, OutputKind kind);
+  // Declares a folder the outputs go into and creates it with its missing parents; refused
+  // before anything is created, as Add refuses a path (a protected input or inside one, inside
+  // a session or a scene folder, a file where the folder should be, no permission).
+  void CreateFolder(const std::string& what, const std::string& dir);
   // Renames every temporary to its path (each rename atomic); after this the destructor
   // removes nothing.
   void Commit();
@@ -61,6 +73,7 @@ class OutputSet {
   struct Input {
     std::string what, path, canonical;
   };
+  std::vector<std::pair<std::string, std::string>> InputNames() const;  // ("what path", canonical)
   std::vector<Input> inputs_;
   bool committed_ = false;
 };

@@ -124,12 +124,14 @@ TEST_F(OutputsTest, OutputsNeverReplaceInputsDevicesOrPipes) {
   }
   {
     OutputSet out;  // the output declared first, the input after
-    out.Add("--out", (scene / "report.html").string(), OutputKind::kFile);
-    EXPECT_NE(ErrorOf([&] { out.Protect("the scene", scene.string()); }).find("would overwrite"),
+    const fs::path photos = dir_ / "photos";
+    fs::create_directories(photos);
+    out.Add("--out", (photos / "report.html").string(), OutputKind::kFile);
+    EXPECT_NE(ErrorOf([&] { out.Protect("--photos", photos.string()); }).find("would overwrite"),
               std::string::npos);
   }
   EXPECT_EQ(ReadFileToString(scene / "scene.json"), "{}");
-  EXPECT_FALSE(fs::exists(scene / "report.html"));
+  EXPECT_FALSE(fs::exists(dir_ / "photos" / "report.html"));
   OutputSet out;
   EXPECT_EQ(ErrorOf([&] { out.Add("--out", "/dev/null", OutputKind::kFile); }),
             "--out /dev/null: is not a regular file (a device or a pipe), which the output would "
@@ -141,6 +143,56 @@ TEST_F(OutputsTest, OutputsNeverReplaceInputsDevicesOrPipes) {
             }).find("is not a regular file"),
             std::string::npos);
   EXPECT_TRUE(fs::is_fifo(fifo));
+}
+
+// A session or a scene is written only by the commands that make it: an output inside one is
+// refused though the command was not told of it (render --png SESSION/frames/000013.png).
+TEST_F(OutputsTest, NoOutputLandsInASessionOrASceneItDidNotMake) {
+  const fs::path session = dir_ / "s", scene = dir_ / "sc";
+  fs::create_directories(session / "frames");
+  fs::create_directories(scene / "atlas");
+  WriteFileAtomic(session / "session.json", "{}");
+  WriteFileAtomic(session / "frames" / "000013.png", "photo");
+  WriteFileAtomic(scene / "scene.json", "{}");
+  OutputSet out;
+  const fs::path photo = session / "frames" / "000013.png";
+  EXPECT_EQ(ErrorOf([&] { out.Add("--png", photo.string(), OutputKind::kImage); }),
+            "--png " + photo.string() + ": lies inside the session " + session.string() +
+                " (it holds session.json), which only capture, import and calib write; write it "
+                "elsewhere");
+  const fs::path atlas = scene / "atlas" / "roof.exr";
+  EXPECT_EQ(ErrorOf([&] { out.Add("--out", atlas.string(), OutputKind::kRadiance); }),
+            "--out " + atlas.string() + ": lies inside the scene " + scene.string() +
+                " (it holds scene.json), which only rouen solve writes; write it elsewhere");
+  // A folder with only a journal is a session too (session.json lost in a crash).
+  fs::remove(session / "session.json");
+  WriteFileAtomic(session / "frames.jsonl", "");
+  EXPECT_NE(ErrorOf([&] {
+              out.Add("--out", (session / "new.json").string(), OutputKind::kFile);
+            }).find("lies inside the session"),
+            std::string::npos);
+  EXPECT_EQ(ReadFileToString(photo), "photo");
+  EXPECT_EQ(ErrorOf([&] { out.Add("--out", (dir_ / "s.json").string(), OutputKind::kFile); }), "");
+  // A folder of outputs is refused before it is made; beside them it is made.
+  EXPECT_NE(ErrorOf([&] {
+              out.CreateFolder("--images", (scene / "img" / "a").string());
+            }).find("lies inside the scene"),
+            std::string::npos);
+  EXPECT_FALSE(fs::exists(scene / "img"));
+  OutputSet protecting;
+  protecting.Protect("--photos", (dir_ / "photos").string());
+  fs::create_directories(dir_ / "photos");
+  EXPECT_NE(ErrorOf([&] {
+              protecting.CreateFolder("--out", (dir_ / "photos" / "r").string());
+            }).find("would overwrite --photos"),
+            std::string::npos);
+  EXPECT_FALSE(fs::exists(dir_ / "photos" / "r"));
+  EXPECT_EQ(ErrorOf([&] { out.CreateFolder("--images", (dir_ / "img" / "a").string()); }), "");
+  EXPECT_TRUE(fs::is_directory(dir_ / "img" / "a"));
+  std::string kind;
+  EXPECT_EQ(EnclosingSessionOrScene(scene / "atlas" / "x.exr", &kind), scene.string());
+  EXPECT_EQ(kind, "scene");
+  EXPECT_EQ(EnclosingSessionOrScene(dir_ / "img", &kind), "");
 }
 
 TEST_F(OutputsTest, CommitRefusesAnOutputNeverWritten) {

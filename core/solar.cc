@@ -3,6 +3,7 @@
 #include <erfa.h>
 
 #include <cmath>
+#include <cstdio>
 #include <string>
 
 #include "core/angles.h"
@@ -105,6 +106,15 @@ void AzElFromEnu(const Eigen::Vector3d& d, double* azimuth_deg, double* elevatio
   if (az >= 360.0) az -= 360.0;
   if (azimuth_deg) *azimuth_deg = n > 0 ? az : 0.0;
   if (elevation_deg) *elevation_deg = n > 0 ? std::atan2(d.z(), horiz) * kRadToDeg : 0.0;
+}
+
+std::string SunDownProblem(UtcTime t, const Site& site) {
+  const SunPosition sun = ComputeSunPosition(t, site);
+  if (!sun.BelowHorizon()) return "";
+  char text[128];
+  std::snprintf(text, sizeof text, "the sun is %.1f deg below the horizon at the site (%.5f, %.5f)",
+                -sun.elevation_deg, site.lat_deg, site.lon_deg);
+  return text;
 }
 
 }  // namespace rouen

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <string>
 
 #include "core/time.h"
 
@@ -30,9 +31,15 @@ struct SunPosition {
   Eigen::Vector3d DirectionEnu() const;
   // Solid angle of the sun's disc, steradians.
   double SolidAngleSr() const;
+  // True when the whole disc is below the (apparent) horizon: night or twilight.
+  bool BelowHorizon() const { return elevation_deg + angular_radius_deg < 0; }
 };
 
 SunPosition ComputeSunPosition(UtcTime t, const Site& site, const Weather& weather = {});
+
+// Empty while any of the sun's disc is above the horizon at `site` at `t`; else "the sun is
+// 12.3 deg below the horizon at the site (lat, lon)", for messages that refuse a night slot.
+std::string SunDownProblem(UtcTime t, const Site& site);
 
 // Unit ENU vector from azimuth (from north, eastward) and elevation, both in degrees.
 Eigen::Vector3d EnuFromAzEl(double azimuth_deg, double elevation_deg);

@@ -9,6 +9,7 @@
 #include "core/files.h"
 #include "core/lens.h"
 #include "core/mesh.h"
+#include "core/outputs.h"
 #include "core/session.h"
 #include "pipeline/solve_config.h"
 
@@ -70,6 +71,13 @@ CaptureSessionSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
     throw Error(
         "--new-slot adds a time of day to a field session; simulated and replay rigs "
         "capture all their slots in one run");
+  if (!opts.resume && !opts.new_slot) {
+    std::string kind;
+    const std::string holder = EnclosingSessionOrScene(fs::absolute(out).parent_path(), &kind);
+    if (!holder.empty())
+      throw Error(out.string() + ": lies inside the " + kind + " " + holder +
+                  "; make the session beside it");
+  }
   if (opts.new_slot && !fs::exists(out / "session.json"))
     throw Error(out.string() + ": --new-slot needs an existing session (run without it first)");
   // The rig's [solve] options are checked now, not after the capture.
@@ -83,6 +91,9 @@ CaptureSessionSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
   // The recorded session of a replay, read once for its site, notes and model.
   std::optional<Session> src;
   if (!opts.from_session.empty()) src.emplace(Session::Load(opts.from_session));
+  // A simulated or replayed plan's times are known: one at night is refused before the session
+  // is made (a field rig's one slot, now, is checked by the controller with its GPS fix).
+  if (!field) CheckPlanDaylight(dev.plan, dev.plan.slots, src ? src->info().site : rig.site);
   std::optional<SessionWriter> writer;
   if ((opts.resume || opts.new_slot) && fs::exists(out / "session.json")) {
     writer.emplace(SessionWriter::Resume(out, opts.writer));

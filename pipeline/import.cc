@@ -6,6 +6,7 @@
 #include <array>
 #include <cctype>
 #include <cmath>
+#include <cstdio>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -22,6 +23,7 @@
 #include "core/limits.h"
 #include "core/list_file.h"
 #include "core/mesh.h"
+#include "core/outputs.h"
 #include "core/temporaries.h"
 
 namespace rouen {
@@ -502,6 +504,11 @@ ImportSummary ImportPhotos(const ImportOptions& o, const fs::path& out) {
     throw Error(out_name + ": give the session folder's name, not a trailing '/'");
   if (fs::exists(out) && !(fs::is_directory(out) && fs::is_empty(out)))
     throw Error(out_name + ": already exists; choose a new session folder");
+  std::string kind;
+  const std::string holder = EnclosingSessionOrScene(fs::absolute(out).parent_path(), &kind);
+  if (!holder.empty())
+    throw Error(out_name + ": lies inside the " + kind + " " + holder +
+                "; make the session beside it");
   CheckModels(o.model, o.surroundings);
 
   std::vector<std::string> notes;
@@ -583,6 +590,11 @@ ImportSummary ImportPhotos(const ImportOptions& o, const fs::path& out) {
       const SunPosition sun = ComputeSunPosition(r.utc, site);
       r.sun_azimuth_deg = sun.azimuth_deg;
       r.sun_elevation_deg = sun.elevation_deg;
+      if (sun.BelowHorizon()) {
+        char text[64];
+        std::snprintf(text, sizeof text, ", sun %.1f deg)", sun.elevation_deg);
+        summary.night.push_back(p.name + " (" + r.utc.Iso8601(0) + text);
+      }
       r.intrinsics = p.intrinsics;
       r.pose = p.pose;
       const FrameRecord done = writer.Append(r, LoadPixels(p));

@@ -63,6 +63,10 @@ struct ImportOptions {
 
 struct ImportSummary {
   int photos = 0, hdr = 0, brackets = 0, slots = 0;
+  // The photos taken with the sun's whole disc below the horizon at the site, "NAME (UTC,
+  // sun -12.3 deg)": a wrong camera clock, time zone or site, or calibration photos taken at
+  // night; `rouen status` lists the slots the solve cannot use.
+  std::vector<std::string> night;
 };
 
 // Imports the photos into the new session folder `out` (which must not exist, or be empty).

@@ -45,6 +45,11 @@ void CheckSceneOutput(const fs::path& out, const fs::path& session) {
       throw Error(out.string() + ": holds the session " + session.string() +
                   "; write the scene beside the session");
   }
+  std::string kind;
+  const std::string holder = EnclosingSessionOrScene(fs::absolute(out, ec).parent_path(), &kind);
+  if (!holder.empty())
+    throw Error(out.string() + ": lies inside the " + kind + " " + holder +
+                "; write the scene beside it");
   if (!fs::exists(out, ec)) {
     const fs::path parent = out.parent_path().empty() ? fs::path(".") : out.parent_path();
     if (!fs::is_directory(parent, ec))
@@ -202,7 +207,11 @@ SceneSolve SolveSessionFolder(const SolveFolderRequest& request) {
   const Session session = Session::Load(session_dir);
   // What the solve reads besides the frames, checked before the long work.
   CheckSessionFrames(session);
-  SessionSite(session);
+  const Site site = SessionSite(session);
+  const std::vector<std::optional<UtcTime>> times = SlotTimes(session.frames());
+  for (size_t k = 0; k < times.size(); ++k)
+    if (times[k])
+      Require(NightSlotProblem(static_cast<int>(k), *times[k], site), session_dir.string());
   const Mesh model = ReadSessionModel(session);
   int nslots = 0;
   for (const FrameRecord& f : session.frames()) nslots = std::max(nslots, f.slot + 1);

@@ -6,7 +6,6 @@
 #include <array>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
 #include <iomanip>
 #include <optional>
 #include <set>
@@ -380,6 +379,36 @@ Site SessionSite(const std::filesystem::path& dir, const SessionInfo& info,
   CheckSite(mean,
             (dir / "frames.jsonl").string() + ": the mean of " + std::to_string(n) + " GPS fixes");
   return mean;
+}
+
+std::vector<std::optional<UtcTime>> SlotTimes(const std::vector<FrameRecord>& frames,
+                                              std::vector<bool>* from_sky) {
+  int nslots = 0;
+  for (const FrameRecord& f : frames) nslots = std::max(nslots, f.slot + 1);
+  std::vector<std::vector<UtcTime>> sky(nslots), all(nslots);
+  for (const FrameRecord& f : frames) {
+    if (f.slot < 0) continue;
+    all[f.slot].push_back(f.utc);
+    if (MergedBracketName(f) == BracketName(f.slot, Target::kSky, 0)) sky[f.slot].push_back(f.utc);
+  }
+  std::vector<std::optional<UtcTime>> times(nslots);
+  if (from_sky) from_sky->assign(nslots, false);
+  for (int k = 0; k < nslots; ++k) {
+    std::vector<UtcTime>& t = sky[k].empty() ? all[k] : sky[k];
+    if (t.empty()) continue;
+    std::sort(t.begin(), t.end());
+    times[k] = t[t.size() / 2];  // the median, as BracketCameraAndTime takes a bracket's
+    if (from_sky) (*from_sky)[k] = !sky[k].empty();
+  }
+  return times;
+}
+
+std::string NightSlotProblem(int slot, const UtcTime& utc, const Site& site) {
+  const std::string night = SunDownProblem(utc, site);
+  if (night.empty()) return "";
+  return "slot " + std::to_string(slot) + " (" + utc.Iso8601(0) + "): " + night +
+         "; every slot needs the sun up (its sun, sky and landscape photographs): check the "
+         "photos' clock and time zone, and the site";
 }
 
 std::string FrameValuesProblem(const FrameRecord& f) {

@@ -172,4 +172,15 @@ Site SessionSite(const Session& session);
 Site SessionSite(const std::filesystem::path& dir, const SessionInfo& info,
                  const std::vector<FrameRecord>& frames);
 
+// The time the solve gives each slot 0..the last in `frames`: the median time of its sky
+// frames (the aureole's merged in), else of all its frames; unset for a slot without frames.
+// `from_sky` (when given) gets whether each slot's time came from its sky frames.
+std::vector<std::optional<UtcTime>> SlotTimes(const std::vector<FrameRecord>& frames,
+                                              std::vector<bool>* from_sky = nullptr);
+
+// Empty while any of the sun's disc is above the horizon at `utc` at `site`; else why slot
+// `slot` cannot be solved (§3.1 measures the sun in every slot): its time, how far below the
+// horizon the sun is, and that the photos' clock, time zone or the site is the usual cause.
+std::string NightSlotProblem(int slot, const UtcTime& utc, const Site& site);
+
 }  // namespace rouen

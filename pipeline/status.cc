@@ -85,6 +85,11 @@ class Fixes {
   std::string Site() const {
     return "correct \"site\" in " + dir_ + "/session.json (or the GPS fixes in frames.jsonl)";
   }
+  std::string Night() const {
+    return captured_ ? "capture the slot again in daylight (rouen plan lists the day's times)"
+                     : "import again with the camera clock's offset (rouen import --timezone "
+                       "+HH:MM, or --time), or correct the site";
+  }
   std::string Frames() const {
     return captured_ ? Capture() : "rouen capture --rig RIG --out DIR, or rouen import";
   }
@@ -248,6 +253,8 @@ const char* StatusProblemName(StatusProblemKind kind) {
       return "capture_unfinished";
     case StatusProblemKind::kJournalNote:
       return "journal_note";
+    case StatusProblemKind::kNight:
+      return "night";
   }
   return "?";
 }
@@ -284,19 +291,11 @@ SessionStatus ReadSessionStatus(const fs::path& dir, const StatusOptions& option
   for (int k = 0; k < nslots; ++k) s.slots[k].slot = k;
   for (const auto& [name, fr] : groups)
     s.slots[fr.front()->slot].brackets.push_back(Describe(name, fr));
+  std::vector<bool> from_sky;
+  const std::vector<std::optional<UtcTime>> times = SlotTimes(frames, &from_sky);
   for (SlotStatus& slot : s.slots) {
-    std::vector<UtcTime> times;
-    const auto sky = merged.find(BracketName(slot.slot, Target::kSky, 0));
-    if (sky != merged.end()) {
-      for (const FrameRecord* f : sky->second) times.push_back(f->utc);
-      slot.utc_from_sky = true;
-    } else {
-      for (const FrameRecord& f : frames)
-        if (f.slot == slot.slot) times.push_back(f.utc);
-    }
-    if (times.empty()) continue;
-    std::sort(times.begin(), times.end());
-    slot.utc = times[times.size() / 2];  // the median, as CalibrateSession takes it
+    slot.utc = times[slot.slot];
+    slot.utc_from_sky = from_sky[slot.slot];
   }
 
   if (frames.empty() && std::none_of(s.problems.begin(), s.problems.end(), [](const auto& p) {
@@ -391,7 +390,13 @@ SessionStatus ReadSessionStatus(const fs::path& dir, const StatusOptions& option
     }
   }
   try {
-    SessionSite(dir, s.info, frames);
+    const Site site = SessionSite(dir, s.info, frames);
+    for (const SlotStatus& slot : s.slots) {
+      if (!slot.utc) continue;
+      const std::string night = NightSlotProblem(slot.slot, *slot.utc, site);
+      if (!night.empty())
+        Add(&s, StatusProblemKind::kNight, true, dir.string() + ": " + night, fixes.Night());
+    }
   } catch (const Error& e) {
     Add(&s, StatusProblemKind::kSite, true, e.what(), fixes.Site());
   }

@@ -59,6 +59,7 @@ enum class StatusProblemKind {
   kJournalNote,        // a last journal line cut short by a crash (ignored, as the solve does)
   kSolveConfig,        // session.json's extra.solve_config, which the solve starts from
   kSkyMask,            // a sky mask file (extra.sky_masks) missing, outside or not the sky's size
+  kNight,              // a slot whose time has the sun below the horizon at the site
 };
 // "journal", "missing_file", "checksum", ..., as the JSON report names the kinds.
 const char* StatusProblemName(StatusProblemKind kind);

@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <filesystem>
 #include <functional>
 #include <string>
@@ -13,7 +14,9 @@
 #include "core/files.h"
 #include "core/image.h"
 #include "core/mesh.h"
+#include "core/solar.h"
 #include "pipeline/capture_session.h"
+#include "pipeline/scene.h"
 
 namespace rouen {
 namespace {
@@ -263,6 +266,40 @@ TEST_F(StatusTest, WhatTheSolveRefusesAtOnceBlocksItHere) {
   EXPECT_NE(Find(s, StatusProblemKind::kFrameImage)->what.find("is 4x4 but its intrinsics are 5x4"),
             std::string::npos)
       << Find(s, StatusProblemKind::kFrameImage)->what;
+}
+
+// Photos timed twelve hours off (a camera clock in the wrong time zone) put the slot at night:
+// status names the slot, its time and the sun's depth with the fix, and the solve refuses it
+// before any work with the same words (it used to fail later, on the sun "outside the camera's
+// field of view").
+TEST_F(StatusTest, ASlotAtNightIsNamedByStatusAndRefusedBySolve) {
+  RewriteJournal(dir_, [](FrameRecord& f) { f.utc = f.utc.PlusSeconds(12 * 3600); });
+  const SessionStatus s = ReadSessionStatus(dir_);
+  ASSERT_EQ(Blocking(s), std::vector<StatusProblemKind>{StatusProblemKind::kNight});
+  const StatusProblem* p = Find(s, StatusProblemKind::kNight);
+  // The sky frames' median time: 08:30:04 UTC, 01:30 in Berkeley, the sun 42 deg down.
+  EXPECT_NE(p->what.find("slot 0 (2026-08-26T08:30:04Z): the sun is"), std::string::npos)
+      << p->what;
+  const SunPosition sun = ComputeSunPosition(*s.slots[0].utc, s.info.site);
+  ASSERT_LT(sun.elevation_deg, -30);
+  char depth[32];
+  std::snprintf(depth, sizeof depth, "%.1f deg below the horizon", -sun.elevation_deg);
+  EXPECT_NE(p->what.find(depth), std::string::npos) << p->what;
+  EXPECT_NE(p->fix.find("capture the slot again in daylight"), std::string::npos) << p->fix;
+  SolveFolderRequest request;
+  request.session = dir_;
+  request.out = root_ / "scene";
+  std::string solve_error;
+  try {
+    SolveSessionFolder(request);
+  } catch (const Error& e) {
+    solve_error = e.what();
+  }
+  EXPECT_EQ(solve_error, p->what);
+  EXPECT_FALSE(fs::exists(root_ / "scene"));
+  // Twelve hours back: day again.
+  RewriteJournal(dir_, [](FrameRecord& f) { f.utc = f.utc.PlusSeconds(-12 * 3600); });
+  EXPECT_TRUE(ReadSessionStatus(dir_).Solvable());
 }
 
 TEST_F(StatusTest, AnUnfinishedCaptureIsANoteNotABlock) {

@@ -243,8 +243,11 @@ TimelapseSummary RenderTimelapse(const LoadedScene& scene, const RenderRequest& 
   // The predictor is fitted once (§5: sun extinction, sky interpolation, environment normals);
   // each frame asks it for its time.
   const LightingPredictor predictor = PredictorFor(scene, base);
-  CheckWritableFolder("--out", out.string());
-  fs::create_directories(out);
+  {
+    OutputSet folder;
+    folder.Protect("the scene", scene.dir.string());
+    folder.CreateFolder("--out", out.string());
+  }
 
   // The highest sun first: its automatic exposure is the sequence's.
   std::vector<double> elevation(times.size());

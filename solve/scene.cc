@@ -11,6 +11,7 @@
 #include "core/files.h"
 #include "core/image.h"
 #include "core/json_text.h"
+#include "core/limits.h"
 #include "solve/atlas.h"
 
 namespace rouen {
@@ -347,6 +348,7 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
     scene.site.lat_deg = site.at("lat_deg").get<double>();
     scene.site.lon_deg = site.at("lon_deg").get<double>();
     scene.site.height_m = site.at("height_m").get<double>();
+    CheckSite(scene.site, "site");
     if (!j.at("response").is_null()) scene.response = j.at("response").get<ResponseCurve>();
     scene.grid_options = j.at("grid").get<GridOptions>();
     // Scenes written before the ground could be modelled have none.

@@ -2,8 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <typeinfo>
 #include <utility>
 #include <vector>
 
@@ -290,6 +292,80 @@ TEST(SceneTest, MismatchedModelOrImagesAreRefused) {
   }
   std::filesystem::remove_all(dir);
   EXPECT_THROW(ReadScene(dir), Error);
+}
+
+// Every value of scene.json tampered with in turn (the first element of each list; removed, a
+// string, 0, -1, +-1e300): the scene reads with every number render uses finite and in range,
+// or is refused with rouen::Error naming a file of the scene; never another exception.
+TEST(SceneTest, ATamperedSceneIsReadOrRefusedByName) {
+  const auto dir = TempDir("tampered");
+  const Mesh mesh = MakeMesh();
+  WriteScene(dir, MakeScene(mesh, nullptr), &mesh);
+  const nlohmann::json original = nlohmann::json::parse(ReadFileToString(dir / "scene.json"));
+  std::vector<nlohmann::json::json_pointer> leaves;
+  const nlohmann::json flat = original.flatten();
+  for (const auto& item : flat.items()) {
+    const nlohmann::json::json_pointer p(item.key());
+    bool first = true;  // only the first element of each list
+    for (nlohmann::json::json_pointer q = p; !q.empty(); q = q.parent_pointer())
+      if (original.at(q.parent_pointer()).is_array() && q.back() != "0") first = false;
+    if (first) leaves.push_back(p);
+  }
+  ASSERT_GT(leaves.size(), 50u);
+  const std::vector<nlohmann::json> values = {"x", 0, -1, 1e300, -1e300, nullptr};
+  int refused = 0, read = 0;
+  for (const auto& p : leaves) {
+    for (size_t m = 0; m <= values.size(); ++m) {
+      nlohmann::json j = original;
+      if (m == values.size()) {
+        nlohmann::json& parent = j.at(p.parent_pointer());
+        if (parent.is_array())
+          parent.erase(std::stoul(p.back()));
+        else
+          parent.erase(p.back());
+      } else {
+        j.at(p) = values[m];
+      }
+      const std::string what =
+          p.to_string() + (m < values.size() ? " = " + values[m].dump() : " removed");
+      WriteFileAtomic(dir / "scene.json", j.dump());
+      try {
+        const SceneModel s = ReadScene(dir);
+        ++read;
+        EXPECT_TRUE(std::isfinite(s.site.lat_deg) && std::abs(s.site.lat_deg) <= 90 &&
+                    std::isfinite(s.site.lon_deg) && std::abs(s.site.lon_deg) <= 360 &&
+                    std::isfinite(s.site.height_m))
+            << what;
+        for (const SlotModel& slot : s.slots) {
+          EXPECT_NEAR(slot.sun_dir.norm(), 1, 1e-6) << what;
+          EXPECT_TRUE(slot.sun_radiance.allFinite() && slot.sun_radiance.minCoeff() >= 0) << what;
+          EXPECT_TRUE(std::isfinite(slot.sun_solid_angle_sr) && slot.sun_solid_angle_sr > 0)
+              << what;
+          for (const SkyParams& c : slot.sky.channel)
+            EXPECT_TRUE(std::isfinite(c.Lz) && c.Lz >= 0 && std::isfinite(c.a) &&
+                        std::isfinite(c.b) && std::isfinite(c.c) && std::isfinite(c.d) &&
+                        std::isfinite(c.e))
+                << what;
+          for (const Eigen::Vector3d& r : slot.env.radiance)
+            EXPECT_TRUE(r.allFinite() && r.minCoeff() >= 0) << what;
+        }
+        for (const auto& [name, v] : s.views) {
+          EXPECT_NO_THROW(v.intrinsics.Validate()) << what;
+          EXPECT_TRUE(v.pose.rotation.allFinite() && v.pose.position.allFinite()) << what;
+        }
+        EXPECT_NO_THROW(s.grid_options.Validate()) << what;
+      } catch (const Error& e) {
+        ++refused;
+        EXPECT_NE(std::string(e.what()).find(dir.string()), std::string::npos)
+            << what << ": " << e.what();
+      } catch (const std::exception& e) {
+        ADD_FAILURE() << what << ": " << typeid(e).name() << ": " << e.what();
+      }
+    }
+  }
+  EXPECT_GT(refused, 0);
+  EXPECT_GT(read, 0);
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

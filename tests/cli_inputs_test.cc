@@ -250,6 +250,53 @@ TEST(CliInputs, ARigsSolveOptionsAreCheckedBeforeTheCapture) {
   fs::remove_all(dir);
 }
 
+// A simulated plan with a slot at night is refused before the session is made, naming the
+// slot, its time and the sun's depth; --allow-night is the rehearsal's way through.
+TEST(CliInputs, ACapturePlannedAtNightIsRefusedBeforeAnyFrame) {
+  const fs::path dir = TempDir("night");
+  std::string rig = ReadFileToString(fs::path(ROUEN_SOURCE_DIR) / "rigs" / "sim.toml");
+  const size_t times = rig.find("times = [");
+  ASSERT_NE(times, std::string::npos);
+  rig.replace(times, rig.find('\n', times) - times, "times = [\"13:30\", \"23:30\"]");
+  const size_t heldout = rig.find("heldout = ");
+  ASSERT_NE(heldout, std::string::npos);
+  rig.erase(heldout, rig.find('\n', heldout) + 1 - heldout);
+  WriteFileAtomic(dir / "rig.toml", rig);
+  // 23:30 PDT on 2026-08-25 is 06:30 UTC the next day, the sun 25-30 deg below Berkeley's horizon.
+  ExpectError(
+      RunRouen("capture --rig " + Q(dir / "rig.toml") + " --out " + Q(dir / "s") +
+               " --no-prompt --quick"),
+      {"slot 1 at 2026-08-26T06:30:00Z: the sun is", "deg below the horizon", "--allow-night"});
+  EXPECT_FALSE(fs::exists(dir / "s"));
+  fs::remove_all(dir);
+}
+
+// A new session or scene is never made inside another session or scene folder, nor a render
+// camera's size given where the camera is a view's own.
+TEST(CliInputs, NewFoldersStayOutOfSessionsAndScenes) {
+  const fs::path dir = TempDir("nested");
+  fs::create_directories(dir / "s");
+  WriteFileAtomic(dir / "s" / "session.json", "{}");
+  fs::create_directories(dir / "sc");
+  WriteFileAtomic(dir / "sc" / "scene.json", "{}");
+  fs::create_directories(dir / "photos");
+  ExpectError(RunRouen("import --photos " + Q(dir / "photos") + " --site 1,2,3 --out " +
+                       Q(dir / "sc" / "new")),
+              {"lies inside the scene " + (dir / "sc").string()});
+  ExpectError(RunRouen("solve " + Q(dir / "s") + " --out " + Q(dir / "sc" / "inner")),
+              {"lies inside the scene " + (dir / "sc").string()});
+  ExpectError(RunRouen("capture --rig " + Q(fs::path(ROUEN_SOURCE_DIR) / "rigs" / "sim.toml") +
+                       " --out " + Q(dir / "s" / "more") + " --no-prompt --quick"),
+              {"lies inside the session " + (dir / "s").string()});
+  EXPECT_FALSE(fs::exists(dir / "sc" / "new"));
+  EXPECT_FALSE(fs::exists(dir / "sc" / "inner"));
+  EXPECT_FALSE(fs::exists(dir / "s" / "more"));
+  ExpectError(
+      RunRouen("render " + Q(dir / "sc") + " --slot 0 --size 64x48 --out " + Q(dir / "r.exr")),
+      {"--size sets the --look-at camera"});
+  fs::remove_all(dir);
+}
+
 TEST(CliInputs, ListsAndCsvWithAByteOrderMarkAreRead) {
   const fs::path dir = TempDir("bom");
   const std::string csv = "utc,lat,lon,elev_m\n2026-08-25T20:30:00Z,37.8722,-122.2578,60\n";

@@ -145,7 +145,7 @@ TEST(FieldTest, GigeFakeCameraListedThenBracketJournalledWithGpsAndSun) {
                       "aureole_exposures_s = [" +
                       list + "]\n");
   std::string out = RunRouen("capture --rig " + (dir / "rig.toml").string() + " --out " +
-                                 (dir / "session").string() + " --no-prompt",
+                                 (dir / "session").string() + " --no-prompt --allow-night",
                              &code);
   ASSERT_EQ(code, 0) << out;
 
@@ -177,7 +177,7 @@ TEST(FieldTest, GigeFakeCameraListedThenBracketJournalledWithGpsAndSun) {
 
   // Later in the day: the same session gets a second time-of-day slot.
   out = RunRouen("capture --rig " + (dir / "rig.toml").string() + " --out " +
-                     (dir / "session").string() + " --no-prompt --new-slot",
+                     (dir / "session").string() + " --no-prompt --allow-night --new-slot",
                  &code);
   ASSERT_EQ(code, 0) << out;
   Session two = Session::Load(dir / "session");
@@ -191,7 +191,7 @@ TEST(FieldTest, GigeFakeCameraListedThenBracketJournalledWithGpsAndSun) {
   EXPECT_EQ(two.info().extra["plan"]["slots"].size(), 2u);
   // --new-slot is for field sessions that exist.
   out = RunRouen("capture --rig " + (dir / "rig.toml").string() + " --out " +
-                     (dir / "nothing").string() + " --no-prompt --new-slot",
+                     (dir / "nothing").string() + " --no-prompt --allow-night --new-slot",
                  &code);
   EXPECT_NE(code, 0);
   EXPECT_NE(out.find("needs an existing session"), std::string::npos) << out;
@@ -199,7 +199,7 @@ TEST(FieldTest, GigeFakeCameraListedThenBracketJournalledWithGpsAndSun) {
   // capture before any frame, naming the rig, the lens file and the problem.
   WriteFileAtomic(dir / "lens.json", lens.substr(0, lens.find("-0.3")) + "-2, 0, 0]}}");
   out = RunRouen("capture --rig " + (dir / "rig.toml").string() + " --out " +
-                     (dir / "bad").string() + " --no-prompt",
+                     (dir / "bad").string() + " --no-prompt --allow-night",
                  &code);
   EXPECT_NE(code, 0);
   EXPECT_NE(out.find("lens.json: vignetting: the fall-off drops"), std::string::npos) << out;

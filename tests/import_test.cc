@@ -89,6 +89,11 @@ TEST(ImportTest, StLouisExposuresAndTimesFromExif) {
   Result r =
       RunRouen("import --photos " + Q(photos) + " --site 38.6261,-90.1911,147 --out " + Q(out));
   ASSERT_EQ(r.code, 0) << r.out;
+  // Taken after dark: imported (a response calibration may use them), and said.
+  EXPECT_NE(r.out.find("warning: 4 of the photos were taken with the sun below the horizon"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("img_15.jpg (2008-06-01T03:44:54Z, sun -2"), std::string::npos) << r.out;
   const Session s = Session::Load(out);
   ASSERT_EQ(s.frames().size(), 4u);
   EXPECT_NEAR(s.info().site.lat_deg, site.lat_deg, 1e-12);
