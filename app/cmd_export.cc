@@ -11,6 +11,7 @@
 #include "app/options.h"
 #include "app/render_options.h"
 #include "core/error.h"
+#include "core/files.h"
 #include "core/outputs.h"
 #include "pipeline/export.h"
 
@@ -32,6 +33,9 @@ struct ExportArgs {
 
 void RunExport(const ExportArgs& a) {
   const auto start = std::chrono::steady_clock::now();
+  // Binary glTF: a .gltf name promises JSON, which other tools would fail to parse.
+  if (LowerExtension(a.gltf) != ".glb")
+    throw Error("--gltf " + a.gltf + ": rouen writes binary glTF; name it .glb");
   OutputSet outputs;
   outputs.Protect("the scene", a.scene);
   const std::string tmp = outputs.Add("--gltf", a.gltf, OutputKind::kFile);

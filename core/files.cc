@@ -252,10 +252,17 @@ void CommitFile(const fs::path& tmp, const fs::path& path) {
 
 void FsyncDirectory(const fs::path& dir) { FsyncPath(dir, true); }
 
-std::string ReadFileToString(const fs::path& path) {
+void CheckReadableKind(const fs::path& path, const std::string& what) {
   // A folder opens, and then its first read throws std::ios_base::failure ("Is a directory").
   std::error_code ec;
-  if (fs::is_directory(path, ec)) throw Error(path.string() + ": is a folder, not a file");
+  const fs::file_status st = fs::status(path, ec);
+  if (fs::is_directory(st)) throw Error(path.string() + ": is a folder, not " + what);
+  if (fs::is_character_file(st) || fs::is_block_file(st))
+    throw Error(path.string() + ": is a device, not " + what);
+}
+
+std::string ReadFileToString(const fs::path& path) {
+  CheckReadableKind(path, "a file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw Error(path.string() + ": cannot open: " + Errno());
   std::string out((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());

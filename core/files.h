@@ -48,7 +48,11 @@ void WriteAll(int fd, std::string_view bytes, const std::filesystem::path& path)
 void WriteFileAtomic(const std::filesystem::path& path, std::string_view bytes);
 // Renames a finished temporary file into place and fsyncs it and its directory.
 void CommitFile(const std::filesystem::path& tmp, const std::filesystem::path& path);
+// The whole file; throws rouen::Error naming it when it is missing, a folder or a device (a
+// device such as /dev/zero never ends; a pipe does and is read).
 std::string ReadFileToString(const std::filesystem::path& path);
+// Throws rouen::Error "<path>: is a folder, not <what>" or "...: is a device, not <what>".
+void CheckReadableKind(const std::filesystem::path& path, const std::string& what);
 // Makes a folder's entries (files created, renamed or removed in it) durable: fsync of the
 // folder. Throws rouen::Error naming it.
 void FsyncDirectory(const std::filesystem::path& dir);

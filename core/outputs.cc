@@ -78,6 +78,15 @@ std::string EnclosingSessionOrScene(const fs::path& path, std::string* kind) {
   return "";
 }
 
+void CheckNewFolderPlace(const std::string& what, const fs::path& folder) {
+  std::error_code ec;
+  std::string kind;
+  const std::string holder = EnclosingSessionOrScene(fs::absolute(folder, ec).parent_path(), &kind);
+  if (!holder.empty())
+    throw Error(what + ": lies inside the " + kind + " " + holder +
+                ", which only the command that made it writes; give a folder outside it");
+}
+
 namespace {
 
 // Refuses `path` (a file or a folder to write) when it is a protected input or lies inside

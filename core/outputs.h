@@ -20,6 +20,9 @@ bool IsWithin(const std::filesystem::path& path, const std::filesystem::path& fo
 // that holds a session's session.json or frames.jsonl, or a scene's scene.json), and `kind`
 // "session" or "scene"; none: "". Only the commands that make such a folder write in it.
 std::string EnclosingSessionOrScene(const std::filesystem::path& path, std::string* kind);
+// Throws rouen::Error "<what>: lies inside the session|scene <folder>; ..." when the new
+// folder `folder` (a session, a scene, a viewer) would be made inside a session or a scene.
+void CheckNewFolderPlace(const std::string& what, const std::filesystem::path& folder);
 
 enum class OutputKind {
   kFile,      // any content (JSON, text)

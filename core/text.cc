@@ -7,6 +7,7 @@
 #include <iterator>
 
 #include "core/error.h"
+#include "core/files.h"
 
 namespace rouen {
 
@@ -16,8 +17,7 @@ std::string_view WithoutUtf8Bom(std::string_view text) {
 }
 
 std::vector<std::string> ReadTextLines(const std::string& path, const std::string& what) {
-  std::error_code ec;
-  if (std::filesystem::is_directory(path, ec)) throw Error(path + ": is a folder, not " + what);
+  CheckReadableKind(path, what);
   std::ifstream in(path, std::ios::binary);
   if (!in) throw Error(path + ": cannot open " + what);
   const std::string all((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());

@@ -34,6 +34,13 @@ TEST(TextTest, ByteOrderMarkAndCrlfAreNotPartOfTheLines) {
   } catch (const Error& e) {
     EXPECT_EQ(std::string(e.what()), dir + ": is a folder, not a list file");
   }
+  // A device never ends (sun --batch /dev/zero died of std::bad_alloc).
+  try {
+    ReadTextLines("/dev/zero", "the CSV file");
+    FAIL() << "read a device";
+  } catch (const Error& e) {
+    EXPECT_EQ(std::string(e.what()), "/dev/zero: is a device, not the CSV file");
+  }
 }
 
 TEST(TextTest, FormattedIsPrintfIntoAStringOfAnyLength) {

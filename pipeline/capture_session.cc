@@ -71,13 +71,7 @@ CaptureSessionSummary CaptureToSession(const RigConfig& rig, RigDevices& dev,
     throw Error(
         "--new-slot adds a time of day to a field session; simulated and replay rigs "
         "capture all their slots in one run");
-  if (!opts.resume && !opts.new_slot) {
-    std::string kind;
-    const std::string holder = EnclosingSessionOrScene(fs::absolute(out).parent_path(), &kind);
-    if (!holder.empty())
-      throw Error(out.string() + ": lies inside the " + kind + " " + holder +
-                  "; make the session beside it");
-  }
+  if (!opts.resume && !opts.new_slot) CheckNewFolderPlace(out.string(), out);
   if (opts.new_slot && !fs::exists(out / "session.json"))
     throw Error(out.string() + ": --new-slot needs an existing session (run without it first)");
   // The rig's [solve] options are checked now, not after the capture.

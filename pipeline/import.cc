@@ -504,11 +504,7 @@ ImportSummary ImportPhotos(const ImportOptions& o, const fs::path& out) {
     throw Error(out_name + ": give the session folder's name, not a trailing '/'");
   if (fs::exists(out) && !(fs::is_directory(out) && fs::is_empty(out)))
     throw Error(out_name + ": already exists; choose a new session folder");
-  std::string kind;
-  const std::string holder = EnclosingSessionOrScene(fs::absolute(out).parent_path(), &kind);
-  if (!holder.empty())
-    throw Error(out_name + ": lies inside the " + kind + " " + holder +
-                "; make the session beside it");
+  CheckNewFolderPlace(out_name, out);
   CheckModels(o.model, o.surroundings);
 
   std::vector<std::string> notes;

@@ -45,11 +45,7 @@ void CheckSceneOutput(const fs::path& out, const fs::path& session) {
       throw Error(out.string() + ": holds the session " + session.string() +
                   "; write the scene beside the session");
   }
-  std::string kind;
-  const std::string holder = EnclosingSessionOrScene(fs::absolute(out, ec).parent_path(), &kind);
-  if (!holder.empty())
-    throw Error(out.string() + ": lies inside the " + kind + " " + holder +
-                "; write the scene beside it");
+  CheckNewFolderPlace(out.string(), out);
   if (!fs::exists(out, ec)) {
     const fs::path parent = out.parent_path().empty() ? fs::path(".") : out.parent_path();
     if (!fs::is_directory(parent, ec))

@@ -15,6 +15,7 @@
 #include "core/error.h"
 #include "core/files.h"
 #include "core/limits.h"
+#include "core/outputs.h"
 #include "core/temporaries.h"
 #include "core/version.h"
 #include "pipeline/export.h"
@@ -367,6 +368,7 @@ ViewerData ComputeViewerData(const LoadedScene& scene, const ViewerOptions& opti
 void CheckViewerOutput(const fs::path& out) {
   std::error_code ec;
   if (out.filename().empty()) throw Error("--out " + out.string() + ": the folder needs a name");
+  CheckNewFolderPlace("--out " + out.string(), out);
   if (!fs::exists(out, ec)) {
     const fs::path parent = out.parent_path().empty() ? fs::path(".") : out.parent_path();
     if (!fs::is_directory(parent, ec))

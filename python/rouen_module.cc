@@ -6,6 +6,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <cmath>
 #include <filesystem>
 #include <functional>
 #include <nlohmann/json.hpp>
@@ -38,7 +39,24 @@ py::object ToPython(const nlohmann::json& j) {
   return py::module_::import("json").attr("loads")(j.dump());
 }
 
-nlohmann::json FromPython(const py::object& o) {
+// Throws rouen::Error naming the key of the first number in `o` (dicts and lists within) that
+// is not finite: JSON has no NaN, and json.dumps would write one that no parser reads.
+void CheckFinite(const py::handle& o, const std::string& where) {
+  if (py::isinstance<py::float_>(o)) {
+    const double v = o.cast<double>();
+    if (!std::isfinite(v))
+      throw Error(where + " = " + std::string(py::str(o)) + " is not a finite number");
+  } else if (py::isinstance<py::dict>(o)) {
+    for (const auto& [k, v] : o.cast<py::dict>())
+      CheckFinite(v, (where.empty() ? "" : where + ".") + std::string(py::str(k)));
+  } else if (py::isinstance<py::list>(o) || py::isinstance<py::tuple>(o)) {
+    size_t i = 0;
+    for (const py::handle v : o) CheckFinite(v, where + "[" + std::to_string(i++) + "]");
+  }
+}
+
+nlohmann::json FromPython(const py::object& o, const std::string& what) {
+  CheckFinite(o, what);
   const std::string text = py::str(py::module_::import("json").attr("dumps")(o));
   return nlohmann::json::parse(text);
 }
@@ -52,16 +70,21 @@ py::array_t<float> ToArray(const Image& image) {
 
 // Progress lines to a Python callable (or nowhere). The library calls it from the solving
 // thread with the GIL released, so the call takes the GIL back.
+// The library's log lines to `callback` (None: none), and between them Ctrl-C: a pending
+// signal (KeyboardInterrupt) stops the work at its next line, which leaves nothing written
+// (a solve writes its scene last, all at once).
 Log PythonLog(const py::object& callback) {
-  if (callback.is_none()) return {};
   return [callback](const std::string& line) {
     py::gil_scoped_acquire gil;
-    callback(line);
+    if (!callback.is_none()) callback(line);
+    if (PyErr_CheckSignals() != 0) throw py::error_already_set();
   };
 }
 
+// A path given as str, bytes or os.PathLike (os.fsdecode: bytes in the file system's encoding).
 std::filesystem::path PathOf(const py::object& o) {
-  return std::filesystem::path(py::str(py::module_::import("os").attr("fspath")(o)));
+  return std::filesystem::path(
+      py::str(py::module_::import("os").attr("fsdecode")(o)).cast<std::string>());
 }
 
 class PySession {
@@ -178,7 +201,7 @@ PyScene Solve(const py::object& session, const py::object& out,
   request.holdout_slots = holdout_slots;
   request.quick = quick;
   if (py::isinstance<py::dict>(config))
-    request.config_overrides = FromPython(config);
+    request.config_overrides = FromPython(config, "config");
   else if (!config.is_none())
     request.config_file = PathOf(config).string();
   request.force = force;

@@ -4,6 +4,8 @@ Run by CTest with PYTHONPATH holding the built module and ROUEN_BIN the rouen bi
 """
 import math
 import os
+import pathlib
+import signal
 import subprocess
 import tempfile
 import unittest
@@ -110,6 +112,30 @@ class QuickDemoTest(unittest.TestCase):
             rouen.solve(self.session_dir, os.path.join(self.tmp.name, "bad.scene"),
                         config={"sky_fit": {"no_such_key": 1}})
         self.assertFalse(os.path.exists(os.path.join(self.tmp.name, "bad.scene")))
+
+    def test_paths_as_bytes_and_pathlike(self):
+        self.assertEqual(rouen.Session(os.fsencode(self.session_dir)).slots, 5)
+        self.assertEqual(rouen.Session(pathlib.Path(self.session_dir)).slots, 5)
+
+    def test_a_nan_in_the_config_is_named(self):
+        out = os.path.join(self.tmp.name, "nan.scene")
+        with self.assertRaisesRegex(rouen.Error, r"config\.grid\.spacing_m = nan is not a finite"):
+            rouen.solve(self.session_dir, out, config={"grid": {"spacing_m": float("nan")}})
+        self.assertFalse(os.path.exists(out))
+
+    def test_ctrl_c_stops_a_solve_and_writes_no_scene(self):
+        out = os.path.join(self.tmp.name, "interrupted.scene")
+        lines = []
+
+        def interrupt(line):
+            lines.append(line)
+            os.kill(os.getpid(), signal.SIGINT)  # as Ctrl-C in the terminal
+
+        with self.assertRaises(KeyboardInterrupt):
+            rouen.solve(self.session_dir, out, holdout_slots=[HELD_OUT], quick=True,
+                        work=os.path.join(self.tmp.name, "interrupted.work"), log=interrupt)
+        self.assertEqual(len(lines), 1, lines)  # stopped at the first line
+        self.assertFalse(os.path.exists(out))
 
 
 class ReadImageTest(unittest.TestCase):

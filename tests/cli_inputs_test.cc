@@ -288,6 +288,9 @@ TEST(CliInputs, NewFoldersStayOutOfSessionsAndScenes) {
   ExpectError(RunRouen("capture --rig " + Q(fs::path(ROUEN_SOURCE_DIR) / "rigs" / "sim.toml") +
                        " --out " + Q(dir / "s" / "more") + " --no-prompt --quick"),
               {"lies inside the session " + (dir / "s").string()});
+  ExpectError(RunRouen("view " + Q(dir / "sc") + " --out " + Q(dir / "sc" / "view")),
+              {"lies inside the scene " + (dir / "sc").string()});
+  EXPECT_FALSE(fs::exists(dir / "sc" / "view"));
   EXPECT_FALSE(fs::exists(dir / "sc" / "new"));
   EXPECT_FALSE(fs::exists(dir / "sc" / "inner"));
   EXPECT_FALSE(fs::exists(dir / "s" / "more"));

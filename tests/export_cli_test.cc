@@ -132,6 +132,11 @@ TEST_F(ExportCli, ExportRefusesBadArgumentsBeforeWriting) {
   r = RunRouen("export " + Q(Scene()) + " --gltf " + Q(*dir_ / "missing" / "b.glb"));
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.out.find("--gltf"), std::string::npos) << r.out;
+  // A .gltf name promises JSON glTF; rouen writes the binary form.
+  r = RunRouen("export " + Q(Scene()) + " --gltf " + Q(*dir_ / "b.gltf"));
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.out.find("rouen writes binary glTF; name it .glb"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(*dir_ / "b.gltf"));
   r = RunRouen("envmap " + Q(Scene()) + " --slot 0 --out " + Q(*dir_ / "sky.png"));
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.out.find("--out"), std::string::npos) << r.out;

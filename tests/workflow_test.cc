@@ -163,11 +163,11 @@ TEST_F(WorkflowTest, ThreeSessionsOnceThenNothingToDo) {
     std::vector<std::string> cells;
     std::istringstream row(line);
     for (std::string cell; std::getline(row, cell, '\t');) cells.push_back(cell);
-    ASSERT_EQ(cells.size(), 9u) << line;
+    ASSERT_EQ(cells.size(), 10u) << line;
     EXPECT_EQ(cells[0], name);
     EXPECT_EQ(cells[1], std::to_string(slot.at(name)));
-    for (size_t i = 5; i < cells.size(); ++i)
-      EXPECT_TRUE(std::isfinite(std::stod(cells[i]))) << line;
+    for (size_t i = 5; i < 9; ++i) EXPECT_TRUE(std::isfinite(std::stod(cells[i]))) << line;
+    EXPECT_EQ(cells[9], "ok");
   }
   EXPECT_FALSE(std::getline(tsv, line)) << line;
 
@@ -216,6 +216,38 @@ TEST_F(WorkflowTest, ThreeSessionsOnceThenNothingToDo) {
   EXPECT_EQ(JobCounts(changed.out), one_session) << changed.out;
   EXPECT_NE(changed.out.find("wildcards: name=b"), std::string::npos) << changed.out;
   EXPECT_EQ(changed.out.find("wildcards: name=a"), std::string::npos) << changed.out;
+  fs::remove(settings);
+  WriteFileAtomic(settings, text);
+
+  // Session d's session.json is broken, session e's solve fails (its options are refused): the
+  // run stops before any job, naming d; with --keep-going every good session is processed and
+  // the summary marks d broken and e failed.
+  fs::copy(dir_ / "capture", dir_ / "sessions/d", fs::copy_options::recursive);
+  WriteFileAtomic(dir_ / "sessions/d/session.json", "{\"site\": ");
+  fs::copy(dir_ / "capture", dir_ / "sessions/e", fs::copy_options::recursive);
+  nlohmann::json e_info = info;
+  e_info["extra"]["solve_config"] = {{"grid", {{"spacing_m", -3}}}};
+  fs::remove(dir_ / "sessions/e/session.json");
+  WriteFileAtomic(dir_ / "sessions/e/session.json", e_info.dump(2));
+  const Result stopped = Snakemake("");
+  EXPECT_NE(stopped.code, 0) << stopped.out;
+  EXPECT_NE(stopped.out.find((dir_ / "sessions/d/session.json").string()), std::string::npos)
+      << stopped.out;
+  EXPECT_NE(stopped.out.find("--keep-going"), std::string::npos) << stopped.out;
+  EXPECT_FALSE(fs::exists(Out() / "e")) << stopped.out;
+  const Result kept = Snakemake("--keep-going");
+  EXPECT_NE(kept.code, 0) << kept.out;
+  std::map<std::string, std::string> status;
+  std::istringstream rows(ReadFileToString(Out() / "summary.tsv"));
+  std::getline(rows, line);
+  while (std::getline(rows, line))
+    status[line.substr(0, line.find('\t'))] = line.substr(line.rfind('\t') + 1);
+  EXPECT_EQ(status.size(), 5u) << kept.out;
+  for (const std::string& name : names) EXPECT_EQ(status[name], "ok") << name;
+  EXPECT_EQ(status["d"].rfind("broken: " + (dir_ / "sessions/d/session.json").string(), 0), 0u)
+      << status["d"];
+  EXPECT_EQ(status["e"], "failed: solve (see " + (Out() / "logs/e").string() + "/)") << kept.out;
+  EXPECT_NE(ReadFileToString(Out() / "logs/e/solve.log").find("grid.spacing_m"), std::string::npos);
 }
 
 }  // namespace
