@@ -411,7 +411,8 @@ std::string EncodeImage(const std::string& path, const Image& image, StoredType 
     if (!std::isfinite(v)) {
       const size_t p = i / image.channels;
       throw Error(path + ": refusing to write a non-finite value at pixel (" +
-                  std::to_string(p % image.width) + ", " + std::to_string(p / image.width) + ")");
+                  std::to_string(p % image.width) + ", " + std::to_string(p / image.width) +
+                  "): a value computed from the inputs overflowed or is undefined; check them");
     }
     if (type == StoredType::kHalf && std::abs(v) > kHalfMax) {
       throw Error(path + ": value " + std::to_string(v) +

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <regex>
@@ -14,11 +15,13 @@
 #include <thread>
 #include <vector>
 
+#include "core/angles.h"
 #include "core/camera.h"
 #include "core/files.h"
 #include "core/image.h"
 #include "core/session.h"
 #include "core/solar.h"
+#include "core/text.h"
 #include "solve/sky_model.h"
 #include "tests/cli_util.h"
 
@@ -297,6 +300,33 @@ TEST(CliInputs, NewFoldersStayOutOfSessionsAndScenes) {
   ExpectError(
       RunRouen("render " + Q(dir / "sc") + " --slot 0 --size 64x48 --out " + Q(dir / "r.exr")),
       {"--size sets the --look-at camera"});
+  fs::remove_all(dir);
+}
+
+// An output that cannot be written is named as the user gave it, not by its temporary name,
+// with the cause: a sky fit whose zenith radiance is 1e308 overflows where it is rendered.
+TEST(CliInputs, AFailedOutputIsNamedAsGivenWithItsCause) {
+  const fs::path dir = TempDir("overflow");
+  std::string csv;
+  for (int el = 5, k = 0; el < 90; el += 10) {
+    for (int az = 0; az < 360; az += 30, ++k) {
+      const double r = 1 + 0.5 * std::cos(az * kDeg) * std::cos(el * kDeg);
+      csv += Formatted("%d, %d, %d, %.4f, %.4f, %.4f\n", k, az, el, r, 1.1 * r, 1.3 * r);
+    }
+  }
+  WriteFileAtomic(dir / "scan.csv", csv);
+  const Result fit = RunRouen("sky fit --samples " + Q(dir / "scan.csv") +
+                              " --sun-azimuth 180 --sun-elevation 40 --out " + Q(dir / "fit.json"));
+  ASSERT_EQ(fit.code, 0) << fit.out;
+  nlohmann::json j = nlohmann::json::parse(ReadFileToString(dir / "fit.json"));
+  for (auto& channel : j["channels"]) channel["Lz"] = 1e308;
+  WriteFileAtomic(dir / "fit.json", j.dump());
+  const fs::path out = dir / "sky.exr";
+  const Result r = RunRouen("sky render " + Q(dir / "fit.json") + " --out " + Q(out));
+  ExpectError(r, {"rouen: error: " + out.string() + ": refusing to write a non-finite value",
+                  "overflowed"});
+  EXPECT_EQ(r.out.find(".tmp-"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(out));
   fs::remove_all(dir);
 }
 
