@@ -87,6 +87,23 @@ void CheckNewFolderPlace(const std::string& what, const fs::path& folder) {
                 ", which only the command that made it writes; give a folder outside it");
 }
 
+void CheckReplaceableFolder(const std::string& what, const fs::path& folder,
+                            const std::string& marker, const std::string& kind) {
+  std::error_code ec;
+  if (folder.filename().empty()) throw Error(what + ": a " + kind + " folder needs a name");
+  CheckNewFolderPlace(what, folder);
+  if (!fs::exists(folder, ec)) {
+    const fs::path parent = folder.parent_path().empty() ? fs::path(".") : folder.parent_path();
+    if (!fs::is_directory(parent, ec))
+      throw Error(what + ": the folder " + parent.string() + " does not exist");
+    return;
+  }
+  if (!fs::is_directory(folder, ec)) throw Error(what + ": exists and is not a folder");
+  if (!fs::exists(folder / marker, ec) && !fs::is_empty(folder, ec))
+    throw Error(what + ": exists and is not a " + kind + " folder (no " + marker +
+                "); give a new folder");
+}
+
 namespace {
 
 // Refuses `path` (a file or a folder to write) when it is a protected input or lies inside

@@ -24,6 +24,14 @@ std::string EnclosingSessionOrScene(const std::filesystem::path& path, std::stri
 // folder `folder` (a session, a scene, a viewer) would be made inside a session or a scene.
 void CheckNewFolderPlace(const std::string& what, const std::filesystem::path& folder);
 
+// Checks a folder a command writes whole and replaces on each run (`kind`: "scene", "viewer"),
+// named `what` in messages: throws rouen::Error when it has no name, would lie inside a session
+// or a scene (CheckNewFolderPlace), its parent does not exist, it is a file, or it exists, is
+// not empty and holds no `marker` (the file that makes it a `kind` folder the command may
+// replace).
+void CheckReplaceableFolder(const std::string& what, const std::filesystem::path& folder,
+                            const std::string& marker, const std::string& kind);
+
 enum class OutputKind {
   kFile,      // any content (JSON, text)
   kRadiance,  // a floating-point image (IsFloatImageFormat)

@@ -3,11 +3,11 @@
 #include <erfa.h>
 
 #include <cmath>
-#include <cstdio>
 #include <string>
 
 #include "core/angles.h"
 #include "core/error.h"
+#include "core/text.h"
 
 namespace rouen {
 namespace {
@@ -111,10 +111,8 @@ void AzElFromEnu(const Eigen::Vector3d& d, double* azimuth_deg, double* elevatio
 std::string SunDownProblem(UtcTime t, const Site& site) {
   const SunPosition sun = ComputeSunPosition(t, site);
   if (!sun.BelowHorizon()) return "";
-  char text[128];
-  std::snprintf(text, sizeof text, "the sun is %.1f deg below the horizon at the site (%.5f, %.5f)",
-                -sun.elevation_deg, site.lat_deg, site.lon_deg);
-  return text;
+  return Formatted("the sun is %.1f deg below the horizon at the site (%.5f, %.5f)",
+                   -sun.elevation_deg, site.lat_deg, site.lon_deg);
 }
 
 }  // namespace rouen

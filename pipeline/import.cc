@@ -6,7 +6,6 @@
 #include <array>
 #include <cctype>
 #include <cmath>
-#include <cstdio>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -25,6 +24,7 @@
 #include "core/mesh.h"
 #include "core/outputs.h"
 #include "core/temporaries.h"
+#include "core/text.h"
 
 namespace rouen {
 namespace fs = std::filesystem;
@@ -587,9 +587,8 @@ ImportSummary ImportPhotos(const ImportOptions& o, const fs::path& out) {
       r.sun_azimuth_deg = sun.azimuth_deg;
       r.sun_elevation_deg = sun.elevation_deg;
       if (sun.BelowHorizon()) {
-        char text[64];
-        std::snprintf(text, sizeof text, ", sun %.1f deg)", sun.elevation_deg);
-        summary.night.push_back(p.name + " (" + r.utc.Iso8601(0) + text);
+        summary.night.push_back(p.name + " (" + r.utc.Iso8601(0) +
+                                Formatted(", sun %.1f deg)", sun.elevation_deg));
       }
       r.intrinsics = p.intrinsics;
       r.pose = p.pose;

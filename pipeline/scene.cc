@@ -35,9 +35,7 @@ fs::path SiblingTemporary(const fs::path& out, const std::string& suffix = "") {
 }  // namespace
 
 void CheckSceneOutput(const fs::path& out, const fs::path& session) {
-  std::error_code ec;
-  if (out.filename().empty()) throw Error(out.string() + ": a scene folder needs a name");
-  if (!session.empty()) {
+  if (!session.empty() && !out.filename().empty()) {
     if (IsWithin(out, session))
       throw Error(out.string() + ": lies inside the session " + session.string() +
                   ", whose files the solve reads; write the scene beside the session");
@@ -45,17 +43,8 @@ void CheckSceneOutput(const fs::path& out, const fs::path& session) {
       throw Error(out.string() + ": holds the session " + session.string() +
                   "; write the scene beside the session");
   }
-  CheckNewFolderPlace(out.string(), out);
-  if (!fs::exists(out, ec)) {
-    const fs::path parent = out.parent_path().empty() ? fs::path(".") : out.parent_path();
-    if (!fs::is_directory(parent, ec))
-      throw Error(out.string() + ": the folder " + parent.string() + " does not exist");
-    return;
-  }
-  if (!fs::is_directory(out, ec)) throw Error(out.string() + ": exists and is not a folder");
-  if (!fs::exists(out / "scene.json", ec) && !fs::is_empty(out, ec))
-    throw Error(out.string() +
-                ": exists and is not a scene folder (no scene.json); give a new folder");
+  CheckReplaceableFolder(out.string(), out, "scene.json", "scene");
+  std::error_code ec;
   if (session.empty() || !fs::is_regular_file(out / "scene.json", ec)) return;
   std::string from;
   try {

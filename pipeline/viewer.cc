@@ -366,20 +366,7 @@ ViewerData ComputeViewerData(const LoadedScene& scene, const ViewerOptions& opti
 }
 
 void CheckViewerOutput(const fs::path& out) {
-  std::error_code ec;
-  if (out.filename().empty()) throw Error("--out " + out.string() + ": the folder needs a name");
-  CheckNewFolderPlace("--out " + out.string(), out);
-  if (!fs::exists(out, ec)) {
-    const fs::path parent = out.parent_path().empty() ? fs::path(".") : out.parent_path();
-    if (!fs::is_directory(parent, ec))
-      throw Error("--out " + out.string() + ": the folder " + parent.string() + " does not exist");
-    return;
-  }
-  if (!fs::is_directory(out, ec))
-    throw Error("--out " + out.string() + ": exists and is not a folder");
-  if (!fs::exists(out / "viewer_data.js", ec) && !fs::is_empty(out, ec))
-    throw Error("--out " + out.string() +
-                ": exists and is not a viewer folder (no viewer_data.js); give a new folder");
+  CheckReplaceableFolder("--out " + out.string(), out, "viewer_data.js", "viewer");
 }
 
 ViewerSummary WriteViewer(const LoadedScene& scene, const fs::path& out_arg,
