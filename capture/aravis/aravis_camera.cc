@@ -106,10 +106,13 @@ uint64_t MissingFrameIds(uint64_t previous, uint64_t next) {
   if (next > previous) return next - previous - 1;
   if (next == previous) return 0;  // repeated id: nothing lost
   if (previous <= 0xFFFF && next >= 1 && next <= 0xFFFF) {
-    // 16-bit block id wrapped: previous+1 .. 65535, then 1 .. next-1 (0 is never used).
-    return (0xFFFF - previous) + (next - 1);
+    // 16-bit block id wrapped: previous+1 .. 65535, then 1 .. next-1 (0 is never used). As in
+    // serial-number arithmetic (RFC 1982), a step back of more than half the range is not a
+    // wrap but a restarted counter or a late frame (93 -> 1 is not 65,442 frames lost).
+    const uint64_t lost = (0xFFFF - previous) + (next - 1);
+    if (lost < 0x8000) return lost;
   }
-  return 0;  // the counter restarted (camera reset); nothing can be said
+  return 0;  // the counter restarted (camera reset) or a late frame; nothing can be said
 }
 
 std::vector<AravisDeviceInfo> ListAravisDevices(bool include_fake) {
