@@ -225,6 +225,7 @@ SceneSolve SolveSessionFolder(const SolveFolderRequest& request) {
   po.work_dir = work;
   po.exclude_albedo_slots = request.holdout_slots;
   po.log = request.log;
+  po.cancel = request.cancel;
   return SolveToScene(session, po, out, request.force);
 }
 

@@ -67,6 +67,9 @@ struct SolveFolderRequest {
   nlohmann::json config_overrides = nlohmann::json::object();
   bool force = false;  // solve even when `out` is up to date
   std::function<void(const std::string&)> log;
+  // Stops the solve (Cancelled) when requested, within a few milliseconds of work; the scene
+  // is then left as it was (not owned; null: the solve runs to its end).
+  const Cancellation* cancel = nullptr;
 };
 
 // The options a request solves its session with (see SolveFolderRequest). Throws rouen::Error

@@ -39,7 +39,9 @@ class StageClock {
  public:
   StageClock(const PipelineOptions& options, std::vector<StageTime>* stages)
       : options_(options), stages_(stages), last_(std::chrono::steady_clock::now()) {}
+  // Throws Cancelled when a cancellation was requested during the stage.
   void Lap(const std::string& stage) {
+    ThrowIfCancelled(options_.cancel);
     const auto now = std::chrono::steady_clock::now();
     const double s = std::chrono::duration<double>(now - last_).count();
     stages_->push_back({stage, s});
@@ -532,6 +534,7 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
   for (const auto& [name, frames] : groups) todo.emplace_back(&name, &frames);
   std::vector<HdrGroup> merged(todo.size());
   tbb::parallel_for(size_t{0}, todo.size(), [&](size_t k) {
+    if (IsCancelled(options.cancel)) return;
     const std::string& name = *todo[k].first;
     merged[k] = MergeGroup(session, name, *todo[k].second, group_hdr.at(name), out.response);
     const std::string base = (calib_dir / "hdr" / SafeName(name)).string();
@@ -726,7 +729,7 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   const EnvStereoOptions env_options = RelightOptions{}.env;
   if (options.config.fit_ground_retro &&
       static_cast<int>(env_slots.size()) >= env_options.min_times) {
-    GroundRetroFit g = FitGroundRetro(EnvObservationsOf(env_slots), env_options);
+    GroundRetroFit g = FitGroundRetro(EnvObservationsOf(env_slots), env_options, options.cancel);
     r.env_ground_retro = g.retro;
     // Kept with the scene: predictions from these slots read it instead of fitting again.
     r.env_stereo = std::move(g.result);
@@ -747,7 +750,8 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
           env_slots.push_back(r.slots[k].lighting);
       }
       // The kept fit is of the maps the scene keeps: those with the ground read at this retro.
-      r.env_stereo = SolveEnvStereo(EnvObservationsOf(env_slots), r.env_stereo->options);
+      r.env_stereo =
+          SolveEnvStereo(EnvObservationsOf(env_slots), r.env_stereo->options, options.cancel);
     }
   }
   clock.Lap("environment ground reflection");
@@ -794,7 +798,9 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
               "the solve's surface grid of " + std::to_string(points) + " points",
               "a larger grid.spacing_m, or grid.block_spacing_m coarser on the largest blocks");
   r.grid = BuildSurfaceGrid(r.mesh, r.grid_options);
-  r.hemisphere = BuildHemisphereCache(r.grid, *r.caster, options.config.hemisphere);
+  HemisphereOptions hemisphere = options.config.hemisphere;
+  hemisphere.cancel = options.cancel;
+  r.hemisphere = BuildHemisphereCache(r.grid, *r.caster, hemisphere);
   Log(options, "surface grid: " + std::to_string(r.grid.size()) + " points");
   clock.Lap("surface grid and visibility");
 
@@ -829,6 +835,7 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   r.albedo_options = options.config.albedo;
   AlbedoOptions with_model = r.albedo_options;  // the vector-flux irradiance projects its faces
   with_model.irradiance.mesh = &r.mesh;
+  with_model.irradiance.cancel = options.cancel;
   r.albedo = SolveAlbedo(r.grid, r.hemisphere, *r.caster, lighting, obs, with_model, &r.irradiance);
   Log(options, "pseudo-albedos: " + r.albedo.summary.BriefReport());
   if (r.albedo_options.fit_retro) {

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "calib/response.h"
+#include "core/cancel.h"
 #include "core/mesh.h"
 #include "core/session.h"
 #include "pipeline/solve_config.h"
@@ -34,6 +35,9 @@ struct PipelineOptions {
   // A response curve known from an earlier calibration: used instead of recovering one.
   std::optional<ResponseCurve> response;
   std::function<void(const std::string&)> log;  // progress lines
+  // Polled between stages and inside the long ones (not owned; null: the solve runs to its
+  // end); a requested cancellation stops the work with Cancelled.
+  const Cancellation* cancel = nullptr;
 };
 
 // The bracket a frame is merged into: its own, except that a slot's aureole frames join its

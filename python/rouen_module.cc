@@ -6,7 +6,9 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <atomic>
 #include <cmath>
+#include <csignal>
 #include <filesystem>
 #include <functional>
 #include <nlohmann/json.hpp>
@@ -15,6 +17,7 @@
 #include <vector>
 
 #include "core/camera.h"
+#include "core/cancel.h"
 #include "core/error.h"
 #include "core/image.h"
 #include "core/lens.h"
@@ -80,6 +83,43 @@ Log PythonLog(const py::object& callback) {
     if (PyErr_CheckSignals() != 0) throw py::error_already_set();
   };
 }
+
+// Ctrl-C during a call that runs with the GIL released. Python's own SIGINT handler only marks
+// the signal, and the interpreter acts on it when it runs again: after the call. For the call's
+// duration a handler of ours requests the call's Cancellation (the library stops within a few
+// milliseconds of work), then hands the signal on to Python's, which raises KeyboardInterrupt
+// once the call returns. Installed only over Python's handler (SIGINT ignored, or left to the
+// default action, stays so) and by one call at a time; the others still stop at their next
+// log line (PythonLog).
+class InterruptCancels {
+ public:
+  explicit InterruptCancels(Cancellation* cancel) {
+    const PyOS_sighandler_t current = PyOS_getsig(SIGINT);
+    if (current == SIG_IGN || current == SIG_DFL || current == SIG_ERR || current == &Handler)
+      return;
+    Cancellation* none = nullptr;
+    if (!target_.compare_exchange_strong(none, cancel)) return;
+    python_handler_ = current;
+    PyOS_setsig(SIGINT, &Handler);
+    installed_ = true;
+  }
+  ~InterruptCancels() {
+    if (!installed_) return;
+    PyOS_setsig(SIGINT, python_handler_);
+    target_.store(nullptr);
+  }
+  InterruptCancels(const InterruptCancels&) = delete;
+  InterruptCancels& operator=(const InterruptCancels&) = delete;
+
+ private:
+  static void Handler(int sig) {
+    if (Cancellation* c = target_.load()) c->Request();
+    python_handler_(sig);
+  }
+  static inline std::atomic<Cancellation*> target_{nullptr};
+  static inline PyOS_sighandler_t python_handler_ = nullptr;  // set before Handler is installed
+  bool installed_ = false;
+};
 
 // A path given as str, bytes or os.PathLike (os.fsdecode: bytes in the file system's encoding).
 std::filesystem::path PathOf(const py::object& o) {
@@ -191,7 +231,7 @@ class PyScene {
 // rouen.solve: the same call `rouen solve` makes (SolveSessionFolder).
 PyScene Solve(const py::object& session, const py::object& out,
               const std::vector<int>& holdout_slots, bool quick, const py::object& config,
-              const py::object& work, bool force, const py::object& log) {
+              const py::object& work, bool force, const py::object& log, Cancellation* cancel) {
   SolveFolderRequest request;
   request.session = py::isinstance<PySession>(session)
                         ? std::filesystem::path(session.cast<const PySession&>().Path())
@@ -206,9 +246,18 @@ PyScene Solve(const py::object& session, const py::object& out,
     request.config_file = PathOf(config).string();
   request.force = force;
   request.log = PythonLog(log);
-  {
+  Cancellation own;  // Ctrl-C's, when the caller gave none
+  Cancellation* token = cancel != nullptr ? cancel : &own;
+  request.cancel = token;
+  try {
+    const InterruptCancels interrupts(token);
     py::gil_scoped_release release;
     SolveSessionFolder(request);
+  } catch (const Cancelled&) {
+    // Ctrl-C (Python's handler marked it) raises KeyboardInterrupt; the caller's request,
+    // rouen.Cancelled.
+    if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+    throw;
   }
   return PyScene(request.out.lexically_normal(), request.log);
 }
@@ -222,7 +271,18 @@ PYBIND11_MODULE(rouen, m) {
       "rouen: recover the lighting and reflectance of a building from photographs (Yu & Malik "
       "1998) and render it at other times of day. The same library as the rouen command.";
   m.attr("__version__") = RouenVersion();
-  py::register_exception<Error>(m, "Error", PyExc_RuntimeError);
+  const auto& error = py::register_exception<Error>(m, "Error", PyExc_RuntimeError);
+  // Registered after Error: pybind11 tries the later translator first.
+  py::register_exception<Cancelled>(m, "Cancelled", error.ptr());
+
+  py::class_<Cancellation>(
+      m, "Cancellation",
+      "A token that stops a rouen.solve early: request() it from any thread (a stop button, a "
+      "watchdog) and the solve raises rouen.Cancelled within a few milliseconds of work, "
+      "leaving no scene. Ctrl-C stops a solve the same way, as KeyboardInterrupt.")
+      .def(py::init<>())
+      .def("request", &Cancellation::Request, "Ask the work that holds this token to stop")
+      .def_property_readonly("requested", &Cancellation::requested);
 
   py::class_<PySession>(m, "Session", "A session folder (from rouen capture or rouen import).")
       .def(py::init<const py::object&>(), py::arg("path"))
@@ -258,10 +318,12 @@ PYBIND11_MODULE(rouen, m) {
   m.def("solve", &Solve, py::arg("session"), py::arg("out"),
         py::arg("holdout_slots") = std::vector<int>{}, py::arg("quick") = false,
         py::arg("config") = py::none(), py::arg("work") = py::none(), py::arg("force") = false,
-        py::arg("log") = py::none(),
+        py::arg("log") = py::none(), py::arg("cancel") = nullptr,
         "Calibrate and solve a session into the scene folder `out` (as rouen solve); "
         "`config` is a TOML file or a dict of the options rouen solve --print-config lists. "
-        "Does nothing when `out` is up to date. Returns the Scene.");
+        "Does nothing when `out` is up to date. Returns the Scene. A `cancel` token "
+        "(rouen.Cancellation) requested from another thread, or Ctrl-C, stops it early "
+        "(rouen.Cancelled, KeyboardInterrupt) with no scene written.");
   m.def(
       "read_image",
       [](const py::object& path) { return ToArray(ReadImage(PathOf(path).string())); },

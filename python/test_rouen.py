@@ -8,6 +8,7 @@ import pathlib
 import signal
 import subprocess
 import tempfile
+import threading
 import unittest
 
 import numpy as np
@@ -136,6 +137,65 @@ class QuickDemoTest(unittest.TestCase):
                         work=os.path.join(self.tmp.name, "interrupted.work"), log=interrupt)
         self.assertEqual(len(lines), 1, lines)  # stopped at the first line
         self.assertFalse(os.path.exists(out))
+
+
+    def solve_stopped_after_observations(self, name, stop, lines, **kwargs):
+        """A quick solve into `name` (the demo's calibration read back) whose log lines go to
+        `lines` and which calls `stop` once the observations are collected, at the start of the
+        long stage (irradiance and pseudo-albedos)."""
+        def log(line):
+            lines.append(line)
+            if line.startswith("done: observations"):
+                stop()
+
+        rouen.solve(self.session_dir, os.path.join(self.tmp.name, name), holdout_slots=[HELD_OUT],
+                    quick=True, work=os.path.join(self.dir, "work"), log=log, **kwargs)
+
+    def assert_stopped_inside_the_stage(self, name, lines):
+        self.assertTrue(any(line.startswith("done: observations") for line in lines), lines)
+        self.assertFalse(any(line.startswith(("pseudo-albedos", "done: irradiance"))
+                             for line in lines), lines)
+        self.assertFalse(os.path.exists(os.path.join(self.tmp.name, name)))
+
+    def test_a_cancellation_stops_the_solve_inside_a_stage(self):
+        token = rouen.Cancellation()
+        self.assertFalse(token.requested)
+        lines = []
+        # As a stop button would, from another thread; here between two log lines, so that the
+        # next poll is inside the stage's work.
+        with self.assertRaises(rouen.Cancelled) as raised:
+            self.solve_stopped_after_observations("cancelled.scene", token.request, lines,
+                                                  cancel=token)
+        self.assertIsInstance(raised.exception, rouen.Error)
+        self.assertTrue(token.requested)
+        self.assert_stopped_inside_the_stage("cancelled.scene", lines)
+
+    def test_ctrl_c_inside_a_stage_stops_the_solve(self):
+        # The log is a builtin (list.append): it runs no Python code, so the interpreter cannot
+        # act on the signal before a line is recorded (a Python callback would raise the
+        # KeyboardInterrupt on entry, before recording the line that follows the stage).
+        lines = []
+        observed = threading.Event()
+
+        def ctrl_c_once_the_stage_runs():
+            # The line is appended while the solve holds the GIL; this thread runs again once
+            # the solve has released it, inside the stage's work.
+            while not any(line.startswith("done: observations") for line in list(lines)):
+                if observed.wait(0.001):
+                    return
+            os.kill(os.getpid(), signal.SIGINT)
+
+        watcher = threading.Thread(target=ctrl_c_once_the_stage_runs)
+        watcher.start()
+        try:
+            with self.assertRaises(KeyboardInterrupt):
+                rouen.solve(self.session_dir, os.path.join(self.tmp.name, "ctrl-c.scene"),
+                            holdout_slots=[HELD_OUT], quick=True,
+                            work=os.path.join(self.dir, "work"), log=lines.append)
+        finally:
+            observed.set()
+            watcher.join()
+        self.assert_stopped_inside_the_stage("ctrl-c.scene", lines)
 
 
 class ReadImageTest(unittest.TestCase):

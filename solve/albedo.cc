@@ -586,6 +586,8 @@ static AlbedoResult SolveWeighted(const SurfaceGrid& grid,
                                   FillPlan* fill) {
   const auto start = std::chrono::steady_clock::now();
   options.Validate();
+  // Polled per solve: the retro and lobe fits call this many times.
+  ThrowIfCancelled(options.irradiance.cancel);
   const int n = grid.size();
   if (shading && shading->sun_dirs.size() < irradiance.size()) {
     throw Error("albedo: " + std::to_string(shading->sun_dirs.size()) + " sun directions for " +
@@ -953,6 +955,7 @@ std::vector<SpecularLobe> FitSunLobes(const SurfaceGrid& grid,
   summary->lobe_cost_zero.assign(nblocks, 0.0);
   summary->lobe_cost_fitted.assign(nblocks, 0.0);
   for (int b = 0; b < nblocks; ++b) {
+    ThrowIfCancelled(options.irradiance.cancel);
     const LobeFit fit = FitSunLobe(samples[b], options.sun_lobe);
     lobes[b] = fit.lobe;
     summary->lobe_samples[b] = fit.samples;
@@ -1011,6 +1014,7 @@ std::vector<SpecularLobe> FitSkyLobes(const SurfaceGrid& grid, const HemisphereC
   summary->sky_lobe_cost_fitted.assign(nblocks, 0.0);
   for (int b = 0; b < nblocks; ++b) {
     if (res.sun_lobes[b].IsZero()) continue;
+    ThrowIfCancelled(options.irradiance.cancel);
     std::vector<const Observation*> of_block;
     std::vector<double> rel;
     for (const Observation& ob : observations) {
@@ -1061,6 +1065,7 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   const auto start = std::chrono::steady_clock::now();
   options.Validate();
   if (slots.empty()) throw Error("albedo: no time-of-day slots");
+  const Cancellation* cancel = options.irradiance.cancel;
   // Every slot at once: the vector flux's per-point geometry is shared by all of them. Exact
   // where photographed; the points no photo sees only light the others (interreflection).
   std::vector<uint8_t> observed(grid.size(), 0);
@@ -1073,6 +1078,7 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   for (const Lighting& l : slots) shading.sun_dirs.push_back(l.sun_dir.normalized());
   AlbedoSummary retro_summary;
   FillPlan fill;  // made once, again only if the observed points change
+  ThrowIfCancelled(cancel);
   AlbedoResult res = SolveWeighted(grid, observations, irr, options, {}, &shading, &fill);
   if (options.fit_retro && options.outer_iterations == 1) {
     shading.retro =
@@ -1084,7 +1090,7 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   for (int it = 1; it < options.outer_iterations; ++it) {
     for (size_t k = 0; k < irr.size(); ++k) {
       AddInterreflection(grid, cache, res.rho_sun, res.rho_se, &irr[k], options.bounces,
-                         shading.retro, shading.sun_dirs[k]);
+                         shading.retro, shading.sun_dirs[k], cancel);
     }
     if (options.slot_weighting) slot_weight = SlotWeights(grid, observations, irr, res, &shading);
     // Once, with the first interreflection: later iterations change the bounce little.
@@ -1109,6 +1115,7 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
     }
     changes.push_back(count ? change / count : 0);
     res = std::move(next);
+    ThrowIfCancelled(cancel);
     if (changes.back() < options.outer_tolerance) break;
   }
   if (options.sun_lobe.fit) {
@@ -1137,12 +1144,15 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
       }
       return SolveWeighted(grid, diffuse, irr, options, slot_weight, &shading, &fill);
     };
+    ThrowIfCancelled(cancel);
     if (any(sun_lobes)) {
       res = resolve();
       res.sun_lobes = sun_lobes;
       if (options.sky_lobe.fit) {
+        ThrowIfCancelled(cancel);
         sky_lobes = FitSkyLobes(grid, cache, slots, observations, irr, res, shading, options,
                                 &lobe_summary);
+        ThrowIfCancelled(cancel);
         if (any(sky_lobes)) res = resolve();
       }
     }
@@ -1166,7 +1176,7 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
     // rendering these slots).
     for (size_t k = 0; k < irr.size(); ++k) {
       AddInterreflection(grid, cache, res.rho_sun, res.rho_se, &irr[k], options.bounces,
-                         shading.retro, shading.sun_dirs[k]);
+                         shading.retro, shading.sun_dirs[k], cancel);
     }
     *irradiance = std::move(irr);
   }

@@ -457,7 +457,7 @@ Eigen::Vector3d EnvSkyIrradianceAt(const EnvLighting& lighting, const EnvStereoO
 
 // §5.2, eq. 18: per-region photometric stereo under the sun and the sky.
 EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
-                               const EnvStereoOptions& options) {
+                               const EnvStereoOptions& options, const Cancellation* cancel) {
   const auto start = std::chrono::steady_clock::now();
   options.Validate();
   if (per_time.empty()) throw Error("environment stereo: no observation given");
@@ -508,6 +508,7 @@ EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
   std::vector<RegionState> states(total);
   std::vector<int> fallback_reason(total, 0);  // 1 bad fit, 2 never lit
   tbb::parallel_for(size_t{0}, total, [&](size_t gi) {
+    if (IsCancelled(cancel)) return;
     const int r = static_cast<int>(gi % nreg);
     const bool above = r >= first_above;
     EnvRegionFit& fit = res.regions[gi];
@@ -685,6 +686,7 @@ EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
       FitSkyOnly(st.data, options, fallback_normal, &fit);
     }
   });
+  ThrowIfCancelled(cancel);
 
   // Optional smoothing between adjacent landscape regions of a layer, all solved together.
   if (options.smoothing_weight > 0 && !res.summary.underdetermined) {
@@ -928,14 +930,15 @@ const EnvStereoResult* FitFor(const std::optional<EnvStereoResult>& fit,
 }
 
 GroundRetroFit FitGroundRetro(const std::vector<EnvObservation>& per_time,
-                              const EnvStereoOptions& options, double min_gain) {
+                              const EnvStereoOptions& options, const Cancellation* cancel,
+                              double min_gain) {
   if (!(min_gain >= 0 && min_gain < 1)) throw Error("ground retro: min_gain must be in [0, 1)");
   GroundRetroFit out;
   std::vector<EnvStereoResult> fits;  // per candidate, as costed
   auto cost_at = [&](double retro) {
     EnvStereoOptions o = options;
     o.ground_retro = retro;
-    fits.push_back(SolveEnvStereo(per_time, o));
+    fits.push_back(SolveEnvStereo(per_time, o, cancel));
     const EnvStereoResult& r = fits.back();
     const int first_above = r.bands_below * r.sectors;
     const int nreg = (r.bands_below + r.bands_above) * r.sectors;

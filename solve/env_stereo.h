@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "core/cancel.h"
 #include "solve/environment.h"
 #include "solve/sky_model.h"
 
@@ -181,12 +182,15 @@ struct GroundRetroFit {
   double cost_lambert = 0, cost = 0;
 };
 GroundRetroFit FitGroundRetro(const std::vector<EnvObservation>& per_time,
-                              const EnvStereoOptions& options, double min_gain = 0.1);
+                              const EnvStereoOptions& options, const Cancellation* cancel = nullptr,
+                              double min_gain = 0.1);
 
 // §5.2: fits every region of every layer. All maps must share the grid and layer count.
-// Throws rouen::Error for no observation, mismatched maps or bad lighting.
+// Throws rouen::Error for no observation, mismatched maps or bad lighting; Cancelled when
+// `cancel` (polled per region) is requested.
 EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
-                               const EnvStereoOptions& options = {});
+                               const EnvStereoOptions& options = {},
+                               const Cancellation* cancel = nullptr);
 
 // §5.2: the environment map at a novel time. Sky regions: the sky model's mean over the
 // region; landscape: eq. 17 with the recovered normal and albedos (+ f x sky for mixed

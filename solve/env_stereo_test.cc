@@ -167,9 +167,13 @@ TEST(EnvStereoTest, RecoversNormalsAndAlbedosWithoutNoise) {
   const EnvironmentMap grid = EnvironmentMap::Constant(SmallGrid(), {1, 1, 1}, {1, 1, 1});
   const Synthetic w = MakeWorld(grid, 7);
   const std::vector<int> train = {0, 1, 2, 4};
-  const EnvStereoResult res = SolveEnvStereo(Observe(w, train, o, 0, 1), o);
+  Cancellation cancel;  // not requested: no effect
+  const EnvStereoResult res = SolveEnvStereo(Observe(w, train, o, 0, 1), o, &cancel);
   EXPECT_EQ(res.summary.times, 4);
   EXPECT_FALSE(res.summary.underdetermined);
+  cancel.Request();
+  EXPECT_THROW(SolveEnvStereo(Observe(w, train, o, 0, 1), o, &cancel), Cancelled);
+  EXPECT_THROW(FitGroundRetro(Observe(w, train, o, 0, 1), o, &cancel), Cancelled);
   int checked = 0;
   for (int r = 0; r < grid.num_regions(); ++r) {
     const EnvRegionFit& fit = res.regions[r];

@@ -149,6 +149,7 @@ HemisphereCache BuildHemisphereCache(const SurfaceGrid& grid, const RayCaster& m
   cache.escaped_fraction.assign(n, 0.f);
   const double offset = model.surface_offset();
   tbb::parallel_for(tbb::blocked_range<int>(0, n, 16), [&](const tbb::blocked_range<int>& range) {
+    if (IsCancelled(options.cancel)) return;
     std::vector<Eigen::Vector3d> dirs;
     for (int i = range.begin(); i < range.end(); ++i) {
       const GridPoint& p = grid.points[i];
@@ -172,6 +173,7 @@ HemisphereCache BuildHemisphereCache(const SurfaceGrid& grid, const RayCaster& m
       cache.escaped_fraction[i] = static_cast<float>(escaped) / K;
     }
   });
+  ThrowIfCancelled(options.cancel);
   cache.rays = static_cast<int64_t>(n) * K;
   cache.lists = ListHits(cache, n);
   cache.seconds = Seconds(start);
@@ -391,6 +393,7 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
   const int K = cache.directions;
   const double offset = model.surface_offset();
   tbb::parallel_for(tbb::blocked_range<int>(0, n, 32), [&](const tbb::blocked_range<int>& range) {
+    if (IsCancelled(options.cancel)) return;
     std::vector<EnvironmentView> views(layouts.size());
     PointFluxCache sky_cache;
     // Monte Carlo: the point's escaping directions, and their environment regions, found once
@@ -513,6 +516,7 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
       }
     }
   });
+  ThrowIfCancelled(options.cancel);
   const double seconds = Seconds(start);
   for (auto& irr : out) {
     for (int i = 0; i < n; ++i) {
@@ -532,7 +536,7 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
                         const std::vector<Eigen::Vector3d>& rho_sun,
                         const std::vector<Eigen::Vector3d>& rho_se, SlotIrradiance* irr,
                         int bounces, const std::vector<double>& retro,
-                        const Eigen::Vector3d& sun_dir) {
+                        const Eigen::Vector3d& sun_dir, const Cancellation* cancel) {
   const int n = grid.size();
   if (static_cast<int>(rho_sun.size()) != n || static_cast<int>(rho_se.size()) != n ||
       static_cast<int>(irr->sun.size()) != n || static_cast<int>(irr->direct_se.size()) != n) {
@@ -551,6 +555,7 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
   std::vector<Eigen::Vector3d> from_sun(n), from_se(n);
   std::vector<Eigen::Vector3d> se(n);
   for (int pass = 0; pass < bounces; ++pass) {
+    ThrowIfCancelled(cancel);
     for (int j = 0; j < n; ++j) {
       from_sun[j] = rho_sun[j].cwiseProduct(irr->sun[j]);
       from_se[j] = rho_se[j].cwiseProduct(se_prev[j]);

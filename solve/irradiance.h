@@ -10,6 +10,7 @@
 #include <memory>
 #include <vector>
 
+#include "core/cancel.h"
 #include "core/mesh.h"
 #include "core/time.h"
 #include "solve/environment.h"
@@ -48,8 +49,9 @@ struct Lighting {
 };
 
 struct HemisphereOptions {
-  int directions = 256;  // per grid point; rounded up to a square number of strata
-  uint64_t seed = 1;     // per-point rotations and shifts (deterministic)
+  int directions = 256;                  // per grid point; rounded up to a square number of strata
+  uint64_t seed = 1;                     // per-point rotations and shifts (deterministic)
+  const Cancellation* cancel = nullptr;  // polled per few points (not owned; null: none)
   void Validate() const;
 };
 
@@ -124,6 +126,8 @@ struct IrradianceOptions {
   // ground is the model's faces projected along the sun onto that ground, clipped on the
   // sphere like the occluders, with one ratio per point, seen towards the shadow's middle.
   bool ground_shadow = true;
+  // Polled per few points and per bounce (not owned; null: the work cannot be stopped).
+  const Cancellation* cancel = nullptr;
   void Validate() const;
 };
 
@@ -156,6 +160,7 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
                         const std::vector<Eigen::Vector3d>& rho_sun,
                         const std::vector<Eigen::Vector3d>& rho_se, SlotIrradiance* irr,
                         int bounces = 1, const std::vector<double>& retro = {},
-                        const Eigen::Vector3d& sun_dir = Eigen::Vector3d::UnitZ());
+                        const Eigen::Vector3d& sun_dir = Eigen::Vector3d::UnitZ(),
+                        const Cancellation* cancel = nullptr);
 
 }  // namespace rouen

@@ -323,6 +323,35 @@ TEST(IrradianceTest, GroundShadowDarkensTheEnvironmentBehindTheTower) {
   EXPECT_GT(darker_rough, 5);
 }
 
+// A requested cancellation stops each long computation with Cancelled instead of a result; an
+// unrequested token changes nothing.
+TEST(IrradianceTest, ACancellationStopsTheWork) {
+  Mesh m;
+  const int b = m.AddBlock("plane");
+  testing::AddHorizontalRect(&m, -5, 5, -5, 5, 0, true, b);
+  const SurfaceGrid g = BuildSurfaceGrid(m, GridOptions());
+  const RayCaster rc(m);
+  Cancellation cancel;
+  HemisphereOptions ho;
+  ho.cancel = &cancel;
+  const HemisphereCache cache = BuildHemisphereCache(g, rc, ho);
+  IrradianceOptions io;
+  io.cancel = &cancel;
+  const Lighting sky = UniformSky({1, 2, 3}, {9, 9, 9});
+  SlotIrradiance irr = ComputeIrradiance(g, cache, rc, sky, io);
+  EXPECT_EQ(irr.se, ComputeIrradiance(g, cache, rc, sky).se);
+  const std::vector<Eigen::Vector3d> rho(g.size(), Eigen::Vector3d::Constant(0.5));
+  cancel.Request();
+  EXPECT_THROW(BuildHemisphereCache(g, rc, ho), Cancelled);
+  EXPECT_THROW(ComputeIrradiance(g, cache, rc, sky, io), Cancelled);
+  const std::vector<Eigen::Vector3d> before = irr.se;
+  EXPECT_THROW(
+      AddInterreflection(g, cache, rho, rho, &irr, 2, {}, Eigen::Vector3d::UnitZ(), &cancel),
+      Cancelled);
+  EXPECT_EQ(irr.se, before);  // left as it was
+  EXPECT_FALSE(irr.has_bounce);
+}
+
 TEST(IrradianceTest, BadInputThrows) {
   Mesh m;
   const int b = m.AddBlock("plane");
