@@ -16,6 +16,7 @@
 #include "core/files.h"
 #include "core/limits.h"
 #include "core/outputs.h"
+#include "pipeline/render_scene.h"
 #include "pipeline/scene.h"
 #include "pipeline/timelapse.h"
 

@@ -30,6 +30,7 @@
 #include "core/process.h"
 #include "core/session.h"
 #include "pipeline/capture_session.h"
+#include "pipeline/render_scene.h"
 #include "pipeline/scene.h"
 #include "pipeline/solve_config.h"
 
@@ -119,7 +120,7 @@ void RenderView(benchmark::State& state, bool predicted) {
   else
     request.slot = 1;
   CheckRenderRequest(scene, request);
-  for (auto _ : state) benchmark::DoNotOptimize(RenderScene(scene, request));
+  for (auto _ : state) benchmark::DoNotOptimize(RenderSceneView(scene, request));
   state.counters["pixels_per_s"] =
       benchmark::Counter(640.0 * 480 * state.iterations(), benchmark::Counter::kIsRate);
 }

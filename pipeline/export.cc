@@ -6,9 +6,7 @@
 
 #include "core/error.h"
 #include "core/files.h"
-#include "core/solar.h"
 #include "core/version.h"
-#include "render/render.h"
 #include "solve/atlas.h"
 #include "solve/retro.h"
 
@@ -275,30 +273,6 @@ GltfSummary WriteSceneGltf(const LoadedScene& scene, const std::filesystem::path
   return summary;
 }
 
-std::vector<ImageAttribute> LightingAttributes(const LoadedScene& scene,
-                                               const RenderRequest& request,
-                                               const Lighting& lighting) {
-  std::vector<ImageAttribute> a;
-  const UtcTime t = request.slot ? scene.solved.slots.at(*request.slot).utc : *request.time;
-  a.push_back({"rouen:time", t.Iso8601(3)});
-  if (request.slot) {
-    a.push_back({"rouen:lighting", "slot " + std::to_string(*request.slot) + " (measured)"});
-    a.push_back({"rouen:slot", *request.slot});
-  } else {
-    a.push_back({"rouen:lighting", std::string("predicted")});
-  }
-  double azimuth = 0, elevation = 0;
-  AzElFromEnu(lighting.sun_dir.normalized(), &azimuth, &elevation);
-  a.push_back({"rouen:sun_azimuth_deg", static_cast<float>(azimuth)});
-  a.push_back({"rouen:sun_elevation_deg", static_cast<float>(elevation)});
-  const Site& site = scene.scene.site;
-  a.push_back({"rouen:site", nlohmann::json({{"lat_deg", site.lat_deg},
-                                             {"lon_deg", site.lon_deg},
-                                             {"height_m", site.height_m}})
-                                 .dump()});
-  return a;
-}
-
 SceneEnvmap SceneEnvmapFor(const LoadedScene& scene, const RenderRequest& request,
                            const LatLongOptions& options,
                            const std::function<void(const std::string&)>& log) {
@@ -326,38 +300,6 @@ SceneEnvmap SceneEnvmapFor(const LoadedScene& scene, const RenderRequest& reques
   out.attributes.push_back(
       {"rouen:above_horizon",
        std::string(options.sky_model ? "sky model" : "environment regions (as the irradiance)")});
-  return out;
-}
-
-RenderedView RenderSceneView(const LoadedScene& scene, const RenderRequest& request,
-                             const std::function<void(const std::string&)>& log) {
-  return RenderSceneViewUnder(scene, request, RequestedLighting(scene, request, log), log);
-}
-
-RenderedView RenderSceneViewUnder(const LoadedScene& scene, const RenderRequest& request,
-                                  Lighting lighting,
-                                  const std::function<void(const std::string&)>& log) {
-  RenderedView out;
-  out.lighting = std::move(lighting);
-  const SolveResult& solved = scene.solved;
-  Log(log, "irradiance at " + std::to_string(solved.grid.size()) + " grid points");
-  const SlotIrradiance irr = IrradianceFor(solved, out.lighting);
-  Log(log, "rendering " + std::to_string(request.intrinsics.width) + "x" +
-               std::to_string(request.intrinsics.height));
-  RenderOptions ro;
-  ro.alpha = true;
-  out.rgba = RenderView(solved.mesh, solved.grid, *solved.caster, solved.albedo, out.lighting, irr,
-                        request.intrinsics, request.pose, ro);
-  out.rgb = Image(out.rgba.width, out.rgba.height, 3, out.rgba.units);
-  for (size_t p = 0; p < static_cast<size_t>(out.rgba.width) * out.rgba.height; ++p)
-    for (int c = 0; c < 3; ++c) out.rgb.data[p * 3 + c] = out.rgba.data[p * 4 + c];
-  out.attributes = LightingAttributes(scene, request, out.lighting);
-  const nlohmann::json camera = {{"intrinsics", request.intrinsics}, {"pose", request.pose}};
-  out.attributes.push_back({"rouen:camera", camera.dump()});
-  out.attributes.push_back(
-      {"rouen:alpha",
-       std::string("fraction of the pixel's rays that hit the building; colours keep the sky, "
-                   "environment and sun where rays escape")});
   return out;
 }
 

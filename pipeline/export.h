@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "core/image.h"
+#include "pipeline/render_scene.h"
 #include "pipeline/scene.h"
 #include "render/envmap.h"
 
@@ -50,14 +51,6 @@ std::string EncodeGlb(const Mesh& mesh, const SurfaceGrid& grid, const AlbedoRes
 GltfSummary WriteSceneGltf(const LoadedScene& scene, const std::filesystem::path& out,
                            const GltfOptions& options = {});
 
-// Header attributes of an image of a scene under the request's lighting: "rouen:time" (ISO 8601
-// UTC: the slot's time or the requested one), "rouen:lighting" ("slot N (measured)" or
-// "predicted"), "rouen:slot" (with a slot), "rouen:sun_azimuth_deg" (from north through east)
-// and "rouen:sun_elevation_deg" of the sun direction the lighting holds, "rouen:site" (JSON).
-std::vector<ImageAttribute> LightingAttributes(const LoadedScene& scene,
-                                               const RenderRequest& request,
-                                               const Lighting& lighting);
-
 struct SceneEnvmap {
   Image map;  // RGB radiance, render/envmap.h's orientation
   Lighting lighting;
@@ -72,23 +65,5 @@ struct SceneEnvmap {
 SceneEnvmap SceneEnvmapFor(const LoadedScene& scene, const RenderRequest& request,
                            const LatLongOptions& options,
                            const std::function<void(const std::string&)>& log = {});
-
-struct RenderedView {
-  Image rgba;  // radiance and alpha (the fraction of the pixel's rays that hit the building)
-  Image rgb;   // the same without alpha
-  Lighting lighting;
-  // LightingAttributes and "rouen:camera" (JSON: the intrinsics and the pose, as the lens and
-  // pose files hold them: x_world = rotation x_cam + position, camera x right, y down, z
-  // forward) and "rouen:alpha" (what the alpha channel means).
-  std::vector<ImageAttribute> attributes;
-};
-
-// RenderScene with the alpha channel and the header attributes.
-RenderedView RenderSceneView(const LoadedScene& scene, const RenderRequest& request,
-                             const std::function<void(const std::string&)>& log = {});
-// The same under `lighting` (the request's, already made: e.g. PredictorFor(...).At(time)).
-RenderedView RenderSceneViewUnder(const LoadedScene& scene, const RenderRequest& request,
-                                  Lighting lighting,
-                                  const std::function<void(const std::string&)>& log = {});
 
 }  // namespace rouen

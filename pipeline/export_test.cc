@@ -182,7 +182,8 @@ TEST_F(ExportTest, BadModelsAreRefused) {
                Error);
 }
 
-// The render with alpha is RenderScene's image plus a fourth channel: the building's coverage.
+// The render with alpha is the plain render's image (render/render.h without alpha) plus a
+// fourth channel: the building's coverage.
 TEST_F(ExportTest, RenderSceneViewAddsAlphaAndTheHeader) {
   RenderRequest request;
   request.slot = 0;
@@ -190,7 +191,11 @@ TEST_F(ExportTest, RenderSceneViewAddsAlphaAndTheHeader) {
   request.intrinsics = view.intrinsics;
   request.pose = view.pose;
   const RenderedView r = RenderSceneView(*scene_, request);
-  const Image plain = RenderScene(*scene_, request);
+  const SolveResult& solved = scene_->solved;
+  const Lighting& lighting = solved.slots[0].lighting;
+  const Image plain =
+      RenderView(solved.mesh, solved.grid, *solved.caster, solved.albedo, lighting,
+                 IrradianceFor(solved, lighting), view.intrinsics, view.pose, RenderOptions{});
   ASSERT_EQ(r.rgba.channels, 4);
   ASSERT_EQ(r.rgb.data.size(), plain.data.size());
   for (size_t i = 0; i < plain.data.size(); ++i) ASSERT_EQ(r.rgb.data[i], plain.data[i]) << i;

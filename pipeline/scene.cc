@@ -16,7 +16,6 @@
 #include "core/solar.h"
 #include "core/temporaries.h"
 #include "core/version.h"
-#include "render/render.h"
 
 namespace rouen {
 namespace fs = std::filesystem;
@@ -266,98 +265,6 @@ LoadedScene LoadScene(const fs::path& dir, const std::function<void(const std::s
                std::to_string(r.solved.grid.size()) + " grid points, " +
                std::to_string(r.scene.views.size()) + " views");
   return r;
-}
-
-const SceneView& FindView(const LoadedScene& scene, const std::string& name) {
-  const std::map<std::string, SceneView>& views = scene.scene.views;
-  if (name.empty()) {
-    for (const auto& [n, v] : views)
-      if (v.target == "architecture") return v;
-    throw Error(scene.dir.string() + ": the scene has no architecture view; give a camera");
-  }
-  const auto it = views.find(name);
-  if (it != views.end()) return it->second;
-  std::string known;
-  for (const auto& [n, v] : views)
-    if (v.target == "architecture") known += (known.empty() ? "" : ", ") + n;
-  throw Error(scene.dir.string() + ": no view named '" + name +
-              "' (architecture views: " + (known.empty() ? "none" : known) + ")");
-}
-
-void CheckRenderRequest(const LoadedScene& scene, const RenderRequest& request) {
-  if (request.slot.has_value() == request.time.has_value())
-    throw Error("give exactly one of a captured slot or a time");
-  const int nslots = static_cast<int>(scene.solved.slots.size());
-  if (request.slot && (*request.slot < 0 || *request.slot >= nslots))
-    throw Error(scene.dir.string() + ": slot " + std::to_string(*request.slot) +
-                " is not in the scene (it has slots 0.." + std::to_string(nslots - 1) + ")");
-  if (request.time) {
-    const SunPosition sun = ComputeSunPosition(*request.time, scene.scene.site);
-    if (!(sun.elevation_deg > 0))
-      throw Error(request.time->Iso8601() + ": the sun is below the horizon there (elevation " +
-                  FormatNumber(sun.elevation_deg) + " deg); rouen renders daylight only");
-    request.relight.Validate();
-  }
-  for (int s : request.predict_without_slots)
-    if (s < 0 || s >= nslots)
-      throw Error(scene.dir.string() + ": slot " + std::to_string(s) +
-                  " (to predict without) is not in the scene");
-  request.intrinsics.Validate();
-}
-
-LightingPredictor PredictorFor(const LoadedScene& scene, const RenderRequest& request,
-                               const std::function<void(const std::string&)>& log) {
-  const SolveResult& solved = scene.solved;
-  std::vector<int> without = request.predict_without_slots;
-  if (!request.use_held_out_lighting)
-    without.insert(without.end(), scene.scene.holdout_slots.begin(),
-                   scene.scene.holdout_slots.end());
-  std::vector<Lighting> measured;
-  std::vector<int> measured_slots;
-  for (const SlotSolve& ss : solved.slots)
-    if (std::find(without.begin(), without.end(), ss.slot) == without.end()) {
-      measured.push_back(ss.lighting);
-      measured_slots.push_back(ss.slot);
-    }
-  if (measured.empty())
-    throw Error(scene.dir.string() +
-                ": no slot is left to predict the lighting from (every slot is held out or left "
-                "out)");
-  RelightOptions relight = request.relight;
-  relight.env.ground_retro = solved.env_ground_retro;  // as the solve fitted it
-  // The solve's environment fit when it was made from these slots with these options.
-  const EnvStereoResult* fitted =
-      FitFor(solved.env_stereo, solved.env_stereo_slots, measured_slots, relight.env);
-  Log(log, std::string("fitting the sun's extinction, the sky interpolation") +
-               (fitted ? "; the environment's normals as the solve fitted them"
-                       : " and the environment's normals") +
-               " (" + std::to_string(measured.size()) + " slots)");
-  LightingPredictor predictor(std::move(measured), relight, fitted);
-  Log(log, predictor.environment().summary.BriefReport());
-  return predictor;
-}
-
-Lighting RequestedLighting(const LoadedScene& scene, const RenderRequest& request,
-                           const std::function<void(const std::string&)>& log) {
-  CheckRenderRequest(scene, request);
-  if (request.slot) return scene.solved.slots[*request.slot].lighting;
-  const LightingPredictor predictor = PredictorFor(scene, request, log);
-  RelightSummary rs;
-  Lighting lighting = predictor.At(*request.time, scene.scene.site, &rs);
-  Log(log, rs.Describe());
-  return lighting;
-}
-
-Image RenderScene(const LoadedScene& scene, const RenderRequest& request,
-                  const std::function<void(const std::string&)>& log) {
-  const Lighting lighting = RequestedLighting(scene, request, log);
-  const SolveResult& solved = scene.solved;
-  Log(log, "irradiance at " + std::to_string(solved.grid.size()) + " grid points");
-  const SlotIrradiance irr = IrradianceFor(solved, lighting);
-  Log(log, "rendering " + std::to_string(request.intrinsics.width) + "x" +
-               std::to_string(request.intrinsics.height));
-  return RenderView(solved.mesh, solved.grid, *solved.caster, solved.albedo, lighting, irr,
-                    request.intrinsics, request.pose, RenderOptions{});
 }
 
 }  // namespace rouen

@@ -94,46 +94,4 @@ struct LoadedScene {
 LoadedScene LoadScene(const std::filesystem::path& dir,
                       const std::function<void(const std::string&)>& log = {});
 
-// What to render: the lighting measured at a captured slot, or predicted for another time
-// (§5: sun from the site and time, sky interpolated, environment from its normals; §6.3
-// overcast through `relight`), seen through a camera.
-struct RenderRequest {
-  std::optional<int> slot;
-  std::optional<UtcTime> time;
-  RelightOptions relight;  // used with `time`
-  // With `time`: slots whose measured lighting the prediction leaves out (e.g. the slot being
-  // validated, so its lighting is predicted from the other times only). The scene's held-out
-  // slots are left out too, unless `use_held_out_lighting`: what was held out stays out.
-  std::vector<int> predict_without_slots;
-  bool use_held_out_lighting = false;
-  Intrinsics intrinsics;
-  Pose pose;
-};
-
-// The camera of the scene's view `name` (e.g. "slot0/architecture/view0"; empty: the first
-// architecture view). Throws rouen::Error listing the scene's views when there is no such one.
-const SceneView& FindView(const LoadedScene& scene, const std::string& name);
-
-// Checks a request against the scene before any work: exactly one of slot and time, the slot
-// is in the scene, the sun is above the horizon at the time, the camera is valid. Throws
-// rouen::Error saying what is wrong.
-void CheckRenderRequest(const LoadedScene& scene, const RenderRequest& request);
-
-// The predictor of lighting at other times from the scene's slots (less the request's
-// predict_without_slots, and the held-out slots unless use_held_out_lighting), with the
-// request's relighting options: fitted once, asked for many times (rouen timelapse). The
-// environment's stereo is the solve's when it was made from the same slots.
-LightingPredictor PredictorFor(const LoadedScene& scene, const RenderRequest& request,
-                               const std::function<void(const std::string&)>& log = {});
-
-// The lighting a request asks for: the slot's measured lighting, or the lighting predicted for
-// the time from the scene's slots (less `predict_without_slots`).
-Lighting RequestedLighting(const LoadedScene& scene, const RenderRequest& request,
-                           const std::function<void(const std::string&)>& log = {});
-
-// The building's radiance through the request's camera (§6), with irradiance (sun, sky,
-// environment, one bounce) computed for the requested lighting.
-Image RenderScene(const LoadedScene& scene, const RenderRequest& request,
-                  const std::function<void(const std::string&)>& log = {});
-
 }  // namespace rouen

@@ -10,6 +10,7 @@
 
 #include "core/solar.h"
 #include "core/time.h"
+#include "pipeline/render_scene.h"
 #include "pipeline/scene.h"
 
 namespace rouen {

@@ -20,6 +20,7 @@
 #include "core/mesh.h"
 #include "core/solar.h"
 #include "core/time.h"
+#include "pipeline/render_scene.h"
 #include "pipeline/scene.h"
 #include "solve/atlas.h"
 #include "solve/grid.h"

@@ -24,6 +24,7 @@
 #include "core/session.h"
 #include "core/time.h"
 #include "core/version.h"
+#include "pipeline/render_scene.h"
 #include "pipeline/scene.h"
 #include "pipeline/solve_config.h"
 #include "pipeline/status.h"
@@ -203,7 +204,7 @@ class PyScene {
     Image image;
     {
       py::gil_scoped_release release;
-      image = RenderScene(scene_, request, say);
+      image = RenderSceneView(scene_, request, say).rgb;
     }
     return ToArray(image);
   }

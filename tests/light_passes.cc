@@ -16,6 +16,7 @@
 #include "core/files.h"
 #include "core/image.h"
 #include "core/stats.h"
+#include "pipeline/render_scene.h"
 #include "pipeline/scene.h"
 #include "pipeline/session_solve.h"
 #include "solve/grid.h"
