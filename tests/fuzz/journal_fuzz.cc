@@ -1,6 +1,7 @@
 // Session journal lines (core/session.h ParseJournalLine, frames.jsonl): each line of the
-// input is one record. An accepted record has finite numbers, valid intrinsics and pose, and
-// the line the writer journals for it reads back as the same record.
+// input is one record. An accepted record has finite numbers, valid intrinsics and pose, a
+// group (when it has one) of its own slot and target, and the line the writer journals for it
+// reads back as the same record.
 #include <cmath>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -39,6 +40,16 @@ void CheckRecord(const FrameRecord& f, const nlohmann::json& j) {
   if (f.intrinsics) FUZZ_CHECK(fuzz::Accepts([&] { f.intrinsics->Validate(); }), "intrinsics");
   if (f.pose) {
     FUZZ_CHECK(f.pose->rotation.allFinite() && f.pose->position.allFinite(), "pose");
+  }
+  // Consistency: a frame files into its group's bracket, so an accepted group names a view of
+  // the frame's own slot and target (else the frame would merge into another time's bracket).
+  if (!f.group.empty()) {
+    BracketKey key;
+    FUZZ_CHECK(fuzz::Accepts([&] { key = ParseBracketName(f.group); }),
+               "accepted group " + f.group + " is not a bracket name");
+    FUZZ_CHECK(key.slot == f.slot && key.target == f.target,
+               "group " + f.group + " accepted for a frame of slot " + std::to_string(f.slot) +
+                   ", target " + TargetName(f.target));
   }
 }
 
