@@ -6,8 +6,8 @@
 #include <utility>
 
 #include "core/error.h"
-#include "core/solar.h"
 #include "core/limits.h"
+#include "core/solar.h"
 #include "render/render.h"
 
 namespace rouen {

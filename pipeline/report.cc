@@ -682,6 +682,12 @@ void Sky(Page& p, const ReportRequest& r, const Inputs& in) {
     p.html().Paragraph(
         "No session given: the sky masks of session.json are not applied; every "
         "well-exposed pixel of the sky photos is compared.");
+  // The sky's pixels as the solve took them (its recorded options; older scenes: defaults).
+  SolveConfig config = DefaultSolveConfig(false);
+  if (in.model && in.model->options.contains("config"))
+    config =
+        ApplySolveConfig(in.model->options["config"], config,
+                         (in.scene_dir / "scene.json").string() + ": provenance.options.config");
   constexpr double kBin = 5;
   std::vector<PlotSeries> by_el, by_gamma;
   std::vector<std::vector<std::string>> stats_rows;
@@ -702,9 +708,10 @@ void Sky(Page& p, const ReportRequest& r, const Inputs& in) {
     std::vector<std::vector<uint8_t>> masks;
     try {
       for (const HdrGroup& g : photos) {
-        std::vector<uint8_t> mask = in.session ? SkyMaskFor(*in.session, g, slot.sun_dir) : g.valid;
+        std::vector<uint8_t> mask =
+            in.session ? SkyMaskFor(*in.session, g, slot.sun_dir, config.sky_segment) : g.valid;
         const std::vector<SkySample> part = ExtractSkySamples(
-            g.radiance, &mask, g.intrinsics, g.pose, slot.sun_dir, SkySampleOptions{});
+            g.radiance, &mask, g.intrinsics, g.pose, slot.sun_dir, config.sky_samples);
         samples.insert(samples.end(), part.begin(), part.end());
         masks.push_back(std::move(mask));
       }

@@ -309,7 +309,8 @@ std::string SessionFilesStamp(const Session& session) {
 }
 
 std::vector<uint8_t> SkyMaskFor(const Session& session, const HdrGroup& group,
-                                const Eigen::Vector3d& sun_dir, std::string* source) {
+                                const Eigen::Vector3d& sun_dir, const SkySegmentOptions& segment,
+                                std::string* source) {
   const std::string json = (session.dir() / "session.json").string();
   const size_t np = static_cast<size_t>(group.radiance.width) * group.radiance.height;
   if (group.valid.size() != np)
@@ -321,7 +322,7 @@ std::vector<uint8_t> SkyMaskFor(const Session& session, const HdrGroup& group,
     if (source) *source = "all";
   } else if (spec->automatic) {
     try {
-      mask = SegmentSky(group.radiance, group.intrinsics, group.pose, sun_dir, SkySegmentOptions{});
+      mask = SegmentSky(group.radiance, group.intrinsics, group.pose, sun_dir, segment);
     } catch (const Error& e) {
       throw Error(group.name + ": " + e.what() + " (give a mask file in " + json +
                   " extra.sky_masks, or rouen import --sky-mask FILE)");
@@ -337,7 +338,9 @@ std::vector<uint8_t> SkyMaskFor(const Session& session, const HdrGroup& group,
 }
 
 std::vector<SkySample> SlotSkySamples(const Session& session, const CalibResult& calib, int slot,
-                                      const Eigen::Vector3d& sun_dir, std::string* sources) {
+                                      const Eigen::Vector3d& sun_dir,
+                                      const SkySegmentOptions& segment,
+                                      const SkySampleOptions& sampling, std::string* sources) {
   std::vector<SkySample> samples;
   if (sources) sources->clear();
   for (int v = 0;; ++v) {
@@ -345,9 +348,9 @@ std::vector<SkySample> SlotSkySamples(const Session& session, const CalibResult&
     if (it == calib.groups.end()) break;
     const HdrGroup& g = it->second;
     std::string source;
-    const std::vector<uint8_t> mask = SkyMaskFor(session, g, sun_dir, &source);
+    const std::vector<uint8_t> mask = SkyMaskFor(session, g, sun_dir, segment, &source);
     const std::vector<SkySample> part =
-        ExtractSkySamples(g.radiance, &mask, g.intrinsics, g.pose, sun_dir, SkySampleOptions{});
+        ExtractSkySamples(g.radiance, &mask, g.intrinsics, g.pose, sun_dir, sampling);
     samples.insert(samples.end(), part.begin(), part.end());
     if (sources) *sources += (v ? ", " : "") + g.name + ": " + source;
   }
@@ -656,7 +659,7 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
         // No validity mask: a sun frame's sky is underexposed through the ND filter (invalid in
         // the merge's mask, yet a fine zero background); a clipped disc is caught by its value.
         const SunMeasurement m = MeasureSun(g->radiance, g->intrinsics, g->pose, at.DirectionEnu(),
-                                            at.SolidAngleSr(), SunOptions{});
+                                            at.SolidAngleSr(), options.config.sun);
         if (m.any_invalid && !sun_g) {
           sun_problems += "; " + g->name + ": the disc is clipped or saturated";
           continue;
@@ -688,7 +691,9 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
     }
     // §3.2: the seven-parameter sky per channel, from every sky photo of the slot.
     std::string mask_source;
-    const std::vector<SkySample> samples = SlotSkySamples(session, calib, s, sun_dir, &mask_source);
+    const std::vector<SkySample> samples =
+        SlotSkySamples(session, calib, s, sun_dir, options.config.sky_segment,
+                       options.config.sky_samples, &mask_source);
     SkyModel sky;
     ss.sky_summary = FitSky(samples, sun_dir, options.config.sky_fit, &sky);
     // §3.3: the environment from the landscape panoramas, one layer per height (e.g. from the

@@ -23,6 +23,7 @@
 #include "solve/irradiance.h"
 #include "solve/raycast.h"
 #include "solve/sky_fit.h"
+#include "solve/sky_segment.h"
 #include "solve/sun.h"
 
 namespace rouen {
@@ -153,7 +154,8 @@ std::vector<SlotIrradiance> IrradianceFor(const SolveResult& solved,
 // 5.5%. Always within the photo's valid pixels. `source` gets "all", "automatic" or the mask's
 // path. Throws rouen::Error naming session.json, the mask file or the group.
 std::vector<uint8_t> SkyMaskFor(const Session& session, const HdrGroup& group,
-                                const Eigen::Vector3d& sun_dir, std::string* source = nullptr);
+                                const Eigen::Vector3d& sun_dir, const SkySegmentOptions& segment,
+                                std::string* source = nullptr);
 
 // The sky samples of a slot for the §3.2 fit: the pixels SkyMaskFor keeps in each of the
 // slot's sky photos (slot<N>/sky/view0, view1, ...; the aureole brackets merge into view0),
@@ -161,6 +163,8 @@ std::vector<uint8_t> SkyMaskFor(const Session& session, const HdrGroup& group,
 // per photo. Throws rouen::Error when no photo gives a sample.
 std::vector<SkySample> SlotSkySamples(const Session& session, const CalibResult& calib, int slot,
                                       const Eigen::Vector3d& sun_dir,
+                                      const SkySegmentOptions& segment,
+                                      const SkySampleOptions& sampling,
                                       std::string* sources = nullptr);
 
 // The session folder's files, one line each: relative path, size and modification time (the

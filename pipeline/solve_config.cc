@@ -151,6 +151,9 @@ void SolveConfig::Validate() const {
   if (response_max_brackets < 1 || response_max_brackets > 1000)
     throw Error("response.max_brackets must be within 1..1000");
   sky_fit.Validate();
+  sky_samples.Validate();
+  sky_segment.Validate();
+  sun.Validate();
   environment.Validate();
   ground_field.Validate();
   albedo.Validate();  // the model the vector-flux irradiance needs is given at solve time
@@ -184,6 +187,28 @@ json SolveConfigJson(const SolveConfig& c) {
           {"surroundings", {{"spacing_m", c.surroundings_spacing_m}}},
           {"hemisphere", {{"directions", c.hemisphere.directions}, {"seed", c.hemisphere.seed}}},
           {"response", {{"max_brackets", c.response_max_brackets}}},
+          {"sun",
+           {{"search_radius_deg", c.sun.search_radius_deg},
+            {"disc_radius_factor", c.sun.disc_radius_factor},
+            {"annulus_inner_factor", c.sun.annulus_inner_factor},
+            {"annulus_outer_factor", c.sun.annulus_outer_factor},
+            {"disc_min_pixels", c.sun.disc_min_pixels},
+            {"annulus_inner_min_pixels", c.sun.annulus_inner_min_pixels},
+            {"annulus_outer_min_pixels", c.sun.annulus_outer_min_pixels},
+            {"clip_radiance", c.sun.clip_radiance},
+            {"centroid_iterations", c.sun.centroid_iterations}}},
+          {"sky_samples",
+           {{"min_elevation_deg", c.sky_samples.min_elevation_deg},
+            {"min_sun_distance_deg", c.sky_samples.min_sun_distance_deg},
+            {"max_samples", c.sky_samples.max_samples},
+            {"seed", c.sky_samples.seed}}},
+          {"sky_segment",
+           {{"min_elevation_deg", c.sky_segment.min_elevation_deg},
+            {"sun_exclusion_deg", c.sky_segment.sun_exclusion_deg},
+            {"max_log_gradient_per_deg", c.sky_segment.max_log_gradient_per_deg},
+            {"min_relative_brightness", c.sky_segment.min_relative_brightness},
+            {"min_relative_blue_ratio", c.sky_segment.min_relative_blue_ratio},
+            {"seed_cone_deg", c.sky_segment.seed_cone_deg}}},
           {"sky_fit",
            {{"model", NameOf(c.sky_fit.model, kSkyModels)},
             {"weighting", NameOf(c.sky_fit.weighting, kWeightings)},
@@ -295,6 +320,37 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
   if (const json* t = root.Table("response")) {
     Fields f(*t, where, "response");
     f.Int("max_brackets", &c.response_max_brackets, 1, 1000);
+    f.Finish();
+  }
+  if (const json* t = root.Table("sun")) {
+    Fields f(*t, where, "sun");
+    f.Number("search_radius_deg", &c.sun.search_radius_deg, 0.01, 45);
+    f.Number("disc_radius_factor", &c.sun.disc_radius_factor, 1, 10);
+    f.Number("annulus_inner_factor", &c.sun.annulus_inner_factor, 1, 50);
+    f.Number("annulus_outer_factor", &c.sun.annulus_outer_factor, 1, 50);
+    f.Number("disc_min_pixels", &c.sun.disc_min_pixels, 1, 100);
+    f.Number("annulus_inner_min_pixels", &c.sun.annulus_inner_min_pixels, 0, 199);
+    f.Number("annulus_outer_min_pixels", &c.sun.annulus_outer_min_pixels, 1, 200);
+    f.Number("clip_radiance", &c.sun.clip_radiance, 0, std::numeric_limits<float>::max());
+    f.Int("centroid_iterations", &c.sun.centroid_iterations, 1, 1000);
+    f.Finish();
+  }
+  if (const json* t = root.Table("sky_samples")) {
+    Fields f(*t, where, "sky_samples");
+    f.Number("min_elevation_deg", &c.sky_samples.min_elevation_deg, 0, 88.99);
+    f.Number("min_sun_distance_deg", &c.sky_samples.min_sun_distance_deg, 0, 90);
+    f.Int("max_samples", &c.sky_samples.max_samples, 1, 100000000);
+    f.Seed("seed", &c.sky_samples.seed);
+    f.Finish();
+  }
+  if (const json* t = root.Table("sky_segment")) {
+    Fields f(*t, where, "sky_segment");
+    f.Number("min_elevation_deg", &c.sky_segment.min_elevation_deg, -10, 88.99);
+    f.Number("sun_exclusion_deg", &c.sky_segment.sun_exclusion_deg, 0, 90);
+    f.Number("max_log_gradient_per_deg", &c.sky_segment.max_log_gradient_per_deg, 1e-6, 100);
+    f.Number("min_relative_brightness", &c.sky_segment.min_relative_brightness, 0, 1);
+    f.Number("min_relative_blue_ratio", &c.sky_segment.min_relative_blue_ratio, 0, 1);
+    f.Number("seed_cone_deg", &c.sky_segment.seed_cone_deg, 0.01, 90);
     f.Finish();
   }
   if (const json* t = root.Table("sky_fit")) {

@@ -13,6 +13,8 @@
 #include "solve/ground_apron.h"
 #include "solve/irradiance.h"
 #include "solve/sky_fit.h"
+#include "solve/sky_segment.h"
+#include "solve/sun.h"
 
 namespace rouen {
 
@@ -34,6 +36,13 @@ struct SolveConfig {
   // sigma = y / log y, and their L1 norm keeps the horizon and inner aureole, which eq. 9
   // cannot follow exactly, from pulling the rest of the fit (bench/sky_bench.cc).
   SkyFitOptions sky_fit;
+  // §3.2: the sky pixels the fit samples (away from the horizon and the sun), and, for a sky
+  // photo without a mask file (`rouen import --sky-mask auto`), how its sky is told apart.
+  SkySampleOptions sky_samples;
+  SkySegmentOptions sky_segment;
+  // §3.1: where the sun disc is looked for and measured in the ND-filtered sun frames, and the
+  // value at which a pixel is clipped rather than radiance.
+  SunOptions sun;
   EnvOptions environment;  // §3.3
   // Beyond §3.3: the ground around the model as a light field (solve/ground_field.h): the
   // landscape panoramas re-projected onto it, lit per time with the model's cast shadow, seen
@@ -57,7 +66,7 @@ nlohmann::json SolveConfigJson(const SolveConfig& config);
 SolveConfig ApplySolveConfig(const nlohmann::json& j, SolveConfig base, const std::string& where);
 // The same from a TOML file (tables as in SolveConfigJson: [grid], [grid.block_spacing_m],
 // [ground], [surroundings], [hemisphere], [response], [sky_fit], [environment], [ground_field],
-// [albedo], [albedo.irradiance]).
+// [albedo], [albedo.irradiance], [sun], [sky_samples], [sky_segment]).
 SolveConfig ReadSolveConfigFile(const std::string& path, const SolveConfig& base);
 // The options a session's solve starts from: the defaults with the session's own
 // (session.json extra.solve_config, e.g. from its rig's [solve] table) applied; errors name

@@ -35,12 +35,20 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   c.ground.radius_m = 12;
   c.ground.block = "yard";
   c.grid.block_spacing_m["yard"] = 1.5;  // as resolving the options sets it
+  c.sun.clip_radiance = 0;               // a float32 sun frame: no value is clipped
+  c.sun.search_radius_deg = 5;
+  c.sky_samples.max_samples = 5000;
+  c.sky_samples.seed = 7;
+  c.sky_segment.min_relative_blue_ratio = 0.4;
   const json j = SolveConfigJson(c);
   const SolveConfig back = ApplySolveConfig(j, DefaultSolveConfig(false), "x");
   EXPECT_EQ(SolveConfigJson(back), j);
   EXPECT_EQ(back.response_max_brackets, 6);
   EXPECT_EQ(back.environment.pixel_stride, 2);
   EXPECT_EQ(back.albedo.irradiance.method, IrradianceMethod::kMonteCarlo);
+  EXPECT_EQ(back.sun.clip_radiance, 0);
+  EXPECT_EQ(back.sky_samples.seed, 7u);
+  EXPECT_EQ(back.sky_segment.min_relative_blue_ratio, 0.4);
 }
 
 TEST(SolveConfigTest, DefaultsAndQuick) {
@@ -130,6 +138,19 @@ TEST(SolveConfigTest, StrictKeysTypesAndRanges) {
                 .find("grid.block_spacing_m.plaza must be a number"),
             std::string::npos);
   EXPECT_NE(ErrorOf(json::parse(R"({"grid": 3})")).find("grid must be a table"), std::string::npos);
+  // The sun's, the sky samples' and the sky segmentation's options, once built on the spot.
+  EXPECT_NE(ErrorOf(json::parse(R"({"sun": {"clip_radiance": -1}})"))
+                .find("sun.clip_radiance must be a number within 0.."),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(json::parse(R"({"sun": {"annulus_outer_factor": 2}})"))
+                .find("annulus_inner_factor < annulus_outer_factor"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(json::parse(R"({"sky_samples": {"max_samples": 0}})"))
+                .find("sky_samples.max_samples must be an integer"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(json::parse(R"({"sky_segment": {"seed_cone": 5}})"))
+                .find("sky_segment.seed_cone is not a known key"),
+            std::string::npos);
 }
 
 TEST(SolveConfigTest, TomlFile) {

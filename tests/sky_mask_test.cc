@@ -75,7 +75,7 @@ std::string LoadErrorOf(const fs::path& dir, const nlohmann::json& sky_masks) {
 
 std::string ErrorOf(const Session& s, const HdrGroup& g) {
   try {
-    SkyMaskFor(s, g, Eigen::Vector3d(0, -1, 1).normalized());
+    SkyMaskFor(s, g, Eigen::Vector3d(0, -1, 1).normalized(), SkySegmentOptions{});
   } catch (const Error& e) {
     return e.what();
   }
@@ -88,7 +88,8 @@ TEST(SkyMaskTest, WithoutAnEntryEveryValidPixelCounts) {
   HdrGroup g = SkyPhoto();
   g.valid[3 * kSize + 4] = 0;
   std::string source;
-  const std::vector<uint8_t> m = SkyMaskFor(s, g, Eigen::Vector3d(0, -1, 1).normalized(), &source);
+  const std::vector<uint8_t> m =
+      SkyMaskFor(s, g, Eigen::Vector3d(0, -1, 1).normalized(), SkySegmentOptions{}, &source);
   EXPECT_EQ(source, "all");
   EXPECT_EQ(m, g.valid);
   fs::remove_all(dir);
@@ -103,7 +104,7 @@ TEST(SkyMaskTest, AutomaticSegmentationKeepsTheSkyAndDropsTheBuilding) {
     for (int x = 40; x < 56; ++x) g.valid[y * kSize + x] = 0;
   const Eigen::Vector3d sun = Eigen::Vector3d(0, -1, 1).normalized();  // south, 45 deg
   std::string source;
-  const std::vector<uint8_t> m = SkyMaskFor(s, g, sun, &source);
+  const std::vector<uint8_t> m = SkyMaskFor(s, g, sun, SkySegmentOptions{}, &source);
   EXPECT_EQ(source, "automatic");
   int building = 0, building_kept = 0, open_sky = 0, open_sky_kept = 0;
   for (int y = 0; y < kSize; ++y) {
@@ -147,7 +148,8 @@ TEST(SkyMaskTest, TheSessionsOwnMaskOverridesSegmentation) {
   HdrGroup g = SkyPhoto();
   g.valid[5 * kSize + 7] = 0;
   std::string source;
-  const std::vector<uint8_t> m = SkyMaskFor(s, g, Eigen::Vector3d(0, -1, 1).normalized(), &source);
+  const std::vector<uint8_t> m =
+      SkyMaskFor(s, g, Eigen::Vector3d(0, -1, 1).normalized(), SkySegmentOptions{}, &source);
   EXPECT_EQ(source, (sdir / "masks/sky0.png").string());
   for (int y = 0; y < kSize; ++y)
     for (int x = 0; x < kSize; ++x)
@@ -155,7 +157,7 @@ TEST(SkyMaskTest, TheSessionsOwnMaskOverridesSegmentation) {
   // Another group of the same session takes the "*" entry.
   HdrGroup other = SkyPhoto();
   other.name = "slot1/sky/view0";
-  SkyMaskFor(s, other, Eigen::Vector3d(0, -1, 1).normalized(), &source);
+  SkyMaskFor(s, other, Eigen::Vector3d(0, -1, 1).normalized(), SkySegmentOptions{}, &source);
   EXPECT_EQ(source, "automatic");
   fs::remove_all(dir);
 }
@@ -177,9 +179,10 @@ TEST(SkyMaskTest, TheSlotsSkyPhotosAreFittedTogether) {
   calib.groups[west.name] = west;
   const Eigen::Vector3d sun = Eigen::Vector3d(0, -1, 1).normalized();
   std::string sources;
-  const std::vector<SkySample> both = SlotSkySamples(s, calib, 0, sun, &sources);
+  const std::vector<SkySample> both =
+      SlotSkySamples(s, calib, 0, sun, SkySegmentOptions{}, SkySampleOptions{}, &sources);
   EXPECT_EQ(sources, "slot0/sky/view0: " + (sdir / "left.png").string() + ", slot0/sky/view1: all");
-  const std::vector<uint8_t> left = SkyMaskFor(s, up, sun);
+  const std::vector<uint8_t> left = SkyMaskFor(s, up, sun, SkySegmentOptions{});
   const size_t n0 =
       ExtractSkySamples(up.radiance, &left, up.intrinsics, up.pose, sun, SkySampleOptions{}).size();
   const size_t n1 = ExtractSkySamples(west.radiance, &west.valid, west.intrinsics, west.pose, sun,
@@ -190,7 +193,7 @@ TEST(SkyMaskTest, TheSlotsSkyPhotosAreFittedTogether) {
   EXPECT_EQ(both.size(), n0 + n1);
   // A slot without a sky photo has nothing to fit.
   try {
-    SlotSkySamples(s, calib, 1, sun);
+    SlotSkySamples(s, calib, 1, sun, SkySegmentOptions{}, SkySampleOptions{});
     ADD_FAILURE() << "slot 1 has no sky photo";
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("slot 1 has no sky pixels"), std::string::npos)
