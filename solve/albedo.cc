@@ -318,12 +318,12 @@ std::string AlbedoSummary::BriefReport() const {
   char buf[512];
   std::snprintf(buf, sizeof(buf),
                 "albedo: %d/%d points observed (%lld obs, %d filled from neighbours), "
-                "sun-unobserved %d, never-shadowed %d, clamped %d, residual rms %.2f%% median "
-                "%.2f%%, downweighted %.1f%%, "
+                "sun-unobserved %d, never-shadowed %d, clamped %d, relative residual median "
+                "%.2f%% p90 %.2f%%, downweighted %.1f%%, "
                 "%d outer iterations, last change %.3f%%, %.2f s",
                 points_observed, points, static_cast<long long>(observations),
                 points_filled_neighbours, points_sun_unobserved, points_never_shadowed,
-                points_clamped, 100 * residual_rms_rel, 100 * residual_median_rel,
+                points_clamped, 100 * residual_median_rel, 100 * residual_p90_rel,
                 100 * downweighted_fraction, outer_iterations,
                 change_per_iteration.empty() ? 0.0 : 100 * change_per_iteration.back(), seconds);
   return buf;
@@ -796,6 +796,7 @@ static AlbedoResult SolveWeighted(const SurfaceGrid& grid,
   }
   s.residual_rms_rel = rel.empty() ? 0 : std::sqrt(sum2 / rel.size());
   s.residual_median_rel = Median(rel);
+  s.residual_p90_rel = rel.empty() ? 0 : Quantile(rel, 0.9);
   s.downweighted_fraction = static_cast<double>(down) / observations.size();
   s.outer_iterations = 1;
   for (int i = 0; i < n; ++i) {

@@ -159,8 +159,12 @@ struct AlbedoSummary {
   int outer_iterations = 0;  // run (at most AlbedoOptions::outer_iterations)
   // Mean relative change of the albedos at each outer iteration after the first.
   std::vector<double> change_per_iteration;
-  double residual_rms_rel = 0;       // relative residual (pi I - model) / (pi I), all obs
-  double residual_median_rel = 0;    // median |relative residual|
+  // Relative residual (pi I - model) / (pi I) over all observations: its rms (a few nearly
+  // black observations can make it any size, e.g. 32,554% on the nave world, median 1.6%), its
+  // median and 90th percentile in absolute value (what the summary line reports).
+  double residual_rms_rel = 0;
+  double residual_median_rel = 0;
+  double residual_p90_rel = 0;
   double downweighted_fraction = 0;  // observations with robust weight < 0.5
   std::vector<double> slot_weights;  // per slot, as used in the last solve (SolveAlbedo)
   // Per block: the relative residual cost (truncated |relative residual|, mean over the

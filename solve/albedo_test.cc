@@ -122,6 +122,8 @@ TEST(AlbedoTest, RecoversBothPseudoAlbedosFromConsistentData) {
   }
   EXPECT_GT(good, w.grid.size() / 3);
   EXPECT_LT(r.summary.residual_rms_rel, 1e-4);
+  EXPECT_LT(r.summary.residual_p90_rel, 1e-4);
+  EXPECT_LE(r.summary.residual_median_rel, r.summary.residual_p90_rel);
   EXPECT_GT(buried, 0);
   EXPECT_EQ(r.summary.points_observed, w.grid.size() - buried);
   // Observations of points that receive no light at all carry no information: unobserved.

@@ -39,6 +39,7 @@ nlohmann::json SummaryJson(const AlbedoSummary& s) {
           {"change_per_iteration", s.change_per_iteration},
           {"residual_rms_rel", s.residual_rms_rel},
           {"residual_median_rel", s.residual_median_rel},
+          {"residual_p90_rel", s.residual_p90_rel},
           {"downweighted_fraction", s.downweighted_fraction},
           {"slot_weights", s.slot_weights},
           {"points_filled_neighbours", s.points_filled_neighbours},
@@ -107,6 +108,7 @@ AlbedoSummary ReadSummary(const nlohmann::json& j) {
   s.change_per_iteration = j.value("change_per_iteration", std::vector<double>{});
   s.residual_rms_rel = j.value("residual_rms_rel", 0.0);
   s.residual_median_rel = j.value("residual_median_rel", 0.0);
+  s.residual_p90_rel = j.value("residual_p90_rel", 0.0);
   s.downweighted_fraction = j.value("downweighted_fraction", 0.0);
   s.slot_weights = j.value("slot_weights", std::vector<double>{});
   s.points_filled_neighbours = j.value("points_filled_neighbours", 0);

@@ -70,6 +70,7 @@ SceneModel MakeScene(const Mesh& mesh, SurfaceGrid* grid_out) {
   s.albedo.sky_lobes[1].n = 12;
   s.albedo.summary.points = grid.size();
   s.albedo.summary.residual_rms_rel = 0.0123;
+  s.albedo.summary.residual_p90_rel = 0.0456;
   // An environment fit from slot 0 alone (underdetermined: every landscape region sky-only).
   EnvObservation seen;
   seen.env = slot.env;
@@ -120,6 +121,7 @@ TEST(SceneTest, RoundTrip) {
     EXPECT_EQ(r.albedo.flags[i], s.albedo.flags[i]);
   }
   EXPECT_EQ(r.albedo.summary.residual_rms_rel, 0.0123);
+  EXPECT_EQ(r.albedo.summary.residual_p90_rel, 0.0456);
   EXPECT_EQ(r.albedo.retro, s.albedo.retro);
   ASSERT_EQ(r.albedo.sun_lobes.size(), 2u);
   EXPECT_TRUE(r.albedo.sun_lobes[0].IsZero());
