@@ -93,7 +93,8 @@ std::string SafeName(std::string s) {
 // divided by its own ND transmission.
 Image MergeLdrFrames(const std::vector<Image>& images, const std::vector<double>& exposures,
                      const std::vector<std::array<double, 3>>& transmission,
-                     const ResponseCurve& response, std::vector<uint8_t>* valid) {
+                     const ResponseCurve& response, const MergeOptions& merge,
+                     std::vector<uint8_t>* valid) {
   std::vector<const Image*> ptrs;
   for (const Image& im : images) ptrs.push_back(&im);
   // Same filter colour in every frame (the usual case): merge with channel 0's factor and
@@ -107,7 +108,7 @@ Image MergeLdrFrames(const std::vector<Image>& images, const std::vector<double>
   if (same_colour || images.front().channels != 3) {
     std::vector<double> x(exposures.size());
     for (size_t k = 0; k < x.size(); ++k) x[k] = exposures[k] * transmission[k][0];
-    Image r = MergeHdr(ptrs, x, response, MergeOptions{}, nullptr, valid);
+    Image r = MergeHdr(ptrs, x, response, merge, nullptr, valid);
     if (r.channels == 3) {
       for (size_t i = 0; i < r.data.size(); ++i) {
         const int c = static_cast<int>(i % 3);
@@ -133,7 +134,7 @@ Image MergeLdrFrames(const std::vector<Image>& images, const std::vector<double>
     ResponseCurve rc;
     for (int k = 0; k < 3; ++k) rc.g[k] = response.g[c];
     std::vector<uint8_t> vc;
-    const Image r = MergeHdr(pp, x, rc, MergeOptions{}, nullptr, &vc);
+    const Image r = MergeHdr(pp, x, rc, merge, nullptr, &vc);
     for (size_t i = 0; i < r.data.size(); ++i) {
       out.data[i * 3 + c] = r.data[i];
       if (valid && !vc[i]) (*valid)[i] = 0;
@@ -148,11 +149,11 @@ Image MergeRadianceFrames(const std::vector<Image>& images,
                           const std::vector<const FrameRecord*>& frames,
                           const std::vector<double>& exposures,
                           const std::vector<std::array<double, 3>>& transmission,
-                          std::vector<uint8_t>* valid) {
+                          const RadianceMergeOptions& merge, std::vector<uint8_t>* valid) {
   std::vector<const Image*> ptrs;
   for (const Image& im : images) ptrs.push_back(&im);
   try {
-    return MergeRadiance(ptrs, exposures, transmission, RadianceMergeOptions{}, valid);
+    return MergeRadiance(ptrs, exposures, transmission, merge, valid);
   } catch (const Error& e) {
     std::string ids;
     for (const FrameRecord* f : frames) ids += (ids.empty() ? "" : ", ") + std::to_string(f->id);
@@ -183,11 +184,12 @@ HdrGroup BracketCameraAndTime(const Session& session, const std::string& name,
   return g;
 }
 
-// One bracket merged to radiance: LDR frames through `response`, HDR frames averaged; each
-// channel divided by its ND filter's transmission, then the vignetting removed.
+// One bracket merged to radiance: LDR frames through `response`, HDR frames averaged (as
+// `config` merges them); each channel divided by its ND filter's transmission, then the
+// vignetting removed.
 HdrGroup MergeGroup(const Session& session, const std::string& name,
                     const std::vector<const FrameRecord*>& frames, bool hdr,
-                    const ResponseCurve& response) {
+                    const ResponseCurve& response, const SolveConfig& config) {
   const std::string where = session.dir().string();
   std::vector<Image> images;
   std::vector<double> exposures;  // seconds x gain (the ND filter is applied per channel)
@@ -209,11 +211,12 @@ HdrGroup MergeGroup(const Session& session, const std::string& name,
   }
   HdrGroup g = BracketCameraAndTime(session, name, frames);
   if (hdr) {
-    g.radiance = MergeRadianceFrames(images, frames, exposures, transmission, &g.valid);
+    g.radiance = MergeRadianceFrames(images, frames, exposures, transmission, config.radiance_merge,
+                                     &g.valid);
   } else {
     if (!response.valid())
       throw Error(where + ": bracket " + name + " is LDR but no response curve is known");
-    g.radiance = MergeLdrFrames(images, exposures, transmission, response, &g.valid);
+    g.radiance = MergeLdrFrames(images, exposures, transmission, response, config.merge, &g.valid);
   }
   // Vignetting multiplies every frame of a bracket alike, so dividing the merge is dividing
   // each frame before merging (for LDR frames: ln L = g(z) - ln X - ln V).
@@ -243,11 +246,13 @@ Image ValidMaskImage(const HdrGroup& g) {
 }
 
 // What a calibration depends on: the session's files, the response curve given (if any), the
-// response's options, rouen's version.
+// response's and the merge's options, rouen's version.
 std::string CalibInputsSha256(const Session& session, const PipelineOptions& options) {
+  const nlohmann::json config = SolveConfigJson(options.config);
   nlohmann::json j = {
       {"version", RouenVersion()},
-      {"max_brackets", options.config.response_max_brackets},
+      {"response_options", config.at("response")},
+      {"merge", config.at("merge")},
       {"response", options.response ? nlohmann::json(*options.response) : nlohmann::json(nullptr)}};
   return Sha256Hex(j.dump() + "\n" + SessionFilesStamp(session));
 }
@@ -521,7 +526,7 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
                   ": no LDR bracket with two or more exposures to recover the response curve "
                   "from");
     Log(options, "response curve from " + std::to_string(brackets.size()) + " brackets");
-    out.response = RecoverResponse(brackets, ResponseOptions{}, &out.response_summary);
+    out.response = RecoverResponse(brackets, options.config.response, &out.response_summary);
   } else {
     Log(options, "all frames are HDR: no response curve needed");
   }
@@ -539,7 +544,8 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
   tbb::parallel_for(size_t{0}, todo.size(), [&](size_t k) {
     if (IsCancelled(options.cancel)) return;
     const std::string& name = *todo[k].first;
-    merged[k] = MergeGroup(session, name, *todo[k].second, group_hdr.at(name), out.response);
+    merged[k] = MergeGroup(session, name, *todo[k].second, group_hdr.at(name), out.response,
+                           options.config);
     const std::string base = (calib_dir / "hdr" / SafeName(name)).string();
     // Uncompressed: zip shrinks noisy float radiance by a tenth for six times the writing time.
     WriteImage(base + ".exr", merged[k].radiance, StoredType::kFloat,
@@ -562,7 +568,7 @@ CalibResult CalibrateSession(const Session& session, const PipelineOptions& opti
 }
 
 HdrGroup MergeSessionBracket(const Session& session, const std::string& name,
-                             const ResponseCurve& response) {
+                             const ResponseCurve& response, const SolveConfig& config) {
   CheckSessionFrames(session);
   const auto groups = SessionBrackets(session);
   const auto it = groups.find(name);
@@ -572,7 +578,7 @@ HdrGroup MergeSessionBracket(const Session& session, const std::string& name,
   for (const FrameRecord* f : it->second)
     if (f->hdr != hdr)
       throw Error(session.dir().string() + ": bracket " + name + " mixes LDR and HDR frames");
-  return MergeGroup(session, name, it->second, hdr, response);
+  return MergeGroup(session, name, it->second, hdr, response, config);
 }
 
 SolveResult SolveSession(const Session& session, const CalibResult& calib,

@@ -82,10 +82,11 @@ struct CalibResult {
 CalibResult CalibrateSession(const Session& session, const PipelineOptions& options);
 
 // One bracket of the session (e.g. "slot2/architecture/view0") merged to radiance as
-// CalibrateSession merges it: LDR frames through `response`, HDR frames averaged. Throws
-// rouen::Error naming the session and the bracket when there is no such bracket.
+// CalibrateSession merges it: LDR frames through `response`, HDR frames averaged, with the
+// merge options of `config` (a scene's: those its solve used). Throws rouen::Error naming the
+// session and the bracket when there is no such bracket.
 HdrGroup MergeSessionBracket(const Session& session, const std::string& name,
-                             const ResponseCurve& response);
+                             const ResponseCurve& response, const SolveConfig& config);
 
 // Checks the journal's values the pipeline computes with: the exposure of LDR frames and the
 // ND density (core/limits.h), the gain. Throws rouen::Error naming frames.jsonl, the frame's

@@ -133,6 +133,11 @@ const std::vector<std::pair<const char*, GridSubdivision>> kSubdivisions = {
     {"longest_edge", GridSubdivision::kLongestEdge},
     {"equivalent_area", GridSubdivision::kEquivalentArea}};
 
+const std::vector<std::pair<const char*, ResponseMethod>> kResponseMethods = {
+    {"debevec", ResponseMethod::kDebevecMalik},
+    {"robertson", ResponseMethod::kRobertson},
+    {"mitsunaga", ResponseMethod::kMitsunagaNayar}};
+
 template <typename E>
 const char* NameOf(E v, const std::vector<std::pair<const char*, E>>& names) {
   for (const auto& [name, e] : names)
@@ -150,6 +155,9 @@ void SolveConfig::Validate() const {
   hemisphere.Validate();
   if (response_max_brackets < 1 || response_max_brackets > 1000)
     throw Error("response.max_brackets must be within 1..1000");
+  response.Validate();
+  merge.Validate();
+  radiance_merge.Validate();
   sky_fit.Validate();
   sky_samples.Validate();
   sky_segment.Validate();
@@ -186,7 +194,31 @@ json SolveConfigJson(const SolveConfig& c) {
             {"spacing_m", c.ground.spacing_m}}},
           {"surroundings", {{"spacing_m", c.surroundings_spacing_m}}},
           {"hemisphere", {{"directions", c.hemisphere.directions}, {"seed", c.hemisphere.seed}}},
-          {"response", {{"max_brackets", c.response_max_brackets}}},
+          {"response",
+           {{"max_brackets", c.response_max_brackets},
+            {"method", NameOf(c.response.method, kResponseMethods)},
+            {"samples_per_bracket", c.response.samples_per_bracket},
+            {"scan_pixels", c.response.scan_pixels},
+            {"lambda", c.response.lambda},
+            {"seed", c.response.seed},
+            {"weight_epsilon", c.response.weight_epsilon},
+            {"monotone_tolerance", c.response.monotone_tolerance},
+            {"min_slope", c.response.min_slope},
+            {"robertson_min_samples_per_bracket", c.response.robertson_min_samples_per_bracket},
+            {"max_iterations", c.response.max_iterations},
+            {"convergence_tolerance", c.response.convergence_tolerance},
+            {"max_polynomial_order", c.response.max_polynomial_order},
+            {"mn_fit_low", c.response.mn_fit_low},
+            {"mn_fit_high", c.response.mn_fit_high}}},
+          {"merge",
+           {{"dark_level", c.merge.dark_level},
+            {"saturation_level", c.merge.saturation_level},
+            {"ghost_removal", c.merge.ghost_removal},
+            {"ghost_threshold", c.merge.ghost_threshold},
+            {"ghost_noise_dn", c.merge.ghost_noise_dn},
+            {"hdr_clip_min_pixels", c.radiance_merge.clip_min_pixels},
+            {"hdr_clip_divisor", c.radiance_merge.clip_divisor},
+            {"hdr_clip_ramp", c.radiance_merge.clip_ramp}}},
           {"sun",
            {{"search_radius_deg", c.sun.search_radius_deg},
             {"disc_radius_factor", c.sun.disc_radius_factor},
@@ -320,6 +352,33 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
   if (const json* t = root.Table("response")) {
     Fields f(*t, where, "response");
     f.Int("max_brackets", &c.response_max_brackets, 1, 1000);
+    ResponseOptions& r = c.response;
+    f.Enum("method", &r.method, kResponseMethods);
+    f.Int("samples_per_bracket", &r.samples_per_bracket, 8, 1000000);
+    f.Int64("scan_pixels", &r.scan_pixels, 10000, int64_t{1} << 40);
+    f.Number("lambda", &r.lambda, 1e-6, 1e12);
+    f.Seed("seed", &r.seed);
+    f.Number("weight_epsilon", &r.weight_epsilon, 1e-9, 10);
+    f.Number("monotone_tolerance", &r.monotone_tolerance, 0, 255);
+    f.Number("min_slope", &r.min_slope, 0, 0.01);
+    f.Int("robertson_min_samples_per_bracket", &r.robertson_min_samples_per_bracket, 0, 1000000);
+    f.Int("max_iterations", &r.max_iterations, 1, 100000);
+    f.Number("convergence_tolerance", &r.convergence_tolerance, 1e-15, 0.99);
+    f.Int("max_polynomial_order", &r.max_polynomial_order, 1, 15);
+    f.Number("mn_fit_low", &r.mn_fit_low, 1, 254);
+    f.Number("mn_fit_high", &r.mn_fit_high, 1, 254);
+    f.Finish();
+  }
+  if (const json* t = root.Table("merge")) {
+    Fields f(*t, where, "merge");
+    f.Number("dark_level", &c.merge.dark_level, 0, 255);
+    f.Number("saturation_level", &c.merge.saturation_level, 0, 255);
+    f.Bool("ghost_removal", &c.merge.ghost_removal);
+    f.Number("ghost_threshold", &c.merge.ghost_threshold, 0, 100);
+    f.Number("ghost_noise_dn", &c.merge.ghost_noise_dn, 0, 255);
+    f.Int64("hdr_clip_min_pixels", &c.radiance_merge.clip_min_pixels, 1, int64_t{1} << 40);
+    f.Int64("hdr_clip_divisor", &c.radiance_merge.clip_divisor, 1, int64_t{1} << 40);
+    f.Number("hdr_clip_ramp", &c.radiance_merge.clip_ramp, 1e-6, 1);
     f.Finish();
   }
   if (const json* t = root.Table("sun")) {

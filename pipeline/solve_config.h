@@ -6,6 +6,8 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "calib/hdr.h"
+#include "calib/response.h"
 #include "core/session.h"
 #include "solve/albedo.h"
 #include "solve/environment.h"
@@ -32,6 +34,12 @@ struct SolveConfig {
   HemisphereOptions hemisphere;  // the irradiance's gathering pattern over that grid
   // LDR brackets the response curve is recovered from, spread evenly over the session.
   int response_max_brackets = 12;
+  // The response curve's recovery from those brackets ([response], with max_brackets).
+  ResponseOptions response;
+  // How a bracket's frames merge to radiance ([merge]): LDR frames through the response curve
+  // (the hat weights' limits, ghost removal), HDR frames (clipping near their maximum).
+  MergeOptions merge;
+  RadianceMergeOptions radiance_merge;
   // §3.2. Relative residuals (sigma = y) fit the physically based sky better than eq. 10's
   // sigma = y / log y, and their L1 norm keeps the horizon and inner aureole, which eq. 9
   // cannot follow exactly, from pulling the rest of the fit (bench/sky_bench.cc).
@@ -66,7 +74,7 @@ nlohmann::json SolveConfigJson(const SolveConfig& config);
 SolveConfig ApplySolveConfig(const nlohmann::json& j, SolveConfig base, const std::string& where);
 // The same from a TOML file (tables as in SolveConfigJson: [grid], [grid.block_spacing_m],
 // [ground], [surroundings], [hemisphere], [response], [sky_fit], [environment], [ground_field],
-// [albedo], [albedo.irradiance], [sun], [sky_samples], [sky_segment]).
+// [albedo], [albedo.irradiance], [sun], [sky_samples], [sky_segment], [merge]).
 SolveConfig ReadSolveConfigFile(const std::string& path, const SolveConfig& base);
 // The options a session's solve starts from: the defaults with the session's own
 // (session.json extra.solve_config, e.g. from its rig's [solve] table) applied; errors name

@@ -40,6 +40,11 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   c.sky_samples.max_samples = 5000;
   c.sky_samples.seed = 7;
   c.sky_segment.min_relative_blue_ratio = 0.4;
+  c.response.method = ResponseMethod::kRobertson;
+  c.response.samples_per_bracket = 400;
+  c.merge.ghost_removal = true;
+  c.merge.saturation_level = 240;
+  c.radiance_merge.clip_ramp = 0.05;
   const json j = SolveConfigJson(c);
   const SolveConfig back = ApplySolveConfig(j, DefaultSolveConfig(false), "x");
   EXPECT_EQ(SolveConfigJson(back), j);
@@ -49,6 +54,11 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   EXPECT_EQ(back.sun.clip_radiance, 0);
   EXPECT_EQ(back.sky_samples.seed, 7u);
   EXPECT_EQ(back.sky_segment.min_relative_blue_ratio, 0.4);
+  EXPECT_EQ(back.response.method, ResponseMethod::kRobertson);
+  EXPECT_EQ(back.response.samples_per_bracket, 400);
+  EXPECT_TRUE(back.merge.ghost_removal);
+  EXPECT_EQ(back.merge.saturation_level, 240);
+  EXPECT_EQ(back.radiance_merge.clip_ramp, 0.05);
 }
 
 TEST(SolveConfigTest, DefaultsAndQuick) {
@@ -147,6 +157,12 @@ TEST(SolveConfigTest, StrictKeysTypesAndRanges) {
             std::string::npos);
   EXPECT_NE(ErrorOf(json::parse(R"({"sky_samples": {"max_samples": 0}})"))
                 .find("sky_samples.max_samples must be an integer"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(json::parse(R"({"response": {"method": "debevec-malik"}})"))
+                .find("response.method must be one of debevec, robertson, mitsunaga"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(json::parse(R"({"merge": {"dark_level": 200, "saturation_level": 100}})"))
+                .find("MergeOptions: need 0 <= dark_level < saturation_level"),
             std::string::npos);
   EXPECT_NE(ErrorOf(json::parse(R"({"sky_segment": {"seed_cone": 5}})"))
                 .find("sky_segment.seed_cone is not a known key"),

@@ -46,7 +46,7 @@ const SceneView& PhotoView(const LoadedScene& scene, const Session& session,
 // The bracket merged to radiance, checked against its camera's size.
 HdrGroup MergePhoto(const LoadedScene& scene, const Session& session, const std::string& name,
                     const SceneView& view) {
-  HdrGroup g = MergeSessionBracket(session, name, scene.scene.response);
+  HdrGroup g = MergeSessionBracket(session, name, scene.scene.response, scene.config);
   if (g.radiance.width != view.intrinsics.width || g.radiance.height != view.intrinsics.height)
     throw Error(name + ": the photograph is " + std::to_string(g.radiance.width) + "x" +
                 std::to_string(g.radiance.height) + " but its camera in " + scene.dir.string() +

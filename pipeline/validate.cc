@@ -149,7 +149,7 @@ Validation ValidateSlot(const LoadedScene& scene, const Session& session, int sl
   MetricsAccumulator all_measured(mo), all_predicted(mo);
   for (const std::string& name : views) {
     const SceneView& view = scene.scene.views.at(name);
-    HdrGroup g = MergeSessionBracket(session, name, scene.scene.response);
+    HdrGroup g = MergeSessionBracket(session, name, scene.scene.response, scene.config);
     if (g.radiance.width != view.intrinsics.width || g.radiance.height != view.intrinsics.height)
       throw Error(session.dir().string() + ": bracket " + name + " is " +
                   std::to_string(g.radiance.width) + "x" + std::to_string(g.radiance.height) +

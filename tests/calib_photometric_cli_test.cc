@@ -4,6 +4,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -323,6 +324,17 @@ TEST(CalibrateSessionTest, HdrOnlySessionFromImportedExrNeedsNoResponse) {
   for (size_t i = 0; i < scene.data.size(); ++i) clipped += scene.data[i] * 0.1 > 1;
   EXPECT_GT(clipped, 100);  // the clipped region was exercised
   for (uint8_t v : g.valid) EXPECT_EQ(v, 1);
+  // The calibration is read back while its inputs are the same, and made again when a merge
+  // option it was made with changes ([merge] in the solve's options).
+  auto read_back = [](const CalibResult& c) {
+    return std::any_of(c.stages.begin(), c.stages.end(),
+                       [](const StageTime& t) { return t.stage == "calibration read back"; });
+  };
+  EXPECT_FALSE(read_back(cal));
+  EXPECT_TRUE(read_back(CalibrateSession(s, po)));
+  po.config.radiance_merge.clip_ramp = 0.05;
+  EXPECT_FALSE(read_back(CalibrateSession(s, po)));
+  EXPECT_TRUE(read_back(CalibrateSession(s, po)));
   fs::remove_all(dir);
 }
 
