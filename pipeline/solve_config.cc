@@ -270,6 +270,8 @@ json SolveConfigJson(const SolveConfig& c) {
             {"huber_k", a.huber_k},
             {"min_scale", a.min_scale},
             {"irls_iterations", a.irls_iterations},
+            {"irls_tolerance", a.irls_tolerance},
+            {"relative_error_floor", a.relative_error_floor},
             {"outer_iterations", a.outer_iterations},
             {"outer_tolerance", a.outer_tolerance},
             {"bounces", a.bounces},
@@ -461,6 +463,8 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
     f.Number("huber_k", &a.huber_k, 1e-6, 100);
     f.Number("min_scale", &a.min_scale, 1e-9, 10);
     f.Int("irls_iterations", &a.irls_iterations, 1, 1000);
+    f.Number("irls_tolerance", &a.irls_tolerance, 0, 0.5);
+    f.Number("relative_error_floor", &a.relative_error_floor, 0, 1);
     f.Int("outer_iterations", &a.outer_iterations, 1, 100);
     f.Number("outer_tolerance", &a.outer_tolerance, 0, 0.5);
     f.Int("bounces", &a.bounces, 0, 16);

@@ -40,6 +40,8 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   c.sky_samples.max_samples = 5000;
   c.sky_samples.seed = 7;
   c.sky_segment.min_relative_blue_ratio = 0.4;
+  c.albedo.irls_tolerance = 1e-3;
+  c.albedo.relative_error_floor = 0.1;
   c.response.method = ResponseMethod::kRobertson;
   c.response.samples_per_bracket = 400;
   c.merge.ghost_removal = true;
@@ -54,6 +56,7 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   EXPECT_EQ(back.sun.clip_radiance, 0);
   EXPECT_EQ(back.sky_samples.seed, 7u);
   EXPECT_EQ(back.sky_segment.min_relative_blue_ratio, 0.4);
+  EXPECT_EQ(back.albedo.relative_error_floor, 0.1);
   EXPECT_EQ(back.response.method, ResponseMethod::kRobertson);
   EXPECT_EQ(back.response.samples_per_bracket, 400);
   EXPECT_TRUE(back.merge.ghost_removal);
@@ -157,6 +160,9 @@ TEST(SolveConfigTest, StrictKeysTypesAndRanges) {
             std::string::npos);
   EXPECT_NE(ErrorOf(json::parse(R"({"sky_samples": {"max_samples": 0}})"))
                 .find("sky_samples.max_samples must be an integer"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(json::parse(R"({"albedo": {"relative_error_floor": 2}})"))
+                .find("albedo.relative_error_floor must be a number within 0..1"),
             std::string::npos);
   EXPECT_NE(ErrorOf(json::parse(R"({"response": {"method": "debevec-malik"}})"))
                 .find("response.method must be one of debevec, robertson, mitsunaga"),

@@ -87,7 +87,7 @@ PointFit FitPoint(const std::vector<Equation>& eqs, Mode mode, const Eigen::Vect
   const int n = static_cast<int>(eqs.size());
   PointFit fit;
   fit.weights.assign(n, 1.0);
-  // Relative errors: sigma_k = pi I_k, floored at 5% of the channel mean.
+  // Relative errors: sigma_k = pi I_k, floored at o.relative_error_floor x the channel mean.
   Eigen::Vector3d mean_y = Eigen::Vector3d::Zero(), mean_e = Eigen::Vector3d::Zero();
   for (const auto& q : eqs) {
     mean_y += q.y;
@@ -98,7 +98,8 @@ PointFit FitPoint(const std::vector<Equation>& eqs, Mode mode, const Eigen::Vect
   std::vector<Eigen::Vector3d> inv_sigma(n);
   for (int k = 0; k < n; ++k) {
     for (int c = 0; c < 3; ++c) {
-      inv_sigma[k][c] = std::sqrt(eqs[k].weight) / std::max({eqs[k].y[c], 0.05 * mean_y[c], 1e-30});
+      inv_sigma[k][c] = std::sqrt(eqs[k].weight) /
+                        std::max({eqs[k].y[c], o.relative_error_floor * mean_y[c], 1e-30});
     }
   }
   const int unknowns = mode == Mode::kBoth ? 2 : 1;
@@ -159,7 +160,7 @@ PointFit FitPoint(const std::vector<Equation>& eqs, Mode mode, const Eigen::Vect
       change = std::max(change, std::abs(w - fit.weights[k]));
       fit.weights[k] = w;
     }
-    if (change < 1e-4) break;
+    if (change < o.irls_tolerance) break;
   }
   return fit;
 }
@@ -186,9 +187,12 @@ struct FillPlan {
   std::vector<double> weight;  // normalised per target
 };
 
-// One pass: points of category 0 near observed ones within `radius` join the plan.
-void PlanFillPass(const SurfaceGrid& grid, double radius, bool coplanar,
+// One pass: points of category 0 near observed ones within `radius` join the plan; with
+// `plane_tolerance_m` > 0 only those of the same plane (normals within 2.6 deg, and each within
+// that distance of the other's plane), else any of the same block.
+void PlanFillPass(const SurfaceGrid& grid, double radius, double plane_tolerance_m,
                   const std::vector<uint8_t>& cat, FillPlan* plan) {
+  constexpr double kSamePlaneCos = 0.999;
   constexpr int kMaxSources = 6;
   const int n = grid.size();
   const double R = radius;
@@ -221,8 +225,9 @@ void PlanFillPass(const SurfaceGrid& grid, double radius, bool coplanar,
           for (int j : it->second) {
             const GridPoint& q = grid.points[j];
             if (q.block != p.block) continue;
-            if (coplanar && (q.normal.dot(p.normal) < 0.999 ||
-                             std::abs(p.normal.dot(q.position - p.position)) > 0.05)) {
+            if (plane_tolerance_m > 0 &&
+                (q.normal.dot(p.normal) < kSamePlaneCos ||
+                 std::abs(p.normal.dot(q.position - p.position)) > plane_tolerance_m)) {
               continue;
             }
             const double d = (q.position - p.position).norm();
@@ -250,17 +255,18 @@ void PlanFillPass(const SurfaceGrid& grid, double radius, bool coplanar,
   }
 }
 
-FillPlan PlanFill(const SurfaceGrid& grid, double radius, const std::vector<uint8_t>& category) {
+FillPlan PlanFill(const SurfaceGrid& grid, double radius, double plane_tolerance_m,
+                  const std::vector<uint8_t>& category) {
   FillPlan plan;
   plan.radius = radius;
   plan.category_in = category;
   plan.category_out = category;
   plan.begin.push_back(0);
-  PlanFillPass(grid, radius, true, category, &plan);
+  PlanFillPass(grid, radius, plane_tolerance_m, category, &plan);
   // The wider pass draws on observed points only, as the first: what it fills is what the
   // first left at 0.
   std::vector<uint8_t> rest = plan.category_out;
-  PlanFillPass(grid, 4 * radius, false, rest, &plan);
+  PlanFillPass(grid, 4 * radius, 0, rest, &plan);
   return plan;
 }
 
@@ -295,6 +301,10 @@ void AlbedoOptions::Validate() const {
   if (!(huber_k > 0)) throw Error("AlbedoOptions: huber_k must be > 0");
   if (!(min_scale > 0)) throw Error("AlbedoOptions: min_scale must be > 0");
   if (irls_iterations < 1) throw Error("AlbedoOptions: irls_iterations must be >= 1");
+  if (!(irls_tolerance >= 0 && irls_tolerance < 1))
+    throw Error("AlbedoOptions: irls_tolerance must be within [0, 1)");
+  if (!(relative_error_floor >= 0 && relative_error_floor <= 1))
+    throw Error("AlbedoOptions: relative_error_floor must be within [0, 1]");
   if (outer_iterations < 1) throw Error("AlbedoOptions: outer_iterations must be >= 1");
   if (!(outer_tolerance >= 0 && outer_tolerance < 1))
     throw Error("AlbedoOptions: outer_tolerance must be within [0, 1)");
@@ -728,7 +738,7 @@ static AlbedoResult SolveWeighted(const SurfaceGrid& grid,
     FillPlan local;
     FillPlan& plan = fill ? *fill : local;
     if (plan.radius != options.fill_radius_m || plan.category_in != category) {
-      plan = PlanFill(grid, options.fill_radius_m, category);
+      plan = PlanFill(grid, options.fill_radius_m, options.observation.plane_tolerance_m, category);
     }
     ApplyFill(plan, &res);
     category = plan.category_out;

@@ -47,7 +47,9 @@ struct ObservationOptions {
   // When the 2x2 footprint fails, use the nearest pixel alone if its own corners pass (more
   // points observed near edges, but noisier there: off by default).
   bool nearest_pixel_fallback = false;
-  double plane_tolerance_m = 0.05;  // distance of a corner's hit from the point's plane
+  // How far from a point's plane a corner's hit may be and still be on it; the albedo fill
+  // (AlbedoOptions::fill_radius_m) takes the same plane test for its neighbours.
+  double plane_tolerance_m = 0.05;
   void Validate() const;
 };
 
@@ -92,6 +94,12 @@ struct AlbedoOptions {
   double huber_k = 1.345;   // in units of the robust scale
   double min_scale = 0.01;  // floor on the relative residual scale (1%)
   int irls_iterations = 8;
+  // The reweighting stops early once no observation's robust weight changes by more than this.
+  double irls_tolerance = 1e-4;
+  // Each observation's error is relative, sigma = pi I, but at least this fraction of the
+  // point's mean pi I in the channel (a nearly black observation would otherwise weigh
+  // without bound).
+  double relative_error_floor = 0.05;
   // §4.1: albedo -> interreflection -> albedo ..., at most this many times, stopping once the
   // albedos change by less than outer_tolerance (mean relative change over the observed points;
   // 0: always outer_iterations). The ground and the walls light each other: on the demo the
