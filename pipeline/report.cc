@@ -683,11 +683,9 @@ void Sky(Page& p, const ReportRequest& r, const Inputs& in) {
         "No session given: the sky masks of session.json are not applied; every "
         "well-exposed pixel of the sky photos is compared.");
   // The sky's pixels as the solve took them (its recorded options; older scenes: defaults).
-  SolveConfig config = DefaultSolveConfig(false);
-  if (in.model && in.model->options.contains("config"))
-    config =
-        ApplySolveConfig(in.model->options["config"], config,
-                         (in.scene_dir / "scene.json").string() + ": provenance.options.config");
+  const SolveConfig config =
+      in.model ? SceneSolveConfig(*in.model, (in.scene_dir / "scene.json").string())
+               : DefaultSolveConfig(false);
   constexpr double kBin = 5;
   std::vector<PlotSeries> by_el, by_gamma;
   std::vector<std::vector<std::string>> stats_rows;

@@ -235,11 +235,7 @@ LoadedScene LoadScene(const fs::path& dir, const std::function<void(const std::s
   if (!fs::is_directory(dir, ec))
     throw Error(dir.string() + ": no such scene folder (rouen solve writes one)");
   r.scene = ReadScene(dir, &r.solved.mesh, &r.solved.grid);
-  // The options the solve used (a scene from before they were recorded: the defaults).
-  r.config = DefaultSolveConfig(false);
-  if (r.scene.options.contains("config"))
-    r.config = ApplySolveConfig(r.scene.options["config"], r.config,
-                                (dir / "scene.json").string() + ": provenance.options.config");
+  r.config = SceneSolveConfig(r.scene, (dir / "scene.json").string());
   r.solved.albedo_options = r.config.albedo;
   r.solved.surrounding_blocks = r.scene.surrounding_blocks;
   r.solved.grid_options = r.scene.grid_options;

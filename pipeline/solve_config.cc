@@ -543,4 +543,11 @@ SolveConfig SessionSolveConfig(const SessionInfo& info, const std::string& sessi
                           session_json + ": extra.solve_config");
 }
 
+SolveConfig SceneSolveConfig(const SceneModel& scene, const std::string& scene_json) {
+  const SolveConfig defaults = DefaultSolveConfig(false);
+  if (!scene.options.contains("config")) return defaults;
+  return ApplySolveConfig(scene.options.at("config"), defaults,
+                          scene_json + ": provenance.options.config");
+}
+
 }  // namespace rouen

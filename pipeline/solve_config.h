@@ -14,6 +14,7 @@
 #include "solve/grid.h"
 #include "solve/ground_apron.h"
 #include "solve/irradiance.h"
+#include "solve/scene.h"
 #include "solve/sky_fit.h"
 #include "solve/sky_segment.h"
 #include "solve/sun.h"
@@ -81,5 +82,9 @@ SolveConfig ReadSolveConfigFile(const std::string& path, const SolveConfig& base
 // `session_json`.
 SolveConfig SessionSolveConfig(const SessionInfo& info, const std::string& session_json,
                                bool quick);
+
+// The options a scene was solved with, as its scene.json records them (`scene_json`: its path,
+// for messages); a scene from before they were recorded: the defaults.
+SolveConfig SceneSolveConfig(const SceneModel& scene, const std::string& scene_json);
 
 }  // namespace rouen

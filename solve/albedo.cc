@@ -1076,6 +1076,7 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   const auto start = std::chrono::steady_clock::now();
   options.Validate();
   if (slots.empty()) throw Error("albedo: no time-of-day slots");
+  // Polled by every albedo solve (SolveWeighted), each lobe fit's blocks, each bounce.
   const Cancellation* cancel = options.irradiance.cancel;
   // Every slot at once: the vector flux's per-point geometry is shared by all of them. Exact
   // where photographed; the points no photo sees only light the others (interreflection).
@@ -1089,7 +1090,6 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   for (const Lighting& l : slots) shading.sun_dirs.push_back(l.sun_dir.normalized());
   AlbedoSummary retro_summary;
   FillPlan fill;  // made once, again only if the observed points change
-  ThrowIfCancelled(cancel);
   AlbedoResult res = SolveWeighted(grid, observations, irr, options, {}, &shading, &fill);
   if (options.fit_retro && options.outer_iterations == 1) {
     shading.retro =
@@ -1126,7 +1126,6 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
     }
     changes.push_back(count ? change / count : 0);
     res = std::move(next);
-    ThrowIfCancelled(cancel);
     if (changes.back() < options.outer_tolerance) break;
   }
   if (options.sun_lobe.fit) {
@@ -1155,15 +1154,12 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
       }
       return SolveWeighted(grid, diffuse, irr, options, slot_weight, &shading, &fill);
     };
-    ThrowIfCancelled(cancel);
     if (any(sun_lobes)) {
       res = resolve();
       res.sun_lobes = sun_lobes;
       if (options.sky_lobe.fit) {
-        ThrowIfCancelled(cancel);
         sky_lobes = FitSkyLobes(grid, cache, slots, observations, irr, res, shading, options,
                                 &lobe_summary);
-        ThrowIfCancelled(cancel);
         if (any(sky_lobes)) res = resolve();
       }
     }
