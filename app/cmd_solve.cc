@@ -108,6 +108,13 @@ void RegisterSolve(CLI::App& app) {
       "cells as the sky model times the panoramas' residual against it there, so the structure\n"
       "near the sun and the horizon reaches the walls; [environment] sky_detail = 1 makes the\n"
       "regions uniform, as the paper's map.\n"
+      "A glossy block's sun lobe (§4.2.2) is eq. 13's; [albedo.sun_lobe] model = \"microfacet\"\n"
+      "fits a microfacet lobe instead (GGX with a dielectric's Fresnel: the glint of a slate or\n"
+      "glazed roof seen near grazing), \"auto\" both, keeping the lower cost per block; with\n"
+      "ground-level panoramas use it with [ground_field]. The sky lobe is the same lobe (one\n"
+      "material) unless the sky's reflection in the photos contradicts it: then the sun lobe is\n"
+      "fitted again among those the sky allows ([albedo.sky_lobe] source = \"fit\": the paper's\n"
+      "own sky lobe, §4.2.1).\n"
       "A key rouen does not know is an error, not a silent default.\n"
       "Example: rouen solve s --out s.scene --holdout-slot 2");
   c->add_option("session", a->session, "Session folder (from rouen capture or rouen import)");

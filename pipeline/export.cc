@@ -181,7 +181,8 @@ std::string EncodeGlb(const Mesh& mesh, const SurfaceGrid& grid, const AlbedoRes
                              {"retro", BlockRetro(albedo.retro, b)},
                              {"frame", "glTF (x, y, z) = ENU (east, up, -north), metres"}};
     // §4.2: the block's lobes of the sun and of the sky and environment, eq. 13 (f_s = rho_s
-    // [-kappa (u.v - u_z v_z) + u_z v_z]^n in the face's frame, 1/sr), where it has them.
+    // [-kappa (u.v - u_z v_z) + u_z v_z]^n in the face's frame, 1/sr) or the microfacet lobe
+    // (solve/specular.h), where it has them.
     for (const auto& [key, lobes] :
          {std::pair{"sun_lobe", &albedo.sun_lobes}, std::pair{"sky_lobe", &albedo.sky_lobes}}) {
       const SpecularLobe lobe = BlockLobe(*lobes, b);
@@ -189,7 +190,10 @@ std::string EncodeGlb(const Mesh& mesh, const SurfaceGrid& grid, const AlbedoRes
       extras[key] = {{"rho_s", {lobe.rho_s[0], lobe.rho_s[1], lobe.rho_s[2]}},
                      {"kappa", lobe.kappa},
                      {"n", lobe.n},
-                     {"model", "Yu & Malik 1998 eq. 13, isotropic, Cz = 1"}};
+                     {"model", lobe.model == LobeModel::kMicrofacet
+                                   ? "microfacet: GGX, Smith G, Schlick F0 0.04, alpha^2 = "
+                                     "2 / (n + 2), rho_s at normal incidence"
+                                   : "Yu & Malik 1998 eq. 13, isotropic, Cz = 1"}};
     }
     nlohmann::json material = {{"name", name}, {"doubleSided", false}};
     nlohmann::json pbr = {{"metallicFactor", 0.0}, {"roughnessFactor", 1.0}};

@@ -68,9 +68,7 @@ std::string LobeText(const std::vector<SpecularLobe>& lobes, const std::vector<d
     cost = text;
   }
   if (l.IsZero()) return "none" + cost;
-  const std::string text = Formatted("%.3g/%.3g/%.3g, kappa %.2f, n %.0f", l.rho_s[0], l.rho_s[1],
-                                     l.rho_s[2], l.kappa, l.n);
-  return text + cost;
+  return l.Text() + cost;
 }
 
 std::string Rgb(const Eigen::Vector3d& v, int digits = 4) {

@@ -875,9 +875,7 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
       if (l.IsZero()) {
         line << " none";
       } else {
-        const std::string text = Formatted(" rho_s %.3g,%.3g,%.3g kappa %.2f n %.0f", l.rho_s[0],
-                                           l.rho_s[1], l.rho_s[2], l.kappa, l.n);
-        line << text;
+        line << " " << l.Text();
       }
       if (b < samples.size() && samples[b] > 0 && b < cost0.size() && b < cost1.size()) {
         line << " (" << samples[b] << " samples, cost " << std::fixed << std::setprecision(0)

@@ -133,6 +133,12 @@ const std::vector<std::pair<const char*, GridSubdivision>> kSubdivisions = {
     {"longest_edge", GridSubdivision::kLongestEdge},
     {"equivalent_area", GridSubdivision::kEquivalentArea}};
 
+const std::vector<std::pair<const char*, std::optional<LobeModel>>> kLobeModels = {
+    {"auto", std::nullopt},
+    {"lafortune", LobeModel::kLafortune},
+    {"microfacet", LobeModel::kMicrofacet}};
+const std::vector<std::pair<const char*, SkyLobeOptions::Source>> kSkyLobeSources = {
+    {"sun", SkyLobeOptions::Source::kSun}, {"fit", SkyLobeOptions::Source::kFit}};
 const std::vector<std::pair<const char*, ResponseMethod>> kResponseMethods = {
     {"debevec", ResponseMethod::kDebevecMalik},
     {"robertson", ResponseMethod::kRobertson},
@@ -286,6 +292,7 @@ json SolveConfigJson(const SolveConfig& c) {
             {"retro_min_gain", a.retro_min_gain},
             {"sun_lobe",
              {{"fit", a.sun_lobe.fit},
+              {"model", NameOf(a.sun_lobe.model, kLobeModels)},
               {"min_samples", a.sun_lobe.min_samples},
               {"max_samples", a.sun_lobe.max_samples},
               {"min_gain", a.sun_lobe.min_gain},
@@ -294,10 +301,12 @@ json SolveConfigJson(const SolveConfig& c) {
               {"simplex_iterations", a.sun_lobe.simplex_iterations}}},
             {"sky_lobe",
              {{"fit", a.sky_lobe.fit},
+              {"source", NameOf(a.sky_lobe.source, kSkyLobeSources)},
               {"min_samples", a.sky_lobe.min_samples},
               {"max_samples", a.sky_lobe.max_samples},
               {"min_gain", a.sky_lobe.min_gain},
-              {"max_iterations", a.sky_lobe.max_iterations}}},
+              {"max_iterations", a.sky_lobe.max_iterations},
+              {"mirror_samples", a.sky_lobe.mirror_samples}}},
             {"observation",
              {{"margin_px", ob.margin_px},
               {"occlusion_tolerance", ob.occlusion_tolerance},
@@ -481,6 +490,7 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
       Fields g(*o, where, "albedo.sun_lobe");
       SunLobeOptions& l = a.sun_lobe;
       g.Bool("fit", &l.fit);
+      g.Enum("model", &l.model, kLobeModels);
       g.Int("min_samples", &l.min_samples, 1, 1 << 30);
       g.Int("max_samples", &l.max_samples, 1, 1 << 30);
       g.Number("min_gain", &l.min_gain, 0, 1);
@@ -493,10 +503,12 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
       Fields g(*o, where, "albedo.sky_lobe");
       SkyLobeOptions& l = a.sky_lobe;
       g.Bool("fit", &l.fit);
+      g.Enum("source", &l.source, kSkyLobeSources);
       g.Int("min_samples", &l.min_samples, 1, 1 << 30);
       g.Int("max_samples", &l.max_samples, 1, 1 << 30);
       g.Number("min_gain", &l.min_gain, 0, 1);
       g.Int("max_iterations", &l.max_iterations, 1, 10000);
+      g.Int("mirror_samples", &l.mirror_samples, 0, 4096);
       g.Finish();
     }
     if (const json* o = f.Table("observation")) {

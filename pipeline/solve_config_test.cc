@@ -42,6 +42,9 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   c.sky_segment.min_relative_blue_ratio = 0.4;
   c.albedo.irls_tolerance = 1e-3;
   c.albedo.relative_error_floor = 0.1;
+  c.albedo.sun_lobe.model = LobeModel::kMicrofacet;  // not the default
+  c.albedo.sky_lobe.source = SkyLobeOptions::Source::kFit;
+  c.albedo.sky_lobe.mirror_samples = 16;
   c.response.method = ResponseMethod::kRobertson;
   c.response.samples_per_bracket = 400;
   c.merge.ghost_removal = true;
@@ -57,6 +60,13 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   EXPECT_EQ(back.sky_samples.seed, 7u);
   EXPECT_EQ(back.sky_segment.min_relative_blue_ratio, 0.4);
   EXPECT_EQ(back.albedo.relative_error_floor, 0.1);
+  EXPECT_EQ(back.albedo.sun_lobe.model, LobeModel::kMicrofacet);
+  EXPECT_EQ(back.albedo.sky_lobe.source, SkyLobeOptions::Source::kFit);
+  EXPECT_EQ(back.albedo.sky_lobe.mirror_samples, 16);
+  EXPECT_EQ(DefaultSolveConfig(false).albedo.sun_lobe.model, LobeModel::kLafortune);
+  c.albedo.sun_lobe.model = std::nullopt;  // "auto": both fitted
+  EXPECT_FALSE(ApplySolveConfig(SolveConfigJson(c), DefaultSolveConfig(false), "x")
+                   .albedo.sun_lobe.model.has_value());
   EXPECT_EQ(back.response.method, ResponseMethod::kRobertson);
   EXPECT_EQ(back.response.samples_per_bracket, 400);
   EXPECT_TRUE(back.merge.ghost_removal);
@@ -163,6 +173,12 @@ TEST(SolveConfigTest, StrictKeysTypesAndRanges) {
             std::string::npos);
   EXPECT_NE(ErrorOf(json::parse(R"({"albedo": {"relative_error_floor": 2}})"))
                 .find("albedo.relative_error_floor must be a number within 0..1"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(json::parse(R"({"albedo": {"sun_lobe": {"model": "ggx"}}})"))
+                .find("albedo.sun_lobe.model must be one of auto, lafortune, microfacet"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(json::parse(R"({"albedo": {"sky_lobe": {"source": "paper"}}})"))
+                .find("albedo.sky_lobe.source must be one of sun, fit"),
             std::string::npos);
   EXPECT_NE(ErrorOf(json::parse(R"({"response": {"method": "debevec-malik"}})"))
                 .find("response.method must be one of debevec, robertson, mitsunaga"),

@@ -464,7 +464,8 @@ ViewerSummary WriteViewer(const LoadedScene& scene, const fs::path& out_arg,
   }
   // The mesh: three vertices per triangle, 17 floats each: position (3), normal (3), texture
   // coordinates (2, 0..1 from the atlas's top-left; -1 without albedo), retro, the sun lobe's
-  // rho_s (3), kappa and exponent, the block, and the shadow atlas's texture coordinates (2).
+  // rho_s (3), kappa (-1 for a microfacet lobe) and exponent, the block, and the shadow atlas's
+  // texture coordinates (2).
   const Mesh& mesh = solved.mesh;
   std::vector<float> verts;
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY), hi = -lo;
@@ -483,23 +484,24 @@ ViewerSummary WriteViewer(const LoadedScene& scene, const fs::path& out_arg,
       const Eigen::Vector2d tx = atlas.Texel(t, corners[k][0], corners[k][1]);
       const Eigen::Vector2d sx = shadow.Texel(t, corners[k][0], corners[k][1]);
       const bool textured = tx.x() >= 0;
-      const float vals[17] = {static_cast<float>(p.x()),
-                              static_cast<float>(p.y()),
-                              static_cast<float>(p.z()),
-                              static_cast<float>(nrm.x()),
-                              static_cast<float>(nrm.y()),
-                              static_cast<float>(nrm.z()),
-                              textured ? static_cast<float>(tx.x() / atlas.width) : -1.f,
-                              textured ? static_cast<float>(tx.y() / atlas.height) : -1.f,
-                              static_cast<float>(retro),
-                              static_cast<float>(lobe.rho_s.x()),
-                              static_cast<float>(lobe.rho_s.y()),
-                              static_cast<float>(lobe.rho_s.z()),
-                              static_cast<float>(lobe.kappa),
-                              static_cast<float>(lobe.n),
-                              static_cast<float>(block),
-                              textured ? static_cast<float>(sx.x() / shadow.width) : -1.f,
-                              textured ? static_cast<float>(sx.y() / shadow.height) : -1.f};
+      const float vals[17] = {
+          static_cast<float>(p.x()),
+          static_cast<float>(p.y()),
+          static_cast<float>(p.z()),
+          static_cast<float>(nrm.x()),
+          static_cast<float>(nrm.y()),
+          static_cast<float>(nrm.z()),
+          textured ? static_cast<float>(tx.x() / atlas.width) : -1.f,
+          textured ? static_cast<float>(tx.y() / atlas.height) : -1.f,
+          static_cast<float>(retro),
+          static_cast<float>(lobe.rho_s.x()),
+          static_cast<float>(lobe.rho_s.y()),
+          static_cast<float>(lobe.rho_s.z()),
+          lobe.model == LobeModel::kMicrofacet ? -1.f : static_cast<float>(lobe.kappa),
+          static_cast<float>(lobe.n),
+          static_cast<float>(block),
+          textured ? static_cast<float>(sx.x() / shadow.width) : -1.f,
+          textured ? static_cast<float>(sx.y() / shadow.height) : -1.f};
       for (float f : vals) {
         if (!std::isfinite(f)) throw Error("viewer: a vertex value is not finite");
         verts.push_back(f);

@@ -112,10 +112,21 @@ float ambientRetroFactor(float retro, vec3 n, vec3 v) {
   float ea2sl = retro * retro * (11.0 * (1.0 - c * c) / 504.0 + c * c / 252.0 + c / 84.0 + 1.0 / 84.0);
   return max(0.0, 1.0 + easl + sv * (ea + ea2sl));
 }
-// solve/specular.h SpecularLobe::Shape (eq. 13, Cz = 1, Cxy = -kappa).
+// solve/specular.h LobeShape: eq. 13 (Cz = 1, Cxy = -kappa), or the microfacet lobe where
+// kappa is sent as -1.
 float lobeShape(vec3 n, vec3 u, vec3 v, float kappa, float e) {
   float un = dot(u, n), vn = dot(v, n);
   if (!(un > 0.0) || !(vn > 0.0)) return 0.0;
+  if (kappa < 0.0) {
+    float uv = dot(u, v), len = sqrt(max(2.0 + 2.0 * uv, 1e-12));
+    float nh = (un + vn) / len, vh = (1.0 + uv) / len;
+    if (!(nh > 0.0)) return 0.0;
+    float a2 = 2.0 / (e + 2.0), t = nh * nh * (a2 - 1.0) + 1.0;
+    float gu = 2.0 * un / (un + sqrt(a2 + (1.0 - a2) * un * un));
+    float gv = 2.0 * vn / (vn + sqrt(a2 + (1.0 - a2) * vn * vn));
+    float fresnel = 1.0 + 24.0 * pow(max(0.0, 1.0 - vh), 5.0);
+    return a2 * a2 / (t * t) * gu * gv * fresnel / (un * vn);
+  }
   float b = -kappa * (dot(u, v) - un * vn) + un * vn;
   return b > 0.0 ? pow(b, e) : 0.0;
 }

@@ -29,14 +29,15 @@ void CheckSizes(const SurfaceGrid& grid, const AlbedoResult& albedo, const SlotI
 }
 
 // §4.2.1: the sky and environment a block's lobe reflects towards v from surface point p:
-// samples x samples stratified directions drawn around v's mirror direction with the density
-// (n + 1) / 2 pi cos^n of the angle to it, each weighing f_s(u, v) L(u) cos(u) / density.
-// Directions the model blocks bring nothing (its light reflected through the lobe is left out).
+// samples x samples stratified directions, the first half drawn about v's mirror direction with
+// the lobe's MirrorExponent and the rest cosine-distributed about the normal, each weighing
+// f_s(u, v) L(u) by MixtureWeight. Directions the model blocks bring nothing (its light
+// reflected through the lobe is left out).
 Eigen::Vector3d SkyLobeLight(const SpecularLobe& lobe, const Eigen::Vector3d& n,
                              const Eigen::Vector3d& v, const Eigen::Vector3d& p,
                              const Lighting& lighting, const RayCaster& model, int samples) {
   const Eigen::Vector3d m = 2 * v.dot(n) * n - v;
-  const Eigen::Vector3d t1 = m.unitOrthogonal(), t2 = m.cross(t1);
+  const double e = lobe.MirrorExponent();
   uint64_t seed = 0;
   for (int c = 0; c < 3; ++c) {
     const float f = static_cast<float>(v[c]);
@@ -44,23 +45,24 @@ Eigen::Vector3d SkyLobeLight(const SpecularLobe& lobe, const Eigen::Vector3d& n,
     std::memcpy(&bits, &f, sizeof bits);
     seed = MixHash(seed ^ bits);
   }
+  const int total = samples * samples, mirror = (total + 1) / 2, cosine = total - mirror;
   Eigen::Vector3d sum = Eigen::Vector3d::Zero();
   for (int a = 0; a < samples; ++a) {
     for (int b = 0; b < samples; ++b) {
-      const uint64_t h = MixHash(seed + static_cast<uint64_t>(a * samples + b));
-      const double u1 = (a + HashUniformHigh(h)) / samples, u2 = (b + HashUniformLow(h)) / samples;
-      const double cos_a = std::pow(u1, 1.0 / (lobe.n + 1));
-      const double sin_a = std::sqrt(std::max(0.0, 1 - cos_a * cos_a));
-      const double phi = 2 * kPi * u2;
-      const Eigen::Vector3d u = cos_a * m + sin_a * (std::cos(phi) * t1 + std::sin(phi) * t2);
-      const double cu = u.dot(n);
-      if (!(cu > 0) || model.Occluded(p, u, 0.0)) continue;
-      const double density = (lobe.n + 1) / (2 * kPi) * std::pow(cos_a, lobe.n);
-      if (!(density > 0)) continue;
-      sum += lobe.Eval(n, u, v).cwiseProduct(lighting.EscapedRadiance(u, p.z())) * (cu / density);
+      const int k = a * samples + b;
+      const uint64_t h = MixHash(seed + static_cast<uint64_t>(k));
+      // Each half stratified on its own: draw k of a half takes stratum k of `half` rows.
+      const bool about_mirror = k < mirror;
+      const int j = about_mirror ? k : k - mirror, half = about_mirror ? mirror : cosine;
+      const double u1 = (j + HashUniformHigh(h)) / half, u2 = HashUniformLow(h);
+      const Eigen::Vector3d u =
+          about_mirror ? DrawAboutAxis(m, e, u1, u2) : DrawAboutAxis(n, 1, u1, u2);
+      const double w = MixtureWeight(n, m, u, e, cosine, mirror);
+      if (!(w > 0) || model.Occluded(p, u, 0.0)) continue;
+      sum += lobe.Eval(n, u, v).cwiseProduct(lighting.EscapedRadiance(u, p.z())) * w;
     }
   }
-  return sum / (samples * samples);
+  return sum;
 }
 
 }  // namespace

@@ -248,6 +248,30 @@ TEST(RenderTest, TheSkyLobeReflectsTheSky) {
     // 16 stratified samples of a weight cos(theta) within 0.75..1 for most of them: 2%.
     EXPECT_NEAR(glossy.at(4, 4, c) - matte.at(4, 4, c), want, 0.02 * want) << c;
   }
+  // The microfacet lobe under the same uniform sky: rho_s times its integral against the
+  // cosine, by a fine quadrature over the hemisphere, from 256 directions of the render's
+  // mixture (half about the mirror, half about the normal; stratified, within 1%).
+  lobe.model = LobeModel::kMicrofacet;
+  lobe.n = 48;  // alpha 0.2
+  f.albedo.sky_lobes = {lobe};
+  o.sky_lobe_samples = 16;
+  const Image micro = RenderView(f.mesh, f.grid, *f.rc, f.albedo, f.lighting, f.irr, k, pose, o);
+  const Eigen::Vector3d up(0, 0, 1);
+  double integral = 0;
+  constexpr int kTheta = 2000, kPhi = 90;
+  for (int i = 0; i < kTheta; ++i) {
+    const double t = (i + 0.5) * (kPi / 2) / kTheta;
+    for (int j = 0; j < kPhi; ++j) {
+      const double p = (j + 0.5) * 2 * kPi / kPhi;
+      const Eigen::Vector3d u(std::sin(t) * std::cos(p), std::sin(t) * std::sin(p), std::cos(t));
+      integral += lobe.Shape(up, u, up) * std::cos(t) * std::sin(t);
+    }
+  }
+  integral *= (kPi / 2 / kTheta) * (2 * kPi / kPhi);
+  for (int c = 0; c < 3; ++c) {
+    const double want = lobe.rho_s[c] * integral;
+    EXPECT_NEAR(micro.at(4, 4, c) - matte.at(4, 4, c), want, 0.01 * want) << c;
+  }
   RenderOptions bad;
   bad.sky_lobe_samples = 0;
   EXPECT_THROW(bad.Validate(), Error);

@@ -4,6 +4,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -14,6 +15,7 @@
 
 #include "core/angles.h"
 #include "core/error.h"
+#include "core/hash_random.h"
 #include "core/stats.h"
 
 namespace rouen {
@@ -926,7 +928,8 @@ std::vector<SpecularLobe> FitSunLobes(const SurfaceGrid& grid,
                                       const std::vector<Observation>& observations,
                                       const std::vector<SlotIrradiance>& irradiance,
                                       const AlbedoResult& res, const SunShading& shading,
-                                      const AlbedoOptions& options, AlbedoSummary* summary) {
+                                      const AlbedoOptions& options, AlbedoSummary* summary,
+                                      std::vector<std::vector<LobeSample>>* block_samples) {
   int nblocks = 0;
   for (const auto& p : grid.points) nblocks = std::max(nblocks, p.block + 1);
   std::vector<std::vector<double>> rel(nblocks);
@@ -973,6 +976,7 @@ std::vector<SpecularLobe> FitSunLobes(const SurfaceGrid& grid,
     summary->lobe_cost_zero[b] = fit.cost_zero;
     summary->lobe_cost_fitted[b] = fit.cost;
   }
+  *block_samples = std::move(samples);
   return lobes;
 }
 
@@ -987,37 +991,71 @@ Eigen::Vector3d SunLobeLight(const SurfaceGrid& grid, const std::vector<Specular
       .cwiseProduct(irr.sun[ob.point]);
 }
 
-// The sky and environment of grid point i at a slot as pieces (§4.2.1): the hemisphere
-// cache's cosine-distributed directions, each bringing pi / K of the radiance it meets (the
-// escaped sky and environment, or the diffuse radiance of the grid point it hits).
+// The sky and environment of grid point i at a slot, seen from `view`, as pieces (§4.2.1):
+// the hemisphere cache's cosine-distributed directions and `mirror_count` more drawn about the
+// view's mirror direction with `lobe`'s MirrorExponent, each weighed by MixtureWeight (a lobe of
+// a few degrees falls between the cache's directions), bringing the radiance it meets: the
+// escaped sky and environment, or the diffuse radiance of the grid point it hits.
 std::vector<LightPiece> Pieces(const SurfaceGrid& grid, const HemisphereCache& cache,
-                               const Lighting& lighting, const SlotIrradiance& irr,
-                               const AlbedoResult& res, int i) {
+                               const RayCaster& model, const Lighting& lighting,
+                               const SlotIrradiance& irr, const AlbedoResult& res, int i,
+                               const Eigen::Vector3d& view, const SpecularLobe& lobe,
+                               int mirror_count) {
   const GridPoint& gp = grid.points[i];
+  const Eigen::Vector3d m = 2 * view.dot(gp.normal) * gp.normal - view;
+  const double e = lobe.MirrorExponent();
+  auto radiance = [&](const Eigen::Vector3d& d, int hit) -> Eigen::Vector3d {
+    if (hit == -1) return lighting.EscapedRadiance(d, gp.position.z());
+    return (res.rho_sun[hit].cwiseProduct(irr.sun[hit]) +
+            res.rho_se[hit].cwiseProduct(irr.se[hit])) /
+           kPi;
+  };
   std::vector<LightPiece> pieces;
-  const double w = kPi / cache.directions;
+  pieces.reserve(cache.directions + mirror_count);
+  auto add = [&](const Eigen::Vector3d& d, int hit) {
+    const double w = MixtureWeight(gp.normal, m, d, e, cache.directions, mirror_count);
+    if (w > 0) pieces.push_back({d.cast<float>(), (w * radiance(d, hit)).cast<float>()});
+  };
   for (int k = 0; k < cache.directions; ++k) {
     const int hit = cache.Hit(i, k);
-    if (hit == -2) continue;
-    const Eigen::Vector3d d = cache.Direction(gp, i, k);
-    const Eigen::Vector3d l = hit == -1
-                                  ? lighting.EscapedRadiance(d, gp.position.z())
-                                  : Eigen::Vector3d((res.rho_sun[hit].cwiseProduct(irr.sun[hit]) +
-                                                     res.rho_se[hit].cwiseProduct(irr.se[hit])) /
-                                                    kPi);
-    pieces.push_back({d.cast<float>(), (w * l).cast<float>()});
+    if (hit != -2) add(cache.Direction(gp, i, k), hit);
+  }
+  const int strata = static_cast<int>(std::ceil(std::sqrt(mirror_count)));
+  uint64_t seed = MixHash(static_cast<uint64_t>(i));
+  for (int c = 0; c < 3; ++c)
+    seed = MixHash(seed ^ std::bit_cast<uint32_t>(static_cast<float>(view[c])));
+  const Eigen::Vector3d origin = gp.position + model.surface_offset() * gp.normal;
+  for (int k = 0; k < mirror_count; ++k) {
+    const uint64_t h = MixHash(seed + static_cast<uint64_t>(k));
+    const double u1 = ((k / strata) + HashUniformHigh(h)) / strata;
+    const double u2 = ((k % strata) + HashUniformLow(h)) / strata;
+    const Eigen::Vector3d d = DrawAboutAxis(m, e, std::min(u1, 1.0), u2);
+    if (!(d.dot(gp.normal) > 0)) continue;
+    const RayHit h2 = model.Intersect(origin, d, 0.0);
+    int hit = -1;
+    if (h2.hit) {
+      hit = grid.NearestPoint(h2.triangle, h2.u, h2.v);
+      if (hit < 0 || grid.points[hit].normal.dot(d) >= 0) continue;  // a back face or no grid
+    }
+    add(d, hit);
   }
   return pieces;
 }
 
 // §4.2.1: the sky/environment lobe of each block with a sun lobe, from the residual of its
 // observations after the diffuse albedos and the sun lobe.
+// With the sky lobe taken from the sun's (SkyLobeOptions::Source::kSun), a sun lobe whose
+// reflection of the sky the observations contradict is fitted again from `sun_samples` among
+// the lobes they do not contradict (none when no lobe passes): *sun_lobes is updated.
 std::vector<SpecularLobe> FitSkyLobes(const SurfaceGrid& grid, const HemisphereCache& cache,
-                                      const std::vector<Lighting>& slots,
+                                      const RayCaster& model, const std::vector<Lighting>& slots,
                                       const std::vector<Observation>& observations,
                                       const std::vector<SlotIrradiance>& irradiance,
                                       const AlbedoResult& res, const SunShading& shading,
-                                      const AlbedoOptions& options, AlbedoSummary* summary) {
+                                      const AlbedoOptions& options,
+                                      const std::vector<std::vector<LobeSample>>& sun_samples,
+                                      std::vector<SpecularLobe>* sun_lobes,
+                                      AlbedoSummary* summary) {
   const int nblocks = static_cast<int>(res.sun_lobes.size());
   std::vector<SpecularLobe> lobes(nblocks);
   summary->sky_lobe_samples.assign(nblocks, 0);
@@ -1049,15 +1087,29 @@ std::vector<SpecularLobe> FitSkyLobes(const SurfaceGrid& grid, const HemisphereC
       SkyLobeSample& s = samples[k];
       s.normal = gp.normal;
       s.to_viewer = ob.view_dir.cast<double>();
-      s.pieces = Pieces(grid, cache, slots[ob.slot], irr, res, ob.point);
+      s.pieces = Pieces(grid, cache, model, slots[ob.slot], irr, res, ob.point, s.to_viewer,
+                        res.sun_lobes[b], options.sky_lobe.mirror_samples);
       const ShadingFactors f = FactorsOf(grid, ob, &shading);
       const Eigen::Vector3d sun_lobe = SunLobeLight(grid, res.sun_lobes, irr, shading, ob);
       for (int c = 0; c < 3; ++c) {
         s.residual[c] = ob.radiance[c] - Predicted(res, irr, ob, f, c) / kPi - sun_lobe[c];
         s.sigma[c] = scale * std::max<double>(ob.radiance[c], 1e-12);
+        s.diffuse_se[c] = res.rho_se[ob.point][c] * irr.se[ob.point][c] * f.se / kPi;
       }
     });
-    const LobeFit fit = FitSkyLobe(samples, options.sky_lobe, res.sun_lobes[b]);
+    LobeFit fit = FitSkyLobe(samples, options.sky_lobe, res.sun_lobes[b]);
+    if (options.sky_lobe.source == SkyLobeOptions::Source::kSun && !fit.kept &&
+        b < static_cast<int>(sun_samples.size())) {
+      // One material: the sun lobe that best explains the sunlit observations among those
+      // whose reflection of the sky these observations do not contradict.
+      const double limit = fit.cost_zero;
+      const LobeFit sun = FitSunLobe(sun_samples[b], options.sun_lobe, [&](const SpecularLobe& l) {
+        return SkyLobeCostRefittingDiffuse(samples, l) <= limit;
+      });
+      (*sun_lobes)[b] = sun.lobe;
+      summary->lobe_cost_fitted[b] = sun.cost;
+      if (sun.kept) fit = FitSkyLobe(samples, options.sky_lobe, sun.lobe);
+    }
     lobes[b] = fit.lobe;
     summary->sky_lobe_samples[b] = fit.samples;
     summary->sky_lobe_cost_zero[b] = fit.cost_zero;
@@ -1130,8 +1182,9 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   }
   if (options.sun_lobe.fit) {
     AlbedoSummary lobe_summary;
+    std::vector<std::vector<LobeSample>> sun_samples;
     std::vector<SpecularLobe> sun_lobes =
-        FitSunLobes(grid, observations, irr, res, shading, options, &lobe_summary);
+        FitSunLobes(grid, observations, irr, res, shading, options, &lobe_summary, &sun_samples);
     std::vector<SpecularLobe> sky_lobes;
     auto any = [](const std::vector<SpecularLobe>& l) {
       return std::any_of(l.begin(), l.end(), [](const auto& x) { return !x.IsZero(); });
@@ -1146,7 +1199,8 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
         const SpecularLobe sky = BlockLobe(sky_lobes, gp.block);
         if (!sky.IsZero()) {
           for (const LightPiece& p :
-               Pieces(grid, cache, slots[ob.slot], irr[ob.slot], res, ob.point))
+               Pieces(grid, cache, model, slots[ob.slot], irr[ob.slot], res, ob.point,
+                      ob.view_dir.cast<double>(), sky, options.sky_lobe.mirror_samples))
             lobe_light += sky.Eval(gp.normal, p.to_light.cast<double>(), ob.view_dir.cast<double>())
                               .cwiseProduct(p.irradiance.cast<double>());
         }
@@ -1158,9 +1212,17 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
       res = resolve();
       res.sun_lobes = sun_lobes;
       if (options.sky_lobe.fit) {
-        sky_lobes = FitSkyLobes(grid, cache, slots, observations, irr, res, shading, options,
-                                &lobe_summary);
-        if (any(sky_lobes)) res = resolve();
+        const std::vector<SpecularLobe> fitted = sun_lobes;
+        sky_lobes = FitSkyLobes(grid, cache, model, slots, observations, irr, res, shading, options,
+                                sun_samples, &sun_lobes, &lobe_summary);
+        // The albedos again where the lobes changed: a sky lobe, or a sun lobe fitted again.
+        bool changed = false;
+        for (size_t b = 0; b < sun_lobes.size(); ++b) {
+          const SpecularLobe &l = sun_lobes[b], &f = fitted[b];
+          changed |= l.rho_s != f.rho_s || l.n != f.n || l.kappa != f.kappa || l.model != f.model;
+        }
+        if (any(sky_lobes) || changed) res = resolve();
+        res.sun_lobes = sun_lobes;
       }
     }
     res.sun_lobes = std::move(sun_lobes);

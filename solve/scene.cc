@@ -60,8 +60,10 @@ nlohmann::json LobesJson(const std::vector<SpecularLobe>& lobes, const Mesh& m) 
   for (int b = 0; b < static_cast<int>(m.block_names.size()); ++b) {
     const SpecularLobe l = BlockLobe(lobes, b);
     if (l.IsZero()) continue;
-    out[m.block_names[b]] = {
-        {"rho_s", {l.rho_s[0], l.rho_s[1], l.rho_s[2]}}, {"kappa", l.kappa}, {"n", l.n}};
+    out[m.block_names[b]] = {{"rho_s", {l.rho_s[0], l.rho_s[1], l.rho_s[2]}},
+                             {"kappa", l.kappa},
+                             {"n", l.n},
+                             {"model", LobeModelName(l.model)}};
   }
   return out;
 }
@@ -85,6 +87,9 @@ std::vector<SpecularLobe> ReadLobes(const nlohmann::json& j, const Mesh& mesh,
       for (int c = 0; c < 3; ++c) l.rho_s[c] = rho[c].get<double>();
       l.kappa = value.at("kappa").get<double>();
       l.n = value.at("n").get<double>();
+      // Scenes written before the microfacet lobe have eq. 13's.
+      if (value.contains("model"))
+        l.model = ParseLobeModel(value.at("model").get<std::string>(), "model");
     } catch (const nlohmann::json::exception& e) {
       throw Error(what + ": " + e.what());
     } catch (const Error& e) {

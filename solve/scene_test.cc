@@ -68,6 +68,8 @@ SceneModel MakeScene(const Mesh& mesh, SurfaceGrid* grid_out) {
   s.albedo.sun_lobes[1].n = 35.5;
   s.albedo.sky_lobes = s.albedo.sun_lobes;
   s.albedo.sky_lobes[1].n = 12;
+  s.albedo.sky_lobes[1].kappa = 1;
+  s.albedo.sky_lobes[1].model = LobeModel::kMicrofacet;
   s.albedo.summary.points = grid.size();
   s.albedo.summary.residual_rms_rel = 0.0123;
   s.albedo.summary.residual_p90_rel = 0.0456;
@@ -131,6 +133,8 @@ TEST(SceneTest, RoundTrip) {
   ASSERT_EQ(r.albedo.sky_lobes.size(), 2u);
   EXPECT_TRUE(r.albedo.sky_lobes[0].IsZero());
   EXPECT_EQ(r.albedo.sky_lobes[1].n, 12);
+  EXPECT_EQ(r.albedo.sun_lobes[1].model, LobeModel::kLafortune);
+  EXPECT_EQ(r.albedo.sky_lobes[1].model, LobeModel::kMicrofacet);
   EXPECT_EQ(r.albedo.sky_lobes[1].rho_s, s.albedo.sky_lobes[1].rho_s);
   // Views keep their cameras exactly (JSON doubles round-trip).
   ASSERT_EQ(r.views.size(), 1u);
@@ -211,14 +215,19 @@ TEST(SceneTest, BadSunLobeIsRefusedNamingTheBlock) {
   WriteScene(dir, MakeScene(mesh, nullptr), &mesh);
   const std::string text = ReadFileToString(dir / "scene.json");
   const std::string ok = R"("rho_s": [0.1, 0.1, 0.1], "kappa": 1, "n": 10)";
-  for (const auto& [bad, expect] : std::vector<std::pair<std::string, std::string>>{
-           {"{\"tower\": {" + ok + "}}", "no block 'tower'"},
-           {R"({"shaft": {"rho_s": [0.1, 0.1], "kappa": 1, "n": 10}})", "sun_lobes.shaft"},
-           {R"({"shaft": {"rho_s": [0.1, 0.1, 0.1], "kappa": 1, "n": 0}})", "exponent"},
-           {R"({"shaft": {"rho_s": [0.1, 0.1, -1], "kappa": 1, "n": 10}})", "rho_s"},
-           {R"({"shaft": {"rho_s": [9, 9, 9], "kappa": 1, "n": 10}})", "more light"},
-           {R"({"shaft": {"rho_s": [0.1, 0.1, 0.1], "n": 10}})", "kappa"},
-           {"[1]", "albedo.sun_lobes"}}) {
+  for (
+      const auto& [bad, expect] : std::vector<std::pair<std::string, std::string>>{
+          {"{\"tower\": {" + ok + "}}", "no block 'tower'"},
+          {R"({"shaft": {"rho_s": [0.1, 0.1], "kappa": 1, "n": 10}})", "sun_lobes.shaft"},
+          {R"({"shaft": {"rho_s": [0.1, 0.1, 0.1], "kappa": 1, "n": 0}})", "exponent"},
+          {R"({"shaft": {"rho_s": [0.1, 0.1, -1], "kappa": 1, "n": 10}})", "rho_s"},
+          {R"({"shaft": {"rho_s": [9, 9, 9], "kappa": 1, "n": 10}})", "more light"},
+          {R"({"shaft": {"rho_s": [0.1, 0.1, 0.1], "n": 10}})", "kappa"},
+          {R"({"shaft": {"rho_s": [0.1, 0.1, 0.1], "kappa": 1, "n": 10, "model": "phong"}})",
+           "unknown lobe model 'phong'"},
+          {R"({"shaft": {"rho_s": [0.1, 0.1, 0.1], "kappa": 1.2, "n": 10, "model": "microfacet"}})",
+           "microfacet lobe has kappa 1"},
+          {"[1]", "albedo.sun_lobes"}}) {
     nlohmann::json j = nlohmann::json::parse(text);
     j["albedo"]["sun_lobes"] = nlohmann::json::parse(bad);
     // The sky lobes are read the same way.

@@ -3,22 +3,42 @@
 #include <ceres/ceres.h>
 #include <tbb/parallel_for.h>
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
 
 #include "core/error.h"
+#include "core/text.h"
 
 namespace rouen {
 
 double SpecularLobe::Shape(const Eigen::Vector3d& normal, const Eigen::Vector3d& u,
                            const Eigen::Vector3d& v) const {
-  const double un = u.dot(normal), vn = v.dot(normal);
-  if (!(un > 0) || !(vn > 0)) return 0;
-  // Cxy (u_x v_x + u_y v_y) + Cz u_z v_z with Cxy = -kappa, Cz = 1 (eq. 13).
-  const double bracket = -kappa * (u.dot(v) - un * vn) + un * vn;
-  return bracket > 0 ? std::pow(bracket, n) : 0;
+  return LobeShape(model, kappa, n, u.dot(normal), v.dot(normal), u.dot(v));
+}
+
+double SpecularLobe::MirrorExponent() const {
+  return model == LobeModel::kMicrofacet ? (n + 2) / 8 : n;
+}
+
+std::string SpecularLobe::Text() const {
+  if (model == LobeModel::kMicrofacet)
+    return Formatted("microfacet rho_s %.3g/%.3g/%.3g, alpha %.3f", rho_s[0], rho_s[1], rho_s[2],
+                     std::sqrt(2 / (n + 2)));
+  return Formatted("rho_s %.3g/%.3g/%.3g, kappa %.2f, n %.0f", rho_s[0], rho_s[1], rho_s[2], kappa,
+                   n);
+}
+
+const char* LobeModelName(LobeModel model) {
+  return model == LobeModel::kMicrofacet ? "microfacet" : "lafortune";
+}
+
+LobeModel ParseLobeModel(const std::string& name, const std::string& what) {
+  if (name == "lafortune") return LobeModel::kLafortune;
+  if (name == "microfacet") return LobeModel::kMicrofacet;
+  throw Error(what + ": unknown lobe model '" + name + "' (lafortune or microfacet)");
 }
 
 void SpecularLobe::Validate(const std::string& what) const {
@@ -27,24 +47,46 @@ void SpecularLobe::Validate(const std::string& what) const {
   if (!(kappa >= kLobeKappaMin && kappa <= kLobeKappaMax))
     throw Error(what + ": specular kappa " + std::to_string(kappa) + " outside [" +
                 std::to_string(kLobeKappaMin) + ", " + std::to_string(kLobeKappaMax) + "]");
+  if (model == LobeModel::kMicrofacet && kappa != 1)
+    throw Error(what + ": a microfacet lobe has kappa 1");
   if (!(n >= kLobeExponentMin && n <= kLobeExponentMax))
     throw Error(what + ": specular exponent " + std::to_string(n) + " outside [" +
                 std::to_string(kLobeExponentMin) + ", " + std::to_string(kLobeExponentMax) + "]");
-  if (rho_s.maxCoeff() > MaxLobeRho(n) * (1 + 1e-9))
-    throw Error(what +
-                ": specular rho_s above (n + 2) / 2 pi: the lobe would reflect more light "
-                "than it receives");
+  if (rho_s.maxCoeff() > MaxLobeRho(n, model) * (1 + 1e-9))
+    throw Error(what + ": specular rho_s above " +
+                (model == LobeModel::kMicrofacet ? "(n + 2) / 8 pi" : "(n + 2) / 2 pi") +
+                ": the lobe would reflect more light than it receives");
   if (kappa > 1 && n * std::log(kappa) > std::log(kLobeMaxGrazingGain) * (1 + 1e-9))
     throw Error(what + ": specular kappa^n above " + std::to_string(kLobeMaxGrazingGain));
 }
 
-double MaxLobeRho(double n) { return (n + 2) / (2 * M_PI); }
+double MaxLobeRho(double n, LobeModel model) {
+  return (n + 2) / (model == LobeModel::kMicrofacet ? 8 * M_PI : 2 * M_PI);
+}
 
 double PaperRho(double z) {
   // tanh(|z| / 4) through one exp, as eq. 15 writes it (glibc's tanh costs several exp: the
   // sun lobe's global search spent a sixth of a demo solve in it).
   const double e = std::exp(-0.5 * std::abs(z));
   return (1 - e) / (1 + e);
+}
+
+Eigen::Vector3d DrawAboutAxis(const Eigen::Vector3d& axis, double exponent, double u1, double u2) {
+  const Eigen::Vector3d t1 = axis.unitOrthogonal(), t2 = axis.cross(t1);
+  const double cos_a = std::pow(u1, 1.0 / (exponent + 1));
+  const double sin_a = std::sqrt(std::max(0.0, 1 - cos_a * cos_a));
+  const double phi = 2 * M_PI * u2;
+  return cos_a * axis + sin_a * (std::cos(phi) * t1 + std::sin(phi) * t2);
+}
+
+double MixtureWeight(const Eigen::Vector3d& n, const Eigen::Vector3d& m, const Eigen::Vector3d& u,
+                     double exponent, int cosine_count, int mirror_count) {
+  const double cu = u.dot(n);
+  if (!(cu > 0)) return 0;
+  const double cm = std::max(0.0, u.dot(m));
+  const double density = cosine_count * cu / M_PI +
+                         mirror_count * (exponent + 1) / (2 * M_PI) * std::pow(cm, exponent);
+  return density > 0 ? cu / density : 0;
 }
 
 void SunLobeOptions::Validate() const {
@@ -58,11 +100,10 @@ void SunLobeOptions::Validate() const {
 
 namespace {
 
-// A sample reduced to what the cost needs: the bracket's parts u.v and (u.n)(v.n) (eq. 13),
-// and per channel E / sigma and residual / sigma.
+// A sample reduced to what the cost needs: u.n, v.n and u.v, and per channel E / sigma and
+// residual / sigma.
 struct Term {
-  double uv = 0, unvn = 0;
-  bool above = false;  // u and v above the surface
+  double un = 0, vn = 0, uv = 0;
   std::array<double, 3> e{}, r{};
 };
 
@@ -71,10 +112,9 @@ std::vector<Term> Terms(const std::vector<LobeSample>& samples) {
   t.reserve(samples.size());
   for (const LobeSample& s : samples) {
     Term q;
-    const double un = s.to_light.dot(s.normal), vn = s.to_viewer.dot(s.normal);
-    q.above = un > 0 && vn > 0;
+    q.un = s.to_light.dot(s.normal);
+    q.vn = s.to_viewer.dot(s.normal);
     q.uv = s.to_light.dot(s.to_viewer);
-    q.unvn = un * vn;
     for (int c = 0; c < 3; ++c) {
       q.e[c] = s.irradiance[c] / s.sigma[c];
       q.r[c] = s.residual[c] / s.sigma[c];
@@ -83,8 +123,6 @@ std::vector<Term> Terms(const std::vector<LobeSample>& samples) {
   }
   return t;
 }
-
-double Bracket(const Term& q, double kappa) { return -kappa * (q.uv - q.unvn) + q.unvn; }
 
 // For a lobe shape (kappa, n): each channel's best rho_s >= 0 and the whole cost. A term
 // rho(r - rho_s g) is concave in rho_s on each side of its zero r / g, so the 1-D cost is
@@ -96,21 +134,19 @@ struct ShapeFit {
 };
 
 ShapeFit FitShape(const std::vector<Term>& terms, const std::array<double, 3>& cost_zero,
-                  double kappa, double n) {
+                  LobeModel model, double kappa, double n) {
   constexpr size_t kAllZeros = 128, kQuantiles = 64, kNeighbours = 8;
   if (kappa > 1 && n * std::log(kappa) > std::log(kLobeMaxGrazingGain)) {
     return {Eigen::Vector3d::Zero(), std::numeric_limits<double>::infinity()};
   }
-  const double rho_max = MaxLobeRho(n);
+  const double rho_max = MaxLobeRho(n, model);
   std::vector<double> g;
   std::vector<int> idx;
   g.reserve(terms.size());
   idx.reserve(terms.size());
   for (size_t i = 0; i < terms.size(); ++i) {
-    if (!terms[i].above) continue;
-    const double b = Bracket(terms[i], kappa);
-    if (!(b > 0)) continue;
-    const double shape = std::pow(b, n);
+    const Term& q = terms[i];
+    const double shape = LobeShape(model, kappa, n, q.un, q.vn, q.uv);
     if (!(shape > 1e-9)) continue;
     g.push_back(shape);
     idx.push_back(static_cast<int>(i));
@@ -178,8 +214,17 @@ double SunLobeCost(const std::vector<LobeSample>& samples, const SpecularLobe& l
 }
 
 // §4.2.2, eq. 15: robust estimation of the sun lobe by a global search.
-LobeFit FitSunLobe(const std::vector<LobeSample>& all, const SunLobeOptions& options) {
+LobeFit FitSunLobe(const std::vector<LobeSample>& all, const SunLobeOptions& options,
+                   const std::function<bool(const SpecularLobe&)>& admissible) {
   options.Validate();
+  if (!options.model) {
+    SunLobeOptions one = options;
+    one.model = LobeModel::kLafortune;
+    const LobeFit lafortune = FitSunLobe(all, one, admissible);
+    one.model = LobeModel::kMicrofacet;
+    const LobeFit microfacet = FitSunLobe(all, one, admissible);
+    return microfacet.cost < lafortune.cost ? microfacet : lafortune;
+  }
   LobeFit out;
   // Only samples that can carry information: finite, lit, sigma > 0.
   std::vector<LobeSample> usable;
@@ -206,15 +251,31 @@ LobeFit FitSunLobe(const std::vector<LobeSample>& all, const SunLobeOptions& opt
 
   // The grid over kappa and log n.
   const double log_min = std::log(kLobeExponentMin), log_max = std::log(kLobeExponentMax);
-  const int nk = options.kappa_steps, nn = options.exponent_steps;
+  // The microfacet lobe has no kappa: the search is over log n alone.
+  const LobeModel model = *options.model;
+  const bool microfacet = model == LobeModel::kMicrofacet;
+  const int nk = microfacet ? 1 : options.kappa_steps, nn = options.exponent_steps;
+  const double kappa_lo = microfacet ? 1 : kLobeKappaMin, kappa_hi = microfacet ? 1 : kLobeKappaMax;
   auto kappa_at = [&](int k) {
     return nk == 1 ? 1.0 : kLobeKappaMin + (kLobeKappaMax - kLobeKappaMin) * k / (nk - 1);
+  };
+  // A shape's best rho_s and cost, infinite where `admissible` refuses the lobe.
+  auto fit_shape = [&](double kappa, double n) {
+    ShapeFit f = FitShape(terms, cost_zero, model, kappa, n);
+    if (admissible && !f.rho_s.isZero() && std::isfinite(f.cost)) {
+      SpecularLobe l;
+      l.rho_s = f.rho_s;
+      l.kappa = kappa;
+      l.n = n;
+      l.model = model;
+      if (!admissible(l)) f.cost = std::numeric_limits<double>::infinity();
+    }
+    return f;
   };
   std::vector<ShapeFit> grid(static_cast<size_t>(nk) * nn);
   tbb::parallel_for(0, nk * nn, [&](int i) {
     const int k = i / nn, j = i % nn;
-    grid[i] = FitShape(terms, cost_zero, kappa_at(k),
-                       std::exp(log_min + (log_max - log_min) * j / (nn - 1)));
+    grid[i] = fit_shape(kappa_at(k), std::exp(log_min + (log_max - log_min) * j / (nn - 1)));
   });
   int best_i = 0;
   for (int i = 1; i < nk * nn; ++i) {
@@ -224,14 +285,15 @@ LobeFit FitSunLobe(const std::vector<LobeSample>& all, const SunLobeOptions& opt
   // the parameters clamped to their ranges.
   using P = Eigen::Vector2d;
   auto clamp = [&](P p) {
-    return P(std::clamp(p[0], kLobeKappaMin, kLobeKappaMax), std::clamp(p[1], log_min, log_max));
+    return P(std::clamp(p[0], kappa_lo, kappa_hi), std::clamp(p[1], log_min, log_max));
   };
-  auto eval = [&](const P& p) { return FitShape(terms, cost_zero, p[0], std::exp(p[1])); };
+  auto eval = [&](const P& p) { return fit_shape(p[0], std::exp(p[1])); };
   const double dk = nk == 1 ? 0.1 : (kLobeKappaMax - kLobeKappaMin) / (nk - 1);
   const double dn = (log_max - log_min) / (nn - 1);
   const P start(kappa_at(best_i / nn), log_min + dn * (best_i % nn));
   std::array<P, 3> v = {start, clamp(start + P(dk, 0)), clamp(start + P(0, dn))};
   if (v[1] == start) v[1] = clamp(start - P(dk, 0));
+  if (v[1] == start) v[1] = clamp(start - P(0, dn));  // one dimension: a simplex on a line
   if (v[2] == start) v[2] = clamp(start - P(0, dn));
   std::array<ShapeFit, 3> f = {grid[best_i], eval(v[1]), eval(v[2])};
   for (int it = 0; it < options.simplex_iterations; ++it) {
@@ -269,12 +331,13 @@ LobeFit FitSunLobe(const std::vector<LobeSample>& all, const SunLobeOptions& opt
   for (int k = 1; k < 3; ++k) {
     if (f[k].cost < f[b].cost) b = k;
   }
-  out.cost = f[b].cost;
+  out.cost = std::isfinite(f[b].cost) ? f[b].cost : out.cost_zero;  // none admissible
   if (out.cost_zero - out.cost >= options.min_gain * out.cost_zero && !f[b].rho_s.isZero()) {
     out.kept = true;
     out.lobe.rho_s = f[b].rho_s;
     out.lobe.kappa = v[b][0];
     out.lobe.n = std::exp(v[b][1]);
+    out.lobe.model = model;
   }
   return out;
 }
@@ -284,29 +347,33 @@ void SkyLobeOptions::Validate() const {
   if (max_samples < min_samples) throw Error("sky lobe: max_samples must be >= min_samples");
   if (!(min_gain >= 0 && min_gain <= 1)) throw Error("sky lobe: min_gain must be in [0, 1]");
   if (max_iterations < 1) throw Error("sky lobe: max_iterations must be >= 1");
+  if (mirror_samples < 0 || mirror_samples > 4096)
+    throw Error("sky lobe: mirror_samples must be 0..4096");
 }
 
 namespace {
 
-// Eq. 14's terms of one sample; the pieces reduced to the bracket's parts u.v and
-// (u.n)(v.n) and their irradiance over sigma.
+// Eq. 14's terms of one sample; the pieces reduced to u.n, v.n, u.v and their irradiance
+// over sigma.
 struct SkyLobeTerm {
   struct Piece {
-    double uv, unvn;
+    double un, uv;
     std::array<double, 3> e;
   };
+  LobeModel model = LobeModel::kLafortune;
+  double vn = 0;
   std::vector<Piece> pieces;
   std::array<double, 3> r{};
 
-  explicit SkyLobeTerm(const SkyLobeSample& s) {
-    const double vn = s.to_viewer.dot(s.normal);
+  SkyLobeTerm(const SkyLobeSample& s, LobeModel lobe_model)
+      : model(lobe_model), vn(s.to_viewer.dot(s.normal)) {
     for (int c = 0; c < 3; ++c) r[c] = s.residual[c] / s.sigma[c];
     if (!(vn > 0)) return;
     for (const LightPiece& p : s.pieces) {
       const Eigen::Vector3d u = p.to_light.cast<double>();
       const double un = u.dot(s.normal);
       if (!(un > 0)) continue;
-      Piece q{u.dot(s.to_viewer), un * vn, {}};
+      Piece q{un, u.dot(s.to_viewer), {}};
       for (int c = 0; c < 3; ++c) q.e[c] = p.irradiance[c] / s.sigma[c];
       pieces.push_back(q);
     }
@@ -318,9 +385,7 @@ struct SkyLobeTerm {
     const T n = exp(shape[1]);
     T sum[3] = {T(0), T(0), T(0)};
     for (const Piece& q : pieces) {
-      const T bracket = -shape[0] * (q.uv - q.unvn) + q.unvn;
-      if (!(bracket > T(0))) continue;
-      const T f = pow(bracket, n);
+      const T f = LobeShape(model, shape[0], n, q.un, vn, q.uv);
       for (int c = 0; c < 3; ++c) sum[c] += q.e[c] * f;
     }
     for (int c = 0; c < 3; ++c) out[c] = rho[c] * sum[c] - r[c];
@@ -330,8 +395,8 @@ struct SkyLobeTerm {
 
 }  // namespace
 
-ceres::CostFunction* SkyLobeCost(const SkyLobeSample& sample) {
-  return new ceres::AutoDiffCostFunction<SkyLobeTerm, 3, 3, 2>(new SkyLobeTerm(sample));
+ceres::CostFunction* SkyLobeCost(const SkyLobeSample& sample, LobeModel model) {
+  return new ceres::AutoDiffCostFunction<SkyLobeTerm, 3, 3, 2>(new SkyLobeTerm(sample, model));
 }
 
 double SkyLobeCost(const std::vector<SkyLobeSample>& samples, const SpecularLobe& lobe) {
@@ -340,11 +405,33 @@ double SkyLobeCost(const std::vector<SkyLobeSample>& samples, const SpecularLobe
   double cost = 0;
   for (const SkyLobeSample& s : samples) {
     double out[3];
-    const SkyLobeTerm term(s);
+    const SkyLobeTerm term(s, lobe.model);
     term(rho, shape, out);
     for (double o : out) cost += o * o;
   }
   return cost;
+}
+
+double SkyLobeCostRefittingDiffuse(const std::vector<SkyLobeSample>& samples,
+                                   const SpecularLobe& lobe) {
+  const double rho[3] = {lobe.rho_s[0], lobe.rho_s[1], lobe.rho_s[2]};
+  const double shape[2] = {lobe.kappa, std::log(lobe.n)};
+  // Per channel, with z = r - lobe and d the diffuse term (over sigma): sum z^2 - (d.z)^2 / d.d.
+  std::array<double, 3> zz{}, dz{}, dd{};
+  for (const SkyLobeSample& s : samples) {
+    double out[3];
+    const SkyLobeTerm term(s, lobe.model);
+    term(rho, shape, out);
+    for (int c = 0; c < 3; ++c) {
+      const double z = -out[c], d = s.diffuse_se[c] / s.sigma[c];
+      zz[c] += z * z;
+      dz[c] += d * z;
+      dd[c] += d * d;
+    }
+  }
+  double cost = 0;
+  for (int c = 0; c < 3; ++c) cost += zz[c] - (dd[c] > 0 ? dz[c] * dz[c] / dd[c] : 0);
+  return std::max(0.0, cost);
 }
 
 // §4.2.1, eq. 14: Levenberg-Marquardt per block.
@@ -365,24 +452,42 @@ LobeFit FitSkyLobe(const std::vector<SkyLobeSample>& all, const SkyLobeOptions& 
   for (size_t k = 0; k < keep; ++k) samples.push_back(*usable[(k * usable.size()) / keep]);
   out.samples = static_cast<int>(samples.size());
   out.cost_zero = out.cost = SkyLobeCost(samples, SpecularLobe{});
+  if (options.source == SkyLobeOptions::Source::kSun) {
+    if (start.IsZero()) return out;
+    // A sun lobe whose reflection of the sky the photographs contradict (eq. 14's cost rises,
+    // the diffuse albedos given back the mean reflection they absorbed) is not the material's;
+    // with too few samples nothing contradicts it.
+    out.cost_zero = SkyLobeCostRefittingDiffuse(samples, SpecularLobe{});
+    out.cost = SkyLobeCostRefittingDiffuse(samples, start);
+    out.kept = out.samples < options.min_samples || out.cost <= out.cost_zero;
+    if (out.kept) out.lobe = start;
+    return out;
+  }
   if (out.samples < options.min_samples || !(out.cost_zero > 0)) return out;
 
   const double log_min = std::log(kLobeExponentMin), log_max = std::log(kLobeExponentMax);
   SpecularLobe best;
   double best_cost = out.cost_zero;
+  const LobeModel model = start.model;
+  const bool microfacet = model == LobeModel::kMicrofacet;
   for (const auto& [kappa0, n0] :
        {std::pair{std::min(start.kappa, 1.0), start.n}, {1.0, 5.0}, {1.0, 80.0}}) {
     double rho[3] = {0.01, 0.01, 0.01};
-    double shape[2] = {std::max(kappa0, kLobeKappaMin), std::clamp(std::log(n0), log_min, log_max)};
+    double shape[2] = {microfacet ? 1.0 : std::max(kappa0, kLobeKappaMin),
+                       std::clamp(std::log(n0), log_min, log_max)};
     ceres::Problem problem;
     for (const SkyLobeSample& s : samples)
-      problem.AddResidualBlock(SkyLobeCost(s), nullptr, rho, shape);
+      problem.AddResidualBlock(SkyLobeCost(s, model), nullptr, rho, shape);
     for (int c = 0; c < 3; ++c) {
       problem.SetParameterLowerBound(rho, c, 0.0);
-      problem.SetParameterUpperBound(rho, c, MaxLobeRho(kLobeExponentMax));
+      problem.SetParameterUpperBound(rho, c, MaxLobeRho(kLobeExponentMax, model));
     }
-    problem.SetParameterLowerBound(shape, 0, kLobeKappaMin);
-    problem.SetParameterUpperBound(shape, 0, 1.0);
+    if (microfacet) {
+      problem.SetManifold(shape, new ceres::SubsetManifold(2, {0}));  // kappa held at 1
+    } else {
+      problem.SetParameterLowerBound(shape, 0, kLobeKappaMin);
+      problem.SetParameterUpperBound(shape, 0, 1.0);
+    }
     problem.SetParameterLowerBound(shape, 1, log_min);
     problem.SetParameterUpperBound(shape, 1, log_max);
     ceres::Solver::Options so;
@@ -394,11 +499,12 @@ LobeFit FitSkyLobe(const std::vector<SkyLobeSample>& all, const SkyLobeOptions& 
     ceres::Solver::Summary summary;
     ceres::Solve(so, &problem, &summary);
     SpecularLobe l;
+    l.model = model;
     l.rho_s = Eigen::Vector3d(rho[0], rho[1], rho[2]);
-    l.kappa = shape[0];
+    l.kappa = microfacet ? 1.0 : shape[0];
     l.n = std::exp(shape[1]);
     // The energy bound depends on n: a lobe above it is scaled down to it.
-    const double cap = MaxLobeRho(l.n);
+    const double cap = MaxLobeRho(l.n, model);
     if (l.rho_s.maxCoeff() > cap) l.rho_s *= cap / l.rho_s.maxCoeff();
     const double cost = SkyLobeCost(samples, l);
     if (cost < best_cost && l.rho_s.allFinite()) {
