@@ -153,7 +153,9 @@ void RegisterValidate(CLI::App& app) {
       "measured at that slot and under lighting predicted from the other slots only (paper §5).\n"
       "Figures per photo and over all: relative RMSE, PSNR of the 8-bit images through the\n"
       "response curve (exposed so the photo's 99th percentile is digital 230), the median\n"
-      "relative error |R - T| / T, and the brightness ratio sum R / sum T.\n"
+      "relative error |R - T| / T, and the brightness ratio sum R / sum T. A photo left with\n"
+      "no pixel to score (the blocks it sees excluded) is skipped and named (\"skipped\" in\n"
+      "--json); none left in any photo is an error.\n"
       "A fair test holds the slot out of the albedos: rouen solve SESSION --out SCENE\n"
       "--holdout-slot N.\n"
       "Example: rouen validate s.scene --session s --slot 4 --exclude-block plaza --json v.json");

@@ -165,10 +165,11 @@ Validation ValidateSlot(const LoadedScene& scene, const Session& session, int sl
       p.mask[i] = p.mask[i] && g.valid[i];
       scored += p.mask[i];
     }
-    if (scored == 0)
-      throw Error(name +
-                  ": no building pixel to score (the model is not in view, or every "
-                  "pixel in view is excluded or unexposed)");
+    if (scored == 0) {
+      Log(log, name + ": skipped, no building pixel to score");
+      out.skipped.push_back(name);
+      continue;
+    }
     p.photo = std::move(g.radiance);
     // §6: the re-rendering at the photo's camera.
     p.rendered_measured = RenderView(solved.mesh, solved.grid, *solved.caster, solved.albedo,
@@ -186,6 +187,10 @@ Validation ValidateSlot(const LoadedScene& scene, const Session& session, int sl
     Log(log, line);
     out.photos.push_back(std::move(p));
   }
+  if (out.photos.empty())
+    throw Error(scene.dir.string() + ": slot " + std::to_string(slot) +
+                " has no building pixel to score in any photo (the model is not in view, or "
+                "every pixel in view is excluded or unexposed)");
   out.measured = all_measured.Result();
   if (predicted) out.predicted = all_predicted.Result();
   out.measured_lighting = measured;
@@ -213,6 +218,7 @@ nlohmann::json ValidationToJson(const Validation& v) {
     if (p.predicted) pj["predicted"] = MetricsJson(*p.predicted);
     j["photos"].push_back(pj);
   }
+  if (!v.skipped.empty()) j["skipped"] = v.skipped;
   if (!v.shaded_terms.empty()) {
     auto rgb = [](const Eigen::Vector3d& x) { return nlohmann::json{x.x(), x.y(), x.z()}; };
     nlohmann::json terms = nlohmann::json::array();

@@ -62,6 +62,9 @@ struct Validation {
   int slot = 0;
   bool held_out = false;  // the albedos did not use this slot's photos
   std::vector<PhotoValidation> photos;
+  // Photos left out because none of their pixels is scored (the blocks they see excluded,
+  // or nothing of the model in view or exposed), with the reason.
+  std::vector<std::string> skipped;
   RenderMetrics measured;  // pooled over every photo
   std::optional<RenderMetrics> predicted;
   // The lighting the photos were rendered under: the slot's measured one and, with the
@@ -74,7 +77,9 @@ struct Validation {
 // Validates slot `slot` of `scene` against the architecture photos of `session` (the session
 // the scene was solved from: each photo's bracket must be one of the scene's views). The
 // photos are merged through the scene's response curve; the PSNR is measured through it too
-// (render/metrics.h). Throws rouen::Error naming the scene, session or bracket.
+// (render/metrics.h). A photo with no pixel to score is skipped (Validation::skipped, and a
+// log line); none left to score is an error. Throws rouen::Error naming the scene, session or
+// bracket.
 Validation ValidateSlot(const LoadedScene& scene, const Session& session, int slot,
                         const ValidateOptions& options,
                         const std::function<void(const std::string&)>& log = {});

@@ -221,6 +221,38 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
       0);
   EXPECT_NE(out.find("no block named 'patio' (blocks: "), std::string::npos) << out;
   EXPECT_FALSE(fs::exists(dir / "w.json"));
+  // Scoring one block: the roof, a few pixels wide in the quick demo's views, vanishes from
+  // most of them once eroded by 3 pixels. Those photos are skipped and named; the others are
+  // scored. Eroded by 64 pixels it is in no photo: an error, and nothing written.
+  const std::string roof_only =
+      " --slot 3 --exclude-block base --exclude-block shaft "
+      "--exclude-block belfry --exclude-block plaza --erode ";
+  out.clear();
+  ASSERT_EQ(
+      RunRouen("validate " + (dir / "scene").string() + " --session " + (dir / "session").string() +
+                   roof_only + "3 --json " + (dir / "roof.json").string(),
+               &out),
+      0)
+      << out;
+  {
+    const nlohmann::json v = nlohmann::json::parse(std::ifstream(dir / "roof.json"));
+    ASSERT_TRUE(v.contains("skipped")) << v.dump();
+    EXPECT_GE(v["photos"].size(), 1u);
+    EXPECT_EQ(v["photos"].size() + v["skipped"].size(), 4u);  // the slot's four views
+    for (const auto& name : v["skipped"])
+      EXPECT_NE(out.find(name.get<std::string>() + ": skipped, no building pixel to score"),
+                std::string::npos)
+          << out;
+  }
+  out.clear();
+  EXPECT_NE(
+      RunRouen("validate " + (dir / "scene").string() + " --session " + (dir / "session").string() +
+                   roof_only + "64 --json " + (dir / "none.json").string(),
+               &out),
+      0);
+  EXPECT_NE(out.find("slot 3 has no building pixel to score in any photo"), std::string::npos)
+      << out;
+  EXPECT_FALSE(fs::exists(dir / "none.json"));
 
   fs::rename(dir / "session", dir / "session-away");
   const std::string scene = " " + (dir / "scene").string();
