@@ -75,7 +75,8 @@ LightingPredictor PredictorFor(const LoadedScene& scene, const RenderRequest& re
                 ": no slot is left to predict the lighting from (every slot is held out or left "
                 "out)");
   RelightOptions relight = request.relight;
-  relight.env.ground_retro = solved.env_ground_retro;  // as the solve fitted it
+  relight.env = scene.config.env_stereo;               // the options the solve fitted with
+  relight.env.ground_retro = solved.env_ground_retro;  // and its ground retro
   // The solve's environment fit when it was made from these slots with these options.
   const EnvStereoResult* fitted =
       FitFor(solved.env_stereo, solved.env_stereo_slots, measured_slots, relight.env);

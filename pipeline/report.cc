@@ -851,7 +851,11 @@ std::optional<EnvStereoResult> FitStereo(const Inputs& in) {
     measured.push_back(std::move(l));
   }
   if (measured.empty()) return std::nullopt;
-  EnvStereoOptions eo = RelightOptions{}.env;
+  // The options the solve fitted with (its recorded ones; older scenes: the defaults).
+  EnvStereoOptions eo =
+      (in.model ? SceneSolveConfig(*in.model, (in.scene_dir / "scene.json").string())
+                : DefaultSolveConfig(false))
+          .env_stereo;
   if (in.scene.contains("environment") && in.scene["environment"].is_object()) {
     const nlohmann::json& env = in.scene["environment"];
     eo.ground_retro = env.value("ground_retro", 0.0);

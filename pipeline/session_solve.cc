@@ -737,7 +737,7 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
       env_slot_ids.push_back(ss.slot);
     }
   }
-  const EnvStereoOptions env_options = RelightOptions{}.env;
+  const EnvStereoOptions& env_options = options.config.env_stereo;
   if (options.config.fit_ground_retro &&
       static_cast<int>(env_slots.size()) >= env_options.min_times) {
     GroundRetroFit g = FitGroundRetro(EnvObservationsOf(env_slots), env_options, options.cancel);

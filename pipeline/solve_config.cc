@@ -133,6 +133,8 @@ const std::vector<std::pair<const char*, GridSubdivision>> kSubdivisions = {
     {"longest_edge", GridSubdivision::kLongestEdge},
     {"equivalent_area", GridSubdivision::kEquivalentArea}};
 
+const std::vector<std::pair<const char*, EnvSkyIrradiance>> kEnvSkyIrradiance = {
+    {"ambient", EnvSkyIrradiance::kAmbient}, {"plane", EnvSkyIrradiance::kPlane}};
 const std::vector<std::pair<const char*, std::optional<LobeModel>>> kLobeModels = {
     {"auto", std::nullopt},
     {"lafortune", LobeModel::kLafortune},
@@ -170,6 +172,7 @@ void SolveConfig::Validate() const {
   sun.Validate();
   environment.Validate();
   ground_field.Validate();
+  env_stereo.Validate();
   albedo.Validate();  // the model the vector-flux irradiance needs is given at solve time
 }
 
@@ -271,6 +274,23 @@ json SolveConfigJson(const SolveConfig& c) {
             {"sky_detail", c.environment.sky_detail},
             {"fit_ground_retro", c.fit_ground_retro}}},
           {"ground_field", c.ground_field},
+          {"env_stereo",
+           {{"alpha", c.env_stereo.alpha},
+            {"fixed_channel", c.env_stereo.fixed_channel},
+            {"fixed_rho_sun", c.env_stereo.fixed_rho_sun},
+            {"sky_irradiance", NameOf(c.env_stereo.sky_irradiance, kEnvSkyIrradiance)},
+            {"ground_albedo", c.env_stereo.ground_albedo},
+            {"sky_quadrature", c.env_stereo.sky_quadrature},
+            {"min_times", c.env_stereo.min_times},
+            {"sky_match_tolerance", c.env_stereo.sky_match_tolerance},
+            {"fit_sky_fraction", c.env_stereo.fit_sky_fraction},
+            {"fallback_rel_error", c.env_stereo.fallback_rel_error},
+            {"max_albedo", c.env_stereo.max_albedo},
+            {"sigma_relative", c.env_stereo.sigma_relative},
+            {"smoothing_weight", c.env_stereo.smoothing_weight},
+            {"ground_normal_prior", c.env_stereo.ground_normal_prior},
+            {"max_iterations", c.env_stereo.max_iterations},
+            {"starts", c.env_stereo.starts}}},
           {"albedo",
            {{"loss", NameOf(a.loss, kLosses)},
             {"huber_k", a.huber_k},
@@ -451,6 +471,27 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
     f.Bool("lit_ground", &e.lit_ground);
     f.Int("sky_detail", &e.sky_detail, 1, 64);
     f.Bool("fit_ground_retro", &c.fit_ground_retro);
+    f.Finish();
+  }
+  if (const json* t = root.Table("env_stereo")) {
+    Fields f(*t, where, "env_stereo");
+    EnvStereoOptions& e = c.env_stereo;
+    f.Number("alpha", &e.alpha, 0, kInf);
+    f.Int("fixed_channel", &e.fixed_channel, 0, 2);
+    f.Number("fixed_rho_sun", &e.fixed_rho_sun, 1e-6, 10);
+    f.Enum("sky_irradiance", &e.sky_irradiance, kEnvSkyIrradiance);
+    f.Number("ground_albedo", &e.ground_albedo, 0, 1);
+    f.Int("sky_quadrature", &e.sky_quadrature, 1, 1000);
+    f.Int("min_times", &e.min_times, 1, 1000);
+    f.Number("sky_match_tolerance", &e.sky_match_tolerance, 0, kInf);
+    f.Bool("fit_sky_fraction", &e.fit_sky_fraction);
+    f.Number("fallback_rel_error", &e.fallback_rel_error, 0, kInf);
+    f.Number("max_albedo", &e.max_albedo, 0, kInf);
+    f.Number("sigma_relative", &e.sigma_relative, 0, 1);
+    f.Number("smoothing_weight", &e.smoothing_weight, 0, kInf);
+    f.Number("ground_normal_prior", &e.ground_normal_prior, 0, kInf);
+    f.Int("max_iterations", &e.max_iterations, 1, 100000);
+    f.Int("starts", &e.starts, 1, 3);
     f.Finish();
   }
   if (const json* t = root.Table("ground_field")) {

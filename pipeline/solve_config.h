@@ -10,6 +10,7 @@
 #include "calib/response.h"
 #include "core/session.h"
 #include "solve/albedo.h"
+#include "solve/env_stereo.h"
 #include "solve/environment.h"
 #include "solve/grid.h"
 #include "solve/ground_apron.h"
@@ -60,6 +61,11 @@ struct SolveConfig {
   // Beyond §5.2: fit how roughly the ground below the horizon reflects the sun (the scene's
   // environment.ground_retro, used when the environment is predicted for a novel time).
   bool fit_ground_retro = true;
+  // §5.2: the environment's photometric stereo, fitted by the solve (for the ground's retro,
+  // kept in the scene) and by every prediction for a novel time, which reuses the solve's fit
+  // only when these options are the ones it was made with (FitFor). Its ground_retro is not
+  // an option: the solve fits it.
+  EnvStereoOptions env_stereo;
   AlbedoOptions albedo;   // §4, with the irradiance options
   void Validate() const;  // throws rouen::Error naming the bad field
 };

@@ -45,6 +45,8 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   c.albedo.sun_lobe.model = LobeModel::kMicrofacet;  // not the default
   c.albedo.sky_lobe.source = SkyLobeOptions::Source::kFit;
   c.albedo.sky_lobe.mirror_samples = 16;
+  c.env_stereo.alpha = 500;
+  c.env_stereo.sky_irradiance = EnvSkyIrradiance::kAmbient;
   c.response.method = ResponseMethod::kRobertson;
   c.response.samples_per_bracket = 400;
   c.merge.ghost_removal = true;
@@ -63,6 +65,8 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   EXPECT_EQ(back.albedo.sun_lobe.model, LobeModel::kMicrofacet);
   EXPECT_EQ(back.albedo.sky_lobe.source, SkyLobeOptions::Source::kFit);
   EXPECT_EQ(back.albedo.sky_lobe.mirror_samples, 16);
+  EXPECT_EQ(back.env_stereo.alpha, 500);
+  EXPECT_EQ(back.env_stereo.sky_irradiance, EnvSkyIrradiance::kAmbient);
   EXPECT_EQ(DefaultSolveConfig(false).albedo.sun_lobe.model, LobeModel::kLafortune);
   c.albedo.sun_lobe.model = std::nullopt;  // "auto": both fitted
   EXPECT_FALSE(ApplySolveConfig(SolveConfigJson(c), DefaultSolveConfig(false), "x")
@@ -173,6 +177,12 @@ TEST(SolveConfigTest, StrictKeysTypesAndRanges) {
             std::string::npos);
   EXPECT_NE(ErrorOf(json::parse(R"({"albedo": {"relative_error_floor": 2}})"))
                 .find("albedo.relative_error_floor must be a number within 0..1"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(json::parse(R"({"env_stereo": {"sky_irradiance": "sphere"}})"))
+                .find("env_stereo.sky_irradiance must be one of ambient, plane"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(json::parse(R"({"env_stereo": {"ground_retro": 0.5}})"))
+                .find("env_stereo.ground_retro is not a known key"),
             std::string::npos);
   EXPECT_NE(ErrorOf(json::parse(R"({"albedo": {"sun_lobe": {"model": "ggx"}}})"))
                 .find("albedo.sun_lobe.model must be one of auto, lafortune, microfacet"),

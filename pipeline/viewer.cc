@@ -302,6 +302,7 @@ ViewerData ComputeViewerData(const LoadedScene& scene, const ViewerOptions& opti
   if (measured.empty())
     throw Error(scene.dir.string() + ": every slot is held out: no lighting to predict from");
   RelightOptions clear;
+  clear.env = scene.config.env_stereo;  // the options the solve fitted with
   clear.env.ground_retro = solved.env_ground_retro;
   RelightOptions overcast = clear;
   overcast.pbs = 1;

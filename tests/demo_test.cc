@@ -254,6 +254,31 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
       << out;
   EXPECT_FALSE(fs::exists(dir / "none.json"));
 
+  // The environment's stereo options are the solve's ([env_stereo]) and the scene records
+  // them: a prediction made from the same slots reuses the solve's fit with non-default ones
+  // too (it refitted with the defaults before).
+  rouen::WriteFileAtomic(dir / "env.toml", "[env_stereo]\nalpha = 500\nmax_albedo = 1.2\n");
+  out.clear();
+  ASSERT_EQ(RunRouen("solve " + (dir / "session").string() + " --quick --holdout-slot 3 --out " +
+                         (dir / "env_scene").string() + " --config " + (dir / "env.toml").string(),
+                     &out),
+            0)
+      << out;
+  {
+    const nlohmann::json j = nlohmann::json::parse(std::ifstream(dir / "env_scene/scene.json"));
+    const nlohmann::json& recorded = j.at("provenance").at("options").at("config");
+    EXPECT_EQ(recorded.at("env_stereo").at("alpha").get<double>(), 500);
+    EXPECT_EQ(recorded.at("env_stereo").at("max_albedo").get<double>(), 1.2);
+  }
+  out.clear();
+  ASSERT_EQ(RunRouen("render " + (dir / "env_scene").string() +
+                         " --time 2026-08-25T17:00:00-07:00 --out " + (dir / "env.exr").string(),
+                     &out),
+            0)
+      << out;
+  EXPECT_NE(out.find("the environment's normals as the solve fitted them"), std::string::npos)
+      << out;
+
   fs::rename(dir / "session", dir / "session-away");
   const std::string scene = " " + (dir / "scene").string();
   out.clear();
