@@ -1029,7 +1029,7 @@ std::vector<LightPiece> Pieces(const SurfaceGrid& grid, const HemisphereCache& c
     const uint64_t h = MixHash(seed + static_cast<uint64_t>(k));
     const double u1 = ((k / strata) + HashUniformHigh(h)) / strata;
     const double u2 = ((k % strata) + HashUniformLow(h)) / strata;
-    const Eigen::Vector3d d = DrawAboutAxis(m, e, std::min(u1, 1.0), u2);
+    const Eigen::Vector3d d = DrawAboutAxis(m, e, u1, u2);
     if (!(d.dot(gp.normal) > 0)) continue;
     const RayHit h2 = model.Intersect(origin, d, 0.0);
     int hit = -1;
@@ -1103,8 +1103,9 @@ std::vector<SpecularLobe> FitSkyLobes(const SurfaceGrid& grid, const HemisphereC
       // One material: the sun lobe that best explains the sunlit observations among those
       // whose reflection of the sky these observations do not contradict.
       const double limit = fit.cost_zero;
+      const SkyLobeCosts costs(samples);
       const LobeFit sun = FitSunLobe(sun_samples[b], options.sun_lobe, [&](const SpecularLobe& l) {
-        return SkyLobeCostRefittingDiffuse(samples, l) <= limit;
+        return costs.CostRefittingDiffuse(l) <= limit;
       });
       (*sun_lobes)[b] = sun.lobe;
       summary->lobe_cost_fitted[b] = sun.cost;

@@ -8,6 +8,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <memory>
 
 #include "core/error.h"
 #include "core/text.h"
@@ -382,10 +383,14 @@ struct SkyLobeTerm {
   // rho: rho_s per channel; shape: kappa, log n.
   template <typename T>
   bool operator()(const T* rho, const T* shape, T* out) const {
+    return Evaluate(model, rho, shape, out);
+  }
+  template <typename T>
+  bool Evaluate(LobeModel lobe_model, const T* rho, const T* shape, T* out) const {
     const T n = exp(shape[1]);
     T sum[3] = {T(0), T(0), T(0)};
     for (const Piece& q : pieces) {
-      const T f = LobeShape(model, shape[0], n, q.un, vn, q.uv);
+      const T f = LobeShape(lobe_model, shape[0], n, q.un, vn, q.uv);
       for (int c = 0; c < 3; ++c) sum[c] += q.e[c] * f;
     }
     for (int c = 0; c < 3; ++c) out[c] = rho[c] * sum[c] - r[c];
@@ -399,31 +404,44 @@ ceres::CostFunction* SkyLobeCost(const SkyLobeSample& sample, LobeModel model) {
   return new ceres::AutoDiffCostFunction<SkyLobeTerm, 3, 3, 2>(new SkyLobeTerm(sample, model));
 }
 
-double SkyLobeCost(const std::vector<SkyLobeSample>& samples, const SpecularLobe& lobe) {
+struct SkyLobeCosts::Terms {
+  std::vector<SkyLobeTerm> terms;
+  std::vector<Eigen::Vector3d> diffuse;  // diffuse_se / sigma
+};
+
+SkyLobeCosts::SkyLobeCosts(const std::vector<SkyLobeSample>& samples)
+    : terms_(std::make_unique<Terms>()) {
+  terms_->terms.reserve(samples.size());
+  for (const SkyLobeSample& s : samples) {
+    terms_->terms.emplace_back(s, LobeModel::kLafortune);  // the model is the lobe's, below
+    terms_->diffuse.push_back(s.diffuse_se.cwiseQuotient(s.sigma));
+  }
+}
+
+SkyLobeCosts::~SkyLobeCosts() = default;
+
+double SkyLobeCosts::Cost(const SpecularLobe& lobe) const {
   const double rho[3] = {lobe.rho_s[0], lobe.rho_s[1], lobe.rho_s[2]};
   const double shape[2] = {lobe.kappa, std::log(lobe.n)};
   double cost = 0;
-  for (const SkyLobeSample& s : samples) {
+  for (const SkyLobeTerm& term : terms_->terms) {
     double out[3];
-    const SkyLobeTerm term(s, lobe.model);
-    term(rho, shape, out);
+    term.Evaluate(lobe.model, rho, shape, out);
     for (double o : out) cost += o * o;
   }
   return cost;
 }
 
-double SkyLobeCostRefittingDiffuse(const std::vector<SkyLobeSample>& samples,
-                                   const SpecularLobe& lobe) {
+double SkyLobeCosts::CostRefittingDiffuse(const SpecularLobe& lobe) const {
   const double rho[3] = {lobe.rho_s[0], lobe.rho_s[1], lobe.rho_s[2]};
   const double shape[2] = {lobe.kappa, std::log(lobe.n)};
   // Per channel, with z = r - lobe and d the diffuse term (over sigma): sum z^2 - (d.z)^2 / d.d.
   std::array<double, 3> zz{}, dz{}, dd{};
-  for (const SkyLobeSample& s : samples) {
+  for (size_t k = 0; k < terms_->terms.size(); ++k) {
     double out[3];
-    const SkyLobeTerm term(s, lobe.model);
-    term(rho, shape, out);
+    terms_->terms[k].Evaluate(lobe.model, rho, shape, out);
     for (int c = 0; c < 3; ++c) {
-      const double z = -out[c], d = s.diffuse_se[c] / s.sigma[c];
+      const double z = -out[c], d = terms_->diffuse[k][c];
       zz[c] += z * z;
       dz[c] += d * z;
       dd[c] += d * d;
@@ -432,6 +450,15 @@ double SkyLobeCostRefittingDiffuse(const std::vector<SkyLobeSample>& samples,
   double cost = 0;
   for (int c = 0; c < 3; ++c) cost += zz[c] - (dd[c] > 0 ? dz[c] * dz[c] / dd[c] : 0);
   return std::max(0.0, cost);
+}
+
+double SkyLobeCost(const std::vector<SkyLobeSample>& samples, const SpecularLobe& lobe) {
+  return SkyLobeCosts(samples).Cost(lobe);
+}
+
+double SkyLobeCostRefittingDiffuse(const std::vector<SkyLobeSample>& samples,
+                                   const SpecularLobe& lobe) {
+  return SkyLobeCosts(samples).CostRefittingDiffuse(lobe);
 }
 
 // §4.2.1, eq. 14: Levenberg-Marquardt per block.
@@ -451,14 +478,15 @@ LobeFit FitSkyLobe(const std::vector<SkyLobeSample>& all, const SkyLobeOptions& 
   const size_t keep = std::min(usable.size(), static_cast<size_t>(options.max_samples));
   for (size_t k = 0; k < keep; ++k) samples.push_back(*usable[(k * usable.size()) / keep]);
   out.samples = static_cast<int>(samples.size());
-  out.cost_zero = out.cost = SkyLobeCost(samples, SpecularLobe{});
+  const SkyLobeCosts costs(samples);
+  out.cost_zero = out.cost = costs.Cost(SpecularLobe{});
   if (options.source == SkyLobeOptions::Source::kSun) {
     if (start.IsZero()) return out;
     // A sun lobe whose reflection of the sky the photographs contradict (eq. 14's cost rises,
     // the diffuse albedos given back the mean reflection they absorbed) is not the material's;
     // with too few samples nothing contradicts it.
-    out.cost_zero = SkyLobeCostRefittingDiffuse(samples, SpecularLobe{});
-    out.cost = SkyLobeCostRefittingDiffuse(samples, start);
+    out.cost_zero = costs.CostRefittingDiffuse(SpecularLobe{});
+    out.cost = costs.CostRefittingDiffuse(start);
     out.kept = out.samples < options.min_samples || out.cost <= out.cost_zero;
     if (out.kept) out.lobe = start;
     return out;
@@ -506,7 +534,7 @@ LobeFit FitSkyLobe(const std::vector<SkyLobeSample>& all, const SkyLobeOptions& 
     // The energy bound depends on n: a lobe above it is scaled down to it.
     const double cap = MaxLobeRho(l.n, model);
     if (l.rho_s.maxCoeff() > cap) l.rho_s *= cap / l.rho_s.maxCoeff();
-    const double cost = SkyLobeCost(samples, l);
+    const double cost = costs.Cost(l);
     if (cost < best_cost && l.rho_s.allFinite()) {
       best = l;
       best_cost = cost;

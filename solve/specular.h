@@ -18,6 +18,7 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -215,6 +216,20 @@ struct SkyLobeOptions {
 // derivatives. Owned by the caller (or a ceres::Problem).
 ceres::CostFunction* SkyLobeCost(const SkyLobeSample& sample,
                                  LobeModel model = LobeModel::kLafortune);
+
+// The samples reduced once (each piece's u.n, u.v and irradiance over sigma) for the costs
+// of many lobes: Cost is eq. 14, CostRefittingDiffuse is SkyLobeCostRefittingDiffuse.
+class SkyLobeCosts {
+ public:
+  explicit SkyLobeCosts(const std::vector<SkyLobeSample>& samples);
+  ~SkyLobeCosts();
+  double Cost(const SpecularLobe& lobe) const;
+  double CostRefittingDiffuse(const SpecularLobe& lobe) const;
+
+ private:
+  struct Terms;
+  std::unique_ptr<Terms> terms_;
+};
 
 // Eq. 14: sum over samples and channels of the squared terms.
 double SkyLobeCost(const std::vector<SkyLobeSample>& samples, const SpecularLobe& lobe);
