@@ -300,6 +300,8 @@ json SolveConfigJson(const SolveConfig& c) {
             {"relative_error_floor", a.relative_error_floor},
             {"outer_iterations", a.outer_iterations},
             {"outer_tolerance", a.outer_tolerance},
+            {"outer_quantile", a.outer_quantile},
+            {"outer_newton", a.outer_newton},
             {"bounces", a.bounces},
             {"sunlit_threshold", a.sunlit_threshold},
             {"never_shadowed_prior", a.never_shadowed_prior},
@@ -517,6 +519,8 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
     f.Number("relative_error_floor", &a.relative_error_floor, 0, 1);
     f.Int("outer_iterations", &a.outer_iterations, 1, 100);
     f.Number("outer_tolerance", &a.outer_tolerance, 0, 0.5);
+    f.Number("outer_quantile", &a.outer_quantile, 0.5, 1);
+    f.Bool("outer_newton", &a.outer_newton);
     f.Int("bounces", &a.bounces, 0, 16);
     f.Number("sunlit_threshold", &a.sunlit_threshold, 0, kInf);
     f.Number("never_shadowed_prior", &a.never_shadowed_prior, 0, kInf);

@@ -308,6 +308,8 @@ void AlbedoOptions::Validate() const {
   if (!(relative_error_floor >= 0 && relative_error_floor <= 1))
     throw Error("AlbedoOptions: relative_error_floor must be within [0, 1]");
   if (outer_iterations < 1) throw Error("AlbedoOptions: outer_iterations must be >= 1");
+  if (!(outer_quantile > 0 && outer_quantile <= 1))
+    throw Error("AlbedoOptions: outer_quantile must be within (0, 1]");
   if (!(outer_tolerance >= 0 && outer_tolerance < 1))
     throw Error("AlbedoOptions: outer_tolerance must be within [0, 1)");
   if (bounces < 1) throw Error("AlbedoOptions: bounces must be >= 1");
@@ -1152,9 +1154,16 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   std::vector<double> changes;
   std::vector<double> slot_weight;
   for (int it = 1; it < options.outer_iterations; ++it) {
+    // Per point: the sum over the slots of k x the light bounced k times, and of all the light.
+    std::vector<Eigen::Vector3d> order_sum(grid.size(), Eigen::Vector3d::Zero()),
+        light_sum(grid.size(), Eigen::Vector3d::Zero()), order;
     for (size_t k = 0; k < irr.size(); ++k) {
       AddInterreflection(grid, cache, res.rho_sun, res.rho_se, &irr[k], options.bounces,
-                         shading.retro, shading.sun_dirs[k], cancel);
+                         shading.retro, shading.sun_dirs[k], cancel, &order);
+      for (int i = 0; i < grid.size(); ++i) {
+        order_sum[i] += order[i];
+        light_sum[i] += irr[k].sun[i] + irr[k].se[i];
+      }
     }
     if (options.slot_weighting) slot_weight = SlotWeights(grid, observations, irr, res, &shading);
     // Once, with the first interreflection: later iterations change the bounce little.
@@ -1164,20 +1173,36 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
     }
     AlbedoResult next =
         SolveWeighted(grid, observations, irr, options, slot_weight, &shading, &fill);
-    double change = 0;
-    int count = 0;
+    // The step the new solve proposes, per observed point (relative, the largest over the
+    // channels and both albedos), then the outer update (AlbedoOptions::outer_newton).
+    std::vector<double> step;
     for (int i = 0; i < grid.size(); ++i) {
-      if (next.observations[i] == 0) continue;
+      double largest = 0;
       for (int c = 0; c < 3; ++c) {
-        const double a = next.rho_se[i][c] + next.rho_sun[i][c];
-        const double b = res.rho_se[i][c] + res.rho_sun[i][c];
-        if (a + b > 0) {
-          change += std::abs(a - b) / (0.5 * (a + b));
-          ++count;
+        for (const auto& [a, b] : {std::pair{next.rho_sun[i][c], res.rho_sun[i][c]},
+                                   std::pair{next.rho_se[i][c], res.rho_se[i][c]}}) {
+          if (a + b > 0) largest = std::max(largest, std::abs(a - b) / (0.5 * (a + b)));
+        }
+      }
+      if (next.observations[i] > 0) step.push_back(largest);
+      if (!options.outer_newton) continue;
+      for (int c = 0; c < 3; ++c) {
+        // Newton's step on log rho for rho E(rho) = pi I: the solve's rho_new = pi I / E(rho)
+        // overshoots by E's elasticity s to the albedos (s = sum_k k x light bounced k times,
+        // over all the light), so the root lies 1 / (1 + s) of the way there in log rho.
+        const double sc =
+            light_sum[i][c] > 0 ? std::max(0.0, order_sum[i][c] / light_sum[i][c]) : 0.0;
+        const double f = 1 / (1 + sc);
+        for (auto [a, b] : {std::pair{&next.rho_sun[i][c], res.rho_sun[i][c]},
+                            std::pair{&next.rho_se[i][c], res.rho_se[i][c]}}) {
+          constexpr double kFloor = 1e-4;  // a zero albedo: the log step from this floor
+          if (f < 1)
+            *a = std::exp(std::log(std::max(b, kFloor)) +
+                          f * (std::log(std::max(*a, kFloor)) - std::log(std::max(b, kFloor))));
         }
       }
     }
-    changes.push_back(count ? change / count : 0);
+    changes.push_back(step.empty() ? 0.0 : Quantile(step, options.outer_quantile));
     res = std::move(next);
     if (changes.back() < options.outer_tolerance) break;
   }

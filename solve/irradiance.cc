@@ -536,7 +536,8 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
                         const std::vector<Eigen::Vector3d>& rho_sun,
                         const std::vector<Eigen::Vector3d>& rho_se, SlotIrradiance* irr,
                         int bounces, const std::vector<double>& retro,
-                        const Eigen::Vector3d& sun_dir, const Cancellation* cancel) {
+                        const Eigen::Vector3d& sun_dir, const Cancellation* cancel,
+                        std::vector<Eigen::Vector3d>* bounce_order) {
   const int n = grid.size();
   if (static_cast<int>(rho_sun.size()) != n || static_cast<int>(rho_se.size()) != n ||
       static_cast<int>(irr->sun.size()) != n || static_cast<int>(irr->direct_se.size()) != n) {
@@ -586,6 +587,10 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
         se[i] = irr->direct_se[i] + sum / K;
       }
     });
+    if (bounce_order) {  // the light this pass added was bounced pass + 1 times
+      if (pass == 0) bounce_order->assign(n, Eigen::Vector3d::Zero());
+      for (int i = 0; i < n; ++i) (*bounce_order)[i] += (pass + 1) * (se[i] - se_prev[i]);
+    }
     se_prev = se;
   }
   for (int i = 0; i < n; ++i) {

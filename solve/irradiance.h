@@ -156,11 +156,15 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
 // B_j = rho_sun_j E_sun_j D(retro, n_j, sun_dir, v) + rho_se_j E_se_j A(retro, n_j, v), v
 // towards i (RetroFactor, AmbientRetroFactor): rough ground seen from a wall at a grazing angle
 // is brighter than Lambert's law, as the photos that gave its albedo saw it.
+// `bounce_order` (when given) receives per point the sum over k of k x the light bounced k
+// times: over the point's whole light, how fast it grows with the albedos (d log E / d log rho
+// when every albedo scales alike), which the albedo solve's outer iteration steps by.
 void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
                         const std::vector<Eigen::Vector3d>& rho_sun,
                         const std::vector<Eigen::Vector3d>& rho_se, SlotIrradiance* irr,
                         int bounces = 1, const std::vector<double>& retro = {},
                         const Eigen::Vector3d& sun_dir = Eigen::Vector3d::UnitZ(),
-                        const Cancellation* cancel = nullptr);
+                        const Cancellation* cancel = nullptr,
+                        std::vector<Eigen::Vector3d>* bounce_order = nullptr);
 
 }  // namespace rouen

@@ -197,7 +197,8 @@ std::map<std::string, TermSums> TermTable(const fs::path& data, const fs::path& 
   return table;
 }
 
-std::vector<BlockAlbedo> BlockAlbedos(const fs::path& data, const fs::path& scene_dir) {
+std::vector<BlockAlbedo> BlockAlbedos(const fs::path& data, const fs::path& scene_dir,
+                                      bool both_lit_and_shaded) {
   const nlohmann::json truth = nlohmann::json::parse(ReadFileToString(data / "truth.json"));
   Mesh mesh;
   SurfaceGrid grid;
@@ -211,6 +212,9 @@ std::vector<BlockAlbedo> BlockAlbedos(const fs::path& data, const fs::path& scen
       for (size_t i = 0; i < grid.points.size(); ++i) {
         if (grid.points[i].block != static_cast<int>(b) || model.albedo.observations[i] == 0)
           continue;
+        if (both_lit_and_shaded &&
+            (model.albedo.flags[i] & (kAlbedoNeverShadowed | kAlbedoSunUnobserved)))
+          continue;
         sun.push_back(model.albedo.rho_sun[i][c]);
         se.push_back(model.albedo.rho_se[i][c]);
       }
@@ -218,8 +222,9 @@ std::vector<BlockAlbedo> BlockAlbedos(const fs::path& data, const fs::path& scen
       BlockAlbedo a{
           mesh.block_names[b], c,         t["glossy"].get<bool>(), t["base_color"][c].get<double>(),
           Median(sun),         Median(se)};
-      std::printf("%s channel %d: base colour %.3f, median rho_sun %.3f, rho_se %.3f\n",
-                  a.block.c_str(), c, a.base, a.rho_sun, a.rho_se);
+      std::printf("%s channel %d%s: base colour %.3f, median rho_sun %.3f, rho_se %.3f\n",
+                  a.block.c_str(), c, both_lit_and_shaded ? " (seen lit and shaded)" : "", a.base,
+                  a.rho_sun, a.rho_se);
       out.push_back(a);
     }
   }

@@ -43,8 +43,10 @@ std::map<std::string, TermSums> TermTable(const std::filesystem::path& data,
 
 // Per block of truth.json's "blocks" (never the surroundings) and channel: the base colour and
 // the median pseudo-albedos (sun; sky and environment) over the block's observed grid points of
-// the scene in `scene_dir`, each printed. Fails the calling test (gtest) on a block with 100
-// observed points or fewer.
+// the scene in `scene_dir`, each printed. With `both_lit_and_shaded`, only the points the photos
+// saw both in sun and in shadow (eqs. 11 and 12 both present: neither flagged never-shadowed nor
+// sun-unobserved), where the photos alone determine both albedos. Fails the calling test (gtest)
+// on a block with 100 such points or fewer.
 struct BlockAlbedo {
   std::string block;
   int channel = 0;
@@ -52,7 +54,8 @@ struct BlockAlbedo {
   double base = 0, rho_sun = 0, rho_se = 0;
 };
 std::vector<BlockAlbedo> BlockAlbedos(const std::filesystem::path& data,
-                                      const std::filesystem::path& scene_dir);
+                                      const std::filesystem::path& scene_dir,
+                                      bool both_lit_and_shaded = false);
 
 }  // namespace rouen::light_passes
 
