@@ -42,6 +42,8 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   c.sky_segment.min_relative_blue_ratio = 0.4;
   c.albedo.irls_tolerance = 1e-3;
   c.albedo.relative_error_floor = 0.1;
+  c.albedo.outer_newton = false;  // the paper's plain update
+  c.albedo.outer_quantile = 0.9;
   c.albedo.sun_lobe.model = LobeModel::kMicrofacet;  // not the default
   c.albedo.sky_lobe.source = SkyLobeOptions::Source::kFit;
   c.albedo.sky_lobe.mirror_samples = 16;
