@@ -1154,12 +1154,18 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   std::vector<double> changes;
   std::vector<double> slot_weight;
   for (int it = 1; it < options.outer_iterations; ++it) {
-    // Per point: the sum over the slots of k x the light bounced k times, and of all the light.
-    std::vector<Eigen::Vector3d> order_sum(grid.size(), Eigen::Vector3d::Zero()),
-        light_sum(grid.size(), Eigen::Vector3d::Zero()), order;
+    // Per point, for Newton's step: the sum over the slots of k x the light bounced k times,
+    // and of all the light.
+    std::vector<Eigen::Vector3d> order_sum, light_sum, order;
+    if (options.outer_newton) {
+      order_sum.assign(grid.size(), Eigen::Vector3d::Zero());
+      light_sum.assign(grid.size(), Eigen::Vector3d::Zero());
+    }
     for (size_t k = 0; k < irr.size(); ++k) {
       AddInterreflection(grid, cache, res.rho_sun, res.rho_se, &irr[k], options.bounces,
-                         shading.retro, shading.sun_dirs[k], cancel, &order);
+                         shading.retro, shading.sun_dirs[k], cancel,
+                         options.outer_newton ? &order : nullptr);
+      if (!options.outer_newton) continue;
       for (int i = 0; i < grid.size(); ++i) {
         order_sum[i] += order[i];
         light_sum[i] += irr[k].sun[i] + irr[k].se[i];

@@ -112,6 +112,23 @@ PANOS = {"pano_square": (0.0, -30.0, nave.EYE_H),  # in the square, 24 m south o
 SUN_EYE = PANOS["pano_square"]
 
 
+# The roofs' slopes and the spire's (steep: 10 m over a 3.5 m half-width) for nave.check_faces.
+SLOPED = {"roof": 0.5, "spire": 0.2}
+WHAT = ("rouen Blender/Cycles validation world: an L-shaped town hall with a campanile on a "
+        "courtyard, photographed from the ground (gen.py); kept out of tuning")
+
+
+def building_entry():
+    """truth.json's "building": the blocks' dimensions and every face's normal."""
+    return {"range": RANGE, "wing": WING, "tower": TOWER, "wall_h": WALL_H,
+            "pitch_deg": PITCH_DEG, "ridge_m": RIDGE, "faces": face_normals()}
+
+
+def face_normals():
+    return [{"block": b, "face": lab, "normal": base.polygon_normal(p).tolist()}
+            for b, lab, p in building_faces()]
+
+
 def _oriented(poly, want):
     """poly, reversed if its normal (counter-clockwise) points away from `want`."""
     return poly if base.polygon_normal(poly) @ np.array(want, float) > 0 else poly[::-1]
@@ -173,45 +190,25 @@ def building_faces():
             for block, label, poly, want in raw]
 
 
-def check_faces(faces):
-    """Walls face their label's direction horizontally, the roofs' and the spire's slopes up and
-    to their side; tower.check_outward: outward as seen from the whole building."""
-    for block, label, poly in faces:
-        n = base.polygon_normal(poly)
-        want = np.array(nave.FACE_DIRECTIONS[label], float)
-        if block in ("roof", "spire"):  # the spire is steep: 10 m over a 3.5 m half-width
-            ok = n[2] > (0.5 if block == "roof" else 0.2) and n @ want > 0.5
-        else:
-            ok = n @ want > 0.999
-        if not ok:
-            raise RuntimeError(f"{block} {label}: normal {n} of {poly}")
-    blocks = {}
-    for block, _, poly in faces:
-        blocks.setdefault(block, []).append(poly)
-    tower.check_outward(blocks)
-    return blocks
-
-
 def install():
     """This world's definitions in place of the nave's, for nave.main() to render."""
     for name in ("SITE", "DATE", "ZONE", "TIMES", "HELDOUT", "BLOCK_MATERIALS",
                  "SURROUNDING_MATERIALS", "SURROUNDINGS", "ARCH_VIEWS", "PANOS", "SUN_EYE",
-                 "RIDGE", "building_faces", "check_faces"):
+                 "RIDGE", "building_faces"):
         setattr(nave, name, globals()[name])
+    nave.SLOPED = SLOPED
     nave.GLINT_SLOT = None  # no view named `glint`: no glossy passes
 
 
 def rewrite_truth(out):
-    """nave.main()'s truth.json describes its own building; this world's replaces it."""
+    """nave.main()'s truth.json describes its own building; this world's (WHAT,
+    building_entry()) replaces it, with the matte worlds' albedo note."""
     path = os.path.join(out, "truth.json")
     if not os.path.exists(path):
         return
     with open(path) as f:
         truth = json.load(f)
-    faces = building_faces()
-    truth["what"] = ("rouen Blender/Cycles validation world: an L-shaped town hall with a "
-                     "campanile on a courtyard, photographed from the ground (gen.py); kept "
-                     "out of tuning")
+    truth["what"] = WHAT
     truth["albedo_note"] = ("albedo = Principled BSDF base colour (linear RGB); every block "
                             "matte: roughness 1, specular 0 (Burley's diffuse, rouen retro 1); "
                             "the ground: roughness 0.9. passes/*_diffdir/_diffind are Cycles' "
@@ -220,18 +217,19 @@ def rewrite_truth(out):
     truth.pop("roof_shader", None)
     truth.pop("glint_slot", None)
     truth.pop("street", None)
-    truth["building"] = {"range": RANGE, "wing": WING, "tower": TOWER, "wall_h": WALL_H,
-                         "pitch_deg": PITCH_DEG, "ridge_m": RIDGE,
-                         "faces": [{"block": b, "face": lab,
-                                    "normal": base.polygon_normal(p).tolist()}
-                                   for b, lab, p in faces]}
+    truth["building"] = building_entry()
     with open(path, "w") as f:
         json.dump(truth, f, indent=1)
 
 
-if __name__ == "__main__":
-    install()
+def run():
+    """Renders the installed world (nave.main() reads the command line), then its truth.json."""
     nave.main()
     argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
     if "--out" in argv and "--plan" not in argv:
         rewrite_truth(os.path.abspath(argv[argv.index("--out") + 1]))
+
+
+if __name__ == "__main__":
+    install()
+    run()

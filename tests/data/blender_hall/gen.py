@@ -17,14 +17,12 @@
 # four architecture views at eye height, each with Cycles' Diffuse Direct and Indirect passes.
 #
 # The pipeline is ../blender_nave/gen.py's main(), run through ../blender_court/gen.py (imported
-# as `court`: its install() puts a world's definitions in place of the nave's, and its
-# check_faces checks the faces); this file gives the geometry, materials, site, times and
-# cameras, and writes truth.json's "building" entry.
+# as `court`: its install() puts a world's definitions in place of the nave's, its run() renders
+# and rewrites truth.json); this file gives the geometry, materials, site, times, cameras and
+# truth.json's "what" and "building" entries.
 import importlib.util
-import json
 import math
 import os
-import sys
 
 import numpy as np
 
@@ -132,37 +130,26 @@ def building_faces():
             for block, label, poly, want in raw]
 
 
+WHAT = ("rouen Blender/Cycles validation world: a cloth hall with a belfry on a market square, "
+        "photographed from the ground (gen.py); kept out of tuning")
+
+
+def building_entry():
+    """truth.json's "building": the blocks' dimensions and every face's normal."""
+    return {"hall": HALL, "belfry": BELFRY, "wall_h": WALL_H, "pitch_deg": PITCH_DEG,
+            "ridge_m": RIDGE, "faces": court.face_normals()}
+
+
 def install():
     """This world's definitions in court's module, then court.install() puts them in nave's."""
     for name in ("SITE", "DATE", "ZONE", "TIMES", "HELDOUT", "BLOCK_MATERIALS",
                  "SURROUNDING_MATERIALS", "SURROUNDINGS", "ARCH_VIEWS", "PANOS", "SUN_EYE",
-                 "RIDGE", "building_faces"):
+                 "RIDGE", "building_faces", "WHAT", "building_entry"):
         setattr(court, name, globals()[name])
+    court.SLOPED = {"roof": 0.5}
     court.install()
-
-
-def rewrite_truth(out):
-    """nave.main()'s truth.json describes the nave; this world's building replaces it."""
-    path = os.path.join(out, "truth.json")
-    if not os.path.exists(path):
-        return
-    court.rewrite_truth(out)  # the matte worlds' albedo note, no roof shader, no street entry
-    with open(path) as f:
-        truth = json.load(f)
-    truth["what"] = ("rouen Blender/Cycles validation world: a cloth hall with a belfry on a "
-                     "market square, photographed from the ground (gen.py); kept out of tuning")
-    truth["building"] = {"hall": HALL, "belfry": BELFRY, "wall_h": WALL_H,
-                         "pitch_deg": PITCH_DEG, "ridge_m": RIDGE,
-                         "faces": [{"block": b, "face": lab,
-                                    "normal": base.polygon_normal(p).tolist()}
-                                   for b, lab, p in building_faces()]}
-    with open(path, "w") as f:
-        json.dump(truth, f, indent=1)
 
 
 if __name__ == "__main__":
     install()
-    nave.main()
-    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-    if "--out" in argv and "--plan" not in argv:
-        rewrite_truth(os.path.abspath(argv[argv.index("--out") + 1]))
+    court.run()

@@ -187,14 +187,19 @@ FACE_DIRECTIONS = {"south": (0, -1, 0), "north": (0, 1, 0), "east": (1, 0, 0),
                    "west": (-1, 0, 0), "top": (0, 0, 1)}
 
 
+# Sloped blocks: the least up-component of their faces' normals (walls face their way level).
+SLOPED = {"roof": 0.5}
+
+
 def check_faces(faces):
-    """Each face's normal points the way its label says (walls horizontally, the roof's slopes
-    up and to their side), and tower.check_outward: outward as seen from the whole building."""
+    """Each face's normal points the way its label says (walls horizontally, the SLOPED blocks'
+    slopes up and to their side), and tower.check_outward: outward as seen from the whole
+    building."""
     for block, label, poly in faces:
         n = base.polygon_normal(poly)
         want = np.array(FACE_DIRECTIONS[label], float)
-        if block == "roof":
-            ok = n[2] > 0.5 and n @ want > 0.5
+        if block in SLOPED:
+            ok = n[2] > SLOPED[block] and n @ want > 0.5
         else:
             ok = n @ want > 0.999
         if not ok:
