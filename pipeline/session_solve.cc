@@ -768,8 +768,11 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   clock.Lap("environment ground reflection");
 
   // Beyond §3.3: the ground as a light field, from the landscape panoramas of the slots the
-  // albedos use (a held-out slot's photos do not shape what predicts it).
-  if (options.config.ground_field.enabled) {
+  // albedos use (a held-out slot's photos do not shape what predicts it). By default only with
+  // the surroundings, whose walls the field, being ground, cannot hold (GroundFieldUse).
+  const GroundFieldUse field_use = options.config.ground_field.use;
+  if (field_use == GroundFieldUse::kAlways ||
+      (field_use == GroundFieldUse::kWithSurroundings && !r.surrounding_blocks.empty())) {
     std::vector<GroundFieldTime> times;
     for (size_t k = 0; k < r.slots.size(); ++k) {
       if (std::find(env_slot_ids.begin(), env_slot_ids.end(), r.slots[k].slot) ==

@@ -499,7 +499,14 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
   if (const json* t = root.Table("ground_field")) {
     Fields f(*t, where, "ground_field");
     GroundFieldOptions& g = c.ground_field;
-    f.Bool("enabled", &g.enabled);
+    if (const json* e = f.Find("enabled")) {
+      if (e->is_boolean())
+        g.use = e->get<bool>() ? GroundFieldUse::kAlways : GroundFieldUse::kNever;
+      else if (e->is_string() && e->get<std::string>() == "with_surroundings")
+        g.use = GroundFieldUse::kWithSurroundings;
+      else
+        f.Fail(f.Path("enabled"), "must be true, false or \"with_surroundings\"");
+    }
     f.Number("cell_m", &g.cell_m, 0.05, 100);
     f.Number("radius_factor", &g.radius_factor, 0, 100);
     f.Number("min_radius_m", &g.min_radius_m, 0, 1e5);

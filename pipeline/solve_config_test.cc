@@ -54,6 +54,7 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   c.merge.ghost_removal = true;
   c.merge.saturation_level = 240;
   c.radiance_merge.clip_ramp = 0.05;
+  c.ground_field.use = GroundFieldUse::kAlways;  // not the default
   const json j = SolveConfigJson(c);
   const SolveConfig back = ApplySolveConfig(j, DefaultSolveConfig(false), "x");
   EXPECT_EQ(SolveConfigJson(back), j);
@@ -78,6 +79,14 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   EXPECT_TRUE(back.merge.ghost_removal);
   EXPECT_EQ(back.merge.saturation_level, 240);
   EXPECT_EQ(back.radiance_merge.clip_ramp, 0.05);
+  EXPECT_EQ(back.ground_field.use, GroundFieldUse::kAlways);
+  // The field's three uses, as the config writes them: true, false and "with_surroundings".
+  for (const GroundFieldUse use :
+       {GroundFieldUse::kNever, GroundFieldUse::kWithSurroundings, GroundFieldUse::kAlways}) {
+    c.ground_field.use = use;
+    EXPECT_EQ(ApplySolveConfig(SolveConfigJson(c), DefaultSolveConfig(false), "x").ground_field.use,
+              use);
+  }
 }
 
 TEST(SolveConfigTest, DefaultsAndQuick) {
@@ -92,6 +101,8 @@ TEST(SolveConfigTest, DefaultsAndQuick) {
   EXPECT_TRUE(full.grid.block_spacing_m.empty());
   EXPECT_EQ(full.grid.SpacingFor("plaza"), 0.6);
   EXPECT_EQ(full.ground.radius_m, 0);  // the ground is not modelled unless asked
+  // The ground as a light field when the session gives the surroundings.
+  EXPECT_EQ(full.ground_field.use, GroundFieldUse::kWithSurroundings);
 }
 
 // The modelled ground gets its own grid spacing unless the grid names its block.
@@ -197,6 +208,9 @@ TEST(SolveConfigTest, StrictKeysTypesAndRanges) {
             std::string::npos);
   EXPECT_NE(ErrorOf(json::parse(R"({"merge": {"dark_level": 200, "saturation_level": 100}})"))
                 .find("MergeOptions: need 0 <= dark_level < saturation_level"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(json::parse(R"({"ground_field": {"enabled": "yes"}})"))
+                .find("ground_field.enabled must be true, false or \"with_surroundings\""),
             std::string::npos);
   EXPECT_NE(ErrorOf(json::parse(R"({"sky_segment": {"seed_cone": 5}})"))
                 .find("sky_segment.seed_cone is not a known key"),

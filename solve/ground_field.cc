@@ -27,14 +27,13 @@ Eigen::Vector3d CosineDirection(int k, int n) {
   return {r * std::cos(phi), r * std::sin(phi), std::sqrt(std::max(0.0, 1 - u))};
 }
 
-// What lights level ground at cell `cell` per unit albedo, seen from `to_viewer`, over pi:
+// What lights level ground at q per unit albedo, seen from `to_viewer`, over pi:
 // (E_sun sin(el) D + E_sky V_sky A) / pi with the ground's rough diffuse reflection `retro`.
-Eigen::Vector3d LightPerAlbedo(const GroundField& f, int cell, bool shaded,
+Eigen::Vector3d LightPerAlbedo(const GroundField& f, const Eigen::Vector3d& q, bool shaded,
                                const Eigen::Vector3d& sun_dir, const Eigen::Vector3d& sun_e,
                                const Eigen::Vector3d& sky_e, const Eigen::Vector3d& to_viewer,
                                double retro) {
-  const double vis = cell < 0 ? 1.0 : f.sky_visibility[cell];
-  Eigen::Vector3d e = sky_e * (vis * AmbientRetroFactor(retro, kUp, to_viewer));
+  Eigen::Vector3d e = sky_e * (f.SkyVisibility(q) * AmbientRetroFactor(retro, kUp, to_viewer));
   if (!shaded && sun_dir.z() > 0)
     e += sun_e * (sun_dir.z() * RetroFactor(retro, kUp, sun_dir, to_viewer));
   return e / kPi;
@@ -42,15 +41,16 @@ Eigen::Vector3d LightPerAlbedo(const GroundField& f, int cell, bool shaded,
 
 // One landscape panorama pixel whose ray meets the ground.
 struct GroundPixel {
-  int time = 0, panorama = 0;  // indices into the times and that time's panoramas
-  int cell = -1;               // -1: beyond the field
-  bool shaded = false;         // the model hides the sun from where the ray meets the ground
+  int time = 0, panorama = 0;                   // indices into the times and that time's panoramas
+  int cell = -1;                                // -1: beyond the field
+  Eigen::Vector3f q = Eigen::Vector3f::Zero();  // where the ray meets the ground
+  bool shaded = false;  // the model hides the sun from where the ray meets the ground
   Eigen::Vector3f radiance = Eigen::Vector3f::Zero();
   Eigen::Vector3f to_viewer = Eigen::Vector3f::UnitZ();  // from the ground to the panorama
   // The albedo the pixel reads with the ground's reflection `retro`; NaN where nothing lights it.
   Eigen::Vector3d Albedo(const GroundField& f, const GroundFieldTime& t, double retro) const {
-    const Eigen::Vector3d e = LightPerAlbedo(f, cell, shaded, t.sun_dir, t.sun_e, t.sky_e,
-                                             to_viewer.cast<double>(), retro);
+    const Eigen::Vector3d e = LightPerAlbedo(f, q.cast<double>(), shaded, t.sun_dir, t.sun_e,
+                                             t.sky_e, to_viewer.cast<double>(), retro);
     if (!(e.minCoeff() > 0)) return Eigen::Vector3d::Constant(std::nan(""));
     return radiance.cast<double>().cwiseQuotient(e);
   }
@@ -88,6 +88,7 @@ void ForEachGroundPixel(const std::vector<GroundFieldTime>& times, const RayCast
           g.time = static_cast<int>(ti);
           g.panorama = static_cast<int>(pi);
           g.cell = f.Cell(q.x(), q.y());
+          g.q = q.cast<float>();
           g.shaded = t.sun_dir.z() <= 0 ||
                      model.Occluded(q + Eigen::Vector3d(0, 0, offset), t.sun_dir, 0.0);
           g.radiance = l;
@@ -217,6 +218,27 @@ int GroundField::Cell(double x, double y) const {
   return static_cast<int>(fy) * nx + static_cast<int>(fx);
 }
 
+double GroundField::SkyVisibility(const Eigen::Vector3d& q) const {
+  const double fx = (q.x() - x0) / cell_m - 0.5, fy = (q.y() - y0) / cell_m - 0.5;
+  const double ix = std::floor(fx), iy = std::floor(fy);
+  if (!(std::isfinite(ix) && std::isfinite(iy))) return 1;
+  double sum = 0, weight = 0;
+  for (int b = 0; b < 2; ++b) {
+    for (int a = 0; a < 2; ++a) {
+      const double w = (a ? fx - ix : 1 - (fx - ix)) * (b ? fy - iy : 1 - (fy - iy));
+      const double cx = ix + a, cy = iy + b;
+      // Beyond the cells the model leaves the whole sky; a cell under the model, none to count.
+      const double v = cx < 0 || cy < 0 || cx >= nx || cy >= ny
+                           ? 1.0
+                           : sky_visibility[static_cast<size_t>(cy) * nx + static_cast<size_t>(cx)];
+      if (!(v > 0)) continue;
+      sum += w * v;
+      weight += w;
+    }
+  }
+  return weight > 0 ? sum / weight : 0;
+}
+
 Eigen::Vector3d GroundField::CellCentre(int cell) const {
   return {x0 + (cell % nx + 0.5) * cell_m, y0 + (cell / nx + 0.5) * cell_m, level_z};
 }
@@ -269,15 +291,26 @@ GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const Ra
   f.y0 = box.min().y() - radius;
   const int n = f.nx * f.ny;
 
-  // The sky the model leaves each cell (cosine-weighted), once.
+  // The sky the model leaves each cell (cosine-weighted), once: the mean over four spots of the
+  // cell, each with its own stratified quarter of the rays, of those outside the model (a spot
+  // under a wall sees no sky at all; the cell is the ground beside the wall).
   const double offset = model.surface_offset();
+  const int per_spot = std::max(1, options.sky_rays / 4);
   f.sky_visibility.assign(n, 1.f);
   tbb::parallel_for(0, n, [&](int c) {
-    const Eigen::Vector3d q = f.CellCentre(c) + Eigen::Vector3d(0, 0, offset);
-    int open = 0;
-    for (int k = 0; k < options.sky_rays; ++k)
-      open += !model.Occluded(q, CosineDirection(k, options.sky_rays), 0.0);
-    f.sky_visibility[c] = static_cast<float>(open) / options.sky_rays;
+    const Eigen::Vector3d centre = f.CellCentre(c) + Eigen::Vector3d(0, 0, offset);
+    int open = 0, cast = 0;
+    for (int j = 0; j < 4; ++j) {
+      const Eigen::Vector3d q =
+          centre + 0.25 * f.cell_m * Eigen::Vector3d(j % 2 ? 1 : -1, j / 2 ? 1 : -1, 0);
+      int spot = 0;
+      for (int k = 0; k < per_spot; ++k)
+        spot += !model.Occluded(q, CosineDirection(k, per_spot), 0.0);
+      if (spot == 0) continue;
+      open += spot;
+      cast += per_spot;
+    }
+    f.sky_visibility[c] = cast > 0 ? static_cast<float>(open) / cast : 0.f;
   });
 
   // The fit's retro from a sample of the sunlit pixels (at most kFitPixels of all), then per time
@@ -381,26 +414,17 @@ GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const Ra
 GroundLight::GroundLight(const GroundField& field, const RayCaster& model,
                          const Eigen::Vector3d& sun_dir, const Eigen::Vector3d& sun_e,
                          const Eigen::Vector3d& sky_e)
-    : field_(&field), sun_dir_(sun_dir), sun_e_(sun_e), sky_e_(sky_e) {
-  const int n = field.nx * field.ny;
-  shadow_.assign(n, 0);
-  if (sun_dir.z() <= 0) {
-    std::fill(shadow_.begin(), shadow_.end(), 1);
-    return;
-  }
-  const Eigen::Vector3d up(0, 0, model.surface_offset());
-  tbb::parallel_for(0, n, [&](int c) {
-    shadow_[c] = model.Occluded(field.CellCentre(c) + up, sun_dir, 0.0) ? 1 : 0;
-  });
-}
+    : field_(&field), model_(&model), sun_dir_(sun_dir), sun_e_(sun_e), sky_e_(sky_e) {}
 
 Eigen::Vector3d GroundLight::Radiance(const Eigen::Vector3d& q,
                                       const Eigen::Vector3d& to_viewer) const {
   const GroundField& f = *field_;
   const int cell = f.Cell(q.x(), q.y());
-  const bool shaded = cell >= 0 ? shadow_[cell] != 0 : sun_dir_.z() <= 0;
+  const bool shaded =
+      sun_dir_.z() <= 0 ||
+      model_->Occluded(q + Eigen::Vector3d(0, 0, model_->surface_offset()), sun_dir_, 0.0);
   return f.Albedo(cell).cwiseProduct(
-      LightPerAlbedo(f, cell, shaded, sun_dir_, sun_e_, sky_e_, to_viewer, f.retro));
+      LightPerAlbedo(f, q, shaded, sun_dir_, sun_e_, sky_e_, to_viewer, f.retro));
 }
 
 Eigen::Vector3d GroundLight::Arriving(const Eigen::Vector3d& origin,
@@ -411,7 +435,11 @@ Eigen::Vector3d GroundLight::Arriving(const Eigen::Vector3d& origin,
 }
 
 void to_json(nlohmann::json& j, const GroundFieldOptions& o) {
-  j = {{"enabled", o.enabled},
+  // The config's key: false, true or "with_surroundings".
+  const nlohmann::json enabled = o.use == GroundFieldUse::kWithSurroundings
+                                     ? nlohmann::json("with_surroundings")
+                                     : nlohmann::json(o.use == GroundFieldUse::kAlways);
+  j = {{"enabled", enabled},
        {"cell_m", o.cell_m},
        {"radius_factor", o.radius_factor},
        {"min_radius_m", o.min_radius_m},

@@ -31,8 +31,9 @@ using cli_test::RunRouen;
 fs::path Data() { return fs::path(ROUEN_SOURCE_DIR) / "tests/data/blender_nave"; }
 
 // Import, solve (the held-out slot kept out of the albedos) and validate the held-out slot:
-// the church alone, the church with its surroundings, and with them the ground as a light field
-// ([ground_field] enabled), and with it the specular lobes' two models tried ("auto").
+// the church alone, the church with its surroundings and the ground field off ([ground_field]
+// enabled = false), with them by default (the field on, as the surroundings are given), and
+// with the specular lobes' two models tried ("auto").
 class BlenderNaveTest : public ::testing::Test {
  protected:
   struct Run {
@@ -43,13 +44,12 @@ class BlenderNaveTest : public ::testing::Test {
     dir_ = new fs::path(cli_test::TempDir("blender_nave"));
     alone_ = new Run(UserPath("alone", ""));
     const std::string surroundings = " --surroundings " + Q(Data() / "surroundings.obj");
-    around_ = new Run(UserPath("around", surroundings));
-    const fs::path config = *dir_ / "field.toml";
-    WriteFileAtomic(config, "[ground_field]\nenabled = true\n");
-    field_ = new Run(UserPath("field", surroundings, " --config " + Q(config)));
+    const fs::path no_field = *dir_ / "no_field.toml";
+    WriteFileAtomic(no_field, "[ground_field]\nenabled = false\n");
+    around_ = new Run(UserPath("around", surroundings, " --config " + Q(no_field)));
+    field_ = new Run(UserPath("field", surroundings));
     const fs::path glossy = *dir_ / "glossy.toml";
-    WriteFileAtomic(glossy,
-                    "[ground_field]\nenabled = true\n[albedo.sun_lobe]\nmodel = \"auto\"\n");
+    WriteFileAtomic(glossy, "[albedo.sun_lobe]\nmodel = \"auto\"\n");
     auto_ = new Run(UserPath("auto", surroundings, " --config " + Q(glossy)));
   }
   static void TearDownTestSuite() {
@@ -148,13 +148,13 @@ TEST_F(BlenderNaveTest, TheHousesShadeTheStreetWall) {
   }
 }
 
-// The ground as a light field. The panoramas see the square and the street at grazing angles,
-// where the rough ground (Principled roughness 0.9) sends the sun back brighter than towards
-// the walls; the environment's fit of that roughness from its regions over the day finds none
-// here (two panoramas pooled in one layer, one of them in a shaded street), so the environment
-// lights the walls with a ground too bright and too red, most on the south wall in sun: its
-// sun albedo in red comes out about 24% low. The field fits the roughness from the ground
-// itself (one albedo per spot at every time and from both panoramas) and lights each wall
+// The ground as a light field, on by default with the surroundings. The panoramas see the square
+// and the street at grazing angles, where the rough ground (Principled roughness 0.9) sends the sun
+// back brighter than towards the walls; the environment's fit of that roughness from its regions
+// over the day finds none here (two panoramas pooled in one layer, one of them in a shaded street),
+// so the environment lights the walls with a ground too bright and too red, most on the south wall
+// in sun: its sun albedo in red comes out about 24% low. The field fits the roughness from the
+// ground itself (one albedo per spot at every time and from both panoramas) and lights each wall
 // with the ground it sees.
 TEST_F(BlenderNaveTest, TheGroundFieldSeesTheSquareAsTheWallsSeeIt) {
   const std::string& log = field_->log;
@@ -184,7 +184,9 @@ TEST_F(BlenderNaveTest, TheGroundFieldSeesTheSquareAsTheWallsSeeIt) {
 
   // The sun pseudo-albedos of the matte blocks within the 5% of the base colours.
   for (const light_passes::BlockAlbedo& a : light_passes::BlockAlbedos(Data(), Scene("field")))
-    if (!a.glossy) EXPECT_NEAR(a.rho_sun / a.base, 1.0, 0.05) << a.block << " " << a.channel;
+    if (!a.glossy) {
+      EXPECT_NEAR(a.rho_sun / a.base, 1.0, 0.05) << a.block << " " << a.channel;
+    }
 
   // The held-out evening under the lighting measured then: the south-east view (the south wall
   // in its own shade, lit by the square) gains, and no view loses more than 1 dB.
@@ -197,7 +199,9 @@ TEST_F(BlenderNaveTest, TheGroundFieldSeesTheSquareAsTheWallsSeeIt) {
                 a["view"].get<std::string>().c_str(), before, after,
                 a["predicted"]["psnr_db"].get<double>(), b["predicted"]["psnr_db"].get<double>());
     EXPECT_GE(after, before - 1) << a["view"];
-    if (a["view"] == "slot4/architecture/view1") EXPECT_GE(after, before + 3);
+    if (a["view"] == "slot4/architecture/view1") {
+      EXPECT_GE(after, before + 3);
+    }
   }
 }
 
@@ -236,7 +240,8 @@ TEST_F(BlenderNaveTest, TheSlateRoofsGlintIsAMicrofacetLobe) {
     EXPECT_LT(std::abs(a.rho_se / a.base - 1), std::abs(l.rho_se / l.base - 1)) << a.channel;
   }
   // The glint view (the scene's view0) at the held-out evening gains; the others are printed
-  // (the south-east view loses about 1.7 dB: the roof's sky light there is too warm).
+  // (the south-east view loses about 6 dB: east of the facade's shadow the roof is never in
+  // shadow, and with the microfacet lobe its rho_se there is 28% low in blue).
   for (size_t k = 0; k < field_->validation["photos"].size(); ++k) {
     const nlohmann::json& l = field_->validation["photos"][k];
     const nlohmann::json& a = auto_->validation["photos"][k];
@@ -245,7 +250,9 @@ TEST_F(BlenderNaveTest, TheSlateRoofsGlintIsAMicrofacetLobe) {
     std::printf("%s: eq. 13's lobe %.2f dB, auto %.2f dB (predicted %.2f -> %.2f)\n",
                 l["view"].get<std::string>().c_str(), before, after,
                 l["predicted"]["psnr_db"].get<double>(), a["predicted"]["psnr_db"].get<double>());
-    if (l["view"] == "slot4/architecture/view0") EXPECT_GT(after, before);
+    if (l["view"] == "slot4/architecture/view0") {
+      EXPECT_GT(after, before);
+    }
   }
 }
 

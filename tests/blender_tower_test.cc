@@ -134,8 +134,11 @@ TEST_F(BlenderTowerTest, HeldOutAndTrainingPhotosExplained) {
   }
   // The sun pseudo-albedos against the base colours: per matte block and channel, the median
   // over its observed points within 5% (the issue's bar; the sun's radiance 1-3%, the retro fit).
-  for (const light_passes::BlockAlbedo& a : light_passes::BlockAlbedos(Data(), Scene()))
-    if (!a.glossy) EXPECT_NEAR(a.rho_sun / a.base, 1.0, 0.05) << a.block << " " << a.channel;
+  for (const light_passes::BlockAlbedo& a : light_passes::BlockAlbedos(Data(), Scene())) {
+    if (!a.glossy) {
+      EXPECT_NEAR(a.rho_sun / a.base, 1.0, 0.05) << a.block << " " << a.channel;
+    }
+  }
 }
 
 // A grid spacing for a block the model lacks (a misspelt block) is refused before any work,
@@ -151,30 +154,54 @@ TEST_F(BlenderTowerTest, ABlockSpacingForNoBlockIsRefused) {
   EXPECT_FALSE(fs::exists(*dir_ / "misspelt_scene"));
 }
 
-// The ground as a light field ([ground_field] enabled): the panorama's ground re-projected and
-// seen from where each point stands. On the shaft's shaded faces -- the light the issue is
-// about -- the default overestimates red by 7-9% at every time (the rough ground is brighter
-// seen from the panorama at grazing angles than from the wall); the field brings every time
-// within 5% per channel (0.950-1.01). It reads a cell's albedo from the times that saw it in
-// sun: the 76 cells the panorama sees both in sun and in the tower's shadow read 1.8-5 times
-// brighter in shadow (median 3.5; pixels a few metres long at grazing views across the shadow's
-// edge), which when pooled lit the ground, and the shaft, 1-2% brighter (within 4% then).
-TEST_F(BlenderTowerTest, GroundFieldSeesTheGroundFromTheWall) {
-  const fs::path config = *dir_ / "field.toml";
-  WriteFileAtomic(config, "[ground_field]\nenabled = true\n");
-  const fs::path scene = *dir_ / "scene_field";
-  const Result r = RunRouen("solve " + Q(Session()) + " --out " + Q(scene) +
-                            " --holdout-slot 4 --config " + Q(config));
+// The ground as a light field, on by default when the session gives the surroundings: the same
+// photographs imported again with the houses, the block, the shed and the wall as boxes
+// (surroundings.obj, as a city model's extruded footprints; not the trees), solved by default
+// and with the field off. The field sees the ground from the wall; the houses' sunlit walls,
+// which a wall 40 m up sees below its horizon, come from the surroundings. On the shaft's shaded
+// faces -- the light the issue is about -- the field is within 0.979-1.003 of Cycles' light at
+// every time (without it 1.012-1.066: the warm ground seen from the panorama at grazing angles).
+// Without the surroundings the field missed the houses' walls: the west face 8-9% too dark in
+// the morning, so the field stays off there (the default solve above logs no field).
+TEST_F(BlenderTowerTest, GroundFieldWithTheSurroundingsSeesTheGroundFromTheWall) {
+  EXPECT_EQ(solve_log_->find("ground field:"), std::string::npos) << *solve_log_;
+  const nlohmann::json truth = Truth();
+  const fs::path session = *dir_ / "session_around";
+  Result r = RunRouen("import --photos " + Q(Data()) + " --list " + Q(Data() / "list.txt") +
+                      " --cameras " + Q(Data() / "cameras.json") + " --site " + SiteArg(truth) +
+                      " --model " + Q(Data() / "building.obj") + " --surroundings " +
+                      Q(Data() / "surroundings.obj") + " --sky-mask auto --out " + Q(session));
+  ASSERT_EQ(r.code, 0) << r.out;
+  const fs::path field = *dir_ / "scene_field", plain = *dir_ / "scene_plain";
+  r = RunRouen("solve " + Q(session) + " --out " + Q(field) + " --holdout-slot 4");
   ASSERT_EQ(r.code, 0) << r.out;
   EXPECT_NE(r.out.find("ground field:"), std::string::npos) << r.out;
-  const std::map<std::string, TermSums> with = TermTable(Data(), scene);
-  const std::map<std::string, TermSums> without = TermTable(Data(), Scene());
+  const fs::path config = *dir_ / "no_field.toml";
+  WriteFileAtomic(config, "[ground_field]\nenabled = false\n");
+  r = RunRouen("solve " + Q(session) + " --out " + Q(plain) + " --holdout-slot 4 --config " +
+               Q(config));
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_EQ(r.out.find("ground field:"), std::string::npos) << r.out;
+
+  const std::map<std::string, TermSums> with = TermTable(Data(), field);
+  const std::map<std::string, TermSums> without = TermTable(Data(), plain);
+  // The issue's bar for the albedos is 5%; an albedo is the photo over this light, so the light
+  // must be within 5% at every time.
   for (int slot = 0; slot < 5; ++slot) {
     const std::string key = std::to_string(slot) + " shaft shaded";
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(with.at(key).TotalRatio()[c], 1.0, 0.05) << key;
   }
-  EXPECT_LT(std::abs(with.at("all shaft shaded").TotalRatio()[0] - 1),
-            std::abs(without.at("all shaft shaded").TotalRatio()[0] - 1));
+  for (int c = 0; c < 3; ++c)
+    EXPECT_LT(std::abs(with.at("all shaft shaded").TotalRatio()[c] - 1),
+              std::abs(without.at("all shaft shaded").TotalRatio()[c] - 1))
+        << c;
+  // And so the matte blocks' sky + environment albedos, where the photos saw them lit and
+  // shaded, reach the bar (-0.8..+1.1% here; without the field the belfry's red is 5.3% low).
+  for (const light_passes::BlockAlbedo& a : light_passes::BlockAlbedos(Data(), field, true)) {
+    if (a.glossy) continue;
+    EXPECT_NEAR(a.rho_se / a.base, 1.0, 0.05) << a.block << " " << a.channel;
+    EXPECT_NEAR(a.rho_sun / a.base, 1.0, 0.05) << a.block << " " << a.channel;
+  }
 }
 
 }  // namespace

@@ -212,20 +212,7 @@ def check_faces(faces):
 
 
 def surrounding_boxes():
-    return {n: geo["box"] for n, (_, geo) in SURROUNDINGS.items()
-            if "box" in geo and geo["box"][4] != geo["box"][5]}
-
-
-def write_surroundings_obj(path):
-    """The surrounding buildings (not the ground, not the trees), one OBJ group per box: walls
-    and a flat roof, no bottom, counter-clockwise from outside (base.write_obj's format)."""
-    base.write_obj(path, {n: base.box_polygons(*b) for n, b in surrounding_boxes().items()})
-    with open(path) as f:
-        lines = f.read().split("\n")
-    lines[0] = ("# rouen validation world (Blender/Cycles): the surroundings only (boxes as a "
-                "city model's extruded footprints; not the ground, not the trees), by gen.py")
-    with open(path, "w") as f:
-        f.write("\n".join(lines))
+    return tower.surrounding_boxes(SURROUNDINGS)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -468,7 +455,7 @@ def main():
     os.makedirs(tmpdir, exist_ok=True)
     os.makedirs(os.path.join(out, "passes"), exist_ok=True)  # not photos: rouen import skips it
     base.write_obj(os.path.join(out, "building.obj"), blocks)
-    write_surroundings_obj(os.path.join(out, "surroundings.obj"))
+    tower.write_surroundings_obj(os.path.join(out, "surroundings.obj"), SURROUNDINGS)
     tris = base.triangles(blocks)
     building, others, sky = tower.build_scene(blocks, BLOCK_MATERIALS, SURROUNDING_MATERIALS,
                                               SURROUNDINGS)

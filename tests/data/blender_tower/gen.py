@@ -148,6 +148,27 @@ def building_blocks():
     return blocks
 
 
+def surrounding_boxes(surroundings=SURROUNDINGS):
+    """{name: box} of the surroundings that stand up from the ground (not the ground plane, not
+    the trees)."""
+    return {n: geo["box"] for n, (_, geo) in surroundings.items()
+            if "box" in geo and geo["box"][4] != geo["box"][5]}
+
+
+def write_surroundings_obj(path, surroundings=SURROUNDINGS):
+    """The surrounding buildings (not the ground, not the trees), one OBJ group per box: walls
+    and a flat roof, no bottom, counter-clockwise from outside (base.write_obj's format), as a
+    user gives them to `rouen import --surroundings` from a city model's extruded footprints."""
+    base.write_obj(path, {n: base.box_polygons(*b)
+                          for n, b in surrounding_boxes(surroundings).items()})
+    with open(path) as f:
+        lines = f.read().split("\n")
+    lines[0] = ("# rouen validation world (Blender/Cycles): the surroundings only (boxes as a "
+                "city model's extruded footprints; not the ground, not the trees), by gen.py")
+    with open(path, "w") as f:
+        f.write("\n".join(lines))
+
+
 def check_outward(blocks):
     """Every face is counter-clockwise from outside: a point just in front of it lies outside
     the building, i.e. a ray from it going up (the building is open only at the ground)
@@ -269,7 +290,12 @@ def main():
     ap.add_argument("--scale", type=float, default=1.0, help="multiplies every sample count")
     ap.add_argument("--times", default="", help="comma-separated slot indices (default: all)")
     ap.add_argument("--no-checks", action="store_true")
+    ap.add_argument("--surroundings-only", action="store_true",
+                    help="write OUT/surroundings.obj and render nothing")
     a = ap.parse_args(argv)
+    if a.surroundings_only:
+        write_surroundings_obj(os.path.join(os.path.abspath(a.out), "surroundings.obj"))
+        return
     base.SITE.update(SITE)  # `rouen sun` (base.rouen_sun) asks for this site
     out = os.path.abspath(a.out)
     tmpdir = os.path.join(out, ".tmp")
@@ -280,6 +306,7 @@ def main():
     blocks = building_blocks()
     check_outward(blocks)
     base.write_obj(os.path.join(out, "building.obj"), blocks)
+    write_surroundings_obj(os.path.join(out, "surroundings.obj"))
     tris = base.triangles(blocks)
     building, others, sky = build_scene(blocks)
     passes = light_pass_output(tmpdir)

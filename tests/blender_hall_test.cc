@@ -1,0 +1,120 @@
+// rouen on the cloth hall world (tests/data/blender_hall: a limestone hall with a brick belfry
+// on a market square at Ypres, a street of houses along its never-sunlit north wall, two
+// eye-height panoramas per time, four eye-height views with Cycles' diffuse light passes; see
+// its README.md). It was rendered before the ground field became the default with surroundings
+// and measured only once that change was done, as a capture rouen had never seen.
+//
+// The user's path with the houses as surroundings (import --surroundings): by default, with
+// the ground as a light field, and with the field off.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "core/files.h"
+#include "tests/cli_util.h"
+#include "tests/light_passes.h"
+
+namespace rouen {
+namespace {
+
+namespace fs = std::filesystem;
+using cli_test::Q;
+using cli_test::Result;
+using cli_test::RunRouen;
+using light_passes::TermSums;
+
+fs::path Data() { return fs::path(ROUEN_SOURCE_DIR) / "tests/data/blender_hall"; }
+
+// The largest deviation from 1 over the channels of rouen's light against Cycles'.
+double WorstChannel(const TermSums& t) { return (t.TotalRatio().array() - 1).abs().maxCoeff(); }
+
+// The held-out figures of a scene (rouen validate --json), or a failed test.
+nlohmann::json Validate(const fs::path& scene, const fs::path& session, int slot,
+                        const fs::path& json) {
+  const Result r = RunRouen("validate " + Q(scene) + " --session " + Q(session) + " --slot " +
+                            std::to_string(slot) + " --json " + Q(json));
+  EXPECT_EQ(r.code, 0) << r.out;
+  return r.code == 0 ? nlohmann::json::parse(ReadFileToString(json)) : nlohmann::json{};
+}
+
+TEST(BlenderHallTest, TheGroundFieldWithTheSurroundingsLightsTheShadedWalls) {
+  const fs::path dir = cli_test::TempDir("blender_hall");
+  const nlohmann::json truth = nlohmann::json::parse(ReadFileToString(Data() / "truth.json"));
+  const nlohmann::json& site = truth["site"];
+  const int heldout = truth["heldout_slot"].get<int>();
+  const fs::path session = dir / "session";
+  Result r = RunRouen(
+      "import --photos " + Q(Data()) + " --list " + Q(Data() / "list.txt") + " --cameras " +
+      Q(Data() / "cameras.json") + " --site=" + std::to_string(site["lat_deg"].get<double>()) +
+      "," + std::to_string(site["lon_deg"].get<double>()) + "," +
+      std::to_string(site["height_m"].get<double>()) + " --model " + Q(Data() / "building.obj") +
+      " --surroundings " + Q(Data() / "surroundings.obj") + " --sky-mask auto --out " + Q(session));
+  ASSERT_EQ(r.code, 0) << r.out;
+  const fs::path field = dir / "scene_field", plain = dir / "scene_plain";
+  r = RunRouen("solve " + Q(session) + " --out " + Q(field) + " --holdout-slot " +
+               std::to_string(heldout));
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("ground field:"), std::string::npos) << r.out;
+  const fs::path config = dir / "no_field.toml";
+  WriteFileAtomic(config, "[ground_field]\nenabled = false\n");
+  r = RunRouen("solve " + Q(session) + " --out " + Q(plain) + " --holdout-slot " +
+               std::to_string(heldout) + " --config " + Q(config));
+  ASSERT_EQ(r.code, 0) << r.out;
+
+  // The light of the faces the sun does not reach, against Cycles' passes: the 5% for
+  // the albedos (an albedo is the photo over this light) at every time and block, with the
+  // field (0.978-1.034 here; without it the belfry's 0.910-1.268). Pooled over the times, the
+  // worst channel nearer 1 with the field than without.
+  const std::map<std::string, TermSums> with = light_passes::TermTable(Data(), field);
+  const std::map<std::string, TermSums> without = light_passes::TermTable(Data(), plain);
+  for (const char* block : {"hall", "belfry"}) {
+    for (int slot = 0; slot < 5; ++slot) {
+      const std::string key = std::to_string(slot) + " " + block + " shaded";
+      ASSERT_TRUE(with.count(key)) << key;
+      EXPECT_LT(WorstChannel(with.at(key)), 0.05) << key;
+    }
+    const std::string all = std::string("all ") + block + " shaded";
+    EXPECT_LT(WorstChannel(with.at(all)), WorstChannel(without.at(all))) << all;
+  }
+
+  // Both pseudo-albedos of every block, where the photos saw it lit and shaded, within the
+  // issue's 5% of the base colour with the field (within 3.6% here); without it the hall's
+  // sky + environment albedo is 9-10% high in green and blue.
+  int beyond_without = 0;
+  for (const light_passes::BlockAlbedo& a : light_passes::BlockAlbedos(Data(), field, true)) {
+    EXPECT_NEAR(a.rho_sun / a.base, 1.0, 0.05) << a.block << " " << a.channel;
+    EXPECT_NEAR(a.rho_se / a.base, 1.0, 0.05) << a.block << " " << a.channel;
+  }
+  for (const light_passes::BlockAlbedo& a : light_passes::BlockAlbedos(Data(), plain, true))
+    beyond_without += std::abs(a.rho_se / a.base - 1) > 0.05;
+  EXPECT_GT(beyond_without, 0) << "the environment map alone already meets the bar";
+
+  // The held-out evening (sun 11 degrees high) under the lighting measured then: every view
+  // explained at least as well with the field (the street's north wall by 4 dB here). Not yet
+  // the 35 dB everywhere: printed.
+  const nlohmann::json vf = Validate(field, session, heldout, dir / "field.json");
+  const nlohmann::json vp = Validate(plain, session, heldout, dir / "plain.json");
+  ASSERT_TRUE(vf.contains("photos") && vp.contains("photos"));
+  ASSERT_EQ(vf["photos"].size(), vp["photos"].size());
+  for (size_t k = 0; k < vf["photos"].size(); ++k) {
+    const nlohmann::json &f = vf["photos"][k], &p = vp["photos"][k];
+    ASSERT_EQ(f["view"], p["view"]);
+    std::printf("%s: measured %.2f -> %.2f dB, predicted %.2f -> %.2f dB (median %.4f)\n",
+                f["view"].get<std::string>().c_str(), p["measured"]["psnr_db"].get<double>(),
+                f["measured"]["psnr_db"].get<double>(), p["predicted"]["psnr_db"].get<double>(),
+                f["predicted"]["psnr_db"].get<double>(),
+                f["measured"]["median_rel_error"].get<double>());
+    EXPECT_GE(f["measured"]["psnr_db"].get<double>(), p["measured"]["psnr_db"].get<double>())
+        << f["view"];
+  }
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace rouen
