@@ -292,8 +292,8 @@ GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const Ra
   const int n = f.nx * f.ny;
 
   // The sky the model leaves each cell (cosine-weighted), once: the mean over four spots of the
-  // cell, each with its own stratified quarter of the rays, of those outside the model (a spot
-  // under a wall sees no sky at all; the cell is the ground beside the wall).
+  // cell, each cast sky_rays / 4 stratified rays, of the spots outside the model (one that sees
+  // no sky at all is under a wall; the cell is the ground beside it).
   const double offset = model.surface_offset();
   const int per_spot = std::max(1, options.sky_rays / 4);
   f.sky_visibility.assign(n, 1.f);

@@ -260,6 +260,65 @@ TEST_F(GroundFieldPanoramaTest, ACellSeenSunlitKeepsTheAlbedoReadInSun) {
 // A vertical wall sees the level ground below its horizon under half its projected solid angle:
 // a uniform Lambertian ground lit by the sun alone gives it rho E_h / 2, E_h the sun's
 // irradiance on the ground, by either irradiance method.
+// A cell's sky is read at the spots of it outside the model, and between cells bilinearly over
+// the cells that see some sky: the ground beside a wall is not dark because a cell's centre
+// lies under the wall.
+TEST(GroundFieldTest, TheSkyBesideAWallIsReadOutsideTheModel) {
+  const GroundField f = [] {
+    GroundField g;
+    g.cell_m = 2;
+    g.nx = g.ny = 3;
+    g.x0 = g.y0 = 0;
+    g.albedo.assign(9, Eigen::Vector3f::Constant(0.3f));
+    g.observed.assign(9, 1);
+    g.sky_visibility = {0.2f, 0.4f, 0.6f, 0.8f, 0.f, 1.f, 1.f, 1.f, 1.f};
+    return g;
+  }();
+  // At a cell's centre, its own; midway between two centres, their mean; beyond the cells, 1.
+  EXPECT_NEAR(f.SkyVisibility({3, 1, 0}), 0.4, 1e-6);
+  EXPECT_NEAR(f.SkyVisibility({2, 1, 0}), 0.3, 1e-6);
+  EXPECT_NEAR(f.SkyVisibility({6, 1, 0}), 0.8, 1e-6);  // half the weight beyond the cells
+  EXPECT_NEAR(f.SkyVisibility({100, 100, 0}), 1.0, 1e-12);
+  // The cell under the model (0) does not count: midway between it and its neighbour, the
+  // neighbour's.
+  EXPECT_NEAR(f.SkyVisibility({3, 2, 0}), 0.4, 1e-6);
+
+  // Built against a 10 m block whose wall runs through the middle of a column of 2 m cells: those
+  // cells see the sky from their spots outside the block (about half of it beside a 30 m wall),
+  // the cells wholly inside it next to none.
+  Mesh m;
+  testing::AddBox(&m, {-5, -5, 0}, {5, 5, 30}, m.AddBlock("tower"));
+  const RayCaster model(m);
+  const Intrinsics k = [] {
+    Intrinsics i;
+    i.projection = Projection::kEquirect;
+    i.width = 90;
+    i.height = 45;
+    return i;
+  }();
+  Image pano(k.width, k.height, 3, PixelUnits::kRadiance);
+  for (float& v : pano.data) v = 0.1f;
+  GroundFieldTime t;
+  t.panoramas.push_back({&pano, k, Pose::Level({0, -30, 1.7}, 0, 0)});
+  t.sun_dir = SunAt(180, 40);
+  t.sun_e = Eigen::Vector3d::Constant(100);
+  t.sky_e = Eigen::Vector3d::Constant(10);
+  GroundFieldOptions o;
+  o.cell_m = 2;
+  o.min_radius_m = 11;  // cells from -16 m: one edge falls on the wall at x = -5 +- 1
+  o.radius_factor = 0;
+  o.fit_retro = false;
+  const GroundField built = BuildGroundField({t}, model, 0, o);
+  const int straddling = built.Cell(-5.0 + 0.5, 0), inside = built.Cell(0, 0);
+  ASSERT_GE(straddling, 0);
+  ASSERT_GE(inside, 0);
+  EXPECT_GT(built.sky_visibility[straddling], 0.3) << "the ground beside the wall sees no sky";
+  EXPECT_LT(built.sky_visibility[straddling], 0.7);
+  // Wholly inside: next to nothing (one ray of a spot's 16 escapes here, between the box's
+  // triangles; such a spot then counts as outside).
+  EXPECT_LT(built.sky_visibility[inside], 0.1);
+}
+
 TEST(GroundFieldTest, AWallSeesHalfOfAUniformGround) {
   Mesh m;
   const int b = m.AddBlock("wall");

@@ -46,15 +46,10 @@ nlohmann::json Validate(const fs::path& scene, const fs::path& session, int slot
 TEST(BlenderHallTest, TheGroundFieldWithTheSurroundingsLightsTheShadedWalls) {
   const fs::path dir = cli_test::TempDir("blender_hall");
   const nlohmann::json truth = nlohmann::json::parse(ReadFileToString(Data() / "truth.json"));
-  const nlohmann::json& site = truth["site"];
   const int heldout = truth["heldout_slot"].get<int>();
   const fs::path session = dir / "session";
-  Result r = RunRouen(
-      "import --photos " + Q(Data()) + " --list " + Q(Data() / "list.txt") + " --cameras " +
-      Q(Data() / "cameras.json") + " --site=" + std::to_string(site["lat_deg"].get<double>()) +
-      "," + std::to_string(site["lon_deg"].get<double>()) + "," +
-      std::to_string(site["height_m"].get<double>()) + " --model " + Q(Data() / "building.obj") +
-      " --surroundings " + Q(Data() / "surroundings.obj") + " --sky-mask auto --out " + Q(session));
+  Result r = RunRouen(light_passes::ImportCommand(Data()) + " --surroundings " +
+                      Q(Data() / "surroundings.obj") + " --out " + Q(session));
   ASSERT_EQ(r.code, 0) << r.out;
   const fs::path field = dir / "scene_field", plain = dir / "scene_plain";
   r = RunRouen("solve " + Q(session) + " --out " + Q(field) + " --holdout-slot " +

@@ -64,16 +64,11 @@ class BlenderNaveTest : public ::testing::Test {
   static Run UserPath(const std::string& name, const std::string& surroundings,
                       const std::string& solve_options = "") {
     const nlohmann::json truth = nlohmann::json::parse(ReadFileToString(Data() / "truth.json"));
-    const nlohmann::json& site = truth["site"];
     const std::string heldout = std::to_string(truth["heldout_slot"].get<int>());
     const fs::path session = *dir_ / (name + "_session"), scene = Scene(name);
     Run run;
-    Result r = RunRouen(
-        "import --photos " + Q(Data()) + " --list " + Q(Data() / "list.txt") + " --cameras " +
-        Q(Data() / "cameras.json") + " --site=" + std::to_string(site["lat_deg"].get<double>()) +
-        "," + std::to_string(site["lon_deg"].get<double>()) + "," +
-        std::to_string(site["height_m"].get<double>()) + " --model " + Q(Data() / "building.obj") +
-        surroundings + " --sky-mask auto --out " + Q(session));
+    Result r =
+        RunRouen(light_passes::ImportCommand(Data()) + surroundings + " --out " + Q(session));
     run.log += r.out;
     if (r.code != 0) return run;
     r = RunRouen("solve " + Q(session) + " --out " + Q(scene) + " --holdout-slot " + heldout +

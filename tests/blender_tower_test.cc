@@ -33,23 +33,13 @@ fs::path Data() { return fs::path(ROUEN_SOURCE_DIR) / "tests/data/blender_tower"
 
 nlohmann::json Truth() { return nlohmann::json::parse(ReadFileToString(Data() / "truth.json")); }
 
-std::string SiteArg(const nlohmann::json& truth) {
-  const nlohmann::json& site = truth["site"];
-  return std::to_string(site["lat_deg"].get<double>()) + "," +
-         std::to_string(site["lon_deg"].get<double>()) + "," +
-         std::to_string(site["height_m"].get<double>());
-}
-
 // One import and one default solve (held-out slot kept out of the albedos) for every test here.
 class BlenderTowerTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     dir_ = new fs::path(cli_test::TempDir("blender_tower"));
     const nlohmann::json truth = Truth();
-    Result r = RunRouen("import --photos " + Q(Data()) + " --list " + Q(Data() / "list.txt") +
-                        " --cameras " + Q(Data() / "cameras.json") + " --site " + SiteArg(truth) +
-                        " --model " + Q(Data() / "building.obj") + " --sky-mask auto --out " +
-                        Q(Session()));
+    Result r = RunRouen(light_passes::ImportCommand(Data()) + " --out " + Q(Session()));
     import_log_ = new std::string(r.out);
     if (r.code != 0) return;
     r = RunRouen("solve " + Q(Session()) + " --out " + Q(Scene()) + " --holdout-slot " +
@@ -167,10 +157,8 @@ TEST_F(BlenderTowerTest, GroundFieldWithTheSurroundingsSeesTheGroundFromTheWall)
   EXPECT_EQ(solve_log_->find("ground field:"), std::string::npos) << *solve_log_;
   const nlohmann::json truth = Truth();
   const fs::path session = *dir_ / "session_around";
-  Result r = RunRouen("import --photos " + Q(Data()) + " --list " + Q(Data() / "list.txt") +
-                      " --cameras " + Q(Data() / "cameras.json") + " --site " + SiteArg(truth) +
-                      " --model " + Q(Data() / "building.obj") + " --surroundings " +
-                      Q(Data() / "surroundings.obj") + " --sky-mask auto --out " + Q(session));
+  Result r = RunRouen(light_passes::ImportCommand(Data()) + " --surroundings " +
+                      Q(Data() / "surroundings.obj") + " --out " + Q(session));
   ASSERT_EQ(r.code, 0) << r.out;
   const fs::path field = *dir_ / "scene_field", plain = *dir_ / "scene_plain";
   r = RunRouen("solve " + Q(session) + " --out " + Q(field) + " --holdout-slot 4");

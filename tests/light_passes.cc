@@ -22,6 +22,7 @@
 #include "solve/grid.h"
 #include "solve/retro.h"
 #include "solve/scene.h"
+#include "tests/cli_util.h"
 
 namespace rouen::light_passes {
 
@@ -229,6 +230,17 @@ std::vector<BlockAlbedo> BlockAlbedos(const fs::path& data, const fs::path& scen
     }
   }
   return out;
+}
+
+std::string ImportCommand(const fs::path& data) {
+  const nlohmann::json truth = nlohmann::json::parse(ReadFileToString(data / "truth.json"));
+  const nlohmann::json& site = truth["site"];
+  return "import --photos " + cli_test::Q(data) + " --list " + cli_test::Q(data / "list.txt") +
+         " --cameras " + cli_test::Q(data / "cameras.json") +
+         " --site=" + std::to_string(site["lat_deg"].get<double>()) + "," +
+         std::to_string(site["lon_deg"].get<double>()) + "," +
+         std::to_string(site["height_m"].get<double>()) + " --model " +
+         cli_test::Q(data / "building.obj") + " --sky-mask auto";
 }
 
 }  // namespace rouen::light_passes

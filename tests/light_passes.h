@@ -13,6 +13,10 @@
 
 namespace rouen::light_passes {
 
+// `rouen import` of the world in `data` as a user runs it (its photos, list, cameras, the site
+// from truth.json, building.obj, the sky segmented): append " --surroundings ..." and " --out ...".
+std::string ImportCommand(const std::filesystem::path& data);
+
 // Sums over a set of visible grid points: Cycles' passes x pi and rouen's terms in the same
 // units (the block's Burley factor for the sun, its ambient factor for the rest).
 struct TermSums {

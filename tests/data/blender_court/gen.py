@@ -134,6 +134,15 @@ def _oriented(poly, want):
     return poly if base.polygon_normal(poly) @ np.array(want, float) > 0 else poly[::-1]
 
 
+def oriented_faces(raw, sloped):
+    """[(block, face label, polygon)] from [(block, label, polygon, outward direction)]: each
+    polygon counter-clockwise from outside, the outward direction of the `sloped` blocks'
+    faces tilted upwards (a roof's slope faces the sky as well as its side)."""
+    up = np.array([0.0, 0.0, 1.0])
+    return [(block, label, _oriented(poly, np.array(want, float) + (up if block in sloped else 0)))
+            for block, label, poly, want in raw]
+
+
 def building_faces():
     """[(block, face label, polygon)], counter-clockwise from outside, no bottom faces; the
     faces two blocks share are left out (the range's north wall where the wing stands against
@@ -185,16 +194,26 @@ def building_faces():
     for (ax, ay), (bx, by), label, want in zip(corners, corners[1:] + corners[:1],
                                                ("south", "east", "north", "west"), (S, E, N, W)):
         raw.append(("spire", label, [(ax, ay, th), (bx, by, th), apex], want))
-    up = np.array([0.0, 0.0, 1.0])
-    return [(block, label, _oriented(poly, np.array(want, float) + (up if block in ("roof", "spire") else 0)))
-            for block, label, poly, want in raw]
+    return oriented_faces(raw, SLOPED)
+
+
+# The definitions a world gives the nave's pipeline.
+WORLD_NAMES = ("SITE", "DATE", "ZONE", "TIMES", "HELDOUT", "BLOCK_MATERIALS",
+               "SURROUNDING_MATERIALS", "SURROUNDINGS", "ARCH_VIEWS", "PANOS", "SUN_EYE", "RIDGE",
+               "building_faces")
+
+
+def install_world(world):
+    """Another world's definitions (its module's globals: WORLD_NAMES, and WHAT,
+    building_entry and SLOPED for truth.json) in place of this one's, then install()."""
+    for name in WORLD_NAMES + ("WHAT", "building_entry", "SLOPED"):
+        globals()[name] = world[name]
+    install()
 
 
 def install():
     """This world's definitions in place of the nave's, for nave.main() to render."""
-    for name in ("SITE", "DATE", "ZONE", "TIMES", "HELDOUT", "BLOCK_MATERIALS",
-                 "SURROUNDING_MATERIALS", "SURROUNDINGS", "ARCH_VIEWS", "PANOS", "SUN_EYE",
-                 "RIDGE", "building_faces"):
+    for name in WORLD_NAMES:
         setattr(nave, name, globals()[name])
     nave.SLOPED = SLOPED
     nave.GLINT_SLOT = None  # no view named `glint`: no glossy passes

@@ -29,7 +29,6 @@ import importlib.util
 import math
 import os
 
-import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 _spec = importlib.util.spec_from_file_location("court_gen",
@@ -172,11 +171,10 @@ def building_faces():
         ("roof", "south", [(x0, y0, h), (x1, y0, h), (x1, mid, r), (x0, mid, r)], S),
         ("roof", "north", [(x0, y1, h), (x1, y1, h), (x1, mid, r), (x0, mid, r)], N),
     ]
-    up = np.array([0.0, 0.0, 1.0])
-    return [(block, label, court._oriented(poly, np.array(want, float) + (up if block == "roof" else 0)))
-            for block, label, poly, want in raw]
+    return court.oriented_faces(raw, SLOPED)
 
 
+SLOPED = {"roof": 0.5}  # sloped block: the least upward part of its normal (nave.check_faces)
 WHAT = ("rouen Blender/Cycles validation world: a cathedral's west front with two towers and "
         "its nave on a square, photographed from the ground (gen.py); kept out of tuning")
 
@@ -189,13 +187,8 @@ def building_entry():
 
 
 def install():
-    """This world's definitions in court's module, then court.install() puts them in nave's."""
-    for name in ("SITE", "DATE", "ZONE", "TIMES", "HELDOUT", "BLOCK_MATERIALS",
-                 "SURROUNDING_MATERIALS", "SURROUNDINGS", "ARCH_VIEWS", "PANOS", "SUN_EYE",
-                 "RIDGE", "building_faces", "WHAT", "building_entry"):
-        setattr(court, name, globals()[name])
-    court.SLOPED = {"roof": 0.5}
-    court.install()
+    """This world's definitions in court's module, then in nave's."""
+    court.install_world(globals())
 
 
 if __name__ == "__main__":
