@@ -117,6 +117,15 @@ bool CarryResidual(const std::vector<std::vector<Eigen::Vector3d>>& residual,
   return true;
 }
 
+// The sky model's mean radiance over each region of `map`'s grid (0 below the horizon).
+EnvironmentMap SkyMeans(const EnvironmentMap& map, const SkyModel& sky) {
+  EnvOptions grid;
+  grid.bands_below = map.bands_below;
+  grid.bands_above = map.bands_above;
+  grid.sectors = map.sectors;
+  return EnvironmentMap::FromSky(grid, sky, Eigen::Vector3d::Zero());
+}
+
 }  // namespace
 
 LightingPredictor::LightingPredictor(std::vector<Lighting> measured, const RelightOptions& options,
@@ -154,26 +163,86 @@ LightingPredictor::LightingPredictor(std::vector<Lighting> measured, const Relig
   } else {
     env_ = SolveEnvStereo(EnvObservationsOf(measured_), options_.env);
   }
+  for (const Lighting& l : measured_) {
+    SkyModel sky = l.sky;
+    sky.sun_dir = l.sun_dir;
+    sky_means_.push_back(SkyMeans(l.env, sky));
+  }
+  const std::vector<std::vector<double>> loo = LeaveOneOutWeights();
   if (options_.sky_residual) {
     for (const Lighting& l : measured_) {
-      EnvOptions grid;
-      grid.bands_below = l.env.bands_below;
-      grid.bands_above = l.env.bands_above;
-      grid.sectors = l.env.sectors;
-      SkyModel sky = l.sky;
-      sky.sun_dir = l.sun_dir;
-      sky_means_.push_back(EnvironmentMap::FromSky(grid, sky, Eigen::Vector3d::Zero()));
       sun_az_.push_back(AzimuthOf(l.sun_dir));
       sky_residual_.emplace_back(l.env.radiance.size(), Eigen::Vector3d::Constant(-1));
     }
     for (size_t gi = 0; gi < env_.regions.size(); ++gi) {
       if (env_.regions[gi].kind == EnvRegionKind::kSky) SetResidual(gi);
     }
-    const std::vector<std::vector<double>> loo = LeaveOneOutWeights();
     // Each region found lends its residual to the next: until none is found.
     for (int pass = 0; pass < 8 && FindSkyByResidual(loo) > 0; ++pass) {
     }
     ChooseResidualFrames(loo);
+  }
+  ChooseFallbackFrames(loo);
+}
+
+bool LightingPredictor::IsMeasuredFallback(size_t gi) const {
+  return gi < env_.regions.size() && env_.regions[gi].kind == EnvRegionKind::kSkyOnly &&
+         !SkyOnlyExplains(env_.regions[gi], options_.env);
+}
+
+// The measured radiances of region gi averaged with `weights` over the times that saw it (or
+// had it filled from its neighbours); with `sky_now`, each relative to that time's fitted sky
+// over the region and put back on sky_now. False when no time counts (or, relative, a time's
+// sky there is not positive).
+bool LightingPredictor::MeasuredFallback(size_t gi, const std::vector<double>& weights,
+                                         const Eigen::Vector3d* sky_now,
+                                         Eigen::Vector3d* out) const {
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  double wsum = 0;
+  for (size_t t = 0; t < measured_.size() && t < weights.size(); ++t) {
+    const EnvironmentMap& m = measured_[t].env;
+    if (!(weights[t] > 0) || gi >= m.radiance.size() ||
+        (m.source[gi] != EnvRegionSource::kObserved && m.source[gi] != EnvRegionSource::kNeighbour))
+      continue;
+    if (sky_now) {
+      const Eigen::Vector3d& sky_then = sky_means_[t].radiance[gi % m.num_regions()];
+      if (!(sky_then.minCoeff() > 0)) return false;
+      sum += weights[t] * m.radiance[gi].cwiseQuotient(sky_then);
+    } else {
+      sum += weights[t] * m.radiance[gi];
+    }
+    wsum += weights[t];
+  }
+  if (!(wsum > 0)) return false;
+  *out = sky_now ? Eigen::Vector3d(sum.cwiseProduct(*sky_now) / wsum) : Eigen::Vector3d(sum / wsum);
+  return true;
+}
+
+// Per measured fallback region above the horizon: whether it carries relative to the sky, by
+// which of the two ways predicts every measured time that saw it from the others (§5.1's
+// weights) with the smaller squared log error. Sky the model misses (a haze band) keeps its
+// ratio to the sky, which dims and reddens towards a low sun; a surface the stereo could not
+// explain keeps its radiance when that holds better across the times.
+void LightingPredictor::ChooseFallbackFrames(const std::vector<std::vector<double>>& loo) {
+  fallback_relative_.assign(env_.regions.size(), 0);
+  const EnvironmentMap& m0 = measured_.front().env;
+  const int nreg = m0.num_regions(), first_above = m0.bands_below * m0.sectors;
+  for (size_t gi = 0; gi < env_.regions.size(); ++gi) {
+    if (!IsMeasuredFallback(gi) || static_cast<int>(gi % nreg) < first_above) continue;
+    double err_plain = 0, err_relative = 0;
+    for (size_t t = 0; t < measured_.size() && t < loo.size(); ++t) {
+      const EnvironmentMap& m = measured_[t].env;
+      if (m.source[gi] != EnvRegionSource::kObserved || !(m.radiance[gi].minCoeff() > 0)) continue;
+      Eigen::Vector3d plain, relative;
+      if (!MeasuredFallback(gi, loo[t], nullptr, &plain) ||
+          !MeasuredFallback(gi, loo[t], &sky_means_[t].radiance[gi % nreg], &relative) ||
+          !(plain.minCoeff() > 0) || !(relative.minCoeff() > 0))
+        continue;
+      const Eigen::Array3d log_observed = m.radiance[gi].array().log();
+      err_plain += (plain.array().log() - log_observed).square().sum();
+      err_relative += (relative.array().log() - log_observed).square().sum();
+    }
+    fallback_relative_[gi] = err_relative < err_plain;
   }
 }
 
@@ -360,22 +429,17 @@ Lighting LightingPredictor::At(UtcTime utc, const Site& site, RelightSummary* su
   // the new sun as a surface: the region takes its measured radiances (or what the maps filled
   // it with from their neighbours at times no panorama saw it), weighted as the sky's times are
   // (§5.1; by default by the sun's elevation, which sets how bright the haze and the distant
-  // ground near the horizon are, more than the sun's azimuth does).
-  for (size_t gi = 0; gi < out.env.radiance.size() && gi < env_.regions.size(); ++gi) {
-    const EnvRegionFit& fit = env_.regions[gi];
-    if (fit.kind != EnvRegionKind::kSkyOnly || SkyOnlyExplains(fit, options_.env)) continue;
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    double wsum = 0;
-    for (size_t t = 0; t < measured_.size() && t < is.weights.size(); ++t) {
-      const EnvironmentMap& m = measured_[t].env;
-      if (!(is.weights[t] > 0) || gi >= m.radiance.size() ||
-          (m.source[gi] != EnvRegionSource::kObserved &&
-           m.source[gi] != EnvRegionSource::kNeighbour))
-        continue;
-      sum += is.weights[t] * m.radiance[gi];
-      wsum += is.weights[t];
-    }
-    if (wsum > 0) out.env.radiance[gi] = sum / wsum;
+  // ground near the horizon are, more than the sun's azimuth does); relative to the sky where
+  // that predicts the measured times better (ChooseFallbackFrames).
+  const EnvironmentMap sky_now = SkyMeans(out.env, out.sky);
+  for (size_t gi = 0; gi < out.env.radiance.size(); ++gi) {
+    if (!IsMeasuredFallback(gi)) continue;
+    const Eigen::Vector3d& sky = sky_now.radiance[gi % sky_now.num_regions()];
+    Eigen::Vector3d r;
+    if ((fallback_relative_[gi] && sky.minCoeff() > 0 &&
+         MeasuredFallback(gi, is.weights, &sky, &r)) ||
+        MeasuredFallback(gi, is.weights, nullptr, &r))
+      out.env.radiance[gi] = r;
   }
   out.env.ground_retro = options_.env.ground_retro;  // as the shadow on it is put back
   // Each sky region spread over itself as the new time's model is (no residual per cell: that

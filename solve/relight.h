@@ -122,12 +122,20 @@ class LightingPredictor {
   std::vector<EnvironmentMap> sky_means_;  // per measured time: its fitted sky per region
   std::vector<double> sun_az_;             // per measured time, radians from north eastwards
   std::vector<ResidualFrame> residual_frame_;
+  // Per layer and region: whether a measured fallback carries relative to the sky (1) or as its
+  // radiance (0).
+  std::vector<uint8_t> fallback_relative_;
   int sky_by_residual_ = 0;
   bool SeenAgainstModel(size_t time, size_t region) const;
   void SetResidual(size_t region);
   // Per measured time, the other times' §5.1 weights for its sun (0 for itself).
   std::vector<std::vector<double>> LeaveOneOutWeights() const;
   int FindSkyByResidual(const std::vector<std::vector<double>>& loo);
+  // A sky-only fallback region that explains nothing: predicted from its measured radiances.
+  bool IsMeasuredFallback(size_t region) const;
+  bool MeasuredFallback(size_t region, const std::vector<double>& weights,
+                        const Eigen::Vector3d* sky_now, Eigen::Vector3d* out) const;
+  void ChooseFallbackFrames(const std::vector<std::vector<double>>& loo);
   void ChooseResidualFrames(const std::vector<std::vector<double>>& loo);
 };
 

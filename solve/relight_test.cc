@@ -298,6 +298,69 @@ TEST(RelightTest, ASkyOnlyFallbackThatExplainsNothingTakesItsMeasuredRadiances) 
   }
 }
 
+// Above the horizon such a region may be sky the model misses (a haze band): its measured
+// radiances, taken relative to each time's fitted sky there and put back on the new time's,
+// predict the measured times from each other better than the radiances do, so it dims with the
+// sky towards a low sun instead of keeping the brightness of the higher suns it was measured
+// under. A region whose radiance holds at every time (a skyline) keeps its radiance.
+TEST(RelightTest, ASkyOnlyFallbackAboveTheHorizonFollowsTheSkyWhereThatPredictsIt) {
+  std::vector<Lighting> day = Day({0.1, 0.14, 0.2}, {1e4, 1e4, 1e4});
+  const EnvironmentMap& m0 = day.front().env;
+  const int r = m0.bands_below * m0.sectors + 2;  // the lowest band above the horizon
+  const size_t gi = static_cast<size_t>(r);
+  EnvOptions grid;
+  grid.bands_below = m0.bands_below;
+  grid.bands_above = m0.bands_above;
+  grid.sectors = m0.sectors;
+  const auto sky_mean = [&](const SkyModel& sky) {
+    return EnvironmentMap::FromSky(grid, sky, Eigen::Vector3d::Zero()).radiance[gi];
+  };
+  std::vector<Eigen::Vector3d> fraction;  // of the fitted sky there, per time
+  for (size_t t = 0; t < day.size(); ++t) {
+    fraction.push_back(Eigen::Vector3d(0.5, 0.6, 0.7) * (1 + 0.1 * t));
+    day[t].env.radiance[gi] = fraction.back().cwiseProduct(sky_mean(day[t].sky));
+    day[t].env.source[gi] = EnvRegionSource::kObserved;
+  }
+  const size_t skyline = gi + 5;
+  const Eigen::Vector3d held(30, 40, 50);
+  for (Lighting& l : day) {
+    l.env.radiance[skyline] = held;
+    l.env.source[skyline] = EnvRegionSource::kObserved;
+  }
+  RelightOptions options;
+  options.sky_residual = false;  // the regions stay fallbacks (the residual could take them)
+  EnvStereoResult stored = LightingPredictor(day, options).environment();
+  for (const size_t g : {gi, skyline}) {
+    EnvRegionFit& fit = stored.regions[g];
+    fit = EnvRegionFit();
+    fit.kind = EnvRegionKind::kSkyOnly;
+    fit.rho_sky = Eigen::Vector3d::Constant(8.0);
+    fit.rel_rms = 0.4;
+    ASSERT_FALSE(SkyOnlyExplains(fit, stored.options));
+  }
+  const LightingPredictor p(day, options, &stored);
+  // After sunset's last measured time (the sky dimmed by extinction) and in the afternoon.
+  for (const char* local : {"2026-08-25T19:30:00-07:00", "2026-08-25T15:00:00-07:00"}) {
+    RelightSummary rs;
+    const Lighting l = p.At(ParseIso8601(local), kSite, &rs);
+    ASSERT_EQ(rs.sky_weights.size(), day.size());
+    Eigen::Vector3d want = Eigen::Vector3d::Zero(), mean = Eigen::Vector3d::Zero();
+    double wsum = 0;
+    for (size_t t = 0; t < day.size(); ++t) {
+      want += rs.sky_weights[t] * fraction[t];
+      mean += rs.sky_weights[t] * day[t].env.radiance[gi];
+      wsum += rs.sky_weights[t];
+    }
+    want = (want / wsum).cwiseProduct(sky_mean(l.sky));
+    mean /= wsum;
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(l.env.radiance[gi][c], want[c], 1e-9 * want[c]) << local;
+    if (rs.extinction_from_air_mass > 0)  // the measured times' mean is brighter than the sky now
+      EXPECT_GT(mean.minCoeff() / l.env.radiance[gi].minCoeff(), 1.1) << local;
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(l.env.radiance[skyline][c], held[c], 1e-9 * held[c]);
+  }
+}
+
 TEST(RelightTest, RefusesNightAndNoData) {
   LightingPredictor predictor(Day({0.1, 0.1, 0.1}, {1e4, 1e4, 1e4}), RelightOptions{});
   try {

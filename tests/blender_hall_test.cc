@@ -107,6 +107,13 @@ TEST(BlenderHallTest, TheGroundFieldWithTheSurroundingsLightsTheShadedWalls) {
                 f["measured"]["median_rel_error"].get<double>());
     EXPECT_GE(f["measured"]["psnr_db"].get<double>(), p["measured"]["psnr_db"].get<double>())
         << f["view"];
+    // Predicted from the four higher suns, no view loses more than half its PSNR's worth of
+    // signal to noise against the lighting measured then (3 dB: a relative RMSE at most 1.41x
+    // the measured one's). 0.1-2.2 dB here; the east view was 10.8 dB below (25.5 against
+    // 36.3) while the environment's unexplained regions above the horizon kept the brightness
+    // of the higher suns instead of dimming with the sky.
+    EXPECT_GE(f["predicted"]["psnr_db"].get<double>(), f["measured"]["psnr_db"].get<double>() - 3)
+        << f["view"];
   }
   fs::remove_all(dir);
 }
