@@ -39,6 +39,12 @@ Eigen::Vector3d LightPerAlbedo(const GroundField& f, const Eigen::Vector3d& q, b
   return e / kPi;
 }
 
+// Whether ground point q lies in the model's shadow (or the sun is down).
+bool InShadow(const RayCaster& model, const Eigen::Vector3d& q, const Eigen::Vector3d& sun_dir) {
+  return sun_dir.z() <= 0 ||
+         model.Occluded(q + Eigen::Vector3d(0, 0, model.surface_offset()), sun_dir, 0.0);
+}
+
 // One landscape panorama pixel whose ray meets the ground.
 struct GroundPixel {
   int time = 0, panorama = 0;                   // indices into the times and that time's panoramas
@@ -89,8 +95,7 @@ void ForEachGroundPixel(const std::vector<GroundFieldTime>& times, const RayCast
           g.panorama = static_cast<int>(pi);
           g.cell = f.Cell(q.x(), q.y());
           g.q = q.cast<float>();
-          g.shaded = t.sun_dir.z() <= 0 ||
-                     model.Occluded(q + Eigen::Vector3d(0, 0, offset), t.sun_dir, 0.0);
+          g.shaded = InShadow(model, q, t.sun_dir);
           g.radiance = l;
           g.to_viewer = (-d).cast<float>();
           fn(g);
@@ -420,11 +425,8 @@ Eigen::Vector3d GroundLight::Radiance(const Eigen::Vector3d& q,
                                       const Eigen::Vector3d& to_viewer) const {
   const GroundField& f = *field_;
   const int cell = f.Cell(q.x(), q.y());
-  const bool shaded =
-      sun_dir_.z() <= 0 ||
-      model_->Occluded(q + Eigen::Vector3d(0, 0, model_->surface_offset()), sun_dir_, 0.0);
-  return f.Albedo(cell).cwiseProduct(
-      LightPerAlbedo(f, q, shaded, sun_dir_, sun_e_, sky_e_, to_viewer, f.retro));
+  return f.Albedo(cell).cwiseProduct(LightPerAlbedo(f, q, InShadow(*model_, q, sun_dir_), sun_dir_,
+                                                    sun_e_, sky_e_, to_viewer, f.retro));
 }
 
 Eigen::Vector3d GroundLight::Arriving(const Eigen::Vector3d& origin,

@@ -257,9 +257,6 @@ TEST_F(GroundFieldPanoramaTest, ACellSeenSunlitKeepsTheAlbedoReadInSun) {
   EXPECT_GE(2 * shade_high, shade_only);
 }
 
-// A vertical wall sees the level ground below its horizon under half its projected solid angle:
-// a uniform Lambertian ground lit by the sun alone gives it rho E_h / 2, E_h the sun's
-// irradiance on the ground, by either irradiance method.
 // A cell's sky is read at the spots of it outside the model, and between cells bilinearly over
 // the cells that see some sky: the ground beside a wall is not dark because a cell's centre
 // lies under the wall.
@@ -319,6 +316,9 @@ TEST(GroundFieldTest, TheSkyBesideAWallIsReadOutsideTheModel) {
   EXPECT_LT(built.sky_visibility[inside], 0.1);
 }
 
+// A vertical wall sees the level ground below its horizon under half its projected solid angle:
+// a uniform Lambertian ground lit by the sun alone gives it rho E_h / 2, E_h the sun's
+// irradiance on the ground, by either irradiance method.
 TEST(GroundFieldTest, AWallSeesHalfOfAUniformGround) {
   Mesh m;
   const int b = m.AddBlock("wall");

@@ -1,5 +1,6 @@
 #include "solve/relight.h"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -431,13 +432,15 @@ Lighting LightingPredictor::At(UtcTime utc, const Site& site, RelightSummary* su
   // (§5.1; by default by the sun's elevation, which sets how bright the haze and the distant
   // ground near the horizon are, more than the sun's azimuth does); relative to the sky where
   // that predicts the measured times better (ChooseFallbackFrames).
-  const EnvironmentMap sky_now = SkyMeans(out.env, out.sky);
+  const bool any_relative = std::find(fallback_relative_.begin(), fallback_relative_.end(), 1) !=
+                            fallback_relative_.end();
+  const EnvironmentMap sky_now = any_relative ? SkyMeans(out.env, out.sky) : EnvironmentMap();
   for (size_t gi = 0; gi < out.env.radiance.size(); ++gi) {
     if (!IsMeasuredFallback(gi)) continue;
-    const Eigen::Vector3d& sky = sky_now.radiance[gi % sky_now.num_regions()];
     Eigen::Vector3d r;
-    if ((fallback_relative_[gi] && sky.minCoeff() > 0 &&
-         MeasuredFallback(gi, is.weights, &sky, &r)) ||
+    const Eigen::Vector3d* sky =
+        fallback_relative_[gi] ? &sky_now.radiance[gi % sky_now.num_regions()] : nullptr;
+    if ((sky && sky->minCoeff() > 0 && MeasuredFallback(gi, is.weights, sky, &r)) ||
         MeasuredFallback(gi, is.weights, nullptr, &r))
       out.env.radiance[gi] = r;
   }

@@ -155,7 +155,6 @@ TEST_F(BlenderTowerTest, ABlockSpacingForNoBlockIsRefused) {
 // the morning, so the field stays off there (the default solve above logs no field).
 TEST_F(BlenderTowerTest, GroundFieldWithTheSurroundingsSeesTheGroundFromTheWall) {
   EXPECT_EQ(solve_log_->find("ground field:"), std::string::npos) << *solve_log_;
-  const nlohmann::json truth = Truth();
   const fs::path session = *dir_ / "session_around";
   Result r = RunRouen(light_passes::ImportCommand(Data()) + " --surroundings " +
                       Q(Data() / "surroundings.obj") + " --out " + Q(session));

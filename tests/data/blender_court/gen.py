@@ -1,5 +1,5 @@
 # A town hall on a courtyard, built from code and rendered by Blender/Cycles: rouen's third
-# ground-level validation world, the one kept OUT of tuning (see README.md):
+# ground-level validation world (README.md: when it was first looked at):
 #
 #   blender -b --factory-startup --python gen.py -- --out DIR --rouen PATH [--scale S]
 #   blender -b --factory-startup --python gen.py -- --out DIR --rouen PATH --plan
@@ -115,7 +115,7 @@ SUN_EYE = PANOS["pano_square"]
 # The roofs' slopes and the spire's (steep: 10 m over a 3.5 m half-width) for nave.check_faces.
 SLOPED = {"roof": 0.5, "spire": 0.2}
 WHAT = ("rouen Blender/Cycles validation world: an L-shaped town hall with a campanile on a "
-        "courtyard, photographed from the ground (gen.py); kept out of tuning")
+        "courtyard, photographed from the ground (gen.py)")
 
 
 def building_entry():

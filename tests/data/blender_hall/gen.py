@@ -1,5 +1,5 @@
 # A cloth hall with a belfry on a market square, built from code and rendered by Blender/Cycles:
-# rouen's fourth ground-level validation world, the one kept OUT of tuning (see README.md):
+# rouen's fourth ground-level validation world (README.md: when it was first looked at):
 #
 #   blender -b --factory-startup --python gen.py -- --out DIR --rouen PATH [--scale S]
 #   blender -b --factory-startup --python gen.py -- --out DIR --rouen PATH --plan
@@ -129,7 +129,7 @@ def building_faces():
 
 SLOPED = {"roof": 0.5}  # sloped block: the least upward part of its normal (nave.check_faces)
 WHAT = ("rouen Blender/Cycles validation world: a cloth hall with a belfry on a market square, "
-        "photographed from the ground (gen.py); kept out of tuning")
+        "photographed from the ground (gen.py)")
 
 
 def building_entry():

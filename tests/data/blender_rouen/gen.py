@@ -1,5 +1,5 @@
 # A cathedral's west front on its square, built from code and rendered by Blender/Cycles:
-# rouen's fifth ground-level validation world, the one kept OUT of tuning (see README.md):
+# rouen's fifth ground-level validation world (README.md: when it was first looked at):
 #
 #   blender -b --factory-startup --python gen.py -- --out DIR --rouen PATH [--scale S]
 #   blender -b --factory-startup --python gen.py -- --out DIR --rouen PATH --plan
@@ -176,7 +176,7 @@ def building_faces():
 
 SLOPED = {"roof": 0.5}  # sloped block: the least upward part of its normal (nave.check_faces)
 WHAT = ("rouen Blender/Cycles validation world: a cathedral's west front with two towers and "
-        "its nave on a square, photographed from the ground (gen.py); kept out of tuning")
+        "its nave on a square, photographed from the ground (gen.py)")
 
 
 def building_entry():
