@@ -675,12 +675,15 @@ EnvStereoResult SolveEnvStereo(const std::vector<EnvObservation>& per_time,
     fit.iterations = best_iter;
     fit.rel_rms = std::sqrt(best / (3.0 * T));
     // Sky-only fallback (§5.2): a bad fit with a normal pointing away from the viewer, or a
-    // normal no training sun lit (its solar term and direction are then unconstrained).
+    // normal no training sun lit (its solar term and direction are then unconstrained). Above
+    // the horizon a normal pointing away is not kept however well it fits: the panorama could
+    // not have seen that side (it is the glow next to a low sun that the smooth sky model
+    // misses, fitted as a surface lit by that sun from behind).
     const bool away = fit.normal.dot(view) > 0;
     const bool implausible =
         std::max(fit.rho_sun.maxCoeff(), fit.rho_sky.maxCoeff()) > options.max_albedo * (1 + 1e-9);
     const Eigen::Vector3d fallback_normal = away ? Eigen::Vector3d(-view) : fit.normal;
-    if ((fit.rel_rms > options.fallback_rel_error && away) || implausible ||
+    if (((fit.rel_rms > options.fallback_rel_error || above) && away) || implausible ||
         fit.sunlit_times == 0) {
       fallback_reason[gi] = fit.sunlit_times == 0 ? 2 : 1;
       FitSkyOnly(st.data, options, fallback_normal, &fit);

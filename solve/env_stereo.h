@@ -73,8 +73,9 @@ struct EnvStereoOptions {
   bool fit_sky_fraction = true;
   // Sky-only fallback (§5.2): a region whose weighted RMS relative residual exceeds this and
   // whose normal points away from the viewer (n . d > 0, d the region's direction from the
-  // panorama), or whose normal faces the sun at no training time, keeps only rho_sky, with
-  // the fitted normal if it faces the viewer, else the direction towards the viewer.
+  // panorama; above the horizon, pointing away whatever the residual), or whose normal faces
+  // the sun at no training time, keeps only rho_sky, with the fitted normal if it faces the
+  // viewer, else the direction towards the viewer.
   double fallback_rel_error = 0.1;
   // Beyond the paper: a fit with an albedo above this (a normal the sun barely lit, whose
   // length ran away) also falls back to sky-only.

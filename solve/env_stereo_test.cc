@@ -368,6 +368,34 @@ TEST(EnvStereoTest, TheSkyAlbedoStaysWithinItsBound) {
   EXPECT_LT(fit.rel_rms, 0.1);
 }
 
+// Sky just above the horizon towards a low sun, brighter than the smooth model there by a glow
+// the seven parameters miss, the stronger the nearer the sun (here as the cosine between
+// them): a surface lit by that sun from behind explains it exactly (the fit finds it, residual
+// 1e-4) -- but it faces away from the panorama, which then could not have seen it. The region
+// falls back to sky-only, facing the panorama.
+TEST(EnvStereoTest, ASurfaceAboveTheHorizonFacingAwayIsNotKept) {
+  EnvStereoOptions o;
+  const EnvironmentMap grid = EnvironmentMap::Constant(SmallGrid(), {1, 1, 1}, {1, 1, 1});
+  const Synthetic w = MakeWorld(grid, 5);
+  const int r = grid.bands_below * grid.sectors + 5;  // 0..30 deg, azimuth 225..270
+  ASSERT_FALSE(w.landscape[r]);
+  const Eigen::Vector3d view = Centre(grid, r);
+  const std::vector<int> train = {0, 1, 2, 3, 4};
+  std::vector<EnvObservation> obs = Observe(w, train, o, 0, 1);
+  for (EnvObservation& ob : obs) {
+    const double glow =
+        0.5 / kPi * ob.lighting.sun_solid_angle_sr * std::max(0.0, view.dot(ob.lighting.sun_dir));
+    ob.env.radiance[r] += glow * ob.lighting.sun_radiance;
+    ob.env.source[r] = EnvRegionSource::kObserved;
+    ob.env.pixel_count[r] = 100;
+  }
+  const EnvStereoResult res = SolveEnvStereo(obs, o);
+  const EnvRegionFit& fit = res.regions[r];
+  EXPECT_EQ(fit.kind, EnvRegionKind::kSkyOnly);
+  EXPECT_LT(fit.normal.dot(view), 0) << fit.normal.transpose();
+  EXPECT_GE(res.summary.fallback_bad_fit, 1);
+}
+
 // A region below the horizon no panorama saw at any time holds its neighbours' radiance
 // (FillBelowHorizon): it is not fitted (that would be their data seen from its direction), and
 // its prediction is the predicted map filled the same way.

@@ -355,8 +355,9 @@ TEST(RelightTest, ASkyOnlyFallbackAboveTheHorizonFollowsTheSkyWhereThatPredictsI
     mean /= wsum;
     for (int c = 0; c < 3; ++c)
       EXPECT_NEAR(l.env.radiance[gi][c], want[c], 1e-9 * want[c]) << local;
-    if (rs.extinction_from_air_mass > 0)  // the measured times' mean is brighter than the sky now
+    if (rs.extinction_from_air_mass > 0) {  // the measured times' mean is brighter than the sky now
       EXPECT_GT(mean.minCoeff() / l.env.radiance[gi].minCoeff(), 1.1) << local;
+    }
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(l.env.radiance[skyline][c], held[c], 1e-9 * held[c]);
   }
 }
