@@ -8,6 +8,7 @@
 
 #include "core/angles.h"
 #include "core/error.h"
+#include "core/json_text.h"
 
 namespace rouen {
 
@@ -68,7 +69,8 @@ CapturePlan PlanFromJson(const nlohmann::json& j) {
     for (const auto& s : j.at("targets")) p.targets.push_back(ParseTarget(s.get<std::string>()));
     p.sun_nd_density = j.at("sun_nd_density").get<double>();
     p.sun_start_exposure_s = j.at("sun_start_exposure_s").get<double>();
-    p.sun_extra_longer_frames = j.at("sun_extra_longer_frames").get<int>();
+    p.sun_extra_longer_frames =
+        JsonGet<int>(j.at("sun_extra_longer_frames"), "sun_extra_longer_frames");
     p.aureole_exposures_s = j.at("aureole_exposures_s").get<std::vector<double>>();
     p.start_exposure_s = j.at("start_exposure_s").get<double>();
     p.sun_exclusion_deg = j.at("sun_exclusion_deg").get<double>();
@@ -76,7 +78,7 @@ CapturePlan PlanFromJson(const nlohmann::json& j) {
     p.bracket.step_stops = b.at("step_stops").get<double>();
     p.bracket.min_exposure_s = b.at("min_exposure_s").get<double>();
     p.bracket.max_exposure_s = b.at("max_exposure_s").get<double>();
-    p.bracket.max_frames = b.at("max_frames").get<int>();
+    p.bracket.max_frames = JsonGet<int>(b.at("max_frames"), "bracket.max_frames");
     p.bracket.saturation_dn = b.at("saturation_dn").get<double>();
     p.bracket.noise_floor_dn = b.at("noise_floor_dn").get<double>();
     p.bracket.max_saturated_fraction = b.at("max_saturated_fraction").get<double>();

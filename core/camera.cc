@@ -61,16 +61,8 @@ T GetKey(const nlohmann::json& j, const char* key, const char* what) {
   if constexpr (std::is_same_v<T, double>) {
     if (!it->is_number()) throw Error(std::string(what) + ": key \"" + key + "\" is not a number");
   } else if constexpr (std::is_same_v<T, int>) {
-    if (!it->is_number_integer()) {
-      throw Error(std::string(what) + ": key \"" + key + "\" is not an integer");
-    }
     // Not truncated to 32 bits: 4294967936 is no width of 640.
-    const bool in_range = it->is_number_unsigned() ? it->template get<uint64_t>() <= INT_MAX
-                                                   : it->template get<int64_t>() >= INT_MIN &&
-                                                         it->template get<int64_t>() <= INT_MAX;
-    if (!in_range) {
-      throw Error(std::string(what) + ": key \"" + key + "\" is out of range");
-    }
+    return JsonGet<int>(*it, std::string(what) + ": key \"" + key + "\"");
   } else if constexpr (std::is_same_v<T, std::string>) {
     if (!it->is_string()) throw Error(std::string(what) + ": key \"" + key + "\" is not a string");
   }

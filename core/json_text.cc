@@ -74,4 +74,17 @@ nlohmann::json ParseJsonText(std::string_view text, const std::string& name) {
   }
 }
 
+int64_t JsonInteger(const nlohmann::json& v, int64_t lo, int64_t hi, const std::string& what) {
+  const std::string is = (what.empty() ? "" : what + " is ") + v.dump();
+  if (!v.is_number_integer()) throw Error(is + (what.empty() ? " is" : ",") + " not an integer");
+  const bool in_range = v.is_number_unsigned()
+                            ? hi >= 0 && v.get<uint64_t>() <= static_cast<uint64_t>(hi) &&
+                                  (lo <= 0 || v.get<uint64_t>() >= static_cast<uint64_t>(lo))
+                            : v.get<int64_t>() >= lo && v.get<int64_t>() <= hi;
+  if (!in_range)
+    throw Error(is + (what.empty() ? " is" : ",") + " outside " + std::to_string(lo) + ".." +
+                std::to_string(hi));
+  return v.is_number_unsigned() ? static_cast<int64_t>(v.get<uint64_t>()) : v.get<int64_t>();
+}
+
 }  // namespace rouen

@@ -10,6 +10,7 @@
 
 #include "core/error.h"
 #include "core/files.h"
+#include "core/json_text.h"
 
 namespace rouen {
 
@@ -64,12 +65,7 @@ void from_json(const nlohmann::json& j, VignettingModel& v) {
     throw Error("vignetting: unknown model (expected \"radial-even-6\")");
   // Sizes are integers that fit an int (a float or a huge number is not converted).
   auto size = [&](const char* key) {
-    const nlohmann::json& n = j.at(key);
-    if (!n.is_number_integer() || (n.is_number_unsigned() && n.get<uint64_t>() > INT_MAX) ||
-        (!n.is_number_unsigned() && (n.get<int64_t>() < INT_MIN || n.get<int64_t>() > INT_MAX))) {
-      throw Error(std::string("vignetting: \"") + key + "\" must be an integer number of pixels");
-    }
-    return n.get<int>();
+    return JsonGet<int>(j.at(key), std::string("vignetting: \"") + key + "\" (pixels)");
   };
   VignettingModel r;
   try {

@@ -142,12 +142,15 @@ TEST(LensTest, BadLensFilesNameTheFileAndTheProblem) {
     w["vignetting"] = Model();
     w["vignetting"]["width"] = nlohmann::json::parse(width);
     const std::string file = write("width.json", w.dump());
-    EXPECT_EQ(ErrorOf(file), file + ": vignetting: \"width\" must be an integer number of pixels");
+    const std::string e = ErrorOf(file);
+    EXPECT_EQ(e.rfind(file + ": vignetting: \"width\" (pixels) is ", 0), 0u) << e;
+    EXPECT_TRUE(e.ends_with(", not an integer") || e.ends_with(", outside -2147483648..2147483647"))
+        << e;
   }
   nlohmann::json wide = Intrinsics::PinholeFov(64, 48, 60);
   wide["width"] = 4294967936LL;
   const std::string wide_file = write("wide.json", wide.dump());
-  EXPECT_NE(ErrorOf(wide_file).find("key \"width\" is out of range"), std::string::npos)
+  EXPECT_NE(ErrorOf(wide_file).find("key \"width\" is 4294967936, outside"), std::string::npos)
       << ErrorOf(wide_file);
   const std::string array = write("array.json", "[1, 2]");
   EXPECT_EQ(ErrorOf(array), array + ": a lens file is a JSON object");

@@ -47,18 +47,7 @@ double NeedNumber(const json& j, const char* key, const char* what) {
 int64_t NeedInt(const json& j, const char* key, const char* what,
                 int64_t lo = std::numeric_limits<int64_t>::min(),
                 int64_t hi = std::numeric_limits<int64_t>::max()) {
-  const json& v = Need(j, key, what);
-  if (!v.is_number_integer()) {
-    throw Error(std::string(what) + ": key \"" + key + "\" is not an integer");
-  }
-  const bool in_range = v.is_number_unsigned()
-                            ? v.get<uint64_t>() <= static_cast<uint64_t>(hi) && hi >= 0
-                            : v.get<int64_t>() >= lo && v.get<int64_t>() <= hi;
-  if (!in_range) {
-    throw Error(std::string(what) + ": key \"" + key + "\" is " + v.dump() + ", outside " +
-                std::to_string(lo) + ".." + std::to_string(hi));
-  }
-  return v.get<int64_t>();
+  return JsonInteger(Need(j, key, what), lo, hi, std::string(what) + ": key \"" + key + "\"");
 }
 
 // An integer that fits an int (not truncated: slot 4294967296 is no slot 0).
@@ -396,9 +385,7 @@ void ParseExtraTables(json extra, SessionInfo* r) {
       r->sky_masks[key] = m;
     }
   if (auto it = extra.find("heldout_slot"); it != extra.end() && !it->is_null()) {
-    if (!it->is_number_integer() || it->get<int64_t>() < 0 || it->get<int64_t>() > kMaxSlot)
-      throw Error(where + "heldout_slot must be a slot number 0.." + std::to_string(kMaxSlot));
-    r->heldout_slot = it->get<int>();
+    r->heldout_slot = static_cast<int>(JsonInteger(*it, 0, kMaxSlot, where + "heldout_slot"));
   }
   if (auto it = extra.find("capture_complete"); it != extra.end() && !it->is_null()) {
     if (!it->is_boolean()) throw Error(where + "capture_complete must be true or false");

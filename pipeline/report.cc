@@ -18,6 +18,7 @@
 #include "core/error.h"
 #include "core/files.h"
 #include "core/image.h"
+#include "core/json_text.h"
 #include "core/mesh.h"
 #include "core/response_curve.h"
 #include "core/session.h"
@@ -192,12 +193,14 @@ Inputs LoadInputs(const ReportRequest& r) {
   }
   if (j.contains("holdout_slots") && j["holdout_slots"].is_array())
     for (const auto& h : j["holdout_slots"])
-      if (h.is_number_integer()) in.holdout.insert(h.get<int>());
+      if (h.is_number_integer() && h.get<int64_t>() >= 0 &&
+          h.get<int64_t>() <= std::numeric_limits<int>::max())
+        in.holdout.insert(static_cast<int>(h.get<int64_t>()));
   if (j.contains("views") && j["views"].is_object()) {
     for (const auto& [name, v] : j["views"].items()) {
       try {
         SceneView view;
-        view.slot = v.at("slot").get<int>();
+        view.slot = JsonGet<int>(v.at("slot"), "slot");
         view.target = v.at("target").get<std::string>();
         view.utc = ParseIso8601(v.at("utc").get<std::string>());
         view.intrinsics = v.at("intrinsics").get<Intrinsics>();
@@ -862,8 +865,8 @@ std::optional<EnvStereoResult> FitStereo(const Inputs& in) {
     // The solve's own fit, when it was made from these slots with these options.
     if (env.contains("stereo")) {
       const std::optional<EnvStereoResult> stored = env["stereo"].at("fit").get<EnvStereoResult>();
-      if (const EnvStereoResult* fit =
-              FitFor(stored, env["stereo"].at("slots").get<std::vector<int>>(), measured_slots, eo))
+      if (const EnvStereoResult* fit = FitFor(
+              stored, JsonGet<std::vector<int>>(env["stereo"].at("slots")), measured_slots, eo))
         return *fit;
     }
   }

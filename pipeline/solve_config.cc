@@ -11,6 +11,7 @@
 #include "capture/rig.h"
 #include "core/error.h"
 #include "core/files.h"
+#include "core/json_text.h"
 #include "core/mesh.h"
 
 namespace rouen {
@@ -51,10 +52,12 @@ class Fields {
   void Int64(const char* key, int64_t* v, int64_t lo, int64_t hi) {
     const json* n = Find(key);
     if (!n) return;
-    if (!n->is_number_integer() || n->get<int64_t>() < lo || n->get<int64_t>() > hi)
+    try {
+      *v = JsonInteger(*n, lo, hi);
+    } catch (const Error&) {
       Fail(Path(key),
            "must be an integer within " + std::to_string(lo) + ".." + std::to_string(hi));
-    *v = n->get<int64_t>();
+    }
   }
   void Seed(const char* key, uint64_t* v) {
     int64_t w = static_cast<int64_t>(*v);

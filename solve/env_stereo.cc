@@ -19,6 +19,7 @@
 
 #include "core/angles.h"
 #include "core/error.h"
+#include "core/json_text.h"
 #include "core/stats.h"
 #include "solve/retro.h"
 
@@ -839,7 +840,7 @@ void from_json(const nlohmann::json& j, EnvStereoResult& r) {
   try {
     auto get = [&](const nlohmann::json& obj, const char* key, auto* out) {
       field = key;
-      *out = obj.at(key).get<std::remove_pointer_t<decltype(out)>>();
+      *out = JsonGet<std::remove_pointer_t<decltype(out)>>(obj.at(key));
     };
     auto vec3 = [&](const nlohmann::json& obj, const char* key) {
       field = key;
@@ -855,8 +856,7 @@ void from_json(const nlohmann::json& j, EnvStereoResult& r) {
     get(j, "layer_z", &r.layer_z);
     field = "source";
     for (const auto& v : j.at("source")) {
-      const int k = v.get<int>();
-      if (k < 0 || k > 3) throw Error("unknown region source " + std::to_string(k));
+      const int k = static_cast<int>(JsonInteger(v, 0, 3, "region source"));
       r.source.push_back(static_cast<EnvRegionSource>(k));
     }
     for (const auto& g : j.at("regions")) {

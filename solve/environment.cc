@@ -11,6 +11,7 @@
 
 #include "core/angles.h"
 #include "core/error.h"
+#include "core/json_text.h"
 #include "solve/retro.h"
 
 namespace rouen {
@@ -338,31 +339,30 @@ void to_json(nlohmann::json& j, const EnvironmentMap& m) {
 void from_json(const nlohmann::json& j, EnvironmentMap& m) {
   try {
     m = EnvironmentMap();
-    m.bands_below = j.at("bands_below").get<int>();
-    m.bands_above = j.at("bands_above").get<int>();
-    m.sectors = j.at("sectors").get<int>();
+    m.bands_below = JsonGet<int>(j.at("bands_below"), "bands_below");
+    m.bands_above = JsonGet<int>(j.at("bands_above"), "bands_above");
+    m.sectors = JsonGet<int>(j.at("sectors"), "sectors");
     if (j.contains("layer_z")) m.layer_z = j.at("layer_z").get<std::vector<double>>();
     m.ground_retro = j.value("ground_retro", 0.0);
-    m.detail = j.value("detail", 1);
+    m.detail = j.contains("detail") ? JsonGet<int>(j.at("detail"), "detail") : 1;
     m.sun_exclusion_rad = j.value("sun_exclusion_rad", m.sun_exclusion_rad);
     if (j.contains("sky_detail")) {
       const auto& cells = j.at("sky_detail");
       if (!cells.is_array() || cells.size() % 3 != 0)
         throw Error("environment map: sky_detail is not a list of RGB triples");
       for (size_t k = 0; k < cells.size(); k += 3) {
-        m.sky_detail.emplace_back(cells[k].get<float>(), cells[k + 1].get<float>(),
-                                  cells[k + 2].get<float>());
+        m.sky_detail.emplace_back(JsonGet<float>(cells[k], "sky_detail"),
+                                  JsonGet<float>(cells[k + 1], "sky_detail"),
+                                  JsonGet<float>(cells[k + 2], "sky_detail"));
       }
     }
     for (const auto& r : j.at("radiance")) {
       if (r.size() != 3) throw Error("environment map: a radiance is not 3 numbers");
       m.radiance.emplace_back(r[0].get<double>(), r[1].get<double>(), r[2].get<double>());
     }
-    m.pixel_count = j.at("pixel_count").get<std::vector<int>>();
+    m.pixel_count = JsonGet<std::vector<int>>(j.at("pixel_count"), "pixel_count");
     for (const auto& s : j.at("source")) {
-      const int v = s.get<int>();
-      if (v < 0 || v > 3)
-        throw Error("environment map: unknown region source " + std::to_string(v));
+      const int v = static_cast<int>(JsonInteger(s, 0, 3, "environment map: region source"));
       m.source.push_back(static_cast<EnvRegionSource>(v));
     }
   } catch (const nlohmann::json::exception& e) {

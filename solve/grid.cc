@@ -7,6 +7,7 @@
 #include <string>
 
 #include "core/error.h"
+#include "core/json_text.h"
 
 namespace rouen {
 
@@ -84,7 +85,8 @@ void from_json(const nlohmann::json& j, GridOptions& o) {
     if (j.contains("block_spacing_m")) {
       o.block_spacing_m = j.at("block_spacing_m").get<std::map<std::string, double>>();
     }
-    if (j.contains("max_subdivision")) o.max_subdivision = j.at("max_subdivision").get<int>();
+    if (j.contains("max_subdivision"))
+      o.max_subdivision = JsonGet<int>(j.at("max_subdivision"), "max_subdivision");
     if (j.contains("subdivision")) {
       const std::string s = j.at("subdivision").get<std::string>();
       if (s == "longest_edge") {

@@ -11,6 +11,7 @@
 
 #include "core/angles.h"
 #include "core/error.h"
+#include "core/json_text.h"
 #include "core/stats.h"
 #include "solve/retro.h"
 
@@ -473,8 +474,8 @@ void from_json(const nlohmann::json& j, GroundField& f) {
   f.x0 = j.at("x0").get<double>();
   f.y0 = j.at("y0").get<double>();
   f.cell_m = j.at("cell_m").get<double>();
-  f.nx = j.at("nx").get<int>();
-  f.ny = j.at("ny").get<int>();
+  f.nx = JsonGet<int>(j.at("nx"), "ground field: nx");
+  f.ny = JsonGet<int>(j.at("ny"), "ground field: ny");
   f.retro = j.at("retro").get<double>();
   const std::vector<double> far = j.at("far_albedo").get<std::vector<double>>();
   if (far.size() != 3) throw Error("ground field: far_albedo must be RGB");

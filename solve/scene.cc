@@ -103,29 +103,35 @@ std::vector<SpecularLobe> ReadLobes(const nlohmann::json& j, const Mesh& mesh,
 
 AlbedoSummary ReadSummary(const nlohmann::json& j) {
   AlbedoSummary s;
-  s.points = j.value("points", 0);
-  s.points_observed = j.value("points_observed", 0);
-  s.points_sun_unobserved = j.value("points_sun_unobserved", 0);
-  s.points_never_shadowed = j.value("points_never_shadowed", 0);
-  s.points_clamped = j.value("points_clamped", 0);
-  s.observations = j.value("observations", int64_t{0});
-  s.outer_iterations = j.value("outer_iterations", 0);
-  s.change_per_iteration = j.value("change_per_iteration", std::vector<double>{});
-  s.residual_rms_rel = j.value("residual_rms_rel", 0.0);
-  s.residual_median_rel = j.value("residual_median_rel", 0.0);
+  // Each figure as written (JsonGet: an integer that does not fit is refused, not wrapped).
+  auto get = [&](const char* key, auto fallback) {
+    return j.contains(key)
+               ? JsonGet<decltype(fallback)>(j.at(key), std::string("albedo.summary.") + key)
+               : fallback;
+  };
+  s.points = get("points", 0);
+  s.points_observed = get("points_observed", 0);
+  s.points_sun_unobserved = get("points_sun_unobserved", 0);
+  s.points_never_shadowed = get("points_never_shadowed", 0);
+  s.points_clamped = get("points_clamped", 0);
+  s.observations = get("observations", int64_t{0});
+  s.outer_iterations = get("outer_iterations", 0);
+  s.change_per_iteration = get("change_per_iteration", std::vector<double>{});
+  s.residual_rms_rel = get("residual_rms_rel", 0.0);
+  s.residual_median_rel = get("residual_median_rel", 0.0);
   s.residual_p90_rel = j.value("residual_p90_rel", 0.0);
-  s.downweighted_fraction = j.value("downweighted_fraction", 0.0);
-  s.slot_weights = j.value("slot_weights", std::vector<double>{});
-  s.points_filled_neighbours = j.value("points_filled_neighbours", 0);
-  s.retro_cost_lambert = j.value("retro_cost_lambert", std::vector<double>{});
-  s.retro_cost_fitted = j.value("retro_cost_fitted", std::vector<double>{});
-  s.lobe_samples = j.value("lobe_samples", std::vector<int>{});
-  s.lobe_cost_zero = j.value("lobe_cost_zero", std::vector<double>{});
-  s.lobe_cost_fitted = j.value("lobe_cost_fitted", std::vector<double>{});
-  s.sky_lobe_samples = j.value("sky_lobe_samples", std::vector<int>{});
-  s.sky_lobe_cost_zero = j.value("sky_lobe_cost_zero", std::vector<double>{});
-  s.sky_lobe_cost_fitted = j.value("sky_lobe_cost_fitted", std::vector<double>{});
-  s.seconds = j.value("seconds", 0.0);
+  s.downweighted_fraction = get("downweighted_fraction", 0.0);
+  s.slot_weights = get("slot_weights", std::vector<double>{});
+  s.points_filled_neighbours = get("points_filled_neighbours", 0);
+  s.retro_cost_lambert = get("retro_cost_lambert", std::vector<double>{});
+  s.retro_cost_fitted = get("retro_cost_fitted", std::vector<double>{});
+  s.lobe_samples = get("lobe_samples", std::vector<int>{});
+  s.lobe_cost_zero = get("lobe_cost_zero", std::vector<double>{});
+  s.lobe_cost_fitted = get("lobe_cost_fitted", std::vector<double>{});
+  s.sky_lobe_samples = get("sky_lobe_samples", std::vector<int>{});
+  s.sky_lobe_cost_zero = get("sky_lobe_cost_zero", std::vector<double>{});
+  s.sky_lobe_cost_fitted = get("sky_lobe_cost_fitted", std::vector<double>{});
+  s.seconds = get("seconds", 0.0);
   return s;
 }
 
@@ -334,20 +340,12 @@ void WriteScene(const std::filesystem::path& dir, const SceneModel& scene, const
   WriteFileAtomic(dir / "scene.json", JsonText(j));
 }
 
-SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGrid* grid_out) {
-  const std::filesystem::path json_path = dir / "scene.json";
-  SceneModel scene;
-  nlohmann::json j;
+SceneJson ParseSceneJson(std::string_view text, const std::string& name) {
+  SceneJson out;
+  SceneModel& scene = out.scene;
+  const nlohmann::json j = ParseJsonText(text, name);
   try {
-    j = nlohmann::json::parse(ReadFileToString(json_path));
-  } catch (const nlohmann::json::exception& e) {
-    throw Error(json_path.string() + ": not valid JSON: " + e.what());
-  }
-  size_t points = 0;
-  std::string files[3], model_sha256, surroundings_sha256;
-  nlohmann::json retro, sun_lobes, sky_lobes;
-  try {
-    scene.format_version = j.at("format_version").get<int>();
+    scene.format_version = JsonGet<int>(j.at("format_version"), "format_version");
     if (scene.format_version != 1) {
       throw Error("unsupported format_version " + std::to_string(scene.format_version));
     }
@@ -360,16 +358,17 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
     scene.grid_options = j.at("grid").get<GridOptions>();
     // Scenes written before the ground could be modelled have none.
     if (j.contains("ground")) scene.ground = j.at("ground").get<GroundApronOptions>();
-    scene.hemisphere.directions = j.at("hemisphere").at("directions").get<int>();
-    scene.hemisphere.seed = j.at("hemisphere").at("seed").get<uint64_t>();
+    scene.hemisphere.directions =
+        JsonGet<int>(j.at("hemisphere").at("directions"), "hemisphere.directions");
+    scene.hemisphere.seed = JsonGet<uint64_t>(j.at("hemisphere").at("seed"), "hemisphere.seed");
     scene.hemisphere.Validate();
     scene.model_file = j.at("model_file").get<std::string>();
-    model_sha256 = j.at("model_sha256").get<std::string>();
+    out.model_sha256 = j.at("model_sha256").get<std::string>();
     if (j.contains("surroundings_file")) {
       scene.surroundings_file = j.at("surroundings_file").get<std::string>();
-      surroundings_sha256 = j.at("surroundings_sha256").get<std::string>();
+      out.surroundings_sha256 = j.at("surroundings_sha256").get<std::string>();
     }
-    points = j.at("points").get<size_t>();
+    out.points = JsonGet<size_t>(j.at("points"), "points");
     for (const auto& s : j.at("slots")) {
       SlotModel m;
       m.utc = ParseIso8601(s.at("utc").get<std::string>());
@@ -386,7 +385,7 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
     }
     for (const auto& [name, v] : j.at("views").items()) {
       SceneView view;
-      view.slot = v.at("slot").get<int>();
+      view.slot = JsonGet<int>(v.at("slot"), "view " + name + ": slot");
       if (view.slot < 0 || view.slot >= static_cast<int>(scene.slots.size())) {
         throw Error("view " + name + ": slot " + std::to_string(view.slot) +
                     " is not in the scene");
@@ -398,7 +397,7 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
       scene.views.emplace(name, std::move(view));
     }
     for (const auto& h : j.at("holdout_slots")) {
-      const int slot = h.get<int>();
+      const int slot = JsonGet<int>(h, "holdout_slots");
       if (slot < 0) throw Error("holdout slot " + std::to_string(slot) + " is negative");
       scene.holdout_slots.push_back(slot);
     }
@@ -410,7 +409,8 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
                     std::to_string(kRetroMax) + "]");
       if (j.at("environment").contains("stereo")) {
         const nlohmann::json& st = j.at("environment").at("stereo");
-        scene.env_stereo_slots = st.at("slots").get<std::vector<int>>();
+        scene.env_stereo_slots =
+            JsonGet<std::vector<int>>(st.at("slots"), "environment.stereo.slots");
         for (int s : scene.env_stereo_slots)
           if (s < 0 || s >= static_cast<int>(scene.slots.size()))
             throw Error("environment.stereo.slots: slot " + std::to_string(s) +
@@ -439,21 +439,34 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
       if (!scene.options.is_object()) throw Error("provenance.options is not an object");
     }
     const auto& a = j.at("albedo");
-    files[0] = a.at("sun").get<std::string>();
-    files[1] = a.at("se").get<std::string>();
-    files[2] = a.at("info").get<std::string>();
+    out.albedo_files[0] = a.at("sun").get<std::string>();
+    out.albedo_files[1] = a.at("se").get<std::string>();
+    out.albedo_files[2] = a.at("info").get<std::string>();
     scene.albedo.summary = ReadSummary(a.value("summary", nlohmann::json::object()));
-    retro = a.value("retro", nlohmann::json::object());
-    if (!retro.is_object()) throw Error("albedo.retro is not an object");
-    sun_lobes = a.value("sun_lobes", nlohmann::json::object());
-    if (!sun_lobes.is_object()) throw Error("albedo.sun_lobes is not an object");
-    sky_lobes = a.value("sky_lobes", nlohmann::json::object());
-    if (!sky_lobes.is_object()) throw Error("albedo.sky_lobes is not an object");
+    out.retro = a.value("retro", nlohmann::json::object());
+    if (!out.retro.is_object()) throw Error("albedo.retro is not an object");
+    out.sun_lobes = a.value("sun_lobes", nlohmann::json::object());
+    if (!out.sun_lobes.is_object()) throw Error("albedo.sun_lobes is not an object");
+    out.sky_lobes = a.value("sky_lobes", nlohmann::json::object());
+    if (!out.sky_lobes.is_object()) throw Error("albedo.sky_lobes is not an object");
   } catch (const nlohmann::json::exception& e) {
-    throw Error(json_path.string() + ": " + e.what());
+    throw Error(name + ": " + e.what());
   } catch (const Error& e) {
-    throw Error(json_path.string() + ": " + e.what());
+    throw Error(name + ": " + e.what());
   }
+  return out;
+}
+
+SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGrid* grid_out) {
+  const std::filesystem::path json_path = dir / "scene.json";
+  SceneJson parsed = ParseSceneJson(ReadFileToString(json_path), json_path.string());
+  SceneModel scene = std::move(parsed.scene);
+  const size_t points = parsed.points;
+  const std::string* files = parsed.albedo_files;
+  const std::string& model_sha256 = parsed.model_sha256;
+  const std::string& surroundings_sha256 = parsed.surroundings_sha256;
+  const nlohmann::json &retro = parsed.retro, &sun_lobes = parsed.sun_lobes,
+                       &sky_lobes = parsed.sky_lobes;
   const std::filesystem::path model_path = ResolveInside(dir, scene.model_file);
   // The grid's points are numbered by triangle: the albedos belong to this very file.
   if (Sha256File(model_path) != model_sha256) {

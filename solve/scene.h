@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/camera.h"
@@ -106,6 +107,18 @@ void WriteScene(const std::filesystem::path& dir, const SceneModel& scene,
 // added. Throws rouen::Error naming a file that is missing or malformed.
 Mesh SceneMesh(const std::filesystem::path& dir, const SceneModel& scene,
                const Mesh* building = nullptr, std::vector<std::string>* surroundings = nullptr);
+// scene.json's text parsed and checked on its own (what ReadScene reads first, before the
+// folder's files): the scene without its albedos, and what the folder must then match. Throws
+// rouen::Error starting with `name`.
+struct SceneJson {
+  SceneModel scene;  // albedo.rho_sun, rho_se, observations, flags, retro and lobes empty
+  size_t points = 0;
+  std::string albedo_files[3];  // sun, se, info: relative to the scene folder
+  std::string model_sha256, surroundings_sha256;
+  nlohmann::json retro, sun_lobes, sky_lobes;  // objects by block name
+};
+SceneJson ParseSceneJson(std::string_view text, const std::string& name);
+
 // Reads and validates a scene folder; checks that the OBJ is the file the scene was written
 // with (scene.json keeps its sha256: grid points are numbered by triangle), rebuilds the grid
 // from it and checks that the albedo images hold exactly one value per grid point. Throws

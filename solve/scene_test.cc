@@ -306,7 +306,7 @@ TEST(SceneTest, MismatchedModelOrImagesAreRefused) {
 }
 
 // Every value of scene.json tampered with in turn (the first element of each list; removed, a
-// string, 0, -1, +-1e300): the scene reads with every number render uses finite and in range,
+// string, 0, -1, +-1e300, 2.5): the scene reads with every number render uses finite and in range,
 // or is refused with rouen::Error naming a file of the scene; never another exception.
 TEST(SceneTest, ATamperedSceneIsReadOrRefusedByName) {
   const auto dir = TempDir("tampered");
@@ -323,7 +323,7 @@ TEST(SceneTest, ATamperedSceneIsReadOrRefusedByName) {
     if (first) leaves.push_back(p);
   }
   ASSERT_GT(leaves.size(), 50u);
-  const std::vector<nlohmann::json> values = {"x", 0, -1, 1e300, -1e300, nullptr};
+  const std::vector<nlohmann::json> values = {"x", 0, -1, 1e300, -1e300, nullptr, 2.5};
   int refused = 0, read = 0;
   for (const auto& p : leaves) {
     for (size_t m = 0; m <= values.size(); ++m) {
@@ -340,8 +340,17 @@ TEST(SceneTest, ATamperedSceneIsReadOrRefusedByName) {
       const std::string what =
           p.to_string() + (m < values.size() ? " = " + values[m].dump() : " removed");
       WriteFileAtomic(dir / "scene.json", j.dump());
+      // An integer of the scene given a fraction is refused, not truncated (1e300 was converted
+      // to int, undefined behaviour); the parts kept as given (the solve's options and
+      // timings) and those no reader uses (the atlas, the albedo images' width) aside.
+      const std::string at = p.to_string();
+      const bool must_refuse =
+          m < values.size() && values[m] == 2.5 && original.at(p).is_number_integer() &&
+          !at.starts_with("/provenance/options") && !at.starts_with("/timings") &&
+          !at.starts_with("/atlas") && at != "/albedo/width";
       try {
         const SceneModel s = ReadScene(dir);
+        EXPECT_FALSE(must_refuse) << what << " read";
         ++read;
         EXPECT_TRUE(std::isfinite(s.site.lat_deg) && std::abs(s.site.lat_deg) <= 90 &&
                     std::isfinite(s.site.lon_deg) && std::abs(s.site.lon_deg) <= 360 &&

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <string>
 
@@ -76,7 +77,10 @@ void from_json(const nlohmann::json& j, SkyModel& m) {
     throw Error("sky model: 'channels' must be an array of 3 parameter sets");
   }
   SkyModel out;
-  out.sun_dir = s.normalized();
+  // Normalized once: a direction already unit to the last bits is kept as written, so a model
+  // written and read again is the same model.
+  out.sun_dir =
+      std::abs(s.norm() - 1) <= 4 * std::numeric_limits<double>::epsilon() ? s : s.normalized();
   for (int c = 0; c < 3; ++c) {
     const nlohmann::json& o = j.at("channels")[c];
     const std::string where = "channel " + std::to_string(c);
