@@ -55,5 +55,44 @@ TEST(JsonTextTest, AKeyGivenTwiceInOneObjectIsRefused) {
   EXPECT_EQ(error_of("{\"a\": ", "f.json").rfind("f.json: not valid JSON: ", 0), 0u);
 }
 
+// An integer read from a file is the integer written, or refused: never truncated (2.5 -> 2),
+// wrapped (4294967297 -> 1, 2^64 - 1 -> -1) or converted out of range (1e36, undefined
+// behaviour in get<int>(); found by the scene reader's fuzzer in an environment map's bands).
+TEST(JsonTextTest, IntegersAreReadExactlyOrRefused) {
+  using nlohmann::json;
+  EXPECT_EQ(JsonGet<int>(json::parse("-7")), -7);
+  EXPECT_EQ(JsonGet<size_t>(json::parse("9007199254740993")), 9007199254740993u);
+  EXPECT_EQ(JsonInteger(json::parse("3"), 1, 5, "n"), 3);
+  const auto error_of = [](const char* text, auto read) {
+    try {
+      read(json::parse(text));
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  const auto as_int = [](const json& v) { return JsonGet<int>(v, "bands"); };
+  EXPECT_EQ(error_of("1e36", as_int), "bands is 1e+36, not an integer");
+  EXPECT_EQ(error_of("2.5", as_int), "bands is 2.5, not an integer");
+  EXPECT_EQ(error_of("\"9\"", as_int), "bands is \"9\", not an integer");
+  EXPECT_EQ(error_of("4294967297", as_int), "bands is 4294967297, outside -2147483648..2147483647");
+  EXPECT_EQ(error_of("18446744073709551615", [](const json& v) { return JsonGet<int64_t>(v); }),
+            "18446744073709551615 is outside -9223372036854775808..9223372036854775807");
+  // An unsigned value below a positive lower bound (nlohmann keeps 0 as unsigned).
+  EXPECT_EQ(error_of("0", [](const json& v) { return JsonInteger(v, 1, 5, "slot"); }),
+            "slot is 0, outside 1..5");
+  EXPECT_EQ(error_of("-1", [](const json& v) { return JsonGet<uint8_t>(v, "flag"); }),
+            "flag is -1, outside 0..255");
+  // A float past a float's range, and vectors element by element.
+  EXPECT_EQ(error_of("1e39", [](const json& v) { return JsonGet<float>(v, "cell"); }),
+            "cell is 1e+39, not a number a float holds");
+  EXPECT_EQ(JsonGet<float>(json::parse("0.5")), 0.5f);
+  EXPECT_EQ(JsonGet<std::vector<int>>(json::parse("[1, 2]")), (std::vector<int>{1, 2}));
+  EXPECT_EQ(error_of("[1, 2.5]", [](const json& v) { return JsonGet<std::vector<int>>(v, "ids"); }),
+            "ids is 2.5, not an integer");
+  EXPECT_EQ(error_of("{}", [](const json& v) { return JsonGet<std::vector<int>>(v, "ids"); }),
+            "ids is {}, not an array");
+}
+
 }  // namespace
 }  // namespace rouen

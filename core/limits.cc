@@ -24,6 +24,15 @@ std::string FormatNumber(double v) {
   return buf;
 }
 
+std::string FormatCount(double n) {
+  char buf[32];
+  if (std::abs(n) < 1e15)
+    std::snprintf(buf, sizeof buf, "%.0f", n);
+  else
+    std::snprintf(buf, sizeof buf, "%g", n);
+  return buf;
+}
+
 std::string LatitudeProblem(double deg) {
   return OutsideOf(deg, -kMaxAbsLatitudeDeg, kMaxAbsLatitudeDeg, "latitude", " deg");
 }

@@ -40,5 +40,8 @@ void CheckSite(const Site& site, const std::string& where);
 
 // A number for messages: %g, so 1e15 stays 1e+15 and 0.5 stays 0.5.
 std::string FormatNumber(double v);
+// A count for messages (of frames, points, bytes), computed in floating point before it is
+// known to fit an integer: whole digits up to 1e15, %g beyond (1e+303, never an overflow).
+std::string FormatCount(double n);
 
 }  // namespace rouen

@@ -206,9 +206,8 @@ TimelapseTimes TimelapseTimesOf(const Site& site, const TimelapseSchedule& s) {
   if (last_k < first_k)
     throw Error("--step " + FormatNumber(s.step_s) + " s: no frame falls between --from and --to");
   if (last_k - first_k + 1 > s.max_frames)
-    throw Error("--from/--to/--step make " +
-                std::to_string(static_cast<int64_t>(last_k - first_k + 1)) + " frames, more than " +
-                std::to_string(s.max_frames) + "; take a longer --step");
+    throw Error("--from/--to/--step make " + FormatCount(last_k - first_k + 1) +
+                " frames, more than " + std::to_string(s.max_frames) + "; take a longer --step");
   for (double k = first_k; k <= last_k; k += 1) {
     // Whole seconds: frame names and headers hold seconds.
     const double at = std::round(origin + k * s.step_s);

@@ -148,6 +148,9 @@ TEST(Timelapse, RefusesTimesOutsideDaylightAndEmptySpans) {
   s.max_frames = 5000;
   EXPECT_NE(ErrorOf([&] { TimelapseTimesOf(kBerkeley, s); }).find("take a longer --step"),
             std::string::npos);
+  s.step_s = 1e-300;  // more frames than any integer counts: counted in floating point
+  EXPECT_NE(ErrorOf([&] { TimelapseTimesOf(kBerkeley, s); }).find("e+304 frames, more than 5000"),
+            std::string::npos);
   s.step_s = 0;
   EXPECT_NE(ErrorOf([&] { TimelapseTimesOf(kBerkeley, s); }).find("--step"), std::string::npos);
 }

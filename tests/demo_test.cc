@@ -429,6 +429,16 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
                      &out),
             0);
   EXPECT_NE(out.find("10801 frames, more than 5000"), std::string::npos) << out;
+  // A step too short for any integer to count its frames: counted all the same (it was printed
+  // as -9223372036854775807 frames, an overflow).
+  out.clear();
+  EXPECT_NE(RunRouen("render" + scene +
+                         " --from 2026-08-25T09:00:00-07:00 --to 2026-08-25T12:00:00-07:00"
+                         " --step 1e-300 --out " +
+                         (dir / "night").string(),
+                     &out),
+            0);
+  EXPECT_NE(out.find("1.08e+304 frames, more than 5000"), std::string::npos) << out;
   // A new camera from a point, a target, a field of view and a size.
   out.clear();
   ASSERT_EQ(RunRouen("render" + scene +
