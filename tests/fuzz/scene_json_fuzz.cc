@@ -62,9 +62,9 @@ void CheckScene(const SceneJson& parsed) {
     CheckRoundTrip(st, "stereo fit");
   }
   if (s.ground_field) CheckRoundTrip(*s.ground_field, "ground field");
-  FUZZ_CHECK(parsed.retro.is_object() && parsed.sun_lobes.is_object() &&
-                 parsed.sky_lobes.is_object(),
-             "per-block albedo parts not objects");
+  FUZZ_CHECK(
+      parsed.retro.is_object() && parsed.sun_lobes.is_object() && parsed.sky_lobes.is_object(),
+      "per-block albedo parts not objects");
 }
 
 }  // namespace
