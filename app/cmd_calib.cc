@@ -45,13 +45,8 @@ std::vector<ListedExposure> ReadExposureList(const std::string& list) {
   ForEachListLine(list, [&](const std::vector<std::string>& words, const std::string& where) {
     if (words.size() != 2) throw Error(where + ": expected 'image seconds'");
     double s = 0;
-    try {
-      size_t used = 0;
-      s = std::stod(words[1], &used);
-      if (used != words[1].size()) throw std::invalid_argument("");
-    } catch (const std::exception&) {
+    if (!ParseDecimal(words[1], &s))
       throw Error(where + ": exposure '" + words[1] + "' is not a number of seconds");
-    }
     Require(ExposureProblem(s), where);
     std::filesystem::path p(words[0]);
     if (p.is_relative()) p = base / p;

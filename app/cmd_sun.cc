@@ -44,17 +44,9 @@ void RunBatch(const SunArgs& a) {
       throw Error(a.batch + ":" + std::to_string(lineno) +
                   ": expected 4 columns utc,lat,lon,elev_m, got " + std::to_string(cols.size()));
     Site site;
-    try {
-      size_t used = 0;
-      site.lat_deg = std::stod(cols[1], &used);
-      if (used != cols[1].size()) throw std::invalid_argument("lat");
-      site.lon_deg = std::stod(cols[2], &used);
-      if (used != cols[2].size()) throw std::invalid_argument("lon");
-      site.height_m = std::stod(cols[3], &used);
-      if (used != cols[3].size()) throw std::invalid_argument("elev_m");
-    } catch (const std::exception&) {
+    if (!ParseDecimal(cols[1], &site.lat_deg) || !ParseDecimal(cols[2], &site.lon_deg) ||
+        !ParseDecimal(cols[3], &site.height_m))
       throw Error(a.batch + ":" + std::to_string(lineno) + ": lat, lon and elev_m must be numbers");
-    }
     CheckSite(site, a.batch + ":" + std::to_string(lineno));
     UtcTime t0;
     try {

@@ -1,5 +1,6 @@
 #include "app/options.h"
 
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <optional>
@@ -8,14 +9,16 @@
 
 #include "core/error.h"
 #include "core/limits.h"
+#include "core/text.h"
 
 namespace rouen {
 namespace {
 
 // The number in `text` as CLI11 converts it (NaN and infinities included), if it is one.
+// A decimal as people write it (not CLI11's reading, which takes 0x10 and nan).
 std::optional<double> Number(const std::string& text) {
   double v = 0;
-  if (!CLI::detail::lexical_cast(text, v)) return std::nullopt;
+  if (!ParseDecimal(text, &v)) return std::nullopt;
   return v;
 }
 
@@ -58,14 +61,10 @@ std::vector<double> ParseNumberList(const std::string& text, size_t n, const std
   std::stringstream ss(text);
   std::string item;
   while (std::getline(ss, item, ',')) {
-    try {
-      size_t used = 0;
-      v.push_back(std::stod(item, &used));
-      if (used != item.size()) throw std::invalid_argument("");
-    } catch (const std::exception&) {
+    double x = 0;
+    if (!ParseDecimal(item, &x))
       throw Error(option + " '" + text + "': '" + item + "' is not a number");
-    }
-    if (!std::isfinite(v.back())) throw Error(option + " '" + text + "': not finite");
+    v.push_back(x);
   }
   if (v.size() != n || (!text.empty() && text.back() == ','))
     throw Error(option + " '" + text + "': expected " + std::to_string(n) +
@@ -83,14 +82,16 @@ UtcTime ParseTimeOption(const std::string& text, const std::string& option) {
 
 double ParseDurationSeconds(const std::string& text, double max_s, const std::string& option) {
   const std::string where = option + " '" + text + "'";
-  size_t used = 0;
-  double value = 0;
-  try {
-    value = std::stod(text, &used);
-  } catch (const std::exception&) {
-    throw Error(where + ": not a duration (e.g. 15min, 1h, 30s)");
-  }
+  // The number, then its unit: the letters at the end (the exponent's 'e' is the number's).
+  size_t used = text.size();
+  while (used > 0 && std::isalpha(static_cast<unsigned char>(text[used - 1])) &&
+         !(text[used - 1] == 'e' && used >= 2 &&
+           std::isdigit(static_cast<unsigned char>(text[used - 2]))))
+    --used;
   const std::string unit = text.substr(used);
+  double value = 0;
+  if (!ParseDecimal(std::string_view(text).substr(0, used), &value))
+    throw Error(where + ": not a duration (e.g. 15min, 1h, 30s)");
   double scale = 0;
   if (unit.empty() || unit == "s") scale = 1;
   if (unit == "min") scale = 60;
@@ -115,13 +116,8 @@ Site ParseSiteOption(const std::string& text, const std::string& option) {
   double v[3];
   const char* names[3] = {"latitude", "longitude", "height"};
   for (int k = 0; k < 3; ++k) {
-    try {
-      size_t used = 0;
-      v[k] = std::stod(parts[k], &used);
-      if (used != parts[k].size() || !std::isfinite(v[k])) throw std::invalid_argument("");
-    } catch (const std::exception&) {
+    if (!ParseDecimal(parts[k], &v[k]))
       throw Error(where + ": " + names[k] + " '" + parts[k] + "' is not a number");
-    }
   }
   const Site site{v[0], v[1], v[2]};
   CheckSite(site, where);

@@ -18,6 +18,7 @@
 
 #include "core/error.h"
 #include "core/files.h"
+#include "core/text.h"
 
 namespace rouen {
 namespace {
@@ -59,13 +60,8 @@ std::string CanonicalDictionary(std::string name) {
 
 double ParsePositive(const std::string& s, const std::string& what, const std::string& spec) {
   double v = 0;
-  try {
-    size_t used = 0;
-    v = std::stod(s, &used);
-    if (used != s.size()) throw std::invalid_argument("");
-  } catch (const std::exception&) {
+  if (!ParseDecimal(s, &v))
     throw Error("board \"" + spec + "\": " + what + " '" + s + "' is not a number");
-  }
   return v;
 }
 

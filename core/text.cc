@@ -1,10 +1,13 @@
 #include "core/text.h"
 
+#include <cmath>
 #include <cstdarg>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <string>
 
 #include "core/error.h"
 #include "core/files.h"
@@ -14,6 +17,33 @@ namespace rouen {
 std::string_view WithoutUtf8Bom(std::string_view text) {
   constexpr std::string_view kBom = "\xEF\xBB\xBF";
   return text.substr(0, kBom.size()) == kBom ? text.substr(kBom.size()) : text;
+}
+
+bool ParseDecimal(std::string_view text, double* value) {
+  size_t i = 0;
+  const auto digits = [&] {
+    const size_t from = i;
+    while (i < text.size() && text[i] >= '0' && text[i] <= '9') ++i;
+    return i - from;
+  };
+  if (i < text.size() && (text[i] == '+' || text[i] == '-')) ++i;
+  size_t mantissa = digits();
+  if (i < text.size() && text[i] == '.') {
+    ++i;
+    mantissa += digits();
+  }
+  if (mantissa == 0) return false;
+  if (i < text.size() && (text[i] == 'e' || text[i] == 'E')) {
+    ++i;
+    if (i < text.size() && (text[i] == '+' || text[i] == '-')) ++i;
+    if (digits() == 0) return false;
+  }
+  if (i != text.size()) return false;
+  const std::string copy(text);
+  const double v = std::strtod(copy.c_str(), nullptr);
+  if (!std::isfinite(v)) return false;
+  *value = v;
+  return true;
 }
 
 std::vector<std::string> ReadTextLines(const std::string& path, const std::string& what) {

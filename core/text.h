@@ -16,6 +16,11 @@ std::string_view WithoutUtf8Bom(std::string_view text);
 // folder, not <what>").
 std::vector<std::string> ReadTextLines(const std::string& path, const std::string& what);
 
+// A decimal number as people write one, the whole of `text`: [+-] digits [. digits]
+// [e|E [+-] digits] (".5" and "5." too), finite. False for anything else -- blanks around it,
+// hexadecimal ("0x10", which std::stod reads as 16), "inf", "nan", "1,5", "1e400".
+bool ParseDecimal(std::string_view text, double* value);
+
 // printf-style formatting into a string (numbers in messages, names and tables).
 std::string Formatted(const char* format, ...) __attribute__((format(printf, 1, 2)));
 

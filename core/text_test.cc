@@ -5,6 +5,9 @@
 
 #include <filesystem>
 #include <fstream>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include "core/error.h"
 
@@ -48,6 +51,23 @@ TEST(TextTest, FormattedIsPrintfIntoAStringOfAnyLength) {
   EXPECT_EQ(Formatted("%s", ""), "");
   const std::string long_text(1000, 'q');
   EXPECT_EQ(Formatted("<%s>", long_text.c_str()), "<" + long_text + ">");
+}
+
+// What people write as a number reads as it; what std::stod would also take but nobody means
+// is refused (found by the second hostile probe: --step 0x10 rendered a frame every 16 s).
+TEST(TextTest, ParseDecimalReadsDecimalsOnly) {
+  double v = -1;
+  for (const auto& [text, want] : std::vector<std::pair<std::string, double>>{
+           {"15", 15}, {"-2.5", -2.5}, {"+.5", 0.5}, {"5.", 5}, {"1e-3", 1e-3}, {"2E+2", 200}}) {
+    EXPECT_TRUE(ParseDecimal(text, &v)) << text;
+    EXPECT_EQ(v, want) << text;
+  }
+  for (const char* text : {"", "-", ".", "e5", "1e", "1e+", "0x10", "0x1p-3", "inf", "nan", " 1",
+                           "1 ", "1,5", "1.2.3", "1e400", "--1", "1/250"}) {
+    v = 7;
+    EXPECT_FALSE(ParseDecimal(text, &v)) << text;
+    EXPECT_EQ(v, 7) << text;  // untouched when refused
+  }
 }
 
 }  // namespace

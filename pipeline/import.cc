@@ -86,22 +86,14 @@ bool IsImageName(const std::string& name) {
 
 double ParseNumber(const std::string& s, const std::string& where, const std::string& what) {
   // Accepts decimals and fractions such as 1/250.
-  try {
-    size_t used = 0;
-    double v = std::stod(s, &used);
-    if (used < s.size() && s[used] == '/') {
-      size_t used2 = 0;
-      const std::string den = s.substr(used + 1);
-      const double d = std::stod(den, &used2);
-      if (used2 != den.size() || !(d > 0)) throw std::invalid_argument("");
-      v /= d;
-      used = s.size();
-    }
-    if (used != s.size() || !std::isfinite(v)) throw std::invalid_argument("");
-    return v;
-  } catch (const std::exception&) {
+  const size_t slash = s.find('/');
+  double v = 0, d = 1;
+  if (!ParseDecimal(std::string_view(s).substr(0, slash), &v) ||
+      (slash != std::string::npos &&
+       (!ParseDecimal(std::string_view(s).substr(slash + 1), &d) || !(d > 0))) ||
+      !std::isfinite(v / d))
     throw Error(where + ": " + what + " '" + s + "' is not a number");
-  }
+  return v / d;
 }
 
 // "nd=D" or "nd=R,G,B": optical densities within core/limits.h's range.

@@ -130,7 +130,7 @@ TEST(CliInputs, SitesObeyOneRuleEverywhere) {
   ExpectError(RunRouen("sun --lat 91 --lon 0 --time 2026-08-25T20:30:00Z"),
               {"--lat", "latitude 91 deg is outside -90..90 deg"});
   ExpectError(RunRouen("sun --lat 37 --lon 0 --height nan --time 2026-08-25T20:30:00Z"),
-              {"--height", "height nan m is outside"});
+              {"--height", "'nan' is not a number"});
   WriteFileAtomic(dir / "fixes.csv",
                   "utc,lat,lon,elev_m\n2026-08-25T20:30:00Z,37.8722,-122.2578,60\n"
                   "2026-08-25T20:30:00Z,37.8722,-122.2578,1e15\n");

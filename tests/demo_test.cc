@@ -421,6 +421,14 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
                      &out),
             0);
   EXPECT_NE(out.find("--step '15m': unknown unit 'm'"), std::string::npos) << out;
+  out.clear();  // hexadecimal, which std::stod reads (as 16 s): not a duration people write
+  EXPECT_NE(RunRouen("render" + scene +
+                         " --from 2026-08-25T09:00:00-07:00 --to 2026-08-25T10:00:00-07:00"
+                         " --step 0x10 --out " +
+                         (dir / "night").string(),
+                     &out),
+            0);
+  EXPECT_NE(out.find("--step '0x10': not a duration"), std::string::npos) << out;
   out.clear();
   EXPECT_NE(RunRouen("render" + scene +
                          " --from 2026-08-25T09:00:00-07:00 --to 2026-08-25T12:00:00-07:00"
