@@ -273,6 +273,16 @@ PYBIND11_MODULE(rouen, m) {
       "1998) and render it at other times of day. The same library as the rouen command.";
   m.attr("__version__") = RouenVersion();
   const auto& error = py::register_exception<Error>(m, "Error", PyExc_RuntimeError);
+  // A disk's refusal (a name too long, a file where a folder belongs) is rouen.Error too, as the
+  // command reports it ("rouen: error: ..."), not a bare RuntimeError.
+  static PyObject* const rouen_error = error.ptr();
+  py::register_exception_translator([](std::exception_ptr p) {
+    try {
+      if (p) std::rethrow_exception(p);
+    } catch (const std::filesystem::filesystem_error& e) {
+      PyErr_SetString(rouen_error, e.what());
+    }
+  });
   // Registered after Error: pybind11 tries the later translator first.
   py::register_exception<Cancelled>(m, "Cancelled", error.ptr());
 

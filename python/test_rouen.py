@@ -114,6 +114,12 @@ class QuickDemoTest(unittest.TestCase):
                         config={"sky_fit": {"no_such_key": 1}})
         self.assertFalse(os.path.exists(os.path.join(self.tmp.name, "bad.scene")))
 
+    def test_a_name_too_long_is_a_rouen_error(self):
+        # The disk's refusal (ENAMETOOLONG) named as the command names it, found by the hostile
+        # probe: it was a bare RuntimeError.
+        with self.assertRaisesRegex(rouen.Error, "File name too long"):
+            rouen.Session("x" * 5000)
+
     def test_paths_as_bytes_and_pathlike(self):
         self.assertEqual(rouen.Session(os.fsencode(self.session_dir)).slots, 5)
         self.assertEqual(rouen.Session(pathlib.Path(self.session_dir)).slots, 5)
