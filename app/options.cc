@@ -14,8 +14,8 @@
 namespace rouen {
 namespace {
 
-// The number in `text` as CLI11 converts it (NaN and infinities included), if it is one.
-// A decimal as people write it (not CLI11's reading, which takes 0x10 and nan).
+// The number in `text` if it is a decimal as people write one (ParseDecimal; not CLI11's
+// reading, which takes 0x10, nan and inf).
 std::optional<double> Number(const std::string& text) {
   double v = 0;
   if (!ParseDecimal(text, &v)) return std::nullopt;
