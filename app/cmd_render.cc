@@ -15,7 +15,6 @@
 #include "core/error.h"
 #include "core/image.h"
 #include "core/lens.h"
-#include "core/limits.h"
 #include "core/outputs.h"
 #include "core/session.h"
 #include "core/time.h"
@@ -137,10 +136,7 @@ void Run(const RenderArgs& a) {
     if (to < from) throw Error("--to " + a.to + " is before --from " + a.from);
     const double step = ParseDurationSeconds(a.step, 86400, "--step");
     const double span = to.UnixSeconds() - from.UnixSeconds();
-    if (span / step + 1 > kMaxSequenceFrames)
-      throw Error("--from/--to/--step make " + FormatCount(std::floor(span / step) + 1) +
-                  " frames, more than " + std::to_string(kMaxSequenceFrames) +
-                  "; take a longer --step");
+    CheckFrameCount(span / step + 1, kMaxSequenceFrames);
     for (double t = 0; t <= span + 1e-6; t += step) times.push_back(from.PlusSeconds(t));
   }
   ApplyPrediction(a.prediction, &request.relight);

@@ -192,10 +192,13 @@ Inputs LoadInputs(const ReportRequest& r) {
     in.slots_error = json_path.string() + ": its slots cannot be read: " + e.what();
   }
   if (j.contains("holdout_slots") && j["holdout_slots"].is_array())
-    for (const auto& h : j["holdout_slots"])
-      if (h.is_number_integer() && h.get<int64_t>() >= 0 &&
-          h.get<int64_t>() <= std::numeric_limits<int>::max())
-        in.holdout.insert(static_cast<int>(h.get<int64_t>()));
+    for (const auto& h : j["holdout_slots"]) {
+      try {
+        in.holdout.insert(static_cast<int>(JsonInteger(h, 0, std::numeric_limits<int>::max())));
+      } catch (const Error&) {
+        // A slot that is not one is left out, as the views that cannot be read are.
+      }
+    }
   if (j.contains("views") && j["views"].is_object()) {
     for (const auto& [name, v] : j["views"].items()) {
       try {

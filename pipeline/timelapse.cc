@@ -167,6 +167,12 @@ Daylight DaylightOf(const Site& site, const LocalDate& date, int utc_offset_minu
   return d;
 }
 
+void CheckFrameCount(double frames, int max_frames) {
+  if (frames > max_frames)
+    throw Error("--from/--to/--step make " + FormatCount(frames) + " frames, more than " +
+                std::to_string(max_frames) + "; take a longer --step");
+}
+
 TimelapseTimes TimelapseTimesOf(const Site& site, const TimelapseSchedule& s) {
   if (!(s.step_s > 0) || !std::isfinite(s.step_s) || s.step_s > kDay)
     throw Error("--step: must be above 0 and at most a day");
@@ -205,9 +211,7 @@ TimelapseTimes TimelapseTimesOf(const Site& site, const TimelapseSchedule& s) {
   const double last_k = std::floor((to - origin) / s.step_s + 1e-9);
   if (last_k < first_k)
     throw Error("--step " + FormatNumber(s.step_s) + " s: no frame falls between --from and --to");
-  if (last_k - first_k + 1 > s.max_frames)
-    throw Error("--from/--to/--step make " + FormatCount(last_k - first_k + 1) +
-                " frames, more than " + std::to_string(s.max_frames) + "; take a longer --step");
+  CheckFrameCount(last_k - first_k + 1, s.max_frames);
   for (double k = first_k; k <= last_k; k += 1) {
     // Whole seconds: frame names and headers hold seconds.
     const double at = std::round(origin + k * s.step_s);

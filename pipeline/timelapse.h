@@ -79,6 +79,11 @@ struct TimelapseTimes {
 // both said in local time), no frame in the span, more than max_frames.
 TimelapseTimes TimelapseTimesOf(const Site& site, const TimelapseSchedule& schedule);
 
+// Refuses a sequence of `frames` frames (counted in floating point, so a step of 1e-300 s is
+// counted, not overflowed) when it is more than `max_frames`: rouen::Error naming
+// --from/--to/--step with both counts.
+void CheckFrameCount(double frames, int max_frames);
+
 struct TimelapseOptions {
   bool png = true;      // also 8-bit PNGs through the response (sRGB when the photos were HDR)
   double exposure = 0;  // PNG exposure factor; 0: automatic on the frame with the highest sun

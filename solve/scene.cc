@@ -119,7 +119,7 @@ AlbedoSummary ReadSummary(const nlohmann::json& j) {
   s.change_per_iteration = get("change_per_iteration", std::vector<double>{});
   s.residual_rms_rel = get("residual_rms_rel", 0.0);
   s.residual_median_rel = get("residual_median_rel", 0.0);
-  s.residual_p90_rel = j.value("residual_p90_rel", 0.0);
+  s.residual_p90_rel = get("residual_p90_rel", 0.0);
   s.downweighted_fraction = get("downweighted_fraction", 0.0);
   s.slot_weights = get("slot_weights", std::vector<double>{});
   s.points_filled_neighbours = get("points_filled_neighbours", 0);
@@ -462,25 +462,20 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
   SceneJson parsed = ParseSceneJson(ReadFileToString(json_path), json_path.string());
   SceneModel scene = std::move(parsed.scene);
   const size_t points = parsed.points;
-  const std::string* files = parsed.albedo_files;
-  const std::string& model_sha256 = parsed.model_sha256;
-  const std::string& surroundings_sha256 = parsed.surroundings_sha256;
-  const nlohmann::json &retro = parsed.retro, &sun_lobes = parsed.sun_lobes,
-                       &sky_lobes = parsed.sky_lobes;
   const std::filesystem::path model_path = ResolveInside(dir, scene.model_file);
   // The grid's points are numbered by triangle: the albedos belong to this very file.
-  if (Sha256File(model_path) != model_sha256) {
+  if (Sha256File(model_path) != parsed.model_sha256) {
     throw Error(json_path.string() + ": " + model_path.string() +
                 " is not the model the scene was solved with (its sha256 differs)");
   }
   if (!scene.surroundings_file.empty() &&
-      Sha256File(ResolveInside(dir, scene.surroundings_file)) != surroundings_sha256) {
+      Sha256File(ResolveInside(dir, scene.surroundings_file)) != parsed.surroundings_sha256) {
     throw Error(json_path.string() + ": " + scene.surroundings_file +
                 " is not the surroundings the scene was solved with (its sha256 differs)");
   }
   Mesh mesh = SceneMesh(dir, scene, nullptr, &scene.surrounding_blocks);
   scene.albedo.retro.assign(mesh.block_names.size(), 0.0);
-  for (const auto& [name, value] : retro.items()) {
+  for (const auto& [name, value] : parsed.retro.items()) {
     const auto it = std::find(mesh.block_names.begin(), mesh.block_names.end(), name);
     if (it == mesh.block_names.end()) {
       throw Error(json_path.string() + ": albedo.retro names block '" + name + "', which " +
@@ -495,9 +490,9 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
     scene.albedo.retro[it - mesh.block_names.begin()] = r;
   }
   scene.albedo.sun_lobes =
-      ReadLobes(sun_lobes, mesh, json_path.string() + ": albedo.sun_lobes", model_path);
+      ReadLobes(parsed.sun_lobes, mesh, json_path.string() + ": albedo.sun_lobes", model_path);
   scene.albedo.sky_lobes =
-      ReadLobes(sky_lobes, mesh, json_path.string() + ": albedo.sky_lobes", model_path);
+      ReadLobes(parsed.sky_lobes, mesh, json_path.string() + ": albedo.sky_lobes", model_path);
   SurfaceGrid grid = BuildSurfaceGrid(mesh, scene.grid_options);
   if (static_cast<size_t>(grid.size()) != points) {
     throw Error(json_path.string() + ": says " + std::to_string(points) + " grid points but " +
@@ -506,7 +501,7 @@ SceneModel ReadScene(const std::filesystem::path& dir, Mesh* mesh_out, SurfaceGr
   }
   std::vector<Eigen::Vector3d> vals[3];
   for (int f = 0; f < 3; ++f) {
-    const std::filesystem::path p = ResolveInside(dir, files[f]);
+    const std::filesystem::path p = ResolveInside(dir, parsed.albedo_files[f]);
     const Image img = ReadImage(p.string());
     if (img.channels < 3 || img.width != kAlbedoImageWidth ||
         img.height != std::max<int>(1, (points + kAlbedoImageWidth - 1) / kAlbedoImageWidth)) {

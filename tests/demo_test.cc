@@ -403,49 +403,30 @@ TEST(DemoTest, QuickDemoEndToEndAndReplay) {
             rouen::ReadImage((dir / "seq" / "20260825T163000Z.exr").string()).data);
   // A sequence reaching into the night is refused before any work, naming the time, and
   // leaves no folder; so are a bad step and too many frames.
-  out.clear();
-  EXPECT_NE(RunRouen("render" + scene +
-                         " --from 2026-08-25T19:00:00-07:00 --to 2026-08-25T23:00:00-07:00"
-                         " --step 1h --out " +
-                         (dir / "night").string(),
-                     &out),
-            0);
+  const auto refused_sequence = [&](const std::string& from, const std::string& to,
+                                    const std::string& step) {
+    std::string said;
+    EXPECT_NE(RunRouen("render" + scene + " --from " + from + " --to " + to + " --step " + step +
+                           " --out " + (dir / "night").string(),
+                       &said),
+              0)
+        << step;
+    return said;
+  };
+  out = refused_sequence("2026-08-25T19:00:00-07:00", "2026-08-25T23:00:00-07:00", "1h");
   EXPECT_NE(out.find("below the horizon"), std::string::npos) << out;
   EXPECT_NE(out.find("at 2026-08-26T"), std::string::npos) << out;
   EXPECT_FALSE(fs::exists(dir / "night"));
-  out.clear();
-  EXPECT_NE(RunRouen("render" + scene +
-                         " --from 2026-08-25T09:00:00-07:00 --to 2026-08-25T10:00:00-07:00"
-                         " --step 15m --out " +
-                         (dir / "night").string(),
-                     &out),
-            0);
+  out = refused_sequence("2026-08-25T09:00:00-07:00", "2026-08-25T10:00:00-07:00", "15m");
   EXPECT_NE(out.find("--step '15m': unknown unit 'm'"), std::string::npos) << out;
-  out.clear();  // hexadecimal, which std::stod reads (as 16 s): not a duration people write
-  EXPECT_NE(RunRouen("render" + scene +
-                         " --from 2026-08-25T09:00:00-07:00 --to 2026-08-25T10:00:00-07:00"
-                         " --step 0x10 --out " +
-                         (dir / "night").string(),
-                     &out),
-            0);
+  // Hexadecimal, which std::stod reads (as 16 s): not a duration people write.
+  out = refused_sequence("2026-08-25T09:00:00-07:00", "2026-08-25T10:00:00-07:00", "0x10");
   EXPECT_NE(out.find("--step '0x10': not a duration"), std::string::npos) << out;
-  out.clear();
-  EXPECT_NE(RunRouen("render" + scene +
-                         " --from 2026-08-25T09:00:00-07:00 --to 2026-08-25T12:00:00-07:00"
-                         " --step 1s --out " +
-                         (dir / "night").string(),
-                     &out),
-            0);
+  out = refused_sequence("2026-08-25T09:00:00-07:00", "2026-08-25T12:00:00-07:00", "1s");
   EXPECT_NE(out.find("10801 frames, more than 5000"), std::string::npos) << out;
   // A step too short for any integer to count its frames: counted all the same (it was printed
   // as -9223372036854775807 frames, an overflow).
-  out.clear();
-  EXPECT_NE(RunRouen("render" + scene +
-                         " --from 2026-08-25T09:00:00-07:00 --to 2026-08-25T12:00:00-07:00"
-                         " --step 1e-300 --out " +
-                         (dir / "night").string(),
-                     &out),
-            0);
+  out = refused_sequence("2026-08-25T09:00:00-07:00", "2026-08-25T12:00:00-07:00", "1e-300");
   EXPECT_NE(out.find("1.08e+304 frames, more than 5000"), std::string::npos) << out;
   // A new camera from a point, a target, a field of view and a size.
   out.clear();
