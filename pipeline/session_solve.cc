@@ -771,20 +771,13 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   // albedos use (a held-out slot's photos do not shape what predicts it). By default only with
   // the surroundings, whose walls the field, being ground, cannot hold (GroundFieldUse).
   const GroundFieldUse field_use = options.config.ground_field.use;
-  if (field_use == GroundFieldUse::kAlways ||
-      (field_use == GroundFieldUse::kWithSurroundings && !r.surrounding_blocks.empty())) {
-    std::vector<GroundFieldTime> times;
-    for (size_t k = 0; k < r.slots.size(); ++k) {
-      if (std::find(env_slot_ids.begin(), env_slot_ids.end(), r.slots[k].slot) ==
-          env_slot_ids.end())
-        continue;
-      const Lighting& l = r.slots[k].lighting;
-      times.push_back({slot_panoramas[k], l.sun_dir, l.sun_radiance * l.sun_solid_angle_sr,
-                       l.env.HorizontalSkyIrradiance()});
-    }
+  std::vector<GroundFieldTime> field_times;
+  std::vector<size_t> field_slots;  // index into r.slots of each of field_times
+  // The field from field_times, lent to every slot's lighting.
+  auto build_field = [&] {
     GroundFieldSummary gs;
-    r.ground_field = std::make_shared<const GroundField>(
-        BuildGroundField(times, env_caster, r.env_ground_retro, options.config.ground_field, &gs));
+    r.ground_field = std::make_shared<const GroundField>(BuildGroundField(
+        field_times, env_caster, r.env_ground_retro, options.config.ground_field, &gs));
     for (SlotSolve& ss : r.slots) ss.lighting.ground = r.ground_field;
     Log(options, "ground field: " + std::to_string(gs.cells_observed) + " of " +
                      std::to_string(gs.cells) + " cells of " +
@@ -800,6 +793,19 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
            << 100 * gs.retro_cost << "%)";
       Log(options, line.str());
     }
+  };
+  if (field_use == GroundFieldUse::kAlways ||
+      (field_use == GroundFieldUse::kWithSurroundings && !r.surrounding_blocks.empty())) {
+    for (size_t k = 0; k < r.slots.size(); ++k) {
+      if (std::find(env_slot_ids.begin(), env_slot_ids.end(), r.slots[k].slot) ==
+          env_slot_ids.end())
+        continue;
+      const Lighting& l = r.slots[k].lighting;
+      field_times.push_back({slot_panoramas[k], l.sun_dir, l.sun_radiance * l.sun_solid_angle_sr,
+                             l.env.HorizontalSkyIrradiance()});
+      field_slots.push_back(k);
+    }
+    build_field();
     clock.Lap("ground field");
   }
 
@@ -852,6 +858,31 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   with_model.irradiance.cancel = options.cancel;
   r.albedo = SolveAlbedo(r.grid, r.hemisphere, *r.caster, lighting, obs, with_model, &r.irradiance);
   Log(options, "pseudo-albedos: " + r.albedo.summary.BriefReport());
+  clock.Lap("irradiance and pseudo-albedos");
+  // The walls' light on the ground: the field above holds it in its albedos as it was at the
+  // training times (several times the albedo in a street). Read again with the walls' light
+  // from the model just solved, the field's albedos are the ground's own and the
+  // interreflection lights the ground from the walls at any time (GroundBounce).
+  if (r.ground_field && options.config.ground_field.walls) {
+    const GroundBounce bounce = BuildGroundBounce(*r.ground_field, *r.caster, r.grid, r.hemisphere);
+    if (!bounce.empty()) {
+      for (size_t t = 0; t < field_times.size(); ++t) {
+        const size_t k = field_slots[t];
+        field_times[t].walls_e =
+            GroundWallsIrradiance(bounce, r.grid, r.albedo.rho_sun, r.albedo.rho_se,
+                                  r.irradiance[k], r.albedo.retro, r.slots[k].lighting.sun_dir);
+      }
+      Log(options, "ground field: read again with the light of the walls " +
+                       std::to_string(bounce.cells.size()) + " cells see");
+      build_field();
+      for (size_t k = 0; k < r.slots.size(); ++k) lighting[k].ground = r.ground_field;
+      r.albedo =
+          SolveAlbedo(r.grid, r.hemisphere, *r.caster, lighting, obs, with_model, &r.irradiance);
+      Log(options,
+          "pseudo-albedos with the walls' light on the ground: " + r.albedo.summary.BriefReport());
+      clock.Lap("ground field and pseudo-albedos with the walls' light");
+    }
+  }
   if (r.albedo_options.fit_retro) {
     std::ostringstream line;
     line << "rough diffuse (retro, 0 = Lambert) per block:" << std::fixed << std::setprecision(3);
@@ -897,7 +928,6 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
               r.albedo.sky_lobes, as.sky_lobe_samples, as.sky_lobe_cost_zero,
               as.sky_lobe_cost_fitted);
   }
-  clock.Lap("irradiance and pseudo-albedos");
   return r;
 }
 
@@ -908,9 +938,12 @@ std::vector<SlotIrradiance> IrradianceFor(const SolveResult& solved,
   io.mesh = &solved.mesh;
   std::vector<SlotIrradiance> irr =
       ComputeIrradiance(solved.grid, solved.hemisphere, *solved.caster, lightings, io);
+  const std::vector<std::shared_ptr<const GroundBounce>> ground =
+      GroundBouncesOf(lightings, *solved.caster, solved.grid, solved.hemisphere);
   for (size_t k = 0; k < irr.size(); ++k)
     AddInterreflection(solved.grid, solved.hemisphere, solved.albedo.rho_sun, solved.albedo.rho_se,
-                       &irr[k], ao.bounces, solved.albedo.retro, lightings[k].sun_dir);
+                       &irr[k], ao.bounces, solved.albedo.retro, lightings[k].sun_dir, nullptr,
+                       nullptr, ground[k].get());
   return irr;
 }
 

@@ -515,6 +515,8 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
     f.Number("min_radius_m", &g.min_radius_m, 0, 1e5);
     f.Int64("max_cells", &g.max_cells, 1, int64_t{1} << 30);
     f.Int("sky_rays", &g.sky_rays, 1, 4096);
+    f.Number("open_sky", &g.open_sky, 0, 1);
+    f.Bool("walls", &g.walls);
     f.Bool("fit_retro", &g.fit_retro);
     f.Finish();
   }

@@ -55,6 +55,8 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   c.merge.saturation_level = 240;
   c.radiance_merge.clip_ramp = 0.05;
   c.ground_field.use = GroundFieldUse::kAlways;  // not the default
+  c.ground_field.walls = false;
+  c.ground_field.open_sky = 0.75;
   const json j = SolveConfigJson(c);
   const SolveConfig back = ApplySolveConfig(j, DefaultSolveConfig(false), "x");
   EXPECT_EQ(SolveConfigJson(back), j);
@@ -80,6 +82,8 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   EXPECT_EQ(back.merge.saturation_level, 240);
   EXPECT_EQ(back.radiance_merge.clip_ramp, 0.05);
   EXPECT_EQ(back.ground_field.use, GroundFieldUse::kAlways);
+  EXPECT_FALSE(back.ground_field.walls);
+  EXPECT_EQ(back.ground_field.open_sky, 0.75);
   // The field's three uses, as the config writes them: true, false and "with_surroundings".
   for (const GroundFieldUse use :
        {GroundFieldUse::kNever, GroundFieldUse::kWithSurroundings, GroundFieldUse::kAlways}) {

@@ -916,6 +916,16 @@ std::vector<double> FitRetro(const SurfaceGrid& grid, const std::vector<Observat
       best_cost[b] = cost[k_zero][b];
     }
   }
+  // A block the photos saw too little to tell takes the median of the blocks they could tell
+  // (the site's materials), not Lambert's law.
+  std::vector<double> told;
+  for (int b = 0; b < nblocks; ++b)
+    if (sunlit[b] >= options.retro_min_observations) told.push_back(best[b]);
+  if (!told.empty()) {
+    const double site = Median(told);
+    for (int b = 0; b < nblocks; ++b)
+      if (sunlit[b] < options.retro_min_observations) best[b] = site;
+  }
   if (summary) {
     summary->retro_cost_lambert = cost[k_zero];
     summary->retro_cost_fitted = best_cost;
@@ -1141,6 +1151,8 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   IrradianceOptions io = options.irradiance;
   if (!io.exact_points) io.exact_points = &observed;
   std::vector<SlotIrradiance> irr = ComputeIrradiance(grid, cache, model, slots, io);
+  const std::vector<std::shared_ptr<const GroundBounce>> ground =
+      GroundBouncesOf(slots, model, grid, cache);
   SunShading shading;
   for (const Lighting& l : slots) shading.sun_dirs.push_back(l.sun_dir.normalized());
   AlbedoSummary retro_summary;
@@ -1164,7 +1176,7 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
     for (size_t k = 0; k < irr.size(); ++k) {
       AddInterreflection(grid, cache, res.rho_sun, res.rho_se, &irr[k], options.bounces,
                          shading.retro, shading.sun_dirs[k], cancel,
-                         options.outer_newton ? &order : nullptr);
+                         options.outer_newton ? &order : nullptr, ground[k].get());
       if (!options.outer_newton) continue;
       for (int i = 0; i < grid.size(); ++i) {
         order_sum[i] += order[i];
@@ -1277,7 +1289,7 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
     // rendering these slots).
     for (size_t k = 0; k < irr.size(); ++k) {
       AddInterreflection(grid, cache, res.rho_sun, res.rho_se, &irr[k], options.bounces,
-                         shading.retro, shading.sun_dirs[k], cancel);
+                         shading.retro, shading.sun_dirs[k], cancel, nullptr, ground[k].get());
     }
     *irradiance = std::move(irr);
   }

@@ -144,7 +144,8 @@ struct AlbedoOptions {
   // grazing sun a rough surface sends back than Lambert's law says) from its observations;
   // false keeps every block Lambertian (retro 0), as the paper's eq. 13 does.
   bool fit_retro = true;
-  // A block's retro is fitted only from at least this many sunlit observations; else 0.
+  // A block's retro is fitted only from at least this many sunlit observations; else the median
+  // of the blocks that have them (0 when none has).
   int retro_min_observations = 200;
   // The fit's cost: |relative residual| per observation and channel, truncated here (robust).
   double retro_residual_cap = 0.25;

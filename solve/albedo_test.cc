@@ -259,6 +259,31 @@ TEST(AlbedoTest, FitsTheGlossyBlocksSunLobeAndNotTheMatteOnes) {
   EXPECT_LT(e_fit, 0.5 * e_matte);
 }
 
+// A block the photos saw too little to fit a retro (here the plaza, 40 sunlit observations left
+// of its thousands) takes the retro of the blocks they could tell, not Lambert's law; with no
+// block told, every one stays Lambertian.
+TEST(AlbedoTest, ABlockSeenTooLittleTakesTheRetroOfTheBlocksSeenEnough) {
+  World w = MakeWorld();
+  const int box = 1, plaza = 0;
+  const auto irr = Irradiance(w);
+  std::vector<Observation> obs;
+  int plaza_kept = 0;
+  for (const Observation& o : ObserveRetro(w, irr, box, 0.8)) {
+    if (w.grid.points[o.point].block == plaza && plaza_kept++ >= 40) continue;
+    obs.push_back(o);
+  }
+  AlbedoOptions opt = OptionsFor(w);
+  opt.outer_iterations = 1;
+  opt.bounces = 1;
+  const AlbedoResult fit = SolveAlbedo(w.grid, w.cache, *w.rc, w.slots, obs, opt);
+  ASSERT_EQ(fit.retro.size(), 2u);
+  EXPECT_GT(fit.retro[box], 0.5);
+  EXPECT_EQ(fit.retro[plaza], fit.retro[box]);
+  opt.retro_min_observations = 1000000;  // no block told
+  const AlbedoResult none = SolveAlbedo(w.grid, w.cache, *w.rc, w.slots, obs, opt);
+  EXPECT_TRUE(none.retro.empty() || (none.retro[box] == 0.0 && none.retro[plaza] == 0.0));
+}
+
 TEST(AlbedoTest, FitsEachBlocksRetroAndTheAlbedosWithIt) {
   World w = MakeWorld();
   // Lower suns too, where a rough surface departs most from Lambert.

@@ -7,10 +7,13 @@
 #include <cmath>
 #include <deque>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 
 #include "core/angles.h"
+#include "core/camera.h"
 #include "core/error.h"
+#include "core/hash_random.h"
 #include "core/json_text.h"
 #include "core/stats.h"
 #include "solve/retro.h"
@@ -20,21 +23,27 @@ namespace {
 
 const Eigen::Vector3d kUp = Eigen::Vector3d::UnitZ();
 
-// Cosine-weighted direction k of n over the upper hemisphere (stratified, fixed).
-Eigen::Vector3d CosineDirection(int k, int n) {
+// Cosine-weighted direction k of n over the upper hemisphere: stratified, jittered within its
+// stratum by a hash of `key` and k (one pattern for every spot would put the same error on
+// every cell beside a wall).
+Eigen::Vector3d CosineDirection(int k, int n, uint64_t key) {
   const int side = std::max(1, static_cast<int>(std::lround(std::sqrt(n))));
-  const double u = (k % side + 0.5) / side, v = ((k / side) % side + 0.5) / side;
+  const uint64_t h = MixHash(MixHash(key) ^ static_cast<uint64_t>(k));
+  const double u = (k % side + HashUniformHigh(h)) / side;
+  const double v = ((k / side) % side + HashUniformLow(h)) / side;
   const double r = std::sqrt(u), phi = 2 * kPi * v;
   return {r * std::cos(phi), r * std::sin(phi), std::sqrt(std::max(0.0, 1 - u))};
 }
 
 // What lights level ground at q per unit albedo, seen from `to_viewer`, over pi:
-// (E_sun sin(el) D + E_sky V_sky A) / pi with the ground's rough diffuse reflection `retro`.
+// (E_sun sin(el) D + (E_sky V_sky + E_walls) A) / pi with the ground's rough diffuse reflection
+// `retro` (the walls' light taken as ambient, like the sky's).
 Eigen::Vector3d LightPerAlbedo(const GroundField& f, const Eigen::Vector3d& q, bool shaded,
                                const Eigen::Vector3d& sun_dir, const Eigen::Vector3d& sun_e,
-                               const Eigen::Vector3d& sky_e, const Eigen::Vector3d& to_viewer,
-                               double retro) {
-  Eigen::Vector3d e = sky_e * (f.SkyVisibility(q) * AmbientRetroFactor(retro, kUp, to_viewer));
+                               const Eigen::Vector3d& sky_e, const Eigen::Vector3d& walls_e,
+                               const Eigen::Vector3d& to_viewer, double retro) {
+  Eigen::Vector3d e =
+      (sky_e * f.SkyVisibility(q) + walls_e) * AmbientRetroFactor(retro, kUp, to_viewer);
   if (!shaded && sun_dir.z() > 0)
     e += sun_e * (sun_dir.z() * RetroFactor(retro, kUp, sun_dir, to_viewer));
   return e / kPi;
@@ -54,10 +63,12 @@ struct GroundPixel {
   bool shaded = false;  // the model hides the sun from where the ray meets the ground
   Eigen::Vector3f radiance = Eigen::Vector3f::Zero();
   Eigen::Vector3f to_viewer = Eigen::Vector3f::UnitZ();  // from the ground to the panorama
-  // The albedo the pixel reads with the ground's reflection `retro`; NaN where nothing lights it.
-  Eigen::Vector3d Albedo(const GroundField& f, const GroundFieldTime& t, double retro) const {
+  // The albedo the pixel reads with the ground's reflection `retro` and the walls' light on its
+  // cell `walls_e`; NaN where nothing lights it.
+  Eigen::Vector3d Albedo(const GroundField& f, const GroundFieldTime& t,
+                         const Eigen::Vector3d& walls_e, double retro) const {
     const Eigen::Vector3d e = LightPerAlbedo(f, q.cast<double>(), shaded, t.sun_dir, t.sun_e,
-                                             t.sky_e, to_viewer.cast<double>(), retro);
+                                             t.sky_e, walls_e, to_viewer.cast<double>(), retro);
     if (!(e.minCoeff() > 0)) return Eigen::Vector3d::Constant(std::nan(""));
     return radiance.cast<double>().cwiseQuotient(e);
   }
@@ -106,11 +117,13 @@ void ForEachGroundPixel(const std::vector<GroundFieldTime>& times, const RayCast
   }
 }
 
-// Every cell not `known` takes the value of the nearest known one (breadth-first over the
-// 4-neighbours from `queue`, the known cells); all stay as they are when none is known.
+// Every cell not `keep` takes the value of the nearest cell of `queue` (breadth-first over the
+// 4-neighbours, through kept cells as through others); all stay as they are when `queue` is
+// empty.
 void FillFromNearest(int nx, int ny, std::vector<Eigen::Vector3f>* values,
-                     const std::vector<uint8_t>& known, std::deque<int> queue) {
-  std::vector<uint8_t> done(known);
+                     const std::vector<uint8_t>& keep, std::deque<int> queue) {
+  std::vector<int> source(values->size(), -1);
+  for (int c : queue) source[c] = c;
   while (!queue.empty()) {
     const int c = queue.front();
     queue.pop_front();
@@ -119,12 +132,18 @@ void FillFromNearest(int nx, int ny, std::vector<Eigen::Vector3f>* values,
     for (const auto& [x, y] : nb) {
       if (x < 0 || y < 0 || x >= nx || y >= ny) continue;
       const int m = y * nx + x;
-      if (done[m]) continue;
-      done[m] = 1;
-      (*values)[m] = (*values)[c];
+      if (source[m] >= 0) continue;
+      source[m] = source[c];
+      if (!keep[m]) (*values)[m] = (*values)[source[c]];
       queue.push_back(m);
     }
   }
+}
+
+// The walls' irradiance on `cell` at time t (GroundFieldTime::walls_e); zero where not given.
+Eigen::Vector3d WallsAt(const GroundFieldTime& t, int cell) {
+  return t.walls_e.empty() || cell < 0 ? Eigen::Vector3d(Eigen::Vector3d::Zero())
+                                       : Eigen::Vector3d(t.walls_e[cell].cast<double>());
 }
 
 struct RetroConsistency {
@@ -162,7 +181,9 @@ RetroConsistency FitRetroByConsistency(std::vector<GroundPixel> sample, const Gr
         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
         int count = 0;
         for (; i < sample.size() && sample[i].cell == cell && pair_of(sample[i]) == pair; ++i) {
-          const Eigen::Vector3d rho = sample[i].Albedo(f, times[sample[i].time], retro);
+          const GroundPixel& g = sample[i];
+          const Eigen::Vector3d rho =
+              g.Albedo(f, times[g.time], WallsAt(times[g.time], g.cell), retro);
           if (!rho.allFinite()) continue;
           sum += rho;
           ++count;
@@ -216,6 +237,7 @@ void GroundFieldOptions::Validate() const {
   if (!(min_radius_m >= 0 && min_radius_m <= 1e5)) bad("min_radius_m must be within [0, 1e5]");
   if (max_cells < 1) bad("max_cells must be positive");
   if (sky_rays < 1 || sky_rays > 4096) bad("sky_rays must be within [1, 4096]");
+  if (!(open_sky >= 0 && open_sky <= 1)) bad("open_sky must be within [0, 1]");
 }
 
 int GroundField::Cell(double x, double y) const {
@@ -249,6 +271,58 @@ Eigen::Vector3d GroundField::CellCentre(int cell) const {
   return {x0 + (cell % nx + 0.5) * cell_m, y0 + (cell / nx + 0.5) * cell_m, level_z};
 }
 
+GroundWalls CastGroundWalls(const GroundField& f, const RayCaster& model, int rays,
+                            bool only_shaded) {
+  if (rays < 1 || rays > 4096) throw Error("ground field: sky_rays must be within [1, 4096]");
+  const int n = f.nx * f.ny;
+  if (only_shaded && f.sky_visibility.size() != static_cast<size_t>(n))
+    throw Error("ground field: no sky visibility per cell to find the cells that see walls");
+  const double offset = model.surface_offset();
+  const int per_spot = std::max(1, rays / 4);
+  GroundWalls w;
+  w.weight.assign(n, 0.f);
+  std::vector<std::vector<GroundWalls::Hit>> per_cell(n);
+  tbb::parallel_for(0, n, [&](int c) {
+    if (only_shaded && !(f.sky_visibility[c] < 1)) {
+      w.weight[c] = f.sky_visibility[c] > 0 ? 1.f / (4 * per_spot) : 0.f;
+      return;
+    }
+    const Eigen::Vector3d centre = f.CellCentre(c) + Eigen::Vector3d(0, 0, offset);
+    std::vector<GroundWalls::Hit> hits;
+    int cast = 0;
+    for (int j = 0; j < 4; ++j) {
+      const Eigen::Vector3d q =
+          centre + 0.25 * f.cell_m * Eigen::Vector3d(j % 2 ? 1 : -1, j / 2 ? 1 : -1, 0);
+      const size_t before = hits.size();
+      for (int k = 0; k < per_spot; ++k) {
+        const Eigen::Vector3d d = CosineDirection(k, per_spot, 4 * static_cast<uint64_t>(c) + j);
+        const RayHit h = model.Intersect(q, d, 0.0);
+        if (!h.hit) continue;
+        GroundWalls::Hit hit;
+        hit.triangle = h.triangle;
+        hit.u = static_cast<float>(h.u);
+        hit.v = static_cast<float>(h.v);
+        hit.position = (q + h.t * d).cast<float>();
+        hit.from = q.cast<float>();
+        hits.push_back(hit);
+      }
+      if (hits.size() - before == static_cast<size_t>(per_spot)) {  // under the model
+        hits.resize(before);
+        continue;
+      }
+      cast += per_spot;
+    }
+    w.weight[c] = cast > 0 ? 1.f / cast : 0.f;
+    per_cell[c] = std::move(hits);
+  });
+  w.begin.assign(static_cast<size_t>(n) + 1, 0);
+  for (int c = 0; c < n; ++c)
+    w.begin[c + 1] = w.begin[c] + static_cast<int32_t>(per_cell[c].size());
+  w.hits.reserve(w.begin[n]);
+  for (int c = 0; c < n; ++c) w.hits.insert(w.hits.end(), per_cell[c].begin(), per_cell[c].end());
+  return w;
+}
+
 void GroundField::Validate() const {
   const size_t n = static_cast<size_t>(nx) * static_cast<size_t>(ny);
   if (nx < 0 || ny < 0 || albedo.size() != n || observed.size() != n || sky_visibility.size() != n)
@@ -257,6 +331,8 @@ void GroundField::Validate() const {
                 " flags, " + std::to_string(sky_visibility.size()) + " sky visibilities");
   if (!(cell_m > 0) || !std::isfinite(x0) || !std::isfinite(y0) || !std::isfinite(level_z))
     throw Error("ground field: bad cell size or origin");
+  if (sky_rays < 1 || sky_rays > 4096)
+    throw Error("ground field: sky_rays must be within [1, 4096]");
   if (!(retro >= kRetroMin && retro <= kRetroMax))
     throw Error("ground field: retro must be within [" + std::to_string(kRetroMin) + ", " +
                 std::to_string(kRetroMax) + "]");
@@ -297,34 +373,32 @@ GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const Ra
   f.y0 = box.min().y() - radius;
   const int n = f.nx * f.ny;
 
-  // The sky the model leaves each cell (cosine-weighted), once: the mean over four spots of the
-  // cell, each cast sky_rays / 4 stratified rays, of the spots outside the model (one that sees
-  // no sky at all is under a wall; the cell is the ground beside it).
-  const double offset = model.surface_offset();
-  const int per_spot = std::max(1, options.sky_rays / 4);
+  int with_walls = 0;
+  for (const GroundFieldTime& t : times) {
+    if (t.walls_e.empty()) continue;
+    if (t.walls_e.size() != static_cast<size_t>(n))
+      throw Error("ground field: the walls' light is given for " +
+                  std::to_string(t.walls_e.size()) + " cells of a field of " + std::to_string(n));
+    ++with_walls;
+  }
+  if (with_walls != 0 && with_walls != static_cast<int>(times.size()))
+    throw Error("ground field: the walls' light is given for some times and not others");
+  f.walls = with_walls > 0;
+  // The sky the model leaves each cell, once.
+  f.sky_rays = options.sky_rays;
+  const GroundWalls seen = CastGroundWalls(f, model, f.sky_rays, false);
   f.sky_visibility.assign(n, 1.f);
-  tbb::parallel_for(0, n, [&](int c) {
-    const Eigen::Vector3d centre = f.CellCentre(c) + Eigen::Vector3d(0, 0, offset);
-    int open = 0, cast = 0;
-    for (int j = 0; j < 4; ++j) {
-      const Eigen::Vector3d q =
-          centre + 0.25 * f.cell_m * Eigen::Vector3d(j % 2 ? 1 : -1, j / 2 ? 1 : -1, 0);
-      int spot = 0;
-      for (int k = 0; k < per_spot; ++k)
-        spot += !model.Occluded(q, CosineDirection(k, per_spot), 0.0);
-      if (spot == 0) continue;
-      open += spot;
-      cast += per_spot;
-    }
-    f.sky_visibility[c] = cast > 0 ? static_cast<float>(open) / cast : 0.f;
-  });
+  for (int c = 0; c < n; ++c) {
+    f.sky_visibility[c] =
+        seen.weight[c] > 0 ? std::max(0.f, 1 - seen.weight[c] * (seen.begin[c + 1] - seen.begin[c]))
+                           : 0.f;
+  }
 
   // The fit's retro from a sample of the sunlit pixels (at most kFitPixels of all), then per time
   // each cell's mean albedo over every pixel that fell in it, sunlit and shaded apart. A shaded
-  // spot's light is the sky's and what the walls around send it, which the field does not
-  // model: in a street it reads an albedo several times too high, sunlit at another time far
-  // too bright. The sun, where it reaches, dominates what the field models: a cell keeps its
-  // sunlit albedos when some time saw it sunlit.
+  // spot's light is the sky's and the walls' (without walls_e, the walls' light as it was then
+  // stays in the albedo: in a street several times the albedo); the sun, where it reaches, is
+  // known best: a cell keeps its sunlit albedos when some time saw it sunlit.
   GroundFieldSummary s;
   s.retro_given = retro;
   if (options.fit_retro) {
@@ -363,7 +437,7 @@ GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const Ra
       if (current >= 0) close_time();
       current = g.time;
     }
-    const Eigen::Vector3d rho = g.Albedo(f, times[g.time], f.retro);
+    const Eigen::Vector3d rho = g.Albedo(f, times[g.time], WallsAt(times[g.time], g.cell), f.retro);
     if (!rho.allFinite()) return;
     if (g.cell < 0) {
       far_sum += rho;
@@ -382,7 +456,7 @@ GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const Ra
   // Over the times, the median per channel (of the sunlit times where there are some).
   f.albedo.assign(n, Eigen::Vector3f::Zero());
   f.observed.assign(n, 0);
-  std::deque<int> queue;
+  std::deque<int> open, elsewhere;
   for (int c = 0; c < n; ++c) {
     const std::vector<Eigen::Vector3f>& v =
         per_time[2 * c].empty() ? per_time[2 * c + 1] : per_time[2 * c];
@@ -393,11 +467,12 @@ GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const Ra
       f.albedo[c][ch] = Median(std::move(x));
     }
     f.observed[c] = 1;
-    queue.push_back(c);
+    (f.sky_visibility[c] >= options.open_sky ? open : elsewhere).push_back(c);
     ++s.cells_observed;
   }
-  // Unobserved cells: the nearest observed one's.
-  FillFromNearest(f.nx, f.ny, &f.albedo, f.observed, queue);
+  // Unobserved cells: the nearest observed one's, of the open ground where some was seen (its
+  // light the field models best: beside a wall a cell's reading rests on the walls' light).
+  FillFromNearest(f.nx, f.ny, &f.albedo, f.observed, open.empty() ? elsewhere : open);
   // Beyond the cells: the pixels that fell there, else the rim's median.
   if (far_count > 0) {
     f.far_albedo = far_sum / static_cast<double>(far_count);
@@ -427,7 +502,8 @@ Eigen::Vector3d GroundLight::Radiance(const Eigen::Vector3d& q,
   const GroundField& f = *field_;
   const int cell = f.Cell(q.x(), q.y());
   return f.Albedo(cell).cwiseProduct(LightPerAlbedo(f, q, InShadow(*model_, q, sun_dir_), sun_dir_,
-                                                    sun_e_, sky_e_, to_viewer, f.retro));
+                                                    sun_e_, sky_e_, Eigen::Vector3d::Zero(),
+                                                    to_viewer, f.retro));
 }
 
 Eigen::Vector3d GroundLight::Arriving(const Eigen::Vector3d& origin,
@@ -448,6 +524,8 @@ void to_json(nlohmann::json& j, const GroundFieldOptions& o) {
        {"min_radius_m", o.min_radius_m},
        {"max_cells", o.max_cells},
        {"sky_rays", o.sky_rays},
+       {"open_sky", o.open_sky},
+       {"walls", o.walls},
        {"fit_retro", o.fit_retro}};
 }
 
@@ -462,6 +540,8 @@ void to_json(nlohmann::json& j, const GroundField& f) {
        {"nx", f.nx},
        {"ny", f.ny},
        {"retro", f.retro},
+       {"sky_rays", f.sky_rays},
+       {"walls", f.walls},
        {"far_albedo", {f.far_albedo.x(), f.far_albedo.y(), f.far_albedo.z()}},
        {"albedo", albedo},
        {"observed", f.observed},
@@ -477,6 +557,10 @@ void from_json(const nlohmann::json& j, GroundField& f) {
   f.nx = JsonGet<int>(j.at("nx"), "ground field: nx");
   f.ny = JsonGet<int>(j.at("ny"), "ground field: ny");
   f.retro = j.at("retro").get<double>();
+  // Absent in scenes written before the walls lit the ground: the default they were cast with.
+  f.sky_rays = j.contains("sky_rays") ? JsonGet<int>(j.at("sky_rays"), "ground field: sky_rays")
+                                      : GroundFieldOptions{}.sky_rays;
+  f.walls = j.contains("walls") && j.at("walls").get<bool>();
   const std::vector<double> far = j.at("far_albedo").get<std::vector<double>>();
   if (far.size() != 3) throw Error("ground field: far_albedo must be RGB");
   f.far_albedo = {far[0], far[1], far[2]};

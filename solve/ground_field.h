@@ -5,11 +5,12 @@
 // of directions cannot light both. Here the landscape panoramas' pixels below the horizon are
 // re-projected onto the level ground around the model, and each becomes an albedo: its radiance
 // over what lights that spot of ground at its time -- the sun unless the model shades it (from
-// the geometry), the sky the model leaves it -- through the ground's rough diffuse reflection
-// (solve/retro.h), pooled per plan cell over every time. A grid point then sees, along each
-// direction that meets the ground, that albedo lit at the time being rendered and seen from
-// where the point stands: the model's cast shadow where it lies at that time, the sun's grazing
-// reflection towards the point, not towards the panorama.
+// the geometry), the sky the model leaves it, the light of the walls it sees (once the model is
+// solved) -- through the ground's rough diffuse reflection (solve/retro.h), pooled per plan cell
+// over every time. A grid point then sees, along each direction that meets the ground, that
+// albedo lit at the time being rendered and seen from where the point stands: the model's cast
+// shadow where it lies at that time, the sun's grazing reflection towards the point, not towards
+// the panorama, and the walls' light of that time (GroundBounce, solve/irradiance.h).
 #pragma once
 
 #include <Eigen/Core>
@@ -44,6 +45,15 @@ struct GroundFieldOptions {
   int64_t max_cells = int64_t{1} << 22;  // refused beyond (memory: 20 bytes a cell)
   // Rays per cell for the sky the model leaves the ground (cosine-weighted over the hemisphere).
   int sky_rays = 64;
+  // Read the field again with the light of the walls around each cell, from the model solved
+  // with the field read without it, and solve the albedos again (GroundFieldTime::walls_e; the
+  // solve's time grows by one albedo solve). false: the walls' light stays in the ground's
+  // albedos as it was at the photographed times.
+  bool walls = true;
+  // Ground no panorama saw takes the albedo of the nearest seen cell that sees at least this
+  // part of the sky (open ground, whose light the field models best), of any seen cell where
+  // none does.
+  double open_sky = 0.9;
   // Fit the ground's rough diffuse reflection (solve/retro.h) to the panoramas: the retro at
   // which every spot of ground seen at several times or from several panoramas reads one albedo
   // (BuildGroundField). false: the retro BuildGroundField is given.
@@ -57,6 +67,10 @@ struct GroundFieldTime {
   Eigen::Vector3d sun_dir = Eigen::Vector3d::UnitZ();  // unit ENU
   Eigen::Vector3d sun_e = Eigen::Vector3d::Zero();     // sun radiance x solid angle, RGB
   Eigen::Vector3d sky_e = Eigen::Vector3d::Zero();     // sky irradiance on level open ground
+  // The walls' irradiance on each cell of the field being built (its layout as a field built
+  // without it has), from the model solved with that field (GroundWallsIrradiance,
+  // solve/irradiance.h); empty: not known.
+  std::vector<Eigen::Vector3f> walls_e;
 };
 
 struct GroundField {
@@ -68,6 +82,11 @@ struct GroundField {
   std::vector<Eigen::Vector3f> albedo;  // per cell (row-major in y), observed or filled
   std::vector<uint8_t> observed;        // per cell: 1 when some panorama pixel fell in it
   std::vector<float> sky_visibility;    // per cell: the part of the sky the model leaves it
+  int sky_rays = 64;  // rays a cell cast for it (GroundFieldOptions::sky_rays; CastGroundWalls)
+  // Whether the albedos were read with the walls' light on the ground (GroundFieldTime::walls_e):
+  // then the interreflection adds that light at any time (GroundBounce, solve/irradiance.h).
+  // false: the albedos hold it as it was at the times that made them.
+  bool walls = false;
   Eigen::Vector3d far_albedo = Eigen::Vector3d::Zero();  // beyond the cells
 
   bool empty() const { return nx == 0 || ny == 0; }
@@ -83,6 +102,27 @@ struct GroundField {
   void Validate() const;  // throws rouen::Error when sizes disagree or values are not finite
 };
 
+// What each cell of the field sees of the model: the hits of the cosine-weighted rays cast
+// from its four spots outside the model (a spot that sees no sky lies under a wall and casts
+// none). The rest of a cell's rays reach the sky: its sky visibility is 1 - hits x weight.
+struct GroundWalls {
+  struct Hit {
+    int triangle = -1;
+    float u = 0, v = 0;                                  // barycentric (RayHit)
+    Eigen::Vector3f position = Eigen::Vector3f::Zero();  // where the ray met the model
+    Eigen::Vector3f from = Eigen::Vector3f::Zero();      // the spot of ground it left
+  };
+  std::vector<int32_t> begin;  // per cell into `hits`; size cells + 1
+  std::vector<Hit> hits;
+  std::vector<float> weight;  // per cell: one ray's share of its hemisphere (0: under the model)
+};
+
+// Casts `rays` rays a cell (GroundField::sky_rays) from every cell of f's layout (level_z, x0,
+// y0, cell_m, nx, ny), or with `only_shaded` from the cells whose sky_visibility is below 1 (the
+// others saw no wall when the field was built).
+GroundWalls CastGroundWalls(const GroundField& f, const RayCaster& model, int rays,
+                            bool only_shaded);
+
 struct GroundFieldSummary {
   int cells = 0, cells_observed = 0;
   int64_t pixels_used = 0, pixels_model = 0, pixels_far = 0;
@@ -97,19 +137,22 @@ struct GroundFieldSummary {
 // Re-projects every time's landscape panorama pixels below the horizon onto the level ground
 // (GroundLevel of `model`), skipping those whose ray meets the model first, and pools their
 // albedo per cell: per time the mean, over the times the median (of the times that saw it in
-// sun, where some did: the light in shadow is the part the field models worst). The ground
-// reflects with
-// `retro`, or with the retro fitted to the pixels (options.fit_retro; `retro` where too few
-// cells are seen twice). Cells no pixel fell in take the
-// nearest observed cell's albedo; beyond the cells, the median of the observed cells at the
-// field's rim. Throws rouen::Error for bad options or when no pixel meets the ground.
+// sun, where some did). A pixel's albedo is its radiance over what lit that spot: the sun
+// unless the model shades it, the sky the model leaves it, and, where every time gives it
+// (GroundFieldTime::walls_e), the walls' light (the field's `walls`). The ground
+// reflects with `retro`, or with the retro fitted to the pixels (options.fit_retro; `retro`
+// where too few cells are seen twice). Cells no pixel fell in take the nearest observed cell's
+// albedo, of the open ground's (GroundFieldOptions::open_sky); beyond the cells, the median of the
+// observed cells at the field's rim. Throws rouen::Error for bad options or when no pixel meets the
+// ground.
 GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const RayCaster& model,
                              double retro, const GroundFieldOptions& options,
                              GroundFieldSummary* summary = nullptr);
 
 // The ground at one time: the field lit by a sun and a sky, the model's shadow where each
 // query meets the ground (one shadow ray: a cell's 2 m would make the shadow's edge a staircase
-// and darken the cells whose centre lies under a wall).
+// and darken the cells whose centre lies under a wall). The walls' light on the ground depends
+// on the model's albedos: the interreflection adds it (GroundBounce, solve/irradiance.h).
 class GroundLight {
  public:
   GroundLight(const GroundField& field, const RayCaster& model, const Eigen::Vector3d& sun_dir,

@@ -4,7 +4,9 @@
 
 #include <array>
 #include <cmath>
+#include <memory>
 #include <nlohmann/json.hpp>
+#include <vector>
 
 #include "core/angles.h"
 #include "core/error.h"
@@ -29,10 +31,12 @@ Eigen::Vector3d TrueAlbedo(const Eigen::Vector3d& q) {
 // no sky light: each pixel below the horizon the ground's radiance along its ray, the model's
 // pixels 7 (not ground), the sky 1.
 // With `field`, the sky lights the ground too (sky_e, the field's sky visibility per cell) and
-// the ground in shadow also gets `unmodelled` x the sky's light (the walls around it).
+// the ground in shadow also gets `unmodelled` x the sky's light (the walls around it), and
+// every spot of ground the irradiance `walls` gives its cell of `field` (none: nothing).
 Image RenderPanorama(const RayCaster& model, const Eigen::Vector3d& eye, const Intrinsics& k,
                      const Pose& pose, const Eigen::Vector3d& sun, double sun_e, double retro,
-                     const GroundField* field = nullptr, double sky_e = 0, double unmodelled = 0) {
+                     const GroundField* field = nullptr, double sky_e = 0, double unmodelled = 0,
+                     const std::vector<Eigen::Vector3f>* walls = nullptr) {
   Image im(k.width, k.height, 3, PixelUnits::kRadiance);
   for (int y = 0; y < k.height; ++y) {
     for (int x = 0; x < k.width; ++x) {
@@ -49,6 +53,8 @@ Image RenderPanorama(const RayCaster& model, const Eigen::Vector3d& eye, const I
           const double sky =
               sky_e * field->SkyVisibility(q) * AmbientRetroFactor(retro, {0, 0, 1}, -d);
           e += lit ? sky : sky * (1 + unmodelled);
+          const int c = field->Cell(q.x(), q.y());
+          if (walls && c >= 0) e += (*walls)[c].x() * AmbientRetroFactor(retro, {0, 0, 1}, -d);
         }
         l = TrueAlbedo(q) * (e / kPi);
       }
@@ -78,19 +84,33 @@ class GroundFieldPanoramaTest : public ::testing::Test {
   }
   // The panoramas under suns[0] and suns[1]; the other arguments as RenderPanorama's.
   void Render(const std::array<Eigen::Vector3d, 2>& suns, double retro,
-              const GroundField* field = nullptr, double sky_e = 0, double unmodelled = 0) {
+              const GroundField* field = nullptr, double sky_e = 0, double unmodelled = 0,
+              const std::vector<Eigen::Vector3f>* walls = nullptr) {
     images.clear();
     images.reserve(2);  // the times point into it
     times.assign(2, GroundFieldTime{});
     for (int t = 0; t < 2; ++t) {
       images.push_back(RenderPanorama(model, pose.position, k, pose, suns[t], kSunE, retro, field,
-                                      sky_e, unmodelled));
+                                      sky_e, unmodelled, walls));
       times[t].panoramas.push_back({&images[t], k, pose});
       times[t].sun_dir = suns[t];
       times[t].sun_e = Eigen::Vector3d::Constant(kSunE);
       times[t].sky_e = Eigen::Vector3d::Constant(sky_e);
     }
   }
+  // The field's cells and sky visibility, read from panoramas under `suns` without sky light,
+  // the retro given.
+  GroundField Cells(const std::array<Eigen::Vector3d, 2>& suns, double retro) {
+    Render(suns, retro);
+    return BuildGroundField(times, model, retro, FixedRetro());
+  }
+  GroundFieldOptions FixedRetro() const {
+    GroundFieldOptions o = options;
+    o.fit_retro = false;
+    return o;
+  }
+  // Suns whose tower shadow falls towards the panorama, south-south-west then south-south-east.
+  const std::array<Eigen::Vector3d, 2> towards_panorama = {SunAt(20, 35), SunAt(340, 35)};
   const Mesh mesh = Tower();
   const RayCaster model{mesh};
   Intrinsics k;
@@ -226,13 +246,9 @@ TEST_F(GroundFieldPanoramaTest, TheGroundsRetroIsFittedFromThePanoramas) {
 // times, so many cells are seen both ways.
 TEST_F(GroundFieldPanoramaTest, ACellSeenSunlitKeepsTheAlbedoReadInSun) {
   const double retro = 0.5, sky_e = 20;
-  // The tower's shadow falls towards the panorama, south-south-west then south-south-east.
-  const std::array<Eigen::Vector3d, 2> suns = {SunAt(20, 35), SunAt(340, 35)};
-  GroundFieldOptions o = options;
-  o.fit_retro = false;
-  // The field's cells and sky visibility, for the renders' sky light.
-  Render(suns, retro);
-  const GroundField cells = BuildGroundField(times, model, retro, o);
+  const std::array<Eigen::Vector3d, 2>& suns = towards_panorama;
+  const GroundFieldOptions o = FixedRetro();
+  const GroundField cells = Cells(suns, retro);  // for the renders' sky light
   Render(suns, retro, &cells, sky_e, 1.0);
   const GroundField f = BuildGroundField(times, model, retro, o);
   int both = 0, shade_only = 0, shade_high = 0;
@@ -255,6 +271,44 @@ TEST_F(GroundFieldPanoramaTest, ACellSeenSunlitKeepsTheAlbedoReadInSun) {
   // hold a sunlit pixel at the shadow's edge and keep that).
   EXPECT_GT(shade_only, 4);
   EXPECT_GE(2 * shade_high, shade_only);
+}
+
+// The walls' light on the ground given (GroundFieldTime::walls_e, here 40 x the part of the sky
+// the tower hides from the cell, on every spot of it, sunlit or not): the field reads the
+// ground's own albedo beside the tower, where without it the albedo holds that light, and says
+// so (GroundField::walls). Given for some times only, or for another layout, it is refused.
+TEST_F(GroundFieldPanoramaTest, TheWallsLightGivenTheFieldReadsTheGroundsOwnAlbedo) {
+  const double retro = 0.5, sky_e = 20;
+  const std::array<Eigen::Vector3d, 2>& suns = towards_panorama;
+  const GroundFieldOptions o = FixedRetro();
+  const GroundField cells = Cells(suns, retro);
+  EXPECT_FALSE(cells.walls);
+  std::vector<Eigen::Vector3f> walls(cells.sky_visibility.size());
+  for (size_t c = 0; c < walls.size(); ++c)
+    walls[c] = Eigen::Vector3f::Constant(40 * (1 - cells.sky_visibility[c]));
+  Render(suns, retro, &cells, sky_e, 0.0, &walls);
+  const GroundField without = BuildGroundField(times, model, retro, o);
+  for (GroundFieldTime& t : times) t.walls_e = walls;
+  const GroundField with = BuildGroundField(times, model, retro, o);
+  EXPECT_TRUE(with.walls);
+  EXPECT_EQ(with.sky_visibility, cells.sky_visibility);
+  int near = 0, high = 0;
+  for (int c = 0; c < with.nx * with.ny; ++c) {
+    if (!with.observed[c] || !(with.sky_visibility[c] < 0.9)) continue;
+    const Eigen::Vector3d q = with.CellCentre(c);
+    if (std::abs(q.x()) < 1) continue;
+    ++near;
+    // Exact up to float rounding: the model and the renderer agree.
+    EXPECT_LT((with.Albedo(c) - TrueAlbedo(q)).cwiseAbs().maxCoeff(), 1e-4) << q.transpose();
+    high += without.Albedo(c).x() > 1.05 * TrueAlbedo(q).x();
+  }
+  EXPECT_GT(near, 20);
+  EXPECT_GE(2 * high, near) << "the walls' light is not in the albedo read without it";
+
+  times[1].walls_e.clear();
+  EXPECT_THROW(BuildGroundField(times, model, retro, o), Error);
+  times[1].walls_e.assign(7, Eigen::Vector3f::Zero());
+  EXPECT_THROW(BuildGroundField(times, model, retro, o), Error);
 }
 
 // A cell's sky is read at the spots of it outside the model, and between cells bilinearly over
@@ -316,26 +370,48 @@ TEST(GroundFieldTest, TheSkyBesideAWallIsReadOutsideTheModel) {
   EXPECT_LT(built.sky_visibility[inside], 0.1);
 }
 
+// A wall 4 m wide and 20 m high facing -y at y = 0, its 2 m grid and hemisphere cache.
+struct Wall {
+  static Mesh Make() {
+    Mesh m;
+    m.AddPolygon({{0, 0, 0}, {4, 0, 0}, {4, 0, 20}, {0, 0, 20}}, m.AddBlock("wall"));
+    return m;
+  }
+  static SurfaceGrid Grid(const Mesh& m) {
+    GridOptions go;
+    go.spacing_m = 2;
+    return BuildSurfaceGrid(m, go);
+  }
+  const Mesh m = Make();
+  const SurfaceGrid g = Grid(m);
+  const RayCaster rc{m};
+  const HemisphereCache cache = BuildHemisphereCache(g, rc);
+};
+
+// A field of nx x nx cells of cell_m from (x0, x0), albedo 0.3 everywhere, every cell seeing the
+// whole sky.
+std::shared_ptr<GroundField> UniformField(double cell_m, int nx, double x0) {
+  auto field = std::make_shared<GroundField>();
+  field->cell_m = cell_m;
+  field->nx = field->ny = nx;
+  field->x0 = field->y0 = x0;
+  field->albedo.assign(nx * nx, Eigen::Vector3f::Constant(0.3f));
+  field->observed.assign(nx * nx, 1);
+  field->sky_visibility.assign(nx * nx, 1.f);
+  field->far_albedo = Eigen::Vector3d::Constant(0.3);
+  return field;
+}
+
 // A vertical wall sees the level ground below its horizon under half its projected solid angle:
 // a uniform Lambertian ground lit by the sun alone gives it rho E_h / 2, E_h the sun's
 // irradiance on the ground, by either irradiance method.
 TEST(GroundFieldTest, AWallSeesHalfOfAUniformGround) {
-  Mesh m;
-  const int b = m.AddBlock("wall");
-  m.AddPolygon({{0, 0, 0}, {4, 0, 0}, {4, 0, 20}, {0, 0, 20}}, b);  // normal -y
-  GridOptions go;
-  go.spacing_m = 2;
-  const SurfaceGrid g = BuildSurfaceGrid(m, go);
-  const RayCaster rc(m);
-  const HemisphereCache cache = BuildHemisphereCache(g, rc);
-  auto field = std::make_shared<GroundField>();
-  field->cell_m = 4;
-  field->nx = field->ny = 100;
-  field->x0 = field->y0 = -200;
-  field->albedo.assign(10000, Eigen::Vector3f(0.3f, 0.3f, 0.3f));
-  field->observed.assign(10000, 1);
-  field->sky_visibility.assign(10000, 1.f);
-  field->far_albedo = Eigen::Vector3d::Constant(0.3);
+  const Wall w;
+  const Mesh& m = w.m;
+  const SurfaceGrid& g = w.g;
+  const RayCaster& rc = w.rc;
+  const HemisphereCache& cache = w.cache;
+  const std::shared_ptr<GroundField> field = UniformField(4, 100, -200);
   Lighting l;
   l.sun_dir = SunAt(180, 30);  // from the south: the wall's shadow falls behind it
   l.sun_radiance = Eigen::Vector3d::Constant(1e5);
@@ -354,6 +430,87 @@ TEST(GroundFieldTest, AWallSeesHalfOfAUniformGround) {
     // one of its 16 strata on the boundary).
     EXPECT_NEAR(mean, 0.3 * e_h / 2, 0.3 * e_h / 32);
   }
+}
+
+// A wall of uniform radiosity B lights the ground in front of it (GroundWallsIrradiance): a cell
+// gets B times the part of its sky the wall hides, 1 - V, exactly (the same rays); a cell behind
+// it sees its back and gets nothing. That ground lights the wall back (AddInterreflection with
+// the bounce): rho_g (1 / K) sum over the point's directions to the ground of its cell's light,
+// against an estimate made here from other rays (per point 2,048 cosine directions, per spot of
+// ground 256 rays): the per-point estimates scatter by a few percent (about 100 directions meet
+// the ground, each cell's wall fraction from 64 rays), their mean over the wall's points by about
+// 1%, hence 4%. A field read without the walls' light gets no bounce (it holds that light).
+TEST(GroundFieldTest, AWallLightsTheGroundAndTheGroundTheWall) {
+  const Wall w;
+  const SurfaceGrid& g = w.g;
+  const RayCaster& rc = w.rc;
+  const HemisphereCache& cache = w.cache;
+  const std::shared_ptr<GroundField> field = UniformField(0.5, 160, -40);
+  const int n = field->nx * field->ny;
+  const GroundWalls walls = CastGroundWalls(*field, rc, field->sky_rays, false);
+  for (int c = 0; c < n; ++c)
+    field->sky_visibility[c] = 1 - walls.weight[c] * (walls.begin[c + 1] - walls.begin[c]);
+  field->walls = true;
+
+  const GroundBounce bounce = BuildGroundBounce(*field, rc, g, cache);
+  ASSERT_FALSE(bounce.empty());
+  const double kB = 50;  // rho_sun 0.5 x E_sun 100, no sky light
+  const std::vector<Eigen::Vector3d> rho_sun(g.size(), Eigen::Vector3d::Constant(0.5)),
+      rho_se(g.size(), Eigen::Vector3d::Zero());
+  SlotIrradiance irr;
+  irr.sun.assign(g.size(), Eigen::Vector3d::Constant(100));
+  irr.direct_se.assign(g.size(), Eigen::Vector3d::Zero());
+  irr.se = irr.direct_se;
+  irr.sun_visibility.assign(g.size(), 1.f);
+  const std::vector<Eigen::Vector3f> e = GroundWallsIrradiance(bounce, g, rho_sun, rho_se, irr);
+  ASSERT_EQ(static_cast<int>(e.size()), n);
+  const int front = field->Cell(2, -1), behind = field->Cell(2, 1);
+  ASSERT_LT(field->sky_visibility[front], 0.7);
+  ASSERT_LT(field->sky_visibility[behind], 0.7);
+  EXPECT_NEAR(e[front].x(), kB * (1 - field->sky_visibility[front]), 1e-4 * kB);
+  EXPECT_EQ(e[behind].x(), 0.f);
+
+  SlotIrradiance with = irr, plain = irr;
+  AddInterreflection(g, cache, rho_sun, rho_se, &plain, 1);
+  AddInterreflection(g, cache, rho_sun, rho_se, &with, 1, {}, Eigen::Vector3d::UnitZ(), nullptr,
+                     nullptr, &bounce);
+  // Here: 2,048 cosine directions about the normal (-y), each that meets the ground at q adding
+  // the part of 256 rays from q that meet the wall's front.
+  const int kDirs = 2048, kRays = 256;
+  double got = 0, want = 0;
+  for (int i = 0; i < g.size(); ++i) {
+    const GridPoint& p = g.points[i];
+    const Eigen::Vector3d o = p.position + rc.surface_offset() * p.normal;
+    double sum = 0;
+    for (int k = 0; k < kDirs; ++k) {
+      const double u = (k % 64 + 0.5) / 64, v = (k / 64 + 0.5) / 32;
+      const double r = std::sqrt(u), phi = 2 * kPi * v;
+      // About n = -y: tangent x, bitangent z.
+      const Eigen::Vector3d d(r * std::cos(phi), -std::sqrt(1 - u), r * std::sin(phi));
+      if (!(d.z() < 0)) continue;
+      const Eigen::Vector3d q = o + (o.z() / -d.z()) * d;
+      int hit = 0;
+      for (int j = 0; j < kRays; ++j) {
+        const double a = (j % 16 + 0.5) / 16, c = (j / 16 + 0.5) / 16;
+        const double s = std::sqrt(a), psi = 2 * kPi * c;
+        const Eigen::Vector3d up(s * std::cos(psi), s * std::sin(psi), std::sqrt(1 - a));
+        const RayHit h = rc.Intersect(q + Eigen::Vector3d(0, 0, rc.surface_offset()), up);
+        hit += h.hit && up.y() > 0;  // the front (normal -y) faces rays going +y
+      }
+      sum += 0.3 * kB * hit / kRays;
+    }
+    want += sum / kDirs;
+    got += with.se[i].x() - plain.se[i].x();
+  }
+  EXPECT_GT(want, 0);
+  EXPECT_NEAR(got / want, 1.0, 0.04);
+
+  field->walls = false;
+  Lighting l;
+  l.ground = field;
+  EXPECT_EQ(GroundBouncesOf({l}, rc, g, cache)[0], nullptr);
+  field->walls = true;
+  EXPECT_NE(GroundBouncesOf({l}, rc, g, cache)[0], nullptr);
 }
 
 }  // namespace

@@ -531,13 +531,165 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
   return out;
 }
 
+namespace {
+
+// The walls' irradiance on entry w of b.cells: (pi / N) sum over its rays of B_j / pi, each
+// point's light sent towards the cell as towards another point (AddInterreflection).
+Eigen::Vector3d WallsOnCell(const GroundBounce& b, size_t w, const SurfaceGrid& grid,
+                            const std::vector<Eigen::Vector3d>& from_sun,
+                            const std::vector<Eigen::Vector3d>& from_se,
+                            const std::vector<double>& retro, const Eigen::Vector3d& sun_dir) {
+  const Eigen::Vector3d centre = b.field->CellCentre(b.cells[w]);
+  Eigen::Vector3d e = Eigen::Vector3d::Zero();
+  for (int m = b.cell_begin[w]; m < b.cell_begin[w + 1]; ++m) {
+    const int j = b.cell_point[m];
+    const GridPoint& q = grid.points[j];
+    const double r = BlockRetro(retro, q.block);
+    const Eigen::Vector3d to_cell = (centre - q.position).normalized();
+    if (r == 0 || !to_cell.allFinite()) {
+      e += b.cell_weight[m] * (from_sun[j] + from_se[j]);
+    } else {
+      e += b.cell_weight[m] * (from_sun[j] * RetroFactor(r, q.normal, sun_dir, to_cell) +
+                               from_se[j] * AmbientRetroFactor(r, q.normal, to_cell));
+    }
+  }
+  return e;
+}
+
+}  // namespace
+
+GroundBounce BuildGroundBounce(const GroundField& field, const RayCaster& model,
+                               const SurfaceGrid& grid, const HemisphereCache& cache) {
+  const int n = grid.size();
+  const int K = cache.directions;
+  if (static_cast<int64_t>(cache.hit.size()) != static_cast<int64_t>(n) * K)
+    throw Error("ground bounce: the hemisphere cache does not match the grid");
+  GroundBounce b;
+  b.field = &field;
+  // Per cell, the grid points its rays meet on their front faces, merged.
+  const GroundWalls walls = CastGroundWalls(field, model, field.sky_rays, true);
+  const int cells = static_cast<int>(walls.weight.size());
+  std::vector<int32_t> index(cells, -1);
+  b.cell_begin.push_back(0);
+  std::vector<std::pair<int32_t, float>> entries;
+  for (int c = 0; c < cells; ++c) {
+    entries.clear();
+    for (int k = walls.begin[c]; k < walls.begin[c + 1]; ++k) {
+      const GroundWalls::Hit& h = walls.hits[k];
+      const int j = grid.NearestPoint(h.triangle, h.u, h.v);
+      if (j < 0 || grid.points[j].normal.cast<float>().dot(h.position - h.from) >= 0) continue;
+      entries.emplace_back(j, walls.weight[c]);
+    }
+    if (entries.empty()) continue;
+    std::sort(entries.begin(), entries.end());
+    index[c] = static_cast<int32_t>(b.cells.size());
+    b.cells.push_back(c);
+    for (size_t e = 0; e < entries.size(); ++e) {
+      if (e > 0 && entries[e].first == entries[e - 1].first) {
+        b.cell_weight.back() += entries[e].second;
+        continue;
+      }
+      b.cell_point.push_back(entries[e].first);
+      b.cell_weight.push_back(entries[e].second);
+    }
+    b.cell_begin.push_back(static_cast<int32_t>(b.cell_point.size()));
+  }
+  // Per point, the cells of those cells its escaping directions below the horizon meet.
+  std::vector<std::vector<std::pair<int32_t, float>>> per_point(n);
+  const double offset = model.surface_offset();
+  if (!b.cells.empty()) {
+    tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& r) {
+      std::vector<Eigen::Vector3d> dirs;
+      for (int i = r.begin(); i < r.end(); ++i) {
+        const GridPoint& p = grid.points[i];
+        const Eigen::Vector3d origin = p.position + offset * p.normal;
+        const double h = origin.z() - field.level_z;
+        if (!(h > 0)) continue;
+        cache.Directions(p, i, &dirs);
+        std::vector<std::pair<int32_t, float>>& out = per_point[i];
+        for (int k = 0; k < K; ++k) {
+          const Eigen::Vector3d& d = dirs[k];
+          if (cache.Hit(i, k) != -1 || !(d.z() < 0)) continue;
+          const Eigen::Vector3d q = origin + (h / -d.z()) * d;
+          const int c = field.Cell(q.x(), q.y());
+          if (c < 0 || index[c] < 0) continue;
+          out.emplace_back(index[c],
+                           static_cast<float>(
+                               AmbientRetroFactor(field.retro, Eigen::Vector3d::UnitZ(), -d) / K));
+        }
+        std::sort(out.begin(), out.end());
+        size_t m = 0;
+        for (size_t e = 0; e < out.size(); ++e) {
+          if (m > 0 && out[m - 1].first == out[e].first) {
+            out[m - 1].second += out[e].second;
+          } else {
+            out[m++] = out[e];
+          }
+        }
+        out.resize(m);
+      }
+    });
+  }
+  b.point_begin.assign(static_cast<size_t>(n) + 1, 0);
+  for (int i = 0; i < n; ++i)
+    b.point_begin[i + 1] = b.point_begin[i] + static_cast<int32_t>(per_point[i].size());
+  b.point_cell.reserve(b.point_begin[n]);
+  b.point_weight.reserve(b.point_begin[n]);
+  for (int i = 0; i < n; ++i) {
+    for (const auto& [w, weight] : per_point[i]) {
+      b.point_cell.push_back(w);
+      b.point_weight.push_back(weight);
+    }
+  }
+  return b;
+}
+
+std::vector<std::shared_ptr<const GroundBounce>> GroundBouncesOf(
+    const std::vector<Lighting>& lightings, const RayCaster& model, const SurfaceGrid& grid,
+    const HemisphereCache& cache) {
+  std::vector<std::shared_ptr<const GroundBounce>> out(lightings.size());
+  for (size_t k = 0; k < lightings.size(); ++k) {
+    const Lighting& l = lightings[k];
+    if (!l.use_env || !l.ground || !l.ground->walls) continue;
+    for (size_t m = 0; m < k && !out[k]; ++m)
+      if (out[m] && out[m]->field == l.ground.get()) out[k] = out[m];
+    if (!out[k])
+      out[k] =
+          std::make_shared<const GroundBounce>(BuildGroundBounce(*l.ground, model, grid, cache));
+  }
+  return out;
+}
+
+std::vector<Eigen::Vector3f> GroundWallsIrradiance(const GroundBounce& b, const SurfaceGrid& grid,
+                                                   const std::vector<Eigen::Vector3d>& rho_sun,
+                                                   const std::vector<Eigen::Vector3d>& rho_se,
+                                                   const SlotIrradiance& irr,
+                                                   const std::vector<double>& retro,
+                                                   const Eigen::Vector3d& sun_dir) {
+  const size_t n = b.point_begin.empty() ? 0 : b.point_begin.size() - 1;
+  if (static_cast<size_t>(grid.size()) != n || rho_sun.size() != n || rho_se.size() != n ||
+      irr.sun.size() != n || irr.se.size() != n)
+    throw Error("ground bounce: albedo and irradiance sizes do not match the grid");
+  std::vector<Eigen::Vector3d> from_sun(n), from_se(n);
+  for (size_t j = 0; j < n; ++j) {
+    from_sun[j] = rho_sun[j].cwiseProduct(irr.sun[j]);
+    from_se[j] = rho_se[j].cwiseProduct(irr.se[j]);
+  }
+  const Eigen::Vector3d s = sun_dir.normalized();
+  std::vector<Eigen::Vector3f> e(static_cast<size_t>(b.field->nx) * b.field->ny,
+                                 Eigen::Vector3f::Zero());
+  for (size_t w = 0; w < b.cells.size(); ++w)
+    e[b.cells[w]] = WallsOnCell(b, w, grid, from_sun, from_se, retro, s).cast<float>();
+  return e;
+}
+
 // §4.1: one-bounce interreflection between model faces.
 void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
                         const std::vector<Eigen::Vector3d>& rho_sun,
                         const std::vector<Eigen::Vector3d>& rho_se, SlotIrradiance* irr,
                         int bounces, const std::vector<double>& retro,
                         const Eigen::Vector3d& sun_dir, const Cancellation* cancel,
-                        std::vector<Eigen::Vector3d>* bounce_order) {
+                        std::vector<Eigen::Vector3d>* bounce_order, const GroundBounce* ground) {
   const int n = grid.size();
   if (static_cast<int>(rho_sun.size()) != n || static_cast<int>(rho_se.size()) != n ||
       static_cast<int>(irr->sun.size()) != n || static_cast<int>(irr->direct_se.size()) != n) {
@@ -555,11 +707,23 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
   std::vector<Eigen::Vector3d> se_prev = irr->direct_se;
   std::vector<Eigen::Vector3d> from_sun(n), from_se(n);
   std::vector<Eigen::Vector3d> se(n);
+  if (ground && static_cast<int>(ground->point_begin.size()) != n + 1)
+    throw Error("interreflection: the ground bounce was built for another grid");
+  std::vector<Eigen::Vector3d> walls_e;  // per cell of the ground bounce
   for (int pass = 0; pass < bounces; ++pass) {
     ThrowIfCancelled(cancel);
     for (int j = 0; j < n; ++j) {
       from_sun[j] = rho_sun[j].cwiseProduct(irr->sun[j]);
       from_se[j] = rho_se[j].cwiseProduct(se_prev[j]);
+    }
+    if (ground) {
+      // The walls' irradiance on each cell times the cell's albedo: what the cell reflects,
+      // over pi, before its reflection towards a point.
+      walls_e.assign(ground->cells.size(), Eigen::Vector3d::Zero());
+      tbb::parallel_for(size_t{0}, ground->cells.size(), [&](size_t w) {
+        walls_e[w] = ground->field->Albedo(ground->cells[w])
+                         .cwiseProduct(WallsOnCell(*ground, w, grid, from_sun, from_se, retro, s));
+      });
     }
     tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& range) {
       for (int i = range.begin(); i < range.end(); ++i) {
@@ -585,6 +749,10 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
         }
         // (B_j / pi) (pi / K)
         se[i] = irr->direct_se[i] + sum / K;
+        if (ground) {
+          for (int m = ground->point_begin[i]; m < ground->point_begin[i + 1]; ++m)
+            se[i] += ground->point_weight[m] * walls_e[ground->point_cell[m]];
+        }
       }
     });
     if (bounce_order) {  // the light this pass added was bounced pass + 1 times

@@ -148,6 +148,44 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
                                               const std::vector<Lighting>& lightings,
                                               const IrradianceOptions& options = {});
 
+// Beyond §4.1: the light the model's faces send each other by way of the ground field
+// (Lighting::ground): the walls light the ground around them (GroundWalls), the ground lights
+// the faces. Geometry only, shared by every time lit by that field.
+struct GroundBounce {
+  const GroundField* field = nullptr;  // not owned
+  std::vector<int32_t> cells;          // the field's cells whose rays meet grid points
+  // Per entry of `cells`, into cell_point and cell_weight: the grid points its rays meet, each
+  // with the share of the cell's hemisphere they cover.
+  std::vector<int32_t> cell_begin, cell_point;
+  std::vector<float> cell_weight;
+  // Per grid point, into point_cell (entries of `cells`) and point_weight: the cells its
+  // hemisphere directions meet on the ground, each with (1 / K) x the sum over those directions
+  // of the ground's reflection of ambient light towards the point (AmbientRetroFactor).
+  std::vector<int32_t> point_begin, point_cell;
+  std::vector<float> point_weight;
+  bool empty() const { return cells.empty(); }
+};
+
+// `model` the ray-casting model of `grid`; the directions below the horizon that escape it in
+// `cache` meet the ground as ComputeIrradiance's ground light does.
+GroundBounce BuildGroundBounce(const GroundField& field, const RayCaster& model,
+                               const SurfaceGrid& grid, const HemisphereCache& cache);
+// Per lighting, the bounce of its ground field (use_env with a Lighting::ground whose albedos
+// were read with the walls' light, GroundField::walls; built once per field), null for a
+// lighting without one.
+std::vector<std::shared_ptr<const GroundBounce>> GroundBouncesOf(
+    const std::vector<Lighting>& lightings, const RayCaster& model, const SurfaceGrid& grid,
+    const HemisphereCache& cache);
+// The walls' irradiance on every cell of b.field at one time (zero on those that see none), from
+// the radiosity of `grid`'s points B_j = rho_sun_j E_sun_j + rho_se_j E_se_j, sent towards the
+// cell as AddInterreflection sends it (`retro` per block, the sun towards `sun_dir`): what
+// GroundFieldTime::walls_e holds for a field read with the walls' light.
+std::vector<Eigen::Vector3f> GroundWallsIrradiance(
+    const GroundBounce& b, const SurfaceGrid& grid, const std::vector<Eigen::Vector3d>& rho_sun,
+    const std::vector<Eigen::Vector3d>& rho_se, const SlotIrradiance& irr,
+    const std::vector<double>& retro = {},
+    const Eigen::Vector3d& sun_dir = Eigen::Vector3d::UnitZ());
+
 // One-bounce interreflection (§4.1): E_se[i] = E_direct_se[i] + (pi/K) sum over directions
 // hitting point j of B_j / pi, with B_j = rho_sun_j E_sun_j + rho_se_j E_direct_se_j. With
 // bounces > 1 the radiosity is iterated (B_j uses the previous E_se). Overwrites irr->se.
@@ -159,12 +197,17 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
 // `bounce_order` (when given) receives per point the sum over k of k x the light bounced k
 // times: over the point's whole light, how fast it grows with the albedos (d log E / d log rho
 // when every albedo scales alike), which the albedo solve's outer iteration steps by.
+// With `ground`, each pass adds the light the points send by way of the ground: a cell's
+// irradiance from the walls E_c = sum over its points j of share x B_j (sent towards the cell
+// as towards a point), reflected
+// towards point i with the cell's albedo, E_se[i] += sum_c weight x rho_c E_c.
 void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
                         const std::vector<Eigen::Vector3d>& rho_sun,
                         const std::vector<Eigen::Vector3d>& rho_se, SlotIrradiance* irr,
                         int bounces = 1, const std::vector<double>& retro = {},
                         const Eigen::Vector3d& sun_dir = Eigen::Vector3d::UnitZ(),
                         const Cancellation* cancel = nullptr,
-                        std::vector<Eigen::Vector3d>* bounce_order = nullptr);
+                        std::vector<Eigen::Vector3d>* bounce_order = nullptr,
+                        const GroundBounce* ground = nullptr);
 
 }  // namespace rouen

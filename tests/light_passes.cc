@@ -20,6 +20,8 @@
 #include "pipeline/scene.h"
 #include "pipeline/session_solve.h"
 #include "solve/grid.h"
+#include "solve/ground_field.h"
+#include "solve/irradiance.h"
 #include "solve/retro.h"
 #include "solve/scene.h"
 #include "tests/cli_util.h"
@@ -126,6 +128,18 @@ std::vector<TermSums> SumTerms(const LoadedScene& sc, const SceneView& view, con
   return out;
 }
 
+// The group of cameras.json whose camera stands at `position`; empty when none does.
+std::string GroupAt(const nlohmann::json& cams, const Eigen::Vector3d& position) {
+  for (const auto& [key, cam] : cams.items()) {
+    if (key.rfind("group=", 0) != 0) continue;
+    const Eigen::Vector3d at(cam["pose"]["position"][0].get<double>(),
+                             cam["pose"]["position"][1].get<double>(),
+                             cam["pose"]["position"][2].get<double>());
+    if ((at - position).norm() < 1e-3) return key.substr(6);
+  }
+  return "";
+}
+
 }  // namespace
 
 std::map<std::string, TermSums> TermTable(const fs::path& data, const fs::path& scene_dir,
@@ -154,14 +168,7 @@ std::map<std::string, TermSums> TermTable(const fs::path& data, const fs::path& 
     for (const auto& [name, view] : sc.scene.views) {
       if (view.slot != slot || view.target != "architecture") continue;
       // The view's group: the camera of cameras.json at the same place.
-      std::string group;
-      for (const auto& [key, cam] : cams.items()) {
-        if (key.rfind("group=", 0) != 0) continue;
-        const Eigen::Vector3d at(cam["pose"]["position"][0].get<double>(),
-                                 cam["pose"]["position"][1].get<double>(),
-                                 cam["pose"]["position"][2].get<double>());
-        if ((at - view.pose.position).norm() < 1e-3) group = key.substr(6);
-      }
+      const std::string group = GroupAt(cams, view.pose.position);
       EXPECT_FALSE(group.empty()) << name;
       std::string stem = "t";
       stem += std::to_string(slot) + "_" + group;
@@ -229,6 +236,74 @@ std::vector<BlockAlbedo> BlockAlbedos(const fs::path& data, const fs::path& scen
       out.push_back(a);
     }
   }
+  return out;
+}
+
+GroundPrediction GroundBesideWalls(const fs::path& data, const fs::path& scene_dir, int slot) {
+  const LoadedScene sc = LoadScene(scene_dir);
+  const SolveResult& s = sc.solved;
+  GroundPrediction out;
+  EXPECT_TRUE(s.ground_field) << scene_dir << " has no ground field";
+  if (!s.ground_field) return out;
+  const GroundField& f = *s.ground_field;
+  const nlohmann::json cams = nlohmann::json::parse(ReadFileToString(data / "cameras.json"));
+  const SlotSolve* solve = nullptr;
+  for (const SlotSolve& ss : s.slots)
+    if (ss.slot == slot) solve = &ss;
+  EXPECT_NE(solve, nullptr) << "no slot " << slot;
+  if (!solve) return out;
+  const Lighting& l = solve->lighting;
+  // The field lit then: the sun and the sky (GroundLight), and the walls' light when the field
+  // was read with it (from the scene's albedos and that time's irradiance, as the renderer's
+  // interreflection has it).
+  std::vector<Eigen::Vector3f> walls;
+  if (f.walls) {
+    const GroundBounce bounce = BuildGroundBounce(f, *s.caster, s.grid, s.hemisphere);
+    walls = GroundWallsIrradiance(bounce, s.grid, s.albedo.rho_sun, s.albedo.rho_se,
+                                  IrradianceFor(s, l), s.albedo.retro, l.sun_dir);
+  }
+  const GroundLight light(f, *s.caster, l.sun_dir, l.sun_radiance * l.sun_solid_angle_sr,
+                          l.env.HorizontalSkyIrradiance());
+  Eigen::Vector3d pred[2] = {Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
+  Eigen::Vector3d meas[2] = {Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
+  for (const auto& [name, view] : sc.scene.views) {
+    if (view.slot != slot || view.target != "landscape") continue;
+    const std::string group = GroupAt(cams, view.pose.position);
+    EXPECT_FALSE(group.empty()) << name;
+    const Image im =
+        ReadImage((data / ("t" + std::to_string(slot) + "_" + group + ".exr")).string());
+    EXPECT_EQ(im.width, view.intrinsics.width);
+    if (im.width != view.intrinsics.width) continue;
+    const Eigen::Vector3d o = view.pose.position;
+    for (int y = 0; y < im.height; ++y) {
+      for (int x = 0; x < im.width; ++x) {
+        const Eigen::Vector3d d =
+            view.pose.rotation * Unproject(view.intrinsics, Eigen::Vector2d(x + 0.5, y + 0.5));
+        if (!(d.z() < 0)) continue;
+        const double dist = (o.z() - f.level_z) / -d.z();
+        if (s.caster->Occluded(o, d, 0.0, dist - s.caster->surface_offset())) continue;
+        const Eigen::Vector3d q = o + dist * d;
+        const int c = f.Cell(q.x(), q.y());
+        if (c < 0 || !f.observed[c] || !(f.sky_visibility[c] < 0.5)) continue;
+        Eigen::Vector3d p = light.Radiance(q, -d);
+        if (!walls.empty())
+          p += f.Albedo(c).cwiseProduct(walls[c].cast<double>()) *
+               (AmbientRetroFactor(f.retro, Eigen::Vector3d::UnitZ(), -d) / kPi);
+        const bool shaded = s.caster->Occluded(
+            q + Eigen::Vector3d(0, 0, s.caster->surface_offset()), l.sun_dir, 0.0);
+        pred[shaded] += p;
+        meas[shaded] += Eigen::Vector3d(im.at(x, y, 0), im.at(x, y, 1), im.at(x, y, 2));
+        ++(shaded ? out.shaded : out.sunlit);
+      }
+    }
+  }
+  out.sunlit_ratio = pred[0].cwiseQuotient(meas[0]);
+  out.shaded_ratio = pred[1].cwiseQuotient(meas[1]);
+  std::printf(
+      "slot %d, ground beside the walls (%s): in shadow (%d pixels) rouen/Cycles %s, in sun "
+      "(%d pixels) %s\n",
+      slot, scene_dir.filename().string().c_str(), out.shaded, Rgb(out.shaded_ratio).c_str(),
+      out.sunlit, Rgb(out.sunlit_ratio).c_str());
   return out;
 }
 

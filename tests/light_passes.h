@@ -13,6 +13,18 @@
 
 namespace rouen::light_passes {
 
+// The ground beside the walls (the observed cells of the scene's ground field that see less than
+// half the sky) as the field predicts it at `slot` under that slot's measured lighting, against
+// the world's landscape panoramas then (t<slot>_<group>.exr, every pixel on such ground): per
+// channel, rouen's radiance over Cycles' summed over the pixels, of the ground then in shadow
+// and in sun; printed. Fails the calling test (gtest) on a scene without a field.
+struct GroundPrediction {
+  Eigen::Vector3d shaded_ratio = Eigen::Vector3d::Zero(), sunlit_ratio = Eigen::Vector3d::Zero();
+  int shaded = 0, sunlit = 0;  // pixels
+};
+GroundPrediction GroundBesideWalls(const std::filesystem::path& data,
+                                   const std::filesystem::path& scene_dir, int slot);
+
 // `rouen import` of the world in `data` as a user runs it (its photos, list, cameras, the site
 // from truth.json, building.obj, the sky segmented): append " --surroundings ..." and " --out ...".
 std::string ImportCommand(const std::filesystem::path& data);
