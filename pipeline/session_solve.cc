@@ -801,8 +801,11 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
           env_slot_ids.end())
         continue;
       const Lighting& l = r.slots[k].lighting;
-      field_times.push_back({slot_panoramas[k], l.sun_dir, l.sun_radiance * l.sun_solid_angle_sr,
-                             l.env.HorizontalSkyIrradiance()});
+      GroundFieldTime& t = field_times.emplace_back();
+      t.panoramas = slot_panoramas[k];
+      t.sun_dir = l.sun_dir;
+      t.sun_e = l.sun_radiance * l.sun_solid_angle_sr;
+      t.sky_e = l.env.HorizontalSkyIrradiance();
       field_slots.push_back(k);
     }
     build_field();
@@ -876,8 +879,8 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
                        std::to_string(bounce.cells.size()) + " cells see");
       build_field();
       for (size_t k = 0; k < r.slots.size(); ++k) lighting[k].ground = r.ground_field;
-      r.albedo =
-          SolveAlbedo(r.grid, r.hemisphere, *r.caster, lighting, obs, with_model, &r.irradiance);
+      r.albedo = SolveAlbedo(r.grid, r.hemisphere, *r.caster, lighting, obs, with_model,
+                             &r.irradiance, &r.albedo);
       Log(options,
           "pseudo-albedos with the walls' light on the ground: " + r.albedo.summary.BriefReport());
       clock.Lap("ground field and pseudo-albedos with the walls' light");

@@ -1137,10 +1137,13 @@ std::vector<SpecularLobe> FitSkyLobes(const SurfaceGrid& grid, const HemisphereC
 AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
                          const RayCaster& model, const std::vector<Lighting>& slots,
                          const std::vector<Observation>& observations, const AlbedoOptions& options,
-                         std::vector<SlotIrradiance>* irradiance) {
+                         std::vector<SlotIrradiance>* irradiance, const AlbedoResult* warm) {
   const auto start = std::chrono::steady_clock::now();
   options.Validate();
   if (slots.empty()) throw Error("albedo: no time-of-day slots");
+  if (warm && (static_cast<int>(warm->rho_sun.size()) != grid.size() ||
+               static_cast<int>(warm->rho_se.size()) != grid.size()))
+    throw Error("albedo: the albedos to start from are not of this grid");
   // Polled by every albedo solve (SolveWeighted), each lobe fit's blocks, each bounce.
   const Cancellation* cancel = options.irradiance.cancel;
   // Every slot at once: the vector flux's per-point geometry is shared by all of them. Exact
@@ -1157,8 +1160,10 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   for (const Lighting& l : slots) shading.sun_dirs.push_back(l.sun_dir.normalized());
   AlbedoSummary retro_summary;
   FillPlan fill;  // made once, again only if the observed points change
-  AlbedoResult res = SolveWeighted(grid, observations, irr, options, {}, &shading, &fill);
-  if (options.fit_retro && options.outer_iterations == 1) {
+  AlbedoResult res =
+      warm ? *warm : SolveWeighted(grid, observations, irr, options, {}, &shading, &fill);
+  if (warm) shading.retro = warm->retro;
+  if (!warm && options.fit_retro && options.outer_iterations == 1) {
     shading.retro =
         FitRetro(grid, observations, irr, options, {}, shading.sun_dirs, &retro_summary);
     res = SolveWeighted(grid, observations, irr, options, {}, &shading, &fill);

@@ -237,11 +237,15 @@ AlbedoResult SolveAlbedoFixedIrradiance(const SurfaceGrid& grid,
 // more from the observations less the lobes' light. The direct sky and environment term is
 // options.irradiance's method at every observed point; points no observation sees (their
 // albedos filled from neighbours) take Monte Carlo's for the light they pass on, unless
-// options.irradiance.exact_points says otherwise.
+// options.irradiance.exact_points says otherwise. With `warm` (a solve of these photos on this
+// grid under other light: the ground field read again), the outer iteration starts from its
+// albedos and retros instead of a solve without the interreflection, so that the first bounce,
+// and the retro fitted with it, see albedos near the answer.
 AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
                          const RayCaster& model, const std::vector<Lighting>& slots,
                          const std::vector<Observation>& observations,
                          const AlbedoOptions& options = {},
-                         std::vector<SlotIrradiance>* irradiance = nullptr);
+                         std::vector<SlotIrradiance>* irradiance = nullptr,
+                         const AlbedoResult* warm = nullptr);
 
 }  // namespace rouen

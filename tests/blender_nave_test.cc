@@ -236,7 +236,7 @@ TEST_F(BlenderNaveTest, TheSlateRoofsGlintIsAMicrofacetLobe) {
   }
   // The views at the held-out evening, printed. The glint view (view0) gained 0.1 dB with the
   // microfacet lobe until the walls lit the field's ground; since, the two lobes explain it
-  // alike (41.65 against 41.75 dB). The south-east view loses about 7 dB: east of the facade's
+  // alike (41.6 against 41.7 dB). The south-east view loses about 7 dB: east of the facade's
   // shadow the roof is never in shadow, and with the microfacet lobe its rho_se there is 28% low
   // in blue.
   for (size_t k = 0; k < field_->validation["photos"].size(); ++k) {
