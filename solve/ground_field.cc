@@ -7,11 +7,9 @@
 #include <cmath>
 #include <deque>
 #include <nlohmann/json.hpp>
-#include <optional>
 #include <string>
 
 #include "core/angles.h"
-#include "core/camera.h"
 #include "core/error.h"
 #include "core/hash_random.h"
 #include "core/json_text.h"
@@ -271,8 +269,12 @@ Eigen::Vector3d GroundField::CellCentre(int cell) const {
   return {x0 + (cell % nx + 0.5) * cell_m, y0 + (cell / nx + 0.5) * cell_m, level_z};
 }
 
-GroundWalls CastGroundWalls(const GroundField& f, const RayCaster& model, int rays,
-                            bool only_shaded) {
+float GroundWalls::SkyVisibility(int cell) const {
+  return weight[cell] > 0 ? std::max(0.f, 1 - weight[cell] * (begin[cell + 1] - begin[cell])) : 0.f;
+}
+
+GroundWalls CastGroundWalls(const GroundField& f, const RayCaster& model, bool only_shaded) {
+  const int rays = f.sky_rays;
   if (rays < 1 || rays > 4096) throw Error("ground field: sky_rays must be within [1, 4096]");
   const int n = f.nx * f.ny;
   if (only_shaded && f.sky_visibility.size() != static_cast<size_t>(n))
@@ -283,10 +285,7 @@ GroundWalls CastGroundWalls(const GroundField& f, const RayCaster& model, int ra
   w.weight.assign(n, 0.f);
   std::vector<std::vector<GroundWalls::Hit>> per_cell(n);
   tbb::parallel_for(0, n, [&](int c) {
-    if (only_shaded && !(f.sky_visibility[c] < 1)) {
-      w.weight[c] = f.sky_visibility[c] > 0 ? 1.f / (4 * per_spot) : 0.f;
-      return;
-    }
+    if (only_shaded && !(f.sky_visibility[c] < 1)) return;
     const Eigen::Vector3d centre = f.CellCentre(c) + Eigen::Vector3d(0, 0, offset);
     std::vector<GroundWalls::Hit> hits;
     int cast = 0;
@@ -386,13 +385,9 @@ GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const Ra
   f.walls = with_walls > 0;
   // The sky the model leaves each cell, once.
   f.sky_rays = options.sky_rays;
-  const GroundWalls seen = CastGroundWalls(f, model, f.sky_rays, false);
-  f.sky_visibility.assign(n, 1.f);
-  for (int c = 0; c < n; ++c) {
-    f.sky_visibility[c] =
-        seen.weight[c] > 0 ? std::max(0.f, 1 - seen.weight[c] * (seen.begin[c + 1] - seen.begin[c]))
-                           : 0.f;
-  }
+  const GroundWalls seen = CastGroundWalls(f, model, false);
+  f.sky_visibility.resize(n);
+  for (int c = 0; c < n; ++c) f.sky_visibility[c] = seen.SkyVisibility(c);
 
   // The fit's retro from a sample of the sunlit pixels (at most kFitPixels of all), then per time
   // each cell's mean albedo over every pixel that fell in it, sunlit and shaded apart. A shaded

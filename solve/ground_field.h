@@ -114,14 +114,15 @@ struct GroundWalls {
   };
   std::vector<int32_t> begin;  // per cell into `hits`; size cells + 1
   std::vector<Hit> hits;
-  std::vector<float> weight;  // per cell: one ray's share of its hemisphere (0: under the model)
+  std::vector<float> weight;  // per cell: one ray's share of its hemisphere (0: none cast)
+  // The part of the sky `cell` sees: 1 - hits x weight; 0 under the model.
+  float SkyVisibility(int cell) const;
 };
 
-// Casts `rays` rays a cell (GroundField::sky_rays) from every cell of f's layout (level_z, x0,
-// y0, cell_m, nx, ny), or with `only_shaded` from the cells whose sky_visibility is below 1 (the
-// others saw no wall when the field was built).
-GroundWalls CastGroundWalls(const GroundField& f, const RayCaster& model, int rays,
-                            bool only_shaded);
+// Casts f.sky_rays rays a cell from every cell of f's layout (level_z, x0, y0, cell_m, nx, ny),
+// or with `only_shaded` from the cells whose sky_visibility is below 1 (the others saw no wall
+// when the field was built).
+GroundWalls CastGroundWalls(const GroundField& f, const RayCaster& model, bool only_shaded);
 
 struct GroundFieldSummary {
   int cells = 0, cells_observed = 0;

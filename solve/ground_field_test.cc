@@ -447,9 +447,8 @@ TEST(GroundFieldTest, AWallLightsTheGroundAndTheGroundTheWall) {
   const HemisphereCache& cache = w.cache;
   const std::shared_ptr<GroundField> field = UniformField(0.5, 160, -40);
   const int n = field->nx * field->ny;
-  const GroundWalls walls = CastGroundWalls(*field, rc, field->sky_rays, false);
-  for (int c = 0; c < n; ++c)
-    field->sky_visibility[c] = 1 - walls.weight[c] * (walls.begin[c + 1] - walls.begin[c]);
+  const GroundWalls walls = CastGroundWalls(*field, rc, false);
+  for (int c = 0; c < n; ++c) field->sky_visibility[c] = walls.SkyVisibility(c);
   field->walls = true;
 
   const GroundBounce bounce = BuildGroundBounce(*field, rc, g, cache);

@@ -556,6 +556,20 @@ Eigen::Vector3d WallsOnCell(const GroundBounce& b, size_t w, const SurfaceGrid& 
   return e;
 }
 
+// Sorts (index, weight) entries by index and sums the weights of each index into one entry.
+void MergeEntries(std::vector<std::pair<int32_t, float>>* entries) {
+  std::sort(entries->begin(), entries->end());
+  size_t m = 0;
+  for (const auto& e : *entries) {
+    if (m > 0 && (*entries)[m - 1].first == e.first) {
+      (*entries)[m - 1].second += e.second;
+    } else {
+      (*entries)[m++] = e;
+    }
+  }
+  entries->resize(m);
+}
+
 }  // namespace
 
 GroundBounce BuildGroundBounce(const GroundField& field, const RayCaster& model,
@@ -567,7 +581,7 @@ GroundBounce BuildGroundBounce(const GroundField& field, const RayCaster& model,
   GroundBounce b;
   b.field = &field;
   // Per cell, the grid points its rays meet on their front faces, merged.
-  const GroundWalls walls = CastGroundWalls(field, model, field.sky_rays, true);
+  const GroundWalls walls = CastGroundWalls(field, model, true);
   const int cells = static_cast<int>(walls.weight.size());
   std::vector<int32_t> index(cells, -1);
   b.cell_begin.push_back(0);
@@ -581,16 +595,12 @@ GroundBounce BuildGroundBounce(const GroundField& field, const RayCaster& model,
       entries.emplace_back(j, walls.weight[c]);
     }
     if (entries.empty()) continue;
-    std::sort(entries.begin(), entries.end());
+    MergeEntries(&entries);
     index[c] = static_cast<int32_t>(b.cells.size());
     b.cells.push_back(c);
-    for (size_t e = 0; e < entries.size(); ++e) {
-      if (e > 0 && entries[e].first == entries[e - 1].first) {
-        b.cell_weight.back() += entries[e].second;
-        continue;
-      }
-      b.cell_point.push_back(entries[e].first);
-      b.cell_weight.push_back(entries[e].second);
+    for (const auto& [j, weight] : entries) {
+      b.cell_point.push_back(j);
+      b.cell_weight.push_back(weight);
     }
     b.cell_begin.push_back(static_cast<int32_t>(b.cell_point.size()));
   }
@@ -617,16 +627,7 @@ GroundBounce BuildGroundBounce(const GroundField& field, const RayCaster& model,
                            static_cast<float>(
                                AmbientRetroFactor(field.retro, Eigen::Vector3d::UnitZ(), -d) / K));
         }
-        std::sort(out.begin(), out.end());
-        size_t m = 0;
-        for (size_t e = 0; e < out.size(); ++e) {
-          if (m > 0 && out[m - 1].first == out[e].first) {
-            out[m - 1].second += out[e].second;
-          } else {
-            out[m++] = out[e];
-          }
-        }
-        out.resize(m);
+        MergeEntries(&out);
       }
     });
   }
