@@ -204,7 +204,9 @@ json SolveConfigJson(const SolveConfig& c) {
             {"max_face_m", c.ground.max_face_m},
             {"block", c.ground.block},
             {"spacing_m", c.ground.spacing_m}}},
-          {"surroundings", {{"spacing_m", c.surroundings_spacing_m}}},
+          {"surroundings",
+           {{"spacing_m", c.surroundings_spacing_m},
+            {"from_panoramas", c.surroundings_from_panoramas}}},
           {"hemisphere", {{"directions", c.hemisphere.directions}, {"seed", c.hemisphere.seed}}},
           {"response",
            {{"max_brackets", c.response_max_brackets},
@@ -377,6 +379,7 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
   if (const json* t = root.Table("surroundings")) {
     Fields f(*t, where, "surroundings");
     f.Number("spacing_m", &c.surroundings_spacing_m, 0.01, 100);
+    f.Bool("from_panoramas", &c.surroundings_from_panoramas);
     f.Finish();
   }
   if (const json* t = root.Table("hemisphere")) {

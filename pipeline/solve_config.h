@@ -33,6 +33,13 @@ struct SolveConfig {
   // geometry seen mostly from afar, solved only to light the building) unless
   // grid.block_spacing_m names their block, metres.
   double surroundings_spacing_m = 2.0;
+  // Whether the surroundings' albedos are read from the landscape panoramas of the training
+  // slots as well as from the architecture photos: the panoramas are what sees the houses
+  // around a square; without them a house no architecture view shows takes the fill (on the
+  // Rouen world the houses across the square, the brightest light on the shaded west front in
+  // the morning, read 0.64 / 0.58 / 0.50 against 0.46 / 0.36 / 0.27). The building's own
+  // albedos never take a panorama's pixels.
+  bool surroundings_from_panoramas = true;
   HemisphereOptions hemisphere;  // the irradiance's gathering pattern over that grid
   // LDR brackets the response curve is recovered from, spread evenly over the session.
   int response_max_brackets = 12;

@@ -118,6 +118,27 @@ TEST_F(BlenderNaveTest, SurroundingsAreSolvedButNeverScored) {
   }
 }
 
+// The landscape panoramas read the surroundings' albedos too (SolveConfig::
+// surroundings_from_panoramas): the house south-west of the square, which no architecture view
+// shows, took the fill of the observed points before (0.571 / 0.488 / 0.392 against its
+// 0.55 / 0.53 / 0.50); the square's panorama sees it at every training time, so both its
+// albedos come out within the 5% the issue asks of the building's.
+TEST_F(BlenderNaveTest, AHouseOnlyThePanoramasSeeIsReadFromThem) {
+  EXPECT_NE(field_->log.find("observations of the surroundings in 8 landscape panoramas"),
+            std::string::npos)
+      << field_->log;
+  int channels = 0;
+  for (const light_passes::BlockAlbedo& a :
+       light_passes::SurroundingAlbedos(Data(), Scene("field"))) {
+    if (a.block != "house_sw") continue;
+    ++channels;
+    EXPECT_GT(a.points, 20) << a.channel;
+    EXPECT_NEAR(a.rho_sun / a.base, 1, 0.05) << a.channel;
+    EXPECT_NEAR(a.rho_se / a.base, 1, 0.05) << a.channel;
+  }
+  EXPECT_EQ(channels, 3);
+}
+
 // At the held-out evening time the houses across the street shade the nave's north wall: the
 // church alone lights it with the sun (several times too bright), the church with its
 // surroundings does not. Every view is explained at least as well under the lighting measured

@@ -205,16 +205,19 @@ std::map<std::string, TermSums> TermTable(const fs::path& data, const fs::path& 
   return table;
 }
 
-std::vector<BlockAlbedo> BlockAlbedos(const fs::path& data, const fs::path& scene_dir,
-                                      bool both_lit_and_shaded) {
-  const nlohmann::json truth = nlohmann::json::parse(ReadFileToString(data / "truth.json"));
+namespace {
+
+// Per block named in `section` (truth.json's "blocks" or "surroundings") and channel: the base
+// colour and the median pseudo-albedos over the block's observed grid points (see BlockAlbedos).
+std::vector<BlockAlbedo> AlbedosOf(const nlohmann::json& section, const fs::path& scene_dir,
+                                   bool both_lit_and_shaded, const char* what) {
   Mesh mesh;
   SurfaceGrid grid;
   const SceneModel model = ReadScene(scene_dir, &mesh, &grid);
   std::vector<BlockAlbedo> out;
   for (size_t b = 0; b < mesh.block_names.size(); ++b) {
-    if (!truth["blocks"].contains(mesh.block_names[b])) continue;  // the surroundings
-    const nlohmann::json& t = truth["blocks"][mesh.block_names[b]];
+    if (!section.contains(mesh.block_names[b])) continue;
+    const nlohmann::json& t = section[mesh.block_names[b]];
     for (int c = 0; c < 3; ++c) {
       std::vector<double> sun, se;
       for (size_t i = 0; i < grid.points.size(); ++i) {
@@ -226,17 +229,41 @@ std::vector<BlockAlbedo> BlockAlbedos(const fs::path& data, const fs::path& scen
         sun.push_back(model.albedo.rho_sun[i][c]);
         se.push_back(model.albedo.rho_se[i][c]);
       }
-      EXPECT_GT(sun.size(), 100u) << mesh.block_names[b];
-      BlockAlbedo a{
-          mesh.block_names[b], c,         t["glossy"].get<bool>(), t["base_color"][c].get<double>(),
-          Median(sun),         Median(se)};
-      std::printf("%s channel %d%s: base colour %.3f, median rho_sun %.3f, rho_se %.3f\n",
-                  a.block.c_str(), c, both_lit_and_shaded ? " (seen lit and shaded)" : "", a.base,
-                  a.rho_sun, a.rho_se);
+      BlockAlbedo a{mesh.block_names[b],
+                    c,
+                    t.value("glossy", false),
+                    t["base_color"][c].get<double>(),
+                    sun.empty() ? 0.0 : Median(sun),
+                    se.empty() ? 0.0 : Median(se),
+                    static_cast<int>(sun.size())};
+      std::printf(
+          "%s %s channel %d%s: base colour %.3f, median rho_sun %.3f, rho_se %.3f over %d "
+          "points\n",
+          what, a.block.c_str(), c, both_lit_and_shaded ? " (seen lit and shaded)" : "", a.base,
+          a.rho_sun, a.rho_se, a.points);
       out.push_back(a);
     }
   }
   return out;
+}
+
+}  // namespace
+
+std::vector<BlockAlbedo> BlockAlbedos(const fs::path& data, const fs::path& scene_dir,
+                                      bool both_lit_and_shaded) {
+  const nlohmann::json truth = nlohmann::json::parse(ReadFileToString(data / "truth.json"));
+  std::vector<BlockAlbedo> out =
+      AlbedosOf(truth["blocks"], scene_dir, both_lit_and_shaded, "block");
+  for (const BlockAlbedo& a : out) EXPECT_GT(a.points, 100) << a.block;
+  return out;
+}
+
+std::vector<BlockAlbedo> SurroundingAlbedos(const fs::path& data, const fs::path& scene_dir) {
+  const nlohmann::json truth = nlohmann::json::parse(ReadFileToString(data / "truth.json"));
+  nlohmann::json in_obj = nlohmann::json::object();
+  for (const auto& [name, s] : truth["surroundings"].items())
+    if (s.value("in_surroundings_obj", false)) in_obj[name] = s;
+  return AlbedosOf(in_obj, scene_dir, false, "surrounding");
 }
 
 GroundPrediction GroundBesideWalls(const fs::path& data, const fs::path& scene_dir, int slot) {

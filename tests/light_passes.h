@@ -68,10 +68,15 @@ struct BlockAlbedo {
   int channel = 0;
   bool glossy = false;
   double base = 0, rho_sun = 0, rho_se = 0;
+  int points = 0;  // the observed grid points the medians are over
 };
 std::vector<BlockAlbedo> BlockAlbedos(const std::filesystem::path& data,
                                       const std::filesystem::path& scene_dir,
                                       bool both_lit_and_shaded = false);
+// The same for the surroundings (truth.json's "surroundings" that surroundings.obj holds), each
+// printed; a block no photo observed has points 0 and albedos 0.
+std::vector<BlockAlbedo> SurroundingAlbedos(const std::filesystem::path& data,
+                                            const std::filesystem::path& scene_dir);
 
 }  // namespace rouen::light_passes
 
