@@ -277,6 +277,7 @@ json SolveConfigJson(const SolveConfig& c) {
             {"layer_merge_m", c.environment.layer_merge_m},
             {"lit_ground", c.environment.lit_ground},
             {"sky_detail", c.environment.sky_detail},
+            {"fill_band_residual", c.environment.fill_band_residual},
             {"fit_ground_retro", c.fit_ground_retro}}},
           {"ground_field", c.ground_field},
           {"env_stereo",
@@ -478,6 +479,7 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
     f.Number("layer_merge_m", &e.layer_merge_m, 0, 1000);
     f.Bool("lit_ground", &e.lit_ground);
     f.Int("sky_detail", &e.sky_detail, 1, 64);
+    f.Bool("fill_band_residual", &e.fill_band_residual);
     f.Bool("fit_ground_retro", &c.fit_ground_retro);
     f.Finish();
   }

@@ -58,6 +58,7 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   c.ground_field.walls = false;
   c.ground_field.open_sky = 0.75;
   c.surroundings_from_panoramas = false;  // not the default
+  c.environment.fill_band_residual = false;
   const json j = SolveConfigJson(c);
   const SolveConfig back = ApplySolveConfig(j, DefaultSolveConfig(false), "x");
   EXPECT_EQ(SolveConfigJson(back), j);
@@ -74,6 +75,7 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   EXPECT_EQ(back.env_stereo.alpha, 500);
   EXPECT_EQ(back.env_stereo.sky_irradiance, EnvSkyIrradiance::kAmbient);
   EXPECT_FALSE(back.surroundings_from_panoramas);
+  EXPECT_FALSE(back.environment.fill_band_residual);
   EXPECT_EQ(DefaultSolveConfig(false).albedo.sun_lobe.model, LobeModel::kLafortune);
   c.albedo.sun_lobe.model = std::nullopt;  // "auto": both fitted
   EXPECT_FALSE(ApplySolveConfig(SolveConfigJson(c), DefaultSolveConfig(false), "x")

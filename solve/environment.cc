@@ -12,6 +12,7 @@
 #include "core/angles.h"
 #include "core/error.h"
 #include "core/json_text.h"
+#include "core/stats.h"
 #include "solve/retro.h"
 
 namespace rouen {
@@ -72,13 +73,30 @@ void InitMap(const EnvOptions& o, int layers, EnvironmentMap* m) {
 }
 
 // Fills the unobserved regions of one layer (starting at `base`): sky model above the
-// horizon; below, as FillBelowHorizon.
-void FillLayer(const SkyModel& sky, int sky_samples, int base, EnvironmentMap* m) {
+// horizon, times its band's residual with `band_residual` (EnvOptions::fill_band_residual);
+// below, as FillBelowHorizon.
+void FillLayer(const SkyModel& sky, int sky_samples, bool band_residual, int base,
+               EnvironmentMap* m) {
   const int S = m->sectors, nreg = m->num_regions();
-  for (int r = m->bands_below * S; r < nreg; ++r) {
-    if (m->source[base + r] == EnvRegionSource::kObserved) continue;
-    m->radiance[base + r] = SkyMean(sky, *m, r, sky_samples);
-    m->source[base + r] = EnvRegionSource::kSkyModel;
+  for (int band = m->bands_below; band < m->bands_below + m->bands_above; ++band) {
+    Eigen::Vector3d scale = Eigen::Vector3d::Ones();
+    std::vector<double> ratio[3];
+    for (int s = 0; s < S && band_residual; ++s) {
+      const int r = band * S + s;
+      if (m->source[base + r] != EnvRegionSource::kObserved) continue;
+      const Eigen::Vector3d model = SkyMean(sky, *m, r, sky_samples);
+      if (!(model.minCoeff() > 0)) continue;
+      for (int c = 0; c < 3; ++c) ratio[c].push_back(m->radiance[base + r][c] / model[c]);
+    }
+    if (band_residual && 4 * static_cast<int>(ratio[0].size()) >= S) {
+      for (int c = 0; c < 3; ++c) scale[c] = Median(std::move(ratio[c]));
+    }
+    for (int s = 0; s < S; ++s) {
+      const int r = band * S + s;
+      if (m->source[base + r] == EnvRegionSource::kObserved) continue;
+      m->radiance[base + r] = SkyMean(sky, *m, r, sky_samples).cwiseProduct(scale);
+      m->source[base + r] = EnvRegionSource::kSkyModel;
+    }
   }
   FillBelowHorizon(m, base / nreg);
 }
@@ -590,7 +608,8 @@ EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
         m.source[base + r] = EnvRegionSource::kObserved;
       }
     }
-    FillLayer(sky, options.sky_fill_samples, static_cast<int>(base), &m);
+    FillLayer(sky, options.sky_fill_samples, options.fill_band_residual, static_cast<int>(base),
+              &m);
   }
   if (!shaded.empty()) {
     // Each shaded pixel as the same ground sunlit, by the ratio from the finished map's sky (the
@@ -605,7 +624,8 @@ EnvironmentMap BuildEnvironmentMap(const std::vector<EnvPanorama>& panoramas,
           u.radiance.binaryExpr(ratio, [](double l, double q) { return q > 0 ? l / q : l; });
       m.radiance[r] += (u.weight / wsum[r]) * (lit - u.radiance);
     }
-    for (int k = 0; k < layers; ++k) FillLayer(sky, options.sky_fill_samples, k * nreg, &m);
+    for (int k = 0; k < layers; ++k)
+      FillLayer(sky, options.sky_fill_samples, options.fill_band_residual, k * nreg, &m);
   }
   if (detail) {
     // The sky photos' pixels give the detail of the regions no landscape panorama saw.

@@ -46,6 +46,13 @@ struct EnvOptions {
   // against it per cell (SkyShape): the fine structure near the sun and the horizon survives.
   // 1: uniform regions, as the paper's map.
   int sky_detail = 4;
+  // Beyond the paper: a region above the horizon no photograph saw takes the sky model's mean
+  // times the median ratio of the observed regions of its elevation band to the model's mean
+  // over them (when a quarter of the band's sectors or more were observed), not the model
+  // alone: trees and distant roofs hide the low sky all round, and a seven-parameter sky
+  // overestimates the horizon band away from the sun (on the Rouen world at a 10 deg sun the
+  // observed regions of the lowest band read 0.6-0.8 of the model). false: the model alone.
+  bool fill_band_residual = true;
 
   void Validate() const;  // throws rouen::Error
 };

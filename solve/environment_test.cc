@@ -92,10 +92,22 @@ TEST(BuildEnvironmentMapTest, AveragesSkipsModelAndSunAndFills) {
       EXPECT_NEAR((env.radiance[r] - expect).norm(), 0, 1e-5) << r;
     }
   }
-  // Fully hidden by the wall above the horizon: the sky model (7).
+  // Fully hidden by the wall above the horizon: the sky model (7) times its band's residual
+  // (EnvOptions::fill_band_residual): the band's observed regions read 1 2 4 where the model
+  // says 7, and so does the hidden one; without the residual, the model alone.
   const int hidden = env.Region(Dir(90, 30));
   EXPECT_EQ(env.source[hidden], EnvRegionSource::kSkyModel);
-  EXPECT_NEAR((env.radiance[hidden] - Eigen::Vector3d::Constant(7)).norm(), 0, 1e-9);
+  EXPECT_NEAR((env.radiance[hidden] - Eigen::Vector3d(1, 2, 4)).norm(), 0, 1e-5);
+  EnvOptions model_alone;
+  model_alone.fill_band_residual = false;
+  const EnvironmentMap plain =
+      BuildEnvironmentMap({{&pano, k, pose}}, rc, {sun, 0.0047}, sky, model_alone);
+  EXPECT_EQ(plain.source[hidden], EnvRegionSource::kSkyModel);
+  EXPECT_NEAR((plain.radiance[hidden] - Eigen::Vector3d::Constant(7)).norm(), 0, 1e-9);
+  // Every region of the sky the panorama did not see takes its band's residual.
+  for (int r = 0; r < env.num_regions(); ++r)
+    if (env.source[r] == EnvRegionSource::kSkyModel)
+      EXPECT_NEAR((env.radiance[r] - Eigen::Vector3d(1, 2, 4)).norm(), 0, 1e-5) << r;
   // Below -20 deg everything hits the ground square: filled from nearer bands.
   const int low = env.Region(Dir(10, -60));
   EXPECT_EQ(env.source[low], EnvRegionSource::kNeighbour);

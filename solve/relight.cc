@@ -468,6 +468,28 @@ Lighting LightingPredictor::At(UtcTime utc, const Site& site, RelightSummary* su
       out.env.radiance[gi] = out.env.radiance[gi].cwiseProduct(residual);
     }
   }
+  {
+    // A sky region no panorama saw at any time: the measured maps filled it with their sky
+    // model's mean times its band's residual (EnvOptions::fill_band_residual; 1 without it), and
+    // the new time's takes the same ratio, weighted as the sky's times are (§5.1).
+    const EnvironmentMap& m = out.env;
+    for (size_t gi = 0; gi < m.radiance.size() && gi < env_.regions.size(); ++gi) {
+      if (env_.regions[gi].kind != EnvRegionKind::kSky) continue;
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      double wsum = 0;
+      bool seen = false;
+      for (size_t t = 0; t < measured_.size() && t < is.weights.size(); ++t) {
+        const EnvironmentMap& then = measured_[t].env;
+        if (gi >= then.radiance.size()) continue;
+        seen = seen || then.source[gi] == EnvRegionSource::kObserved;
+        const Eigen::Vector3d model = sky_means_[t].radiance[gi % then.num_regions()];
+        if (!(is.weights[t] > 0) || !(model.minCoeff() > 0)) continue;
+        sum += is.weights[t] * then.radiance[gi].cwiseQuotient(model);
+        wsum += is.weights[t];
+      }
+      if (!seen && wsum > 0) out.env.radiance[gi] = m.radiance[gi].cwiseProduct(sum / wsum);
+    }
+  }
   out.use_env = true;
   out.ground = measured_.front().ground;  // the ground's albedos hold at any time
   if (!out.sun_radiance.allFinite() || out.sun_radiance.minCoeff() < 0)

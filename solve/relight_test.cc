@@ -226,6 +226,31 @@ TEST(RelightTest, TheSkysResidualFollowsTheSunOrStaysWhereItIs) {
   }
 }
 
+// A sky region no panorama saw at any time: the measured maps filled it with their model's
+// mean times its band's residual (EnvOptions::fill_band_residual), and the new time's takes the
+// same ratio over its own model, not the model alone; fills of the model alone stay the model.
+TEST(RelightTest, ASkyRegionNoPanoramaSawKeepsTheFillsRatio) {
+  const UtcTime t = ParseIso8601("2026-08-25T16:00:00-07:00");
+  const auto darker_horizon = [](double, double, int band) { return band == 0 ? 0.8 : 1.0; };
+  for (const double fill : {0.8, 1.0}) {
+    std::vector<Lighting> day = ObservedDay(darker_horizon);
+    for (Lighting& l : day) {
+      EnvironmentMap& m = l.env;
+      const EnvironmentMap model =
+          EnvironmentMap::FromSky(EnvOptions{}, l.sky, Eigen::Vector3d::Zero());
+      for (int k = 8; k < 16; ++k) {  // the south of the lowest band, hidden at every time
+        const int r = m.bands_below * m.sectors + k;
+        m.radiance[r] = fill * model.radiance[r];
+        m.source[r] = EnvRegionSource::kSkyModel;
+        m.pixel_count[r] = 0;
+      }
+    }
+    const std::vector<double> ratio =
+        OverModel(LightingPredictor(day, RelightOptions{}).At(t, kSite), 0);
+    for (int k = 8; k < 16; ++k) EXPECT_NEAR(ratio[k], fill, 1e-9) << fill << " sector " << k;
+  }
+}
+
 TEST(RelightTest, RegionsTheResidualExplainsAreSky) {
   // A bright aureole on the horizon under each time's sun (up to 1.8x the model): the stereo's
   // comparison with the model alone takes the regions under the suns for landscape; the
