@@ -869,7 +869,8 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
       return static_cast<size_t>(o.photo) >= first_panorama;
     };
     std::erase_if(obs, [&](const Observation& o) {
-      return from_panorama(o) && !surrounding[r.grid.points[o.point].block];
+      const int b = r.grid.points[o.point].block;
+      return from_panorama(o) && !(b >= 0 && surrounding[b]);
     });
     std::vector<uint8_t> seen(r.grid.size(), 0);
     for (const Observation& o : obs) seen[o.point] = 1;
