@@ -827,17 +827,10 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   Log(options, "surface grid: " + std::to_string(r.grid.size()) + " points");
   clock.Lap("surface grid and visibility");
 
-  // Observations from the architecture photos of the training slots, then of the surroundings
-  // from their landscape panoramas (SolveConfig::surroundings_from_panoramas).
+  // Observations from the architecture photos of the training slots, and of the surroundings
+  // alone from their landscape panoramas (SolveConfig::surroundings_from_panoramas).
   std::vector<ArchitecturePhoto> photos;
-  const bool read_panoramas =
-      options.config.surroundings_from_panoramas && !r.surrounding_blocks.empty();
-  size_t first_panorama = 0;
-  for (Target target : {Target::kArchitecture, Target::kLandscape}) {
-    if (target == Target::kLandscape) {
-      first_panorama = photos.size();
-      if (!read_panoramas) break;
-    }
+  const auto add_photos = [&](Target target, const std::vector<uint8_t>& blocks) {
     for (const auto& [name, g] : calib.groups) {
       if (g.target != target) continue;
       if (std::find(options.exclude_albedo_slots.begin(), options.exclude_albedo_slots.end(),
@@ -850,8 +843,18 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
       ph.slot = g.slot;
       ph.mask = g.valid;
       ph.name = name;
+      ph.blocks = blocks;
       photos.push_back(std::move(ph));
     }
+  };
+  add_photos(Target::kArchitecture, {});
+  const size_t panoramas_from = photos.size();
+  if (options.config.surroundings_from_panoramas && !r.surrounding_blocks.empty()) {
+    std::vector<uint8_t> surrounding(r.mesh.block_names.size(), 0);
+    for (size_t b = 0; b < r.mesh.block_names.size(); ++b)
+      surrounding[b] = std::find(r.surrounding_blocks.begin(), r.surrounding_blocks.end(),
+                                 r.mesh.block_names[b]) != r.surrounding_blocks.end();
+    add_photos(Target::kLandscape, surrounding);
   }
   ObservationSummary os;
   // Sun directions per slot let footprints that straddle a shadow edge be dropped.
@@ -859,25 +862,12 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   for (const SlotSolve& ss : r.slots) sun_dirs.push_back(ss.lighting.sun_dir);
   std::vector<Observation> obs = CollectObservations(
       r.grid, *r.caster, photos, options.config.albedo.observation, &os, &sun_dirs);
-  if (read_panoramas) {
-    std::vector<uint8_t> surrounding(r.mesh.block_names.size(), 0);
-    for (size_t b = 0; b < r.mesh.block_names.size(); ++b)
-      surrounding[b] = std::find(r.surrounding_blocks.begin(), r.surrounding_blocks.end(),
-                                 r.mesh.block_names[b]) != r.surrounding_blocks.end();
-    // A panorama's pixel is kept on the surroundings only; the building is read from its views.
-    const auto from_panorama = [&](const Observation& o) {
-      return static_cast<size_t>(o.photo) >= first_panorama;
-    };
-    std::erase_if(obs, [&](const Observation& o) {
-      const int b = r.grid.points[o.point].block;
-      return from_panorama(o) && !(b >= 0 && surrounding[b]);
+  if (photos.size() > panoramas_from) {
+    const auto from_panoramas = std::count_if(obs.begin(), obs.end(), [&](const Observation& o) {
+      return static_cast<size_t>(o.photo) >= panoramas_from;
     });
-    std::vector<uint8_t> seen(r.grid.size(), 0);
-    for (const Observation& o : obs) seen[o.point] = 1;
-    os.points_observed = static_cast<int>(std::count(seen.begin(), seen.end(), 1));
-    const auto panorama_obs = std::count_if(obs.begin(), obs.end(), from_panorama);
-    Log(options, std::to_string(panorama_obs) + " observations of the surroundings in " +
-                     std::to_string(photos.size() - first_panorama) + " landscape panoramas");
+    Log(options, std::to_string(from_panoramas) + " observations of the surroundings in " +
+                     std::to_string(photos.size() - panoramas_from) + " landscape panoramas");
   }
   Log(options, std::to_string(obs.size()) + " observations of " +
                    std::to_string(os.points_observed) + " grid points in " +

@@ -392,6 +392,10 @@ std::vector<Observation> CollectObservations(const SurfaceGrid& grid, const RayC
       const GridPoint& gp = grid.points[i];
       for (size_t p = 0; p < photos.size(); ++p) {
         const ArchitecturePhoto& ph = photos[p];
+        if (!ph.blocks.empty() &&
+            !(gp.block >= 0 && gp.block < static_cast<int>(ph.blocks.size()) &&
+              ph.blocks[gp.block]))
+          continue;
         const Eigen::Vector3d to_cam = ph.pose.position - gp.position;
         const double dist = to_cam.norm();
         if (!(dist > 0) || gp.normal.dot(to_cam) < options.min_cos_view * dist) continue;

@@ -27,6 +27,9 @@ struct ArchitecturePhoto {
   int slot = 0;               // index into the per-slot lighting / irradiance
   std::vector<uint8_t> mask;  // empty: all valid; else width*height, nonzero = valid pixel
   std::string name;           // for messages
+  // The blocks this photo observes: empty, every one; else per block, nonzero = observed (a
+  // landscape panorama reads the surroundings only). Points of no block (-1) never are.
+  std::vector<uint8_t> blocks;
 };
 
 struct Observation {

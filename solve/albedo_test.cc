@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
@@ -625,6 +626,18 @@ TEST(CollectObservationsTest, ProjectsChecksVisibilityMaskAndSamples) {
     EXPECT_GT(std::abs(p.position.x()), 0.55);
   }
   EXPECT_GT(wall_points, 20);
+  // A photo told which blocks it observes (ArchitecturePhoto::blocks) reads those alone, with
+  // the same samples there.
+  ArchitecturePhoto post_only = ph;
+  post_only.blocks.assign(m.block_names.size(), 0);
+  post_only.blocks[post] = 1;
+  const auto of_post = CollectObservations(g, rc, {post_only});
+  ASSERT_FALSE(of_post.empty());
+  EXPECT_EQ(of_post.size(),
+            static_cast<size_t>(std::count_if(obs.begin(), obs.end(), [&](const Observation& o) {
+              return g.points[o.point].block == post;
+            })));
+  for (const auto& o : of_post) EXPECT_EQ(g.points[o.point].block, post);
   // A coarse photo (25 cm pixels on the wall): 2x2-pixel footprints near the post's
   // silhouette and the wall's edges see other surfaces and are dropped.
   const ArchitecturePhoto coarse = make_photo(64, 48);

@@ -169,6 +169,23 @@ LightingPredictor::LightingPredictor(std::vector<Lighting> measured, const Relig
     sky.sun_dir = l.sun_dir;
     sky_means_.push_back(SkyMeans(l.env, sky));
   }
+  for (size_t gi = 0; gi < env_.regions.size(); ++gi) {
+    if (env_.regions[gi].kind != EnvRegionKind::kSky) continue;
+    bool seen = false;
+    for (const Lighting& l : measured_)
+      seen = seen || (gi < l.env.source.size() && l.env.source[gi] == EnvRegionSource::kObserved);
+    if (!seen) never_seen_.push_back(gi);
+  }
+  for (size_t t = 0; t < measured_.size(); ++t) {
+    const EnvironmentMap& env = measured_[t].env;
+    std::vector<Eigen::Vector3d>& ratio = fill_ratio_.emplace_back();
+    for (size_t gi : never_seen_) {
+      const Eigen::Vector3d model = sky_means_[t].radiance[gi % env.num_regions()];
+      ratio.push_back(gi < env.radiance.size() && model.minCoeff() > 0
+                          ? Eigen::Vector3d(env.radiance[gi].cwiseQuotient(model))
+                          : Eigen::Vector3d::Constant(-1));
+    }
+  }
   const std::vector<std::vector<double>> loo = LeaveOneOutWeights();
   if (options_.sky_residual) {
     for (const Lighting& l : measured_) {
@@ -468,27 +485,20 @@ Lighting LightingPredictor::At(UtcTime utc, const Site& site, RelightSummary* su
       out.env.radiance[gi] = out.env.radiance[gi].cwiseProduct(residual);
     }
   }
-  {
-    // A sky region no panorama saw at any time: the measured maps filled it with their sky
-    // model's mean times its band's residual (EnvOptions::fill_band_residual; 1 without it), and
-    // the new time's takes the same ratio, weighted as the sky's times are (§5.1).
-    const EnvironmentMap& m = out.env;
-    for (size_t gi = 0; gi < m.radiance.size() && gi < env_.regions.size(); ++gi) {
-      if (env_.regions[gi].kind != EnvRegionKind::kSky) continue;
-      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-      double wsum = 0;
-      bool seen = false;
-      for (size_t t = 0; t < measured_.size() && t < is.weights.size(); ++t) {
-        const EnvironmentMap& then = measured_[t].env;
-        if (gi >= then.radiance.size()) continue;
-        seen = seen || then.source[gi] == EnvRegionSource::kObserved;
-        const Eigen::Vector3d model = sky_means_[t].radiance[gi % then.num_regions()];
-        if (!(is.weights[t] > 0) || !(model.minCoeff() > 0)) continue;
-        sum += is.weights[t] * then.radiance[gi].cwiseQuotient(model);
-        wsum += is.weights[t];
-      }
-      if (!seen && wsum > 0) out.env.radiance[gi] = m.radiance[gi].cwiseProduct(sum / wsum);
+  // A sky region no panorama saw at any time: the measured maps filled it with their sky
+  // model's mean times its band's residual (EnvOptions::fill_band_residual; 1 without it), and
+  // the new time's takes the same ratio, weighted as the sky's times are (§5.1).
+  for (size_t k = 0; k < never_seen_.size(); ++k) {
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    double wsum = 0;
+    for (size_t t = 0; t < fill_ratio_.size() && t < is.weights.size(); ++t) {
+      if (!(is.weights[t] > 0) || !(fill_ratio_[t][k].minCoeff() > 0)) continue;
+      sum += is.weights[t] * fill_ratio_[t][k];
+      wsum += is.weights[t];
     }
+    const size_t gi = never_seen_[k];
+    if (wsum > 0 && gi < out.env.radiance.size())
+      out.env.radiance[gi] = out.env.radiance[gi].cwiseProduct(sum / wsum);
   }
   out.use_env = true;
   out.ground = measured_.front().ground;  // the ground's albedos hold at any time

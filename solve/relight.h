@@ -120,7 +120,11 @@ class LightingPredictor {
   // that time.
   std::vector<std::vector<Eigen::Vector3d>> sky_residual_;
   std::vector<EnvironmentMap> sky_means_;  // per measured time: its fitted sky per region
-  std::vector<double> sun_az_;             // per measured time, radians from north eastwards
+  // The sky regions (layer x region) no measured time observed, and per measured time each one's
+  // filled radiance over that time's model mean (EnvOptions::fill_band_residual; 1 without it).
+  std::vector<size_t> never_seen_;
+  std::vector<std::vector<Eigen::Vector3d>> fill_ratio_;
+  std::vector<double> sun_az_;  // per measured time, radians from north eastwards
   std::vector<ResidualFrame> residual_frame_;
   // Per layer and region: whether a measured fallback carries relative to the sky (1) or as its
   // radiance (0).
