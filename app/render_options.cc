@@ -16,13 +16,15 @@ namespace {
 // --sky-interp: "elevation" (default) or "angular" (solve/sky_time.h SkyInterpMode).
 constexpr char kSkyInterpHelp[] =
     "How the sky at a new time is made from the captured ones: elevation (by the sun's "
-    "elevation, log-linear, extrapolates to lower suns) or angular (the paper's inverse angular "
+    "elevation, log-linear, extrapolates to lower suns), airmass (as elevation, the zenith and "
+    "the gradation dimming along the sun's air mass) or angular (the paper's inverse angular "
     "distance average, §5.1)";
 
 SkyInterpMode ParseSkyInterp(const std::string& text) {
   if (text == "elevation") return SkyInterpMode::kElevation;
+  if (text == "airmass") return SkyInterpMode::kAirMass;
   if (text == "angular") return SkyInterpMode::kAngularDistance;
-  throw Error("--sky-interp takes elevation or angular, not '" + text + "'");
+  throw Error("--sky-interp takes elevation, airmass or angular, not '" + text + "'");
 }
 
 }  // namespace
@@ -35,7 +37,7 @@ void AddPredictionOptions(CLI::App* c, PredictionArgs* a, unsigned which, CLI::O
                                 "slots"));
   if (which & kSkyInterpOption)
     added.push_back(c->add_option("--sky-interp", a->sky_interp, kSkyInterpHelp)
-                        ->check(CLI::IsMember({"elevation", "angular"}))
+                        ->check(CLI::IsMember({"elevation", "airmass", "angular"}))
                         ->capture_default_str());
   if (which & kSkyInterpOption)
     added.push_back(c->add_flag("--no-sky-residual", a->no_sky_residual,

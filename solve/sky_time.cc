@@ -185,6 +185,13 @@ void SkyInterpOptions::Validate() const {
                 Num(coincident_rad));
 }
 
+namespace {
+
+// Whether the mode weighs the inputs by elevation difference and follows each part's line.
+bool ByElevation(SkyInterpMode mode) { return mode != SkyInterpMode::kAngularDistance; }
+
+}  // namespace
+
 std::vector<double> SkyInterpWeights(const std::vector<TimedSky>& skies,
                                      const Eigen::Vector3d& sun_dir,
                                      const SkyInterpOptions& options) {
@@ -196,8 +203,8 @@ std::vector<double> SkyInterpWeights(const std::vector<TimedSky>& skies,
   for (size_t j = 0; j < skies.size(); ++j) {
     const Eigen::Vector3d sj = UnitDirection(
         skies[j].sky.sun_dir, "sky interpolation: input " + std::to_string(j) + " sun direction");
-    dist[j] = options.mode == SkyInterpMode::kElevation ? std::abs(ElevationOf(s) - ElevationOf(sj))
-                                                        : AngleBetween(s, sj);
+    dist[j] = ByElevation(options.mode) ? std::abs(ElevationOf(s) - ElevationOf(sj))
+                                        : AngleBetween(s, sj);
     if (dist[j] <= options.coincident_rad) ++coincident;
   }
   std::vector<double> w(skies.size(), 0.0);
@@ -217,18 +224,26 @@ std::vector<double> SkyInterpWeights(const std::vector<TimedSky>& skies,
 
 namespace {
 
+// What a part's log is a straight line of (kElevation, kAirMass): log sin of the sun's elevation
+// (a power law in sin e), or the sun's air mass (Beer-Lambert: kAirMass's zenith radiance and
+// gradation part, whose light comes down the sun's slant path as the sun's own does).
+enum class Abscissa : uint8_t { kLogSin, kAirMass };
+
 // The estimate for the new sun of a positive part known at every input: the weighted mean
-// (kAngularDistance), or the weighted least-squares line of log value against log sin of the
-// inputs' sun elevations evaluated at `at_rad` (kElevation; the weighted mean of the logs when
+// (kAngularDistance), or the weighted least-squares line of log value against the inputs' sun
+// elevations' abscissa evaluated at `at_rad` (kElevation; the weighted mean of the logs when
 // the weighted inputs share one elevation).
 class PartEstimate {
  public:
   PartEstimate(const std::vector<double>& w, const std::vector<double>& elevation, double at_rad,
-               SkyInterpMode mode)
+               SkyInterpMode mode, Abscissa abscissa = Abscissa::kLogSin)
       : w_(w), mode_(mode) {
-    if (mode_ != SkyInterpMode::kElevation) return;
-    // A power law in sin(elevation) (from 1 degree up): straight in log-log.
-    auto x = [](double e) { return std::log(std::sin(std::max(e, kDeg))); };
+    if (!ByElevation(mode_)) return;
+    // From 1 degree up: a power law in sin(elevation) is straight in log-log.
+    auto x = [abscissa](double e) {
+      return abscissa == Abscissa::kAirMass ? KastenYoungAirMass(std::max(e, kDeg))
+                                            : std::log(std::sin(std::max(e, kDeg)));
+    };
     double mean = 0;
     for (size_t j = 0; j < w.size(); ++j) mean += w[j] * x(elevation[j]);
     dx_.resize(w.size());
@@ -243,7 +258,7 @@ class PartEstimate {
 
   double operator()(const std::vector<double>& v) const {
     double m = 0;
-    if (mode_ != SkyInterpMode::kElevation) {
+    if (!ByElevation(mode_)) {
       for (size_t j = 0; j < v.size(); ++j) m += w_[j] * v[j];
       return m;
     }
@@ -273,10 +288,13 @@ SkyModel InterpolateSky(const std::vector<TimedSky>& skies, const Eigen::Vector3
   std::vector<double> elevation(k);
   for (size_t j = 0; j < k; ++j) elevation[j] = ElevationOf(skies[j].sky.sun_dir);
   const auto [lowest, highest] = std::minmax_element(elevation.begin(), elevation.end());
-  const double reach =
-      options.mode == SkyInterpMode::kElevation ? options.max_extrapolation_deg * kDeg : 0.0;
+  const double reach = ByElevation(options.mode) ? options.max_extrapolation_deg * kDeg : 0.0;
   const double at_elevation = std::clamp(ElevationOf(s), *lowest - reach, *highest + reach);
   const PartEstimate estimate(w, elevation, at_elevation, options.mode);
+  // The zenith radiance's and the gradation's estimate: along the air mass in kAirMass.
+  const PartEstimate zenith_and_gradation(
+      w, elevation, at_elevation, options.mode,
+      options.mode == SkyInterpMode::kAirMass ? Abscissa::kAirMass : Abscissa::kLogSin);
   for (size_t j = 0; j < k; ++j) {
     for (int c = 0; c < 3; ++c) {
       const SkyParams& p = skies[j].sky.channel[c];
@@ -335,13 +353,13 @@ SkyModel InterpolateSky(const std::vector<TimedSky>& skies, const Eigen::Vector3
     }
     // An input's Lz may be 0 (a black channel): the log line needs positive values.
     const bool lz_positive = *std::min_element(lz_in.begin(), lz_in.end()) > 0;
-    const double lz = lz_positive ? estimate(lz_in)
+    const double lz = lz_positive ? zenith_and_gradation(lz_in)
                                   : PartEstimate(w, elevation, at_elevation,
                                                  SkyInterpMode::kAngularDistance)(lz_in);
     std::vector<double> bg_avg(rings + 1), sa_avg(grid.size()), values(k);
     for (int i = 0; i <= rings; ++i) {
       std::copy_n(bg_in.begin() + i * k, k, values.begin());
-      bg_avg[i] = estimate(values);
+      bg_avg[i] = zenith_and_gradation(values);
     }
     for (size_t i = 0; i < grid.size(); ++i) {
       std::copy_n(sa_in.begin() + i * k, k, values.begin());

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <iostream>
 #include <limits>
 #include <vector>
@@ -236,35 +237,59 @@ TEST(InterpolateSky, ElevationModeWeighsByElevationAndIgnoresAzimuth) {
   }
 }
 
-TEST(InterpolateSky, ElevationModeFollowsALogLinearSkyBeyondTheInputs) {
-  // Skies of one shape whose brightness is sin(elevation)^k: the weighted power law is exact
-  // for them, inside the inputs' range and below it, up to max_extrapolation_deg.
-  const double k = 0.6;
-  auto bright = [&](double el) { return std::pow(std::sin(el * kDeg), k); };
+// Clear skies of one shape at four suns 20-50 degrees high, each channel's zenith radiance
+// 0.5 (c + 1) bright(elevation in degrees).
+std::vector<TimedSky> SkiesDimmedBy(const std::function<double(double)>& bright) {
   auto sky_at = [&](double az, double el) {
     TimedSky t = ClearSky(SunAt(az, el));
     for (int c = 0; c < 3; ++c) t.sky.channel[c].Lz = 0.5 * (c + 1) * bright(el);
     return t;
   };
-  const std::vector<TimedSky> skies = {sky_at(100, 20), sky_at(140, 42), sky_at(200, 50),
-                                       sky_at(240, 34)};
+  return {sky_at(100, 20), sky_at(140, 42), sky_at(200, 50), sky_at(240, 34)};
+}
+
+// The interpolated zenith radiance is bright(elevation) inside the inputs' range and below it
+// up to max_extrapolation_deg, then held: 15 degrees below the lowest input it is bright(10).
+void ExpectZenithFollows(const std::vector<TimedSky>& skies,
+                         const std::function<double(double)>& bright,
+                         const SkyInterpOptions& options) {
   for (double el : {27.0, 45.0, 17.0, 12.0}) {
     SkyInterpSummary sum;
-    const SkyModel out = InterpolateSky(skies, SunAt(260, el), {}, &sum);
+    const SkyModel out = InterpolateSky(skies, SunAt(260, el), options, &sum);
     EXPECT_NEAR(sum.evaluated_elevation_rad, el * kDeg, 1e-12);
     for (int c = 0; c < 3; ++c) {
       const double want = 0.5 * (c + 1) * bright(el);
       EXPECT_NEAR(out.channel[c].Lz, want, 1e-9 * want) << el;
     }
   }
-  // 15 degrees below the lowest input: followed for 10, then held.
   SkyInterpSummary sum;
-  const SkyModel out = InterpolateSky(skies, SunAt(260, 5), {}, &sum);
+  const SkyModel out = InterpolateSky(skies, SunAt(260, 5), options, &sum);
   EXPECT_NEAR(sum.evaluated_elevation_rad, 10 * kDeg, 1e-12);
   EXPECT_NEAR(out.channel[0].Lz, 0.5 * bright(10), 1e-9);
+}
+
+TEST(InterpolateSky, ElevationModeFollowsALogLinearSkyBeyondTheInputs) {
+  // Skies of one shape whose brightness is sin(elevation)^k: the weighted power law is exact
+  // for them.
+  auto bright = [](double el) { return std::pow(std::sin(el * kDeg), 0.6); };
+  const std::vector<TimedSky> skies = SkiesDimmedBy(bright);
+  ExpectZenithFollows(skies, bright, {});
   // The paper's weighted mean cannot go below the dimmest input.
   const SkyModel paper = InterpolateSky(skies, SunAt(260, 12), PaperInterp(), nullptr);
   EXPECT_GT(paper.channel[0].Lz, 0.5 * bright(20));
+}
+
+TEST(InterpolateSky, AirMassModeFollowsTheZenithsExtinctionBeyondTheInputs) {
+  // Skies of one shape whose zenith dims as exp(-beta m) with the air mass m (Beer-Lambert, as
+  // the sun's light does): kAirMass's weighted line of log Lz against m is exact for them;
+  // kElevation's power law in sin(elevation) dims it too slowly below the inputs.
+  auto bright = [](double el) { return std::exp(-0.12 * KastenYoungAirMass(el * kDeg)); };
+  const std::vector<TimedSky> skies = SkiesDimmedBy(bright);
+  SkyInterpOptions air_mass;
+  air_mass.mode = SkyInterpMode::kAirMass;
+  ExpectZenithFollows(skies, bright, air_mass);
+  EXPECT_GT(InterpolateSky(skies, SunAt(260, 12), {}, nullptr).channel[0].Lz,
+            1.01 * 0.5 * bright(12));
 }
 
 TEST(InterpolateSky, SymmetricInputsAndOrder) {

@@ -182,6 +182,18 @@ TEST(BlenderWorldTest, ImportStatusSolveRenderValidate) {
         << figure;
   }
 
+  // --sky-interp airmass predicts the sky another way (its zenith and gradation along the sun's
+  // air mass) from the same scene: the measured lighting's figures are the same, the
+  // prediction's differ and stay finite.
+  const fs::path ajson = dir / "validate_airmass.json";
+  const auto a = RunRouen("validate " + Q(scene) + " --session " + Q(session) + " --slot " +
+                          std::to_string(heldout) + " --sky-interp airmass --json " + Q(ajson));
+  ASSERT_EQ(a.code, 0) << a.out;
+  const nlohmann::json av = nlohmann::json::parse(ReadFileToString(ajson));
+  ASSERT_TRUE(FiniteFigures(av["predicted"])) << av.dump();
+  EXPECT_EQ(av["measured"]["rel_rmse"].get<double>(), v["measured"]["rel_rmse"].get<double>());
+  EXPECT_NE(av["predicted"]["rel_rmse"].get<double>(), v["predicted"]["rel_rmse"].get<double>());
+
   // The recovered sun pseudo-albedos against the base colours Blender rendered with: the
   // median over each matte block's observed grid points, per channel (the glossy roof is
   // printed, not checked). A global scale error (e.g. in the sun's radiance) leaves the
