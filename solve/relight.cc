@@ -44,6 +44,18 @@ std::string RelightSummary::Describe() const {
   return s;
 }
 
+std::vector<TimedSky> TimedSkiesOf(const std::vector<Lighting>& measured) {
+  std::vector<TimedSky> skies;
+  for (const Lighting& l : measured) {
+    TimedSky ts;
+    ts.sky = l.sky;
+    ts.sky.sun_dir = l.sun_dir;
+    ts.sun_radiance = l.sun_radiance;
+    skies.push_back(ts);
+  }
+  return skies;
+}
+
 std::vector<EnvObservation> EnvObservationsOf(const std::vector<Lighting>& measured) {
   std::vector<EnvObservation> envs;
   for (const Lighting& l : measured) {
@@ -134,13 +146,9 @@ LightingPredictor::LightingPredictor(std::vector<Lighting> measured, const Relig
     : measured_(std::move(measured)), options_(options) {
   options_.Validate();
   if (measured_.empty()) throw Error("relight: no measured time of day to predict from");
+  skies_ = TimedSkiesOf(measured_);
   std::vector<SunObservation> suns;
   for (const Lighting& l : measured_) {
-    TimedSky ts;
-    ts.sky = l.sky;
-    ts.sky.sun_dir = l.sun_dir;
-    ts.sun_radiance = l.sun_radiance;
-    skies_.push_back(ts);
     if (l.sun_dir.z() > 0 && l.sun_radiance.minCoeff() > 0)
       suns.push_back({l.sun_dir, l.sun_radiance});
   }
@@ -411,7 +419,11 @@ Lighting LightingPredictor::At(UtcTime utc, const Site& site, RelightSummary* su
     // from that elevation, so the sky is continuous there.
     const double reached_air_mass = KastenYoungAirMass(std::max(0.0, is.evaluated_elevation_rad));
     if (rs.air_mass > reached_air_mass) {
+      const SkyModel followed = out.sky;
       out.sky = ApplyExtinction(out.sky, *extinction_, reached_air_mass, rs.air_mass);
+      // kAirMass followed the zenith's own line to the new sun: it is not dimmed twice.
+      if (options_.sky.mode == SkyInterpMode::kAirMass)
+        for (int c = 0; c < 3; ++c) out.sky.channel[c].Lz = followed.channel[c].Lz;
       rs.extinction_from_air_mass = reached_air_mass;
     }
   } else {

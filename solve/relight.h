@@ -73,6 +73,8 @@ struct RelightSummary {
   std::string Describe() const;
 };
 
+// The measured times' fitted skies with their suns, as §5.1's interpolation takes them.
+std::vector<TimedSky> TimedSkiesOf(const std::vector<Lighting>& measured);
 // The environment maps of measured times with their sun and sky, as §5.2's photometric stereo
 // takes them.
 std::vector<EnvObservation> EnvObservationsOf(const std::vector<Lighting>& measured);

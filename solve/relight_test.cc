@@ -88,6 +88,34 @@ TEST(RelightTest, SunRadianceFollowsTheExtinctionOfTheMeasuredTimes) {
             noon.sun_radiance[0] / noon.sun_radiance[2]);
 }
 
+TEST(RelightTest, AirMassSkiesFollowTheZenithsLineBelowTheMeasuredSuns) {
+  // A sun below every measured one (18:45, about 11 deg; the lowest measured 13 deg), with no
+  // extrapolation allowed: the sunset extinction dims the sky from the lowest measured sun's
+  // air mass. kAirMass has followed the zenith's own line to the new sun, so its Lz is the
+  // interpolation's, not dimmed again; kElevation's held zenith is dimmed.
+  const std::vector<Lighting> day = Day({0.1, 0.12, 0.15}, {1e4, 1e4, 1e4});
+  const std::vector<TimedSky> skies = TimedSkiesOf(day);
+  const UtcTime t = ParseIso8601("2026-08-25T18:45:00-07:00");
+  const Eigen::Vector3d sun = ComputeSunPosition(t, kSite).DirectionEnu();
+  for (const SkyInterpMode mode : {SkyInterpMode::kAirMass, SkyInterpMode::kElevation}) {
+    RelightOptions o;
+    o.sky.mode = mode;
+    o.sky.max_extrapolation_deg = 0;
+    RelightSummary rs;
+    const Lighting l = LightingPredictor(day, o).At(t, kSite, &rs);
+    ASSERT_GT(rs.extinction_from_air_mass, 0);
+    const SkyModel interpolated = InterpolateSky(skies, sun, o.sky, nullptr);
+    for (int c = 0; c < 3; ++c) {
+      const double lz = interpolated.channel[c].Lz;
+      if (mode == SkyInterpMode::kAirMass) {
+        EXPECT_NEAR(l.sky.channel[c].Lz, lz, 1e-12 * lz) << c;
+      } else {
+        EXPECT_LT(l.sky.channel[c].Lz, 0.99 * lz) << c;
+      }
+    }
+  }
+}
+
 TEST(RelightTest, AMeasuredTimeGivesBackItsSky) {
   const std::vector<Lighting> day = Day({0.1, 0.1, 0.1}, {1e4, 1e4, 1e4});
   LightingPredictor predictor(day, RelightOptions{});

@@ -291,10 +291,14 @@ SkyModel InterpolateSky(const std::vector<TimedSky>& skies, const Eigen::Vector3
   const double reach = ByElevation(options.mode) ? options.max_extrapolation_deg * kDeg : 0.0;
   const double at_elevation = std::clamp(ElevationOf(s), *lowest - reach, *highest + reach);
   const PartEstimate estimate(w, elevation, at_elevation, options.mode);
-  // The zenith radiance's and the gradation's estimate: along the air mass in kAirMass.
-  const PartEstimate zenith_and_gradation(
-      w, elevation, at_elevation, options.mode,
-      options.mode == SkyInterpMode::kAirMass ? Abscissa::kAirMass : Abscissa::kLogSin);
+  // The zenith radiance's and the gradation's estimates: along the air mass in kAirMass, where
+  // the zenith's line is followed to the new sun itself (the air mass is what dims it).
+  const bool by_air_mass = options.mode == SkyInterpMode::kAirMass;
+  const Abscissa dimming = by_air_mass ? Abscissa::kAirMass : Abscissa::kLogSin;
+  const PartEstimate gradation(w, elevation, at_elevation, options.mode, dimming);
+  const PartEstimate zenith(w, elevation,
+                            by_air_mass ? std::max(0.0, ElevationOf(s)) : at_elevation,
+                            options.mode, dimming);
   for (size_t j = 0; j < k; ++j) {
     for (int c = 0; c < 3; ++c) {
       const SkyParams& p = skies[j].sky.channel[c];
@@ -353,13 +357,13 @@ SkyModel InterpolateSky(const std::vector<TimedSky>& skies, const Eigen::Vector3
     }
     // An input's Lz may be 0 (a black channel): the log line needs positive values.
     const bool lz_positive = *std::min_element(lz_in.begin(), lz_in.end()) > 0;
-    const double lz = lz_positive ? zenith_and_gradation(lz_in)
+    const double lz = lz_positive ? zenith(lz_in)
                                   : PartEstimate(w, elevation, at_elevation,
                                                  SkyInterpMode::kAngularDistance)(lz_in);
     std::vector<double> bg_avg(rings + 1), sa_avg(grid.size()), values(k);
     for (int i = 0; i <= rings; ++i) {
       std::copy_n(bg_in.begin() + i * k, k, values.begin());
-      bg_avg[i] = zenith_and_gradation(values);
+      bg_avg[i] = gradation(values);
     }
     for (size_t i = 0; i < grid.size(); ++i) {
       std::copy_n(sa_in.begin() + i * k, k, values.begin());

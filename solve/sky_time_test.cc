@@ -249,10 +249,11 @@ std::vector<TimedSky> SkiesDimmedBy(const std::function<double(double)>& bright)
 }
 
 // The interpolated zenith radiance is bright(elevation) inside the inputs' range and below it
-// up to max_extrapolation_deg, then held: 15 degrees below the lowest input it is bright(10).
+// up to max_extrapolation_deg, where the other parts are held; 15 degrees below the lowest
+// input it is bright(10) (zenith_held) or bright(5) (followed to the sun).
 void ExpectZenithFollows(const std::vector<TimedSky>& skies,
                          const std::function<double(double)>& bright,
-                         const SkyInterpOptions& options) {
+                         const SkyInterpOptions& options, bool zenith_held) {
   for (double el : {27.0, 45.0, 17.0, 12.0}) {
     SkyInterpSummary sum;
     const SkyModel out = InterpolateSky(skies, SunAt(260, el), options, &sum);
@@ -265,7 +266,7 @@ void ExpectZenithFollows(const std::vector<TimedSky>& skies,
   SkyInterpSummary sum;
   const SkyModel out = InterpolateSky(skies, SunAt(260, 5), options, &sum);
   EXPECT_NEAR(sum.evaluated_elevation_rad, 10 * kDeg, 1e-12);
-  EXPECT_NEAR(out.channel[0].Lz, 0.5 * bright(10), 1e-9);
+  EXPECT_NEAR(out.channel[0].Lz, 0.5 * bright(zenith_held ? 10 : 5), 1e-9);
 }
 
 TEST(InterpolateSky, ElevationModeFollowsALogLinearSkyBeyondTheInputs) {
@@ -273,7 +274,7 @@ TEST(InterpolateSky, ElevationModeFollowsALogLinearSkyBeyondTheInputs) {
   // for them.
   auto bright = [](double el) { return std::pow(std::sin(el * kDeg), 0.6); };
   const std::vector<TimedSky> skies = SkiesDimmedBy(bright);
-  ExpectZenithFollows(skies, bright, {});
+  ExpectZenithFollows(skies, bright, {}, /*zenith_held=*/true);
   // The paper's weighted mean cannot go below the dimmest input.
   const SkyModel paper = InterpolateSky(skies, SunAt(260, 12), PaperInterp(), nullptr);
   EXPECT_GT(paper.channel[0].Lz, 0.5 * bright(20));
@@ -281,13 +282,14 @@ TEST(InterpolateSky, ElevationModeFollowsALogLinearSkyBeyondTheInputs) {
 
 TEST(InterpolateSky, AirMassModeFollowsTheZenithsExtinctionBeyondTheInputs) {
   // Skies of one shape whose zenith dims as exp(-beta m) with the air mass m (Beer-Lambert, as
-  // the sun's light does): kAirMass's weighted line of log Lz against m is exact for them;
-  // kElevation's power law in sin(elevation) dims it too slowly below the inputs.
+  // the sun's light does): kAirMass's weighted line of log Lz against m is exact for them, and
+  // followed to the new sun; kElevation's power law in sin(elevation) dims it too slowly below
+  // the inputs.
   auto bright = [](double el) { return std::exp(-0.12 * KastenYoungAirMass(el * kDeg)); };
   const std::vector<TimedSky> skies = SkiesDimmedBy(bright);
   SkyInterpOptions air_mass;
   air_mass.mode = SkyInterpMode::kAirMass;
-  ExpectZenithFollows(skies, bright, air_mass);
+  ExpectZenithFollows(skies, bright, air_mass, /*zenith_held=*/false);
   EXPECT_GT(InterpolateSky(skies, SunAt(260, 12), {}, nullptr).channel[0].Lz,
             1.01 * 0.5 * bright(12));
 }
