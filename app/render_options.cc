@@ -13,7 +13,7 @@
 namespace rouen {
 namespace {
 
-// --sky-interp: "elevation" (default) or "angular" (solve/sky_time.h SkyInterpMode).
+// --sky-interp: "elevation" (default), "airmass" or "angular" (solve/sky_time.h SkyInterpMode).
 constexpr char kSkyInterpHelp[] =
     "How the sky at a new time is made from the captured ones: elevation (by the sun's "
     "elevation, log-linear, extrapolates to lower suns), airmass (as elevation, the zenith and "

@@ -419,11 +419,9 @@ Lighting LightingPredictor::At(UtcTime utc, const Site& site, RelightSummary* su
     // from that elevation, so the sky is continuous there.
     const double reached_air_mass = KastenYoungAirMass(std::max(0.0, is.evaluated_elevation_rad));
     if (rs.air_mass > reached_air_mass) {
-      const SkyModel followed = out.sky;
-      out.sky = ApplyExtinction(out.sky, *extinction_, reached_air_mass, rs.air_mass);
       // kAirMass followed the zenith's own line to the new sun: it is not dimmed twice.
-      if (options_.sky.mode == SkyInterpMode::kAirMass)
-        for (int c = 0; c < 3; ++c) out.sky.channel[c].Lz = followed.channel[c].Lz;
+      out.sky = ApplyExtinction(out.sky, *extinction_, reached_air_mass, rs.air_mass,
+                                /*dim_zenith=*/options_.sky.mode != SkyInterpMode::kAirMass);
       rs.extinction_from_air_mass = reached_air_mass;
     }
   } else {

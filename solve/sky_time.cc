@@ -231,8 +231,8 @@ enum class Abscissa : uint8_t { kLogSin, kAirMass };
 
 // The estimate for the new sun of a positive part known at every input: the weighted mean
 // (kAngularDistance), or the weighted least-squares line of log value against the inputs' sun
-// elevations' abscissa evaluated at `at_rad` (kElevation; the weighted mean of the logs when
-// the weighted inputs share one elevation).
+// elevations' abscissa evaluated at `at_rad` (kElevation, kAirMass; the weighted mean of the logs
+// when the weighted inputs share one elevation).
 class PartEstimate {
  public:
   PartEstimate(const std::vector<double>& w, const std::vector<double>& elevation, double at_rad,
@@ -540,7 +540,7 @@ SunExtinction FitSunExtinction(const std::vector<SunObservation>& observations) 
 }
 
 SkyModel ApplyExtinction(const SkyModel& sky, const SunExtinction& extinction, double from_air_mass,
-                         double to_air_mass) {
+                         double to_air_mass, bool dim_zenith) {
   if (!std::isfinite(from_air_mass) || !std::isfinite(to_air_mass) || from_air_mass <= 0 ||
       to_air_mass <= 0)
     throw Error("sky extinction: air masses must be finite and positive, got " +
@@ -551,7 +551,7 @@ SkyModel ApplyExtinction(const SkyModel& sky, const SunExtinction& extinction, d
   SkyModel out = sky;
   for (int c = 0; c < 3; ++c) {
     // §5.1: the mean beta dims the background; the aureole follows the channel's beta.
-    out.channel[c].Lz *= std::exp(-extinction.beta_mean * dm);
+    if (dim_zenith) out.channel[c].Lz *= std::exp(-extinction.beta_mean * dm);
     out.channel[c].c *= std::exp(-(extinction.beta[c] - extinction.beta_mean) * dm);
   }
   return out;

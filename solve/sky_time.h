@@ -163,9 +163,11 @@ SunExtinction FitSunExtinction(const std::vector<SunObservation>& observations);
 // `to_air_mass` (§5.1): with dm = to - from, Lz_c *= exp(-beta_mean dm) (the whole sky darkens,
 // its background colour kept), and the aureole term c_c *= exp(-(beta_c - beta_mean) dm), so the
 // aureole as a whole changes by exp(-beta_c dm), like the sun. The e cos^2 gamma term is taken
-// as background. sun_dir is left unchanged.
+// as background. sun_dir is left unchanged. `dim_zenith` false: the sky's Lz was already
+// predicted for to_air_mass (SkyInterpMode::kAirMass follows it there); only the aureole's colour
+// changes.
 SkyModel ApplyExtinction(const SkyModel& sky, const SunExtinction& extinction, double from_air_mass,
-                         double to_air_mass);
+                         double to_air_mass, bool dim_zenith = true);
 
 struct LowSunPrediction {
   SkyModel sky;                                            // sun_dir = the new sun

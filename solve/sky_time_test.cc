@@ -486,6 +486,12 @@ TEST(SunExtinction, ApplyToSky) {
     EXPECT_EQ(out.channel[c].a, sky.channel[c].a);
     EXPECT_EQ(out.channel[c].e, sky.channel[c].e);
   }
+  // A zenith already predicted for the new air mass keeps its Lz; the aureole still reddens.
+  const SkyModel kept = ApplyExtinction(sky, ext, from, to, /*dim_zenith=*/false);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_EQ(kept.channel[c].Lz, sky.channel[c].Lz);
+    EXPECT_EQ(kept.channel[c].c, out.channel[c].c);
+  }
   const SkyModel same = ApplyExtinction(sky, ext, 3, 3);
   EXPECT_LT(MaxRelDiff(same, sky), 1e-15);
   EXPECT_THROW(ApplyExtinction(sky, ext, 0, 3), Error);
