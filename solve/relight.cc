@@ -130,6 +130,12 @@ bool CarryResidual(const std::vector<std::vector<Eigen::Vector3d>>& residual,
   return true;
 }
 
+// `sky` weighting its times by the angular distance between suns (§5.1 as written).
+SkyInterpOptions ByDirection(SkyInterpOptions sky) {
+  sky.mode = SkyInterpMode::kAngularDistance;
+  return sky;
+}
+
 // The sky model's mean radiance over each region of `map`'s grid (0 below the horizon).
 EnvironmentMap SkyMeans(const EnvironmentMap& map, const SkyModel& sky) {
   EnvOptions grid;
@@ -194,7 +200,7 @@ LightingPredictor::LightingPredictor(std::vector<Lighting> measured, const Relig
                           : Eigen::Vector3d::Constant(-1));
     }
   }
-  const std::vector<std::vector<double>> loo = LeaveOneOutWeights();
+  const std::vector<std::vector<double>> loo = LeaveOneOutWeights(options_.sky);
   if (options_.sky_residual) {
     for (const Lighting& l : measured_) {
       sun_az_.push_back(AzimuthOf(l.sun_dir));
@@ -208,7 +214,7 @@ LightingPredictor::LightingPredictor(std::vector<Lighting> measured, const Relig
     }
     ChooseResidualFrames(loo);
   }
-  ChooseFallbackFrames(loo);
+  ChooseFallbackWays(loo, LeaveOneOutWeights(ByDirection(options_.sky)));
 }
 
 bool LightingPredictor::IsMeasuredFallback(size_t gi) const {
@@ -244,31 +250,45 @@ bool LightingPredictor::MeasuredFallback(size_t gi, const std::vector<double>& w
   return true;
 }
 
-// Per measured fallback region above the horizon: whether it carries relative to the sky, by
-// which of the two ways predicts every measured time that saw it from the others (§5.1's
-// weights) with the smaller squared log error. Sky the model misses (a haze band) keeps its
-// ratio to the sky, which dims and reddens towards a low sun; a surface the stereo could not
-// explain keeps its radiance when that holds better across the times.
-void LightingPredictor::ChooseFallbackFrames(const std::vector<std::vector<double>>& loo) {
-  fallback_relative_.assign(env_.regions.size(), 0);
+// Per measured fallback region: which of its ways predicts every measured time that saw it from
+// the others with the least squared log error: its radiance or its ratio to the sky (above the
+// horizon), averaged with §5.1's weights for the sky or with the paper's inverse angular distance
+// between suns. Sky the model misses (a haze band) keeps its ratio to the sky, which dims and
+// reddens towards a low sun; the aureole the model misses near the horizon, and a surface the
+// stereo could not explain, follow the sun's direction (a facade lit only when the sun faces
+// it); distant ground and haze follow the sky's weights (by default the sun's elevation).
+void LightingPredictor::ChooseFallbackWays(const std::vector<std::vector<double>>& loo_sky,
+                                           const std::vector<std::vector<double>>& loo_sun) {
+  fallback_way_.assign(env_.regions.size(), 0);
   const EnvironmentMap& m0 = measured_.front().env;
   const int nreg = m0.num_regions(), first_above = m0.bands_below * m0.sectors;
   for (size_t gi = 0; gi < env_.regions.size(); ++gi) {
-    if (!IsMeasuredFallback(gi) || static_cast<int>(gi % nreg) < first_above) continue;
-    double err_plain = 0, err_relative = 0;
-    for (size_t t = 0; t < measured_.size() && t < loo.size(); ++t) {
+    if (!IsMeasuredFallback(gi)) continue;
+    // Below the horizon the sky is no reference: its radiance only.
+    const bool above = static_cast<int>(gi % nreg) >= first_above;
+    const auto allowed = [&](int way) { return above || !(way & kFallbackRelative); };
+    std::array<double, 4> err{0, 0, 0, 0};
+    for (size_t t = 0; t < measured_.size() && t < loo_sky.size(); ++t) {
       const EnvironmentMap& m = measured_[t].env;
       if (m.source[gi] != EnvRegionSource::kObserved || !(m.radiance[gi].minCoeff() > 0)) continue;
-      Eigen::Vector3d plain, relative;
-      if (!MeasuredFallback(gi, loo[t], nullptr, &plain) ||
-          !MeasuredFallback(gi, loo[t], &sky_means_[t].radiance[gi % nreg], &relative) ||
-          !(plain.minCoeff() > 0) || !(relative.minCoeff() > 0))
-        continue;
+      std::array<Eigen::Vector3d, 4> pred;
+      bool all = true;
+      for (int way = 0; way < 4 && all; ++way) {
+        if (!allowed(way)) continue;
+        const std::vector<double>& w = (way & kFallbackBySun) ? loo_sun[t] : loo_sky[t];
+        const Eigen::Vector3d* sky =
+            (way & kFallbackRelative) ? &sky_means_[t].radiance[gi % nreg] : nullptr;
+        all = MeasuredFallback(gi, w, sky, &pred[way]) && pred[way].minCoeff() > 0;
+      }
+      if (!all) continue;
       const Eigen::Array3d log_observed = m.radiance[gi].array().log();
-      err_plain += (plain.array().log() - log_observed).square().sum();
-      err_relative += (relative.array().log() - log_observed).square().sum();
+      for (int way = 0; way < 4; ++way)
+        if (allowed(way)) err[way] += (pred[way].array().log() - log_observed).square().sum();
     }
-    fallback_relative_[gi] = err_relative < err_plain;
+    int best = 0;
+    for (int way = 1; way < 4; ++way)
+      if (allowed(way) && err[way] < err[best]) best = way;
+    fallback_way_[gi] = static_cast<uint8_t>(best);
   }
 }
 
@@ -292,7 +312,8 @@ void LightingPredictor::SetResidual(size_t gi) {
 }
 
 // Per measured time, the §5.1 weights of the other times for its sun (0 for itself).
-std::vector<std::vector<double>> LightingPredictor::LeaveOneOutWeights() const {
+std::vector<std::vector<double>> LightingPredictor::LeaveOneOutWeights(
+    const SkyInterpOptions& sky) const {
   const size_t T = measured_.size();
   std::vector<std::vector<double>> out(T, std::vector<double>(T, 0.0));
   for (size_t t = 0; t < T && T > 1; ++t) {
@@ -303,7 +324,7 @@ std::vector<std::vector<double>> LightingPredictor::LeaveOneOutWeights() const {
       others.push_back(skies_[u]);
       index.push_back(u);
     }
-    const std::vector<double> w = SkyInterpWeights(others, measured_[t].sun_dir, options_.sky);
+    const std::vector<double> w = SkyInterpWeights(others, measured_[t].sun_dir, sky);
     for (size_t k = 0; k < index.size(); ++k) out[t][index[k]] = w[k];
   }
   return out;
@@ -455,20 +476,26 @@ Lighting LightingPredictor::At(UtcTime utc, const Site& site, RelightSummary* su
   out.env = PredictEnvironment(env_, el);
   // A sky-only fallback that does not explain its region (SkyOnlyExplains) is not carried to
   // the new sun as a surface: the region takes its measured radiances (or what the maps filled
-  // it with from their neighbours at times no panorama saw it), weighted as the sky's times are
-  // (§5.1; by default by the sun's elevation, which sets how bright the haze and the distant
-  // ground near the horizon are, more than the sun's azimuth does); relative to the sky where
-  // that predicts the measured times better (ChooseFallbackFrames).
-  const bool any_relative = std::find(fallback_relative_.begin(), fallback_relative_.end(), 1) !=
-                            fallback_relative_.end();
+  // it with from their neighbours at times no panorama saw it), or their ratios to the sky,
+  // weighted as the sky's times are (§5.1; by default by the sun's elevation, which sets how
+  // bright the haze and the distant ground near the horizon are) or by the angular distance
+  // between suns, as predicts the measured times best (ChooseFallbackWays).
+  bool any_relative = false;
+  for (size_t gi = 0; gi < fallback_way_.size(); ++gi)
+    any_relative =
+        any_relative || (IsMeasuredFallback(gi) && (fallback_way_[gi] & kFallbackRelative));
   const EnvironmentMap sky_now = any_relative ? SkyMeans(out.env, out.sky) : EnvironmentMap();
+  const std::vector<double> sun_weights =
+      SkyInterpWeights(skies_, sun_dir, ByDirection(options_.sky));
   for (size_t gi = 0; gi < out.env.radiance.size(); ++gi) {
     if (!IsMeasuredFallback(gi)) continue;
     Eigen::Vector3d r;
-    const Eigen::Vector3d* sky =
-        fallback_relative_[gi] ? &sky_now.radiance[gi % sky_now.num_regions()] : nullptr;
-    if ((sky && sky->minCoeff() > 0 && MeasuredFallback(gi, is.weights, sky, &r)) ||
-        MeasuredFallback(gi, is.weights, nullptr, &r))
+    const std::vector<double>& w = (fallback_way_[gi] & kFallbackBySun) ? sun_weights : is.weights;
+    const Eigen::Vector3d* sky = (fallback_way_[gi] & kFallbackRelative)
+                                     ? &sky_now.radiance[gi % sky_now.num_regions()]
+                                     : nullptr;
+    if ((sky && sky->minCoeff() > 0 && MeasuredFallback(gi, w, sky, &r)) ||
+        MeasuredFallback(gi, w, nullptr, &r))
       out.env.radiance[gi] = r;
   }
   out.env.ground_retro = options_.env.ground_retro;  // as the shadow on it is put back

@@ -128,20 +128,23 @@ class LightingPredictor {
   std::vector<std::vector<Eigen::Vector3d>> fill_ratio_;
   std::vector<double> sun_az_;  // per measured time, radians from north eastwards
   std::vector<ResidualFrame> residual_frame_;
-  // Per layer and region: whether a measured fallback carries relative to the sky (1) or as its
-  // radiance (0).
-  std::vector<uint8_t> fallback_relative_;
+  // Per layer and region, how a measured fallback carries to a new time: bits kFallbackRelative
+  // (its ratio to the sky, else its radiance) and kFallbackBySun (the times weighted by the
+  // angular distance between suns, else as the sky's).
+  static constexpr uint8_t kFallbackRelative = 1, kFallbackBySun = 2;
+  std::vector<uint8_t> fallback_way_;
   int sky_by_residual_ = 0;
   bool SeenAgainstModel(size_t time, size_t region) const;
   void SetResidual(size_t region);
-  // Per measured time, the other times' §5.1 weights for its sun (0 for itself).
-  std::vector<std::vector<double>> LeaveOneOutWeights() const;
+  // Per measured time, the other times' weights for its sun with `sky`'s mode (0 for itself).
+  std::vector<std::vector<double>> LeaveOneOutWeights(const SkyInterpOptions& sky) const;
   int FindSkyByResidual(const std::vector<std::vector<double>>& loo);
   // A sky-only fallback region that explains nothing: predicted from its measured radiances.
   bool IsMeasuredFallback(size_t region) const;
   bool MeasuredFallback(size_t region, const std::vector<double>& weights,
                         const Eigen::Vector3d* sky_now, Eigen::Vector3d* out) const;
-  void ChooseFallbackFrames(const std::vector<std::vector<double>>& loo);
+  void ChooseFallbackWays(const std::vector<std::vector<double>>& loo_sky,
+                          const std::vector<std::vector<double>>& loo_sun);
   void ChooseResidualFrames(const std::vector<std::vector<double>>& loo);
 };
 

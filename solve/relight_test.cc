@@ -307,17 +307,29 @@ TEST(RelightTest, RegionsTheResidualExplainsAreSky) {
   EXPECT_LE(std::abs(std::remainder((brightest + 0.5) * sector - az_new, 2 * kPi)), sector);
 }
 
+// Region gi of `stored` made a sky-only fallback that explains nothing (an albedo of 8, a 40%
+// residual).
+void MakeUnexplainedFallback(EnvStereoResult* stored, size_t gi) {
+  EnvRegionFit& fit = stored->regions[gi];
+  fit = EnvRegionFit();
+  fit.kind = EnvRegionKind::kSkyOnly;
+  fit.rho_sky = Eigen::Vector3d::Constant(8.0);
+  fit.rel_rms = 0.4;
+  ASSERT_FALSE(SkyOnlyExplains(fit, stored->options));
+}
+
 // A sky-only fallback is a surface lit by the sky alone, carried to the new sun by its normal.
 // One that does not explain its region (an albedo of 8, a 40% residual: a region partly hidden
 // by the building, a haze band) would carry a surface that is not there; the region takes its
-// measured radiances instead, weighted as the sky's times are. One that explains its region
-// (albedo 0.3, 2% residual) stays a surface.
+// measured radiances instead, weighted as the sky's times are: it brightens with the sun's
+// elevation (distant ground, haze), which those weights follow better than the direction's. One
+// that explains its region (albedo 0.3, 2% residual) stays a surface.
 TEST(RelightTest, ASkyOnlyFallbackThatExplainsNothingTakesItsMeasuredRadiances) {
   std::vector<Lighting> day = Day({0.1, 0.14, 0.2}, {1e4, 1e4, 1e4});
   const EnvironmentMap& m0 = day.front().env;
   const size_t gi = static_cast<size_t>((m0.bands_below - 1) * m0.sectors + 2);  // below
   for (size_t t = 0; t < day.size(); ++t) {
-    day[t].env.radiance[gi] = Eigen::Vector3d(40, 50, 60) * (1 + 0.5 * t);
+    day[t].env.radiance[gi] = Eigen::Vector3d(40, 50, 60) * (0.2 + ElevationOf(day[t].sun_dir));
     day[t].env.source[gi] = EnvRegionSource::kObserved;
   }
   const EnvStereoResult fresh = LightingPredictor(day, RelightOptions{}).environment();
@@ -355,7 +367,8 @@ TEST(RelightTest, ASkyOnlyFallbackThatExplainsNothingTakesItsMeasuredRadiances) 
 // radiances, taken relative to each time's fitted sky there and put back on the new time's,
 // predict the measured times from each other better than the radiances do, so it dims with the
 // sky towards a low sun instead of keeping the brightness of the higher suns it was measured
-// under. A region whose radiance holds at every time (a skyline) keeps its radiance.
+// under. A region whose radiance holds at every time (a skyline) keeps its radiance. (Both
+// hold at every time, so the times' weights do not matter.)
 TEST(RelightTest, ASkyOnlyFallbackAboveTheHorizonFollowsTheSkyWhereThatPredictsIt) {
   std::vector<Lighting> day = Day({0.1, 0.14, 0.2}, {1e4, 1e4, 1e4});
   const EnvironmentMap& m0 = day.front().env;
@@ -370,7 +383,7 @@ TEST(RelightTest, ASkyOnlyFallbackAboveTheHorizonFollowsTheSkyWhereThatPredictsI
   };
   std::vector<Eigen::Vector3d> fraction;  // of the fitted sky there, per time
   for (size_t t = 0; t < day.size(); ++t) {
-    fraction.push_back(Eigen::Vector3d(0.5, 0.6, 0.7) * (1 + 0.1 * t));
+    fraction.push_back(Eigen::Vector3d(0.5, 0.6, 0.7));
     day[t].env.radiance[gi] = fraction.back().cwiseProduct(sky_mean(day[t].sky));
     day[t].env.source[gi] = EnvRegionSource::kObserved;
   }
@@ -383,14 +396,7 @@ TEST(RelightTest, ASkyOnlyFallbackAboveTheHorizonFollowsTheSkyWhereThatPredictsI
   RelightOptions options;
   options.sky_residual = false;  // the regions stay fallbacks (the residual could take them)
   EnvStereoResult stored = LightingPredictor(day, options).environment();
-  for (const size_t g : {gi, skyline}) {
-    EnvRegionFit& fit = stored.regions[g];
-    fit = EnvRegionFit();
-    fit.kind = EnvRegionKind::kSkyOnly;
-    fit.rho_sky = Eigen::Vector3d::Constant(8.0);
-    fit.rel_rms = 0.4;
-    ASSERT_FALSE(SkyOnlyExplains(fit, stored.options));
-  }
+  for (const size_t g : {gi, skyline}) ASSERT_NO_FATAL_FAILURE(MakeUnexplainedFallback(&stored, g));
   const LightingPredictor p(day, options, &stored);
   // After sunset's last measured time (the sky dimmed by extinction) and in the afternoon.
   for (const char* local : {"2026-08-25T19:30:00-07:00", "2026-08-25T15:00:00-07:00"}) {
@@ -413,6 +419,42 @@ TEST(RelightTest, ASkyOnlyFallbackAboveTheHorizonFollowsTheSkyWhereThatPredictsI
     }
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(l.env.radiance[skyline][c], held[c], 1e-9 * held[c]);
   }
+}
+
+// A region the stereo could not explain that is bright only when the sun faces it (a west
+// facade among the trees): weighting the times by the sun's elevation would mix the morning's
+// dark with the evening's bright; the times weighted by the angular distance between suns (§5.1
+// as written) predict each measured time from the others better, and the new time takes them.
+TEST(RelightTest, AFallbackLitWhenTheSunFacesItFollowsTheSunsDirection) {
+  std::vector<Lighting> day = Day({0.1, 0.14, 0.2}, {1e4, 1e4, 1e4});
+  const EnvironmentMap& m0 = day.front().env;
+  const size_t gi = static_cast<size_t>((m0.bands_below - 1) * m0.sectors + 2);  // below
+  const Eigen::Vector3d west(-1, 0, 0);
+  const auto facade = [&](const Eigen::Vector3d& sun) -> Eigen::Vector3d {
+    return Eigen::Vector3d(4, 5, 6) + Eigen::Vector3d(60, 50, 40) * std::max(0.0, west.dot(sun));
+  };
+  for (Lighting& l : day) {
+    l.env.radiance[gi] = facade(l.sun_dir);
+    l.env.source[gi] = EnvRegionSource::kObserved;
+  }
+  EnvStereoResult stored = LightingPredictor(day, RelightOptions{}).environment();
+  ASSERT_NO_FATAL_FAILURE(MakeUnexplainedFallback(&stored, gi));
+  const LightingPredictor p(day, RelightOptions{}, &stored);
+  RelightSummary rs;
+  const Lighting l = p.At(ParseIso8601("2026-08-25T16:30:00-07:00"), kSite, &rs);
+  SkyInterpOptions angular;
+  angular.mode = SkyInterpMode::kAngularDistance;
+  const std::vector<double> w = SkyInterpWeights(TimedSkiesOf(day), l.sun_dir, angular);
+  Eigen::Vector3d want = Eigen::Vector3d::Zero(), by_elevation = Eigen::Vector3d::Zero();
+  for (size_t t = 0; t < day.size(); ++t) {
+    want += w[t] * day[t].env.radiance[gi];
+    by_elevation += rs.sky_weights[t] * day[t].env.radiance[gi];
+  }
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(l.env.radiance[gi][c], want[c], 1e-9 * want[c]);
+  // Nearer the facade's brightness under this sun than the elevation's weights come.
+  const Eigen::Vector3d truth = facade(l.sun_dir);
+  EXPECT_LT((want - truth).norm(), 0.5 * (by_elevation - truth).norm())
+      << want.transpose() << " | " << by_elevation.transpose() << " | " << truth.transpose();
 }
 
 TEST(RelightTest, RefusesNightAndNoData) {
