@@ -13,12 +13,12 @@
 namespace rouen {
 namespace {
 
-// --sky-interp: "elevation" (default), "airmass" or "angular" (solve/sky_time.h SkyInterpMode).
+// --sky-interp: "airmass" (default), "elevation" or "angular" (solve/sky_time.h SkyInterpMode).
 constexpr char kSkyInterpHelp[] =
-    "How the sky at a new time is made from the captured ones: elevation (by the sun's "
-    "elevation, log-linear, extrapolates to lower suns), airmass (as elevation, the zenith and "
-    "the gradation dimming along the sun's air mass) or angular (the paper's inverse angular "
-    "distance average, §5.1)";
+    "How the sky at a new time is made from the captured ones: airmass (by the sun's elevation, "
+    "the zenith and the gradation dimming along the sun's air mass, the rest log-linear, "
+    "extrapolating to lower suns), elevation (every part log-linear in the sun's elevation) or "
+    "angular (the paper's inverse angular distance average, §5.1)";
 
 SkyInterpMode ParseSkyInterp(const std::string& text) {
   if (text == "elevation") return SkyInterpMode::kElevation;

@@ -14,7 +14,7 @@ namespace rouen {
 // How lighting is predicted at a time no slot captured: --sky-interp, --no-sky-residual, --pbs,
 // --use-held-out.
 struct PredictionArgs {
-  std::string sky_interp = "elevation";
+  std::string sky_interp = "airmass";
   bool no_sky_residual = false;  // the sky model alone, without the measured residual
   double pbs = 0;                // blocked sunlight fraction (§6.3)
   bool use_held_out = false;     // predict also from held-out slots

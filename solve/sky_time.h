@@ -46,19 +46,18 @@ enum class SkyInterpMode {
   // log value against the sun's air mass (Beer-Lambert: the light they scatter down comes along
   // the sun's slant path); the scattering part Sa keeps its power law. The zenith's line is
   // followed to the new sun itself, past max_extrapolation_deg (where the other parts are held
-  // and relight's sunset extinction dims them, not Lz again). On the Blender worlds the
-  // air-mass line through the four training skies' Lz predicts the held-out one (a sun 3-13 deg
-  // below the lowest) within -4..+5.5%, the power law 2-21% too bright, and the predicted sky
-  // above 30 deg is within -5..0% of the held-out panorama (kElevation: -5..+6%). The held-out
-  // views move by -1.2..+2.2 dB: the landscape's §5.2 prediction at a low sun errs, and a
-  // brighter sky hid part of it on some views (the tower's shaded north view goes from 1.6% to
-  // 2.6% median error), so it is not the default.
+  // and relight's sunset extinction dims them, not Lz again). The default: on the Blender
+  // worlds the air-mass line through the four training skies' Lz predicts the held-out one (a
+  // sun 3-13 deg below the lowest) within -4..+5.5%, the power law 2-21% too bright, and the
+  // predicted sky above 30 deg is within -5..0% of the held-out panorama (kElevation: -5..+6%);
+  // the held-out views' worst gain 0.4-2.3 dB (median errors 4.8% -> 2.5% and 2.2%), the others
+  // move by -1.0..+1.2 dB.
   kAirMass,
 };
 
 struct SkyInterpOptions {
-  SkyInterpMode mode = SkyInterpMode::kElevation;
-  // kElevation: how far beyond the inputs' elevations the line is followed (degrees).
+  SkyInterpMode mode = SkyInterpMode::kAirMass;
+  // kElevation, kAirMass: how far beyond the inputs' elevations the line is followed (degrees).
   double max_extrapolation_deg = 10;
   // Equal-area grid on the upper hemisphere where the averaged parts are evaluated and
   // refitted: `grid_zenith` rings uniform in cos(xi) times `grid_azimuth` columns.

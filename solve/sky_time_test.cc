@@ -274,7 +274,9 @@ TEST(InterpolateSky, ElevationModeFollowsALogLinearSkyBeyondTheInputs) {
   // for them.
   auto bright = [](double el) { return std::pow(std::sin(el * kDeg), 0.6); };
   const std::vector<TimedSky> skies = SkiesDimmedBy(bright);
-  ExpectZenithFollows(skies, bright, {}, /*zenith_held=*/true);
+  SkyInterpOptions elevation;
+  elevation.mode = SkyInterpMode::kElevation;
+  ExpectZenithFollows(skies, bright, elevation, /*zenith_held=*/true);
   // The paper's weighted mean cannot go below the dimmest input.
   const SkyModel paper = InterpolateSky(skies, SunAt(260, 12), PaperInterp(), nullptr);
   EXPECT_GT(paper.channel[0].Lz, 0.5 * bright(20));
@@ -287,10 +289,10 @@ TEST(InterpolateSky, AirMassModeFollowsTheZenithsExtinctionBeyondTheInputs) {
   // the inputs.
   auto bright = [](double el) { return std::exp(-0.12 * KastenYoungAirMass(el * kDeg)); };
   const std::vector<TimedSky> skies = SkiesDimmedBy(bright);
-  SkyInterpOptions air_mass;
-  air_mass.mode = SkyInterpMode::kAirMass;
-  ExpectZenithFollows(skies, bright, air_mass, /*zenith_held=*/false);
-  EXPECT_GT(InterpolateSky(skies, SunAt(260, 12), {}, nullptr).channel[0].Lz,
+  ExpectZenithFollows(skies, bright, {}, /*zenith_held=*/false);  // the default
+  SkyInterpOptions elevation;
+  elevation.mode = SkyInterpMode::kElevation;
+  EXPECT_GT(InterpolateSky(skies, SunAt(260, 12), elevation, nullptr).channel[0].Lz,
             1.01 * 0.5 * bright(12));
 }
 
