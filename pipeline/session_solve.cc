@@ -773,6 +773,7 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   const GroundFieldUse field_use = options.config.ground_field.use;
   std::vector<GroundFieldTime> field_times;
   std::vector<size_t> field_slots;  // index into r.slots of each of field_times
+  const double ground_z = GroundLevel(env_caster);
   // The field from field_times, lent to every slot's lighting.
   auto build_field = [&] {
     GroundFieldSummary gs;
@@ -806,6 +807,9 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
       t.sun_dir = l.sun_dir;
       t.sun_e = l.sun_radiance * l.sun_solid_angle_sr;
       t.sky_e = l.env.HorizontalSkyIrradiance();
+      t.sky = [lighting = &l, ground_z](const Eigen::Vector3d& d) {
+        return lighting->EscapedRadiance(d, ground_z);
+      };
       field_slots.push_back(k);
     }
     build_field();

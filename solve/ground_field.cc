@@ -40,8 +40,10 @@ Eigen::Vector3d LightPerAlbedo(const GroundField& f, const Eigen::Vector3d& q, b
                                const Eigen::Vector3d& sun_dir, const Eigen::Vector3d& sun_e,
                                const Eigen::Vector3d& sky_e, const Eigen::Vector3d& walls_e,
                                const Eigen::Vector3d& to_viewer, double retro) {
-  Eigen::Vector3d e =
-      (sky_e * f.SkyVisibility(q) + walls_e) * AmbientRetroFactor(retro, kUp, to_viewer);
+  // walls_e may take away the sky the walls hide beyond its mean (HiddenSkyExcess): the light
+  // never goes below none.
+  Eigen::Vector3d e = (sky_e * f.SkyVisibility(q) + walls_e).cwiseMax(0.0) *
+                      AmbientRetroFactor(retro, kUp, to_viewer);
   if (!shaded && sun_dir.z() > 0)
     e += sun_e * (sun_dir.z() * RetroFactor(retro, kUp, sun_dir, to_viewer));
   return e / kPi;
@@ -138,10 +140,14 @@ void FillFromNearest(int nx, int ny, std::vector<Eigen::Vector3f>* values,
   }
 }
 
-// The walls' irradiance on `cell` at time t (GroundFieldTime::walls_e); zero where not given.
-Eigen::Vector3d WallsAt(const GroundFieldTime& t, int cell) {
-  return t.walls_e.empty() || cell < 0 ? Eigen::Vector3d(Eigen::Vector3d::Zero())
-                                       : Eigen::Vector3d(t.walls_e[cell].cast<double>());
+// Per time and cell, what lights the cell beside the sun and the sky's mean: the walls'
+// irradiance (GroundFieldTime::walls_e) less the excess of the sky they hide (HiddenSkyExcess,
+// with GroundFieldTime::sky); empty per time where neither is given.
+using CellLight = std::vector<std::vector<Eigen::Vector3d>>;
+
+Eigen::Vector3d ExtraAt(const CellLight& extra, int time, int cell) {
+  return cell < 0 || extra[time].empty() ? Eigen::Vector3d(Eigen::Vector3d::Zero())
+                                         : extra[time][cell];
 }
 
 struct RetroConsistency {
@@ -157,7 +163,8 @@ struct RetroConsistency {
 // candidates over [kRetroMin, kRetroMax] in steps of 0.25, refined by a parabola. `given` is
 // kept when fewer than kMinCells cells are seen twice.
 RetroConsistency FitRetroByConsistency(std::vector<GroundPixel> sample, const GroundField& f,
-                                       const std::vector<GroundFieldTime>& times, double given) {
+                                       const std::vector<GroundFieldTime>& times,
+                                       const CellLight& extra, double given) {
   constexpr int kMinPixels = 4, kMinCells = 20;
   int panoramas = 1;
   for (const GroundFieldTime& t : times)
@@ -181,7 +188,7 @@ RetroConsistency FitRetroByConsistency(std::vector<GroundPixel> sample, const Gr
         for (; i < sample.size() && sample[i].cell == cell && pair_of(sample[i]) == pair; ++i) {
           const GroundPixel& g = sample[i];
           const Eigen::Vector3d rho =
-              g.Albedo(f, times[g.time], WallsAt(times[g.time], g.cell), retro);
+              g.Albedo(f, times[g.time], ExtraAt(extra, g.time, g.cell), retro);
           if (!rho.allFinite()) continue;
           sum += rho;
           ++count;
@@ -388,6 +395,17 @@ GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const Ra
   const GroundWalls seen = CastGroundWalls(f, model, false);
   f.sky_visibility.resize(n);
   for (int c = 0; c < n; ++c) f.sky_visibility[c] = seen.SkyVisibility(c);
+  CellLight extra(times.size());
+  for (size_t ti = 0; ti < times.size(); ++ti) {
+    const GroundFieldTime& t = times[ti];
+    if (t.walls_e.empty() && !t.sky) continue;
+    extra[ti] = HiddenSkyExcess(seen, t.sky, t.sky_e);
+    extra[ti].resize(n, Eigen::Vector3d::Zero());
+    for (int c = 0; c < n; ++c) {
+      extra[ti][c] = -extra[ti][c];
+      if (!t.walls_e.empty()) extra[ti][c] += t.walls_e[c].cast<double>();
+    }
+  }
 
   // The fit's retro from a sample of the sunlit pixels (at most kFitPixels of all), then per time
   // each cell's mean albedo over every pixel that fell in it, sunlit and shaded apart. A shaded
@@ -408,7 +426,7 @@ GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const Ra
     ForEachGroundPixel(times, model, f, stride, nullptr, [&](const GroundPixel& g) {
       if (g.cell >= 0 && !g.shaded) sample.push_back(g);
     });
-    const RetroConsistency fit = FitRetroByConsistency(sample, f, times, retro);
+    const RetroConsistency fit = FitRetroByConsistency(sample, f, times, extra, retro);
     f.retro = retro = fit.retro;
     s.retro_cost_given = fit.cost_given;
     s.retro_cost = fit.cost;
@@ -432,7 +450,7 @@ GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const Ra
       if (current >= 0) close_time();
       current = g.time;
     }
-    const Eigen::Vector3d rho = g.Albedo(f, times[g.time], WallsAt(times[g.time], g.cell), f.retro);
+    const Eigen::Vector3d rho = g.Albedo(f, times[g.time], ExtraAt(extra, g.time, g.cell), f.retro);
     if (!rho.allFinite()) return;
     if (g.cell < 0) {
       far_sum += rho;
@@ -487,18 +505,36 @@ GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const Ra
   return f;
 }
 
+std::vector<Eigen::Vector3d> HiddenSkyExcess(const GroundWalls& walls, const SkyByDirection& sky,
+                                             const Eigen::Vector3d& sky_e) {
+  if (!sky) return {};
+  std::vector<Eigen::Vector3d> out(walls.weight.size(), Eigen::Vector3d::Zero());
+  tbb::parallel_for(size_t{0}, out.size(), [&](size_t c) {
+    for (int k = walls.begin[c]; k < walls.begin[c + 1]; ++k) {
+      const GroundWalls::Hit& h = walls.hits[k];
+      const Eigen::Vector3d d = (h.position - h.from).cast<double>().normalized();
+      if (d.allFinite() && d.z() > 0) out[c] += walls.weight[c] * (kPi * sky(d) - sky_e);
+    }
+  });
+  return out;
+}
+
 GroundLight::GroundLight(const GroundField& field, const RayCaster& model,
                          const Eigen::Vector3d& sun_dir, const Eigen::Vector3d& sun_e,
-                         const Eigen::Vector3d& sky_e)
-    : field_(&field), model_(&model), sun_dir_(sun_dir), sun_e_(sun_e), sky_e_(sky_e) {}
+                         const Eigen::Vector3d& sky_e, const SkyByDirection& sky)
+    : field_(&field), model_(&model), sun_dir_(sun_dir), sun_e_(sun_e), sky_e_(sky_e) {
+  if (sky) hidden_excess_ = HiddenSkyExcess(CastGroundWalls(field, model, true), sky, sky_e);
+}
 
 Eigen::Vector3d GroundLight::Radiance(const Eigen::Vector3d& q,
                                       const Eigen::Vector3d& to_viewer) const {
   const GroundField& f = *field_;
   const int cell = f.Cell(q.x(), q.y());
+  const Eigen::Vector3d hidden = cell >= 0 && static_cast<size_t>(cell) < hidden_excess_.size()
+                                     ? hidden_excess_[cell]
+                                     : Eigen::Vector3d::Zero();
   return f.Albedo(cell).cwiseProduct(LightPerAlbedo(f, q, InShadow(*model_, q, sun_dir_), sun_dir_,
-                                                    sun_e_, sky_e_, Eigen::Vector3d::Zero(),
-                                                    to_viewer, f.retro));
+                                                    sun_e_, sky_e_, -hidden, to_viewer, f.retro));
 }
 
 Eigen::Vector3d GroundLight::Arriving(const Eigen::Vector3d& origin,

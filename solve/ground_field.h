@@ -15,6 +15,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <functional>
 #include <nlohmann/json_fwd.hpp>
 #include <vector>
 
@@ -61,12 +62,19 @@ struct GroundFieldOptions {
   void Validate() const;  // throws rouen::Error naming the bad field
 };
 
+// The sky's radiance arriving from a unit direction above the horizon (RGB; e.g. a lighting's
+// escaped radiance).
+using SkyByDirection = std::function<Eigen::Vector3d(const Eigen::Vector3d&)>;
+
 // One time's panoramas and what lit the ground then.
 struct GroundFieldTime {
   std::vector<EnvPanorama> panoramas;  // landscape panoramas (sky_only ones are skipped)
   Eigen::Vector3d sun_dir = Eigen::Vector3d::UnitZ();  // unit ENU
   Eigen::Vector3d sun_e = Eigen::Vector3d::Zero();     // sun radiance x solid angle, RGB
   Eigen::Vector3d sky_e = Eigen::Vector3d::Zero();     // sky irradiance on level open ground
+  // The sky by direction: a cell loses the sky its walls hide as it is there (HiddenSkyExcess);
+  // empty: as the sky's mean (sky_e x the hidden share).
+  SkyByDirection sky;
   // The walls' irradiance on each cell of the field being built (its layout as a field built
   // without it has), from the model solved with that field (GroundWallsIrradiance,
   // solve/irradiance.h); empty: not known.
@@ -150,14 +158,25 @@ GroundField BuildGroundField(const std::vector<GroundFieldTime>& times, const Ra
                              double retro, const GroundFieldOptions& options,
                              GroundFieldSummary* summary = nullptr);
 
+// Per cell of `walls`' field: how much more sky irradiance its walls hide than the sky's mean
+// would (sky_e x the share of its rays they stop): sum over the rays a wall stops of the ray's
+// weight x (pi L(ray) - sky_e). A spot beside a wall facing away from a low sun loses the bright
+// sky round the sun, not an average sky; a cell no wall hides any sky of has 0. Empty when
+// `sky` is.
+std::vector<Eigen::Vector3d> HiddenSkyExcess(const GroundWalls& walls, const SkyByDirection& sky,
+                                             const Eigen::Vector3d& sky_e);
+
 // The ground at one time: the field lit by a sun and a sky, the model's shadow where each
 // query meets the ground (one shadow ray: a cell's 2 m would make the shadow's edge a staircase
 // and darken the cells whose centre lies under a wall). The walls' light on the ground depends
 // on the model's albedos: the interreflection adds it (GroundBounce, solve/irradiance.h).
 class GroundLight {
  public:
+  // With `sky`, the sky a cell's walls hide is taken as it is in their directions
+  // (HiddenSkyExcess), as BuildGroundField read the albedos given GroundFieldTime::sky.
   GroundLight(const GroundField& field, const RayCaster& model, const Eigen::Vector3d& sun_dir,
-              const Eigen::Vector3d& sun_e, const Eigen::Vector3d& sky_e);
+              const Eigen::Vector3d& sun_e, const Eigen::Vector3d& sky_e,
+              const SkyByDirection& sky = {});
   // Radiance leaving ground point q (on the ground plane) towards unit direction `to_viewer`.
   Eigen::Vector3d Radiance(const Eigen::Vector3d& q, const Eigen::Vector3d& to_viewer) const;
   // Radiance arriving from unit direction d (d.z < 0) at `origin` (above the ground), the ray
@@ -169,6 +188,7 @@ class GroundLight {
   const GroundField* field_;
   const RayCaster* model_;
   Eigen::Vector3d sun_dir_, sun_e_, sky_e_;
+  std::vector<Eigen::Vector3d> hidden_excess_;  // per cell (HiddenSkyExcess); empty: none
 };
 
 // The options as SolveConfigJson records them ([ground_field]; ApplySolveConfig reads them).

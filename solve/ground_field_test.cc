@@ -512,5 +512,44 @@ TEST(GroundFieldTest, AWallLightsTheGroundAndTheGroundTheWall) {
   EXPECT_NE(GroundBouncesOf({l}, rc, g, cache)[0], nullptr);
 }
 
+// Beside a long 20 m wall north of it, a spot of ground loses the sky the wall hides as that sky
+// is (HiddenSkyExcess), not as the sky's mean: under a sky ten times brighter in the north (a low
+// sun's side) it keeps the southern half and the sliver of northern sky above the wall,
+// pi L_s / 2 + pi L_n (1/2 - h) with h the share of its rays the wall stops (every one of them
+// northwards); the mean would give it (1 - h) of the whole sky's irradiance, three times as much
+// here. Under a uniform sky both are the same.
+TEST(GroundFieldTest, TheSkyAWallHidesIsTheSkyInItsDirections) {
+  Mesh m;
+  m.AddPolygon({{-100, 0, 0}, {-100, 0, 20}, {100, 0, 20}, {100, 0, 0}}, m.AddBlock("wall"));
+  const RayCaster model(m);
+  const std::shared_ptr<GroundField> field = UniformField(2, 20, -20);
+  field->sky_rays = 1024;
+  const GroundWalls all = CastGroundWalls(*field, model, false);
+  for (int c = 0; c < field->nx * field->ny; ++c) field->sky_visibility[c] = all.SkyVisibility(c);
+  const Eigen::Vector3d q(1, -1, 0);  // the centre of the cell at the wall's foot
+  const int cell = field->Cell(q.x(), q.y());
+  ASSERT_GE(cell, 0);
+  const double h = 1 - field->sky_visibility[cell];
+  ASSERT_GT(h, 0.3) << "the wall hides little of the cell's sky";
+  const double ln = 10, ls = 1;
+  const auto north_bright = [&](const Eigen::Vector3d& d) {
+    return Eigen::Vector3d::Constant(d.y() > 0 ? ln : ls);
+  };
+  const Eigen::Vector3d sky_e = Eigen::Vector3d::Constant(kPi * (ln + ls) / 2);
+  const Eigen::Vector3d no_sun = Eigen::Vector3d::Zero(), sun = SunAt(180, -10);
+  const Eigen::Vector3d up(0, 0, 1);
+  const double rho = 0.3;
+  const double want = rho / kPi * (kPi * ls / 2 + kPi * ln * (0.5 - h));
+  const GroundLight directional(*field, model, sun, no_sun, sky_e, north_bright);
+  const GroundLight mean(*field, model, sun, no_sun, sky_e);
+  EXPECT_NEAR(directional.Radiance(q, up).x(), want, 1e-6 * want);
+  EXPECT_GT(mean.Radiance(q, up).x(), 2 * want);
+  EXPECT_NEAR(mean.Radiance(q, up).x(), rho / kPi * sky_e.x() * (1 - h), 1e-6);
+  // A uniform sky of the same irradiance: the same light either way.
+  const GroundLight uniform(*field, model, sun, no_sun, sky_e,
+                            [&](const Eigen::Vector3d&) { return Eigen::Vector3d(sky_e / kPi); });
+  EXPECT_NEAR(uniform.Radiance(q, up).x(), mean.Radiance(q, up).x(), 1e-9);
+}
+
 }  // namespace
 }  // namespace rouen

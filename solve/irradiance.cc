@@ -333,7 +333,10 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
     }
     if (lighting.use_env && lighting.ground) {
       ls.ground = std::make_unique<GroundLight>(*lighting.ground, model, s, ls.sun_e,
-                                                lighting.env.HorizontalSkyIrradiance());
+                                                lighting.env.HorizontalSkyIrradiance(),
+                                                [&lighting, ground_z](const Eigen::Vector3d& d) {
+                                                  return lighting.EscapedRadiance(d, ground_z);
+                                                });
       if (vector_flux) {
         ls.above_only = lighting.env;
         ZeroBelowHorizon(&ls.above_only);
