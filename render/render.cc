@@ -102,8 +102,21 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
       lighting.env.radiance.size() ==
           static_cast<size_t>(lighting.env.num_regions()) * lighting.env.layer_z.size();
 
-  // *hit_model: whether the ray hits the model (the alpha channel's coverage).
-  auto shade = [&](const Eigen::Vector3d& dir, bool* hit_model) -> Eigen::Vector3d {
+  // Where a supersample looks at the sun (one point of the disc each, or its centre), and the
+  // disc's rim, which tells a corner in part of the sun (the penumbra) from one in all or none.
+  const std::vector<Eigen::Vector3d> disc =
+      SunDiscDirections(s, lighting.SunAngularRadius(), options.soft_shadows ? ss * ss : 1);
+  const int disc_points = static_cast<int>(disc.size());
+  int disc_stride = 5;  // a prime that does not divide the count: coprime with it
+  while (disc_points % disc_stride == 0) disc_stride += 2;
+  const std::vector<Eigen::Vector3d> rim =
+      options.soft_shadows ? SunDiscDirections(s, lighting.SunAngularRadius(), 0, 4)
+                           : std::vector<Eigen::Vector3d>();
+
+  // *hit_model: whether the ray hits the model (the alpha channel's coverage). `to_sun`: the
+  // shadow ray's direction (a point of the sun's disc).
+  auto shade = [&](const Eigen::Vector3d& dir, const Eigen::Vector3d& to_sun,
+                   bool* hit_model) -> Eigen::Vector3d {
     const RayHit hit = model.Intersect(pose.position, dir, 0.0);
     *hit_model = hit.hit;
     if (!hit.hit) {
@@ -143,7 +156,7 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
     const SpecularLobe sky_lobe = BlockLobe(albedo.sky_lobes, block);
     if (!sky_lobe.IsZero())
       specular = SkyLobeLight(sky_lobe, n, -dir, p, lighting, model, options.sky_lobe_samples);
-    if (cosi > 0 && !model.Occluded(p, s, 0.0)) {
+    if (cosi > 0 && !model.Occluded(p, to_sun, 0.0)) {
       e_sun = sun_e * (cosi * RetroFactor(BlockRetro(albedo.retro, block), n, s, -dir));
       // §4.2: the block's sun lobe (eq. 13) under the sun's irradiance on the surface.
       const SpecularLobe lobe = BlockLobe(albedo.sun_lobes, block);
@@ -157,7 +170,8 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
 
   // What a ray through image point (x, y) sees, coarsely: the triangle it hits and whether the
   // sun reaches that point (2 t + lit), -1 when it escapes, -2 when it escapes near the sun
-  // disc or cannot be cast. Pixels whose four corners agree are shaded once.
+  // disc, cannot be cast, or (soft_shadows) sees part of the disc's rim. Pixels whose four
+  // corners agree (and are not -2) are shaded once.
   const double cos_near_sun = std::cos(3 * lighting.SunAngularRadius());
   auto corner_key = [&](double x, double y) -> int64_t {
     Eigen::Vector3d d = pose.rotation * Unproject(intrinsics, Eigen::Vector2d(x, y));
@@ -169,6 +183,8 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
     if (n.dot(d) > 0) n = -n;
     const Eigen::Vector3d p = pose.position + hit.t * d + offset * n;
     const bool lit = n.dot(s) > 0 && !model.Occluded(p, s, 0.0);
+    for (const Eigen::Vector3d& r : rim)
+      if (n.dot(s) > 0 && model.Occluded(p, r, 0.0) == lit) return -2;
     return 2 * static_cast<int64_t>(hit.triangle) + (lit ? 1 : 0);
   };
   std::vector<int64_t> corners;
@@ -190,13 +206,19 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
       Eigen::Vector3d sum = Eigen::Vector3d::Zero();
       int hits = 0;
       const int n_sub = uniform(x, y) ? 1 : ss;
+      // The sun's disc points shuffled over the pixel's supersamples (a stride coprime with
+      // their count, an offset per pixel): no pattern from pixel to pixel.
+      const int offset_k =
+          static_cast<int>((7919 * static_cast<int64_t>(x) + 104729 * y) % disc_points);
       for (int a = 0; a < n_sub; ++a) {
         for (int b = 0; b < n_sub; ++b) {
           const Eigen::Vector2d px(x + (b + 0.5) / n_sub, y + (a + 0.5) / n_sub);
           const Eigen::Vector3d d = pose.rotation * Unproject(intrinsics, px);
           if (!d.allFinite() || d.squaredNorm() == 0) continue;
           bool hit = false;
-          sum += shade(d.normalized(), &hit);
+          const Eigen::Vector3d& to_sun =
+              n_sub == 1 ? s : disc[(offset_k + disc_stride * (a * n_sub + b)) % disc_points];
+          sum += shade(d.normalized(), to_sun, &hit);
           hits += hit;
         }
       }

@@ -24,6 +24,11 @@ struct RenderOptions {
   // centre, where the smooth albedo and irradiance make the box filter's mean the centre's
   // value to second order; others get supersample^2 samples. false: every pixel.
   bool adaptive = true;
+  // The sun as the disc it is (0.53 deg across): a shadow's edge is a penumbra, as wide as the
+  // occluder is far times the disc's angle (0.5 m from 60 m away). Each of an edge pixel's
+  // supersamples looks at the sun through another point of the disc, and a pixel whose corners
+  // see only part of the disc is an edge pixel. false: a point sun (crisp shadows).
+  bool soft_shadows = true;
   bool interpolate = true;      // smooth albedo / E_se between grid points; false: nearest point
   bool draw_background = true;  // sky, environment and sun where rays escape; false: 0
   // A fourth channel, alpha: the fraction of the pixel's samples whose ray hits the model (1 on
@@ -41,7 +46,8 @@ struct RenderStats {
 };
 
 // Per pixel: a ray into the model; on a hit L = (rho_sun E_sun D + rho_se E_se) / pi with E_sun
-// computed at the hit with its own shadow ray (crisp shadows), D the block's RetroFactor
+// computed at the hit with its own shadow ray (through a point of the sun's disc with
+// soft_shadows), D the block's RetroFactor
 // (albedo.retro, solve/retro.h; 1 when Lambertian) and rho, E_se interpolated from
 // the grid; on escape the sun disc (sun_radiance) within the sun's radius, the sky model above
 // the horizon and the environment map below. `irr` is the irradiance of `lighting` on the grid

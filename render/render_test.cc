@@ -136,6 +136,42 @@ TEST(RenderTest, AdaptiveSupersamplingAgreesWithFullAndCastsFewerRays) {
   EXPECT_LT(s_adaptive.rays, s_full.rays / 4);
 }
 
+// The sun as a disc: with a sun 6 deg across (its disc at the slab's height 8 m up a circle of
+// r = 8 tan 3 deg = 0.42 m round the plaza point), the shadow of the 1 m slab is a penumbra whose
+// visible part of the disc is the circle's area outside the slab's square: 0 under its middle,
+// 1/2 under its edge, 1 - (r^2 acos(d/r) - d sqrt(r^2 - d^2)) / (pi r^2) at d = 0.25 m outside
+// it (0.855), 1 beyond r. A point sun's shadow is crisp: 1 and 0 there.
+TEST(RenderTest, TheSunsDiscCastsAPenumbra) {
+  Fixture f = Make();
+  const double radius = 3 * kDeg;
+  f.lighting.sun_solid_angle_sr = 2 * kPi * (1 - std::cos(radius));
+  for (Eigen::Vector3d& rho : f.albedo.rho_se) rho.setZero();  // the sun term alone
+  const Intrinsics k = Intrinsics::PinholeFov(160, 120, 60);
+  const Pose pose = Pose::LookAt({0, -15, 10}, {0, 0, 0});
+  const double r = 8 * std::tan(radius), d = 0.25;
+  const double outside =
+      1 - (r * r * std::acos(d / r) - d * std::sqrt(r * r - d * d)) / (kPi * r * r);
+  const double full = 0.5 * 1e4 * f.lighting.sun_solid_angle_sr / kPi;  // rho_sun E_sun / pi
+  auto visible_at = [&](const Image& img, double x) {
+    const auto px = Project(k, pose.WorldToCamera(Eigen::Vector3d(x, 0, 0)));
+    EXPECT_TRUE(px.has_value());
+    return img.at(static_cast<int>(px->x()), static_cast<int>(px->y()), 1) / full;
+  };
+  const Image soft =
+      RenderView(f.mesh, f.grid, *f.rc, f.albedo, f.lighting, f.irr, k, pose, RenderOptions{});
+  // 16 points of the disc per pixel: the fraction to about 1/16.
+  EXPECT_NEAR(visible_at(soft, 0.0), 0.0, 0.07);
+  EXPECT_NEAR(visible_at(soft, 0.5), 0.5, 0.07);
+  EXPECT_NEAR(visible_at(soft, 0.5 + d), outside, 0.07);
+  EXPECT_NEAR(visible_at(soft, 0.5 + r + 0.1), 1.0, 1e-6);  // float pixels
+  RenderOptions point;
+  point.soft_shadows = false;
+  const Image crisp =
+      RenderView(f.mesh, f.grid, *f.rc, f.albedo, f.lighting, f.irr, k, pose, point);
+  EXPECT_NEAR(visible_at(crisp, 0.2), 0.0, 1e-6);
+  EXPECT_NEAR(visible_at(crisp, 0.5 + d), 1.0, 1e-6);
+}
+
 // Pixel (80, 100) of a grazing view of the plaza (block 0), green, rendered Lambertian and with
 // the plaza's retro 1 (the slab has no entry: Lambertian), and the ray to it.
 struct RetroPixel {

@@ -34,6 +34,26 @@ double Seconds(std::chrono::steady_clock::time_point start) {
 
 }  // namespace
 
+std::vector<Eigen::Vector3d> SunDiscDirections(const Eigen::Vector3d& sun_dir,
+                                               double angular_radius, int n, int rim) {
+  std::vector<Eigen::Vector3d> out;
+  if (n == 1) out.push_back(sun_dir);
+  Eigen::Vector3d t, b;
+  TangentFrame(sun_dir, &t, &b);
+  const double radius = std::tan(angular_radius);
+  for (int m = 0; m < n && n > 1; ++m) {
+    // Fibonacci spiral over the disc: uniform in area.
+    const double rr = radius * std::sqrt((m + 0.5) / n);
+    const double phi = m * 2.399963229728653;
+    out.push_back((sun_dir + rr * (std::cos(phi) * t + std::sin(phi) * b)).normalized());
+  }
+  for (int m = 0; m < rim; ++m) {
+    const double phi = 2 * kPi * m / rim;
+    out.push_back((sun_dir + radius * (std::cos(phi) * t + std::sin(phi) * b)).normalized());
+  }
+  return out;
+}
+
 double Lighting::SunAngularRadius() const {
   // Omega = 2 pi (1 - cos r)
   const double c = 1.0 - sun_solid_angle_sr / (2 * kPi);
@@ -318,19 +338,7 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
     const Eigen::Vector3d s = lighting.sun_dir;
     ls.sun_e = lighting.sun_radiance * lighting.sun_solid_angle_sr;
     // Sun-disc sample directions (stratified rings) for soft shadow edges.
-    if (options.sun_samples == 1) {
-      ls.disc.push_back(s);
-    } else {
-      Eigen::Vector3d t, b;
-      TangentFrame(s, &t, &b);
-      const double radius = std::tan(lighting.SunAngularRadius());
-      for (int m = 0; m < options.sun_samples; ++m) {
-        // Fibonacci spiral over the disc: uniform in area.
-        const double rr = radius * std::sqrt((m + 0.5) / options.sun_samples);
-        const double phi = m * 2.399963229728653;
-        ls.disc.push_back((s + rr * (std::cos(phi) * t + std::sin(phi) * b)).normalized());
-      }
-    }
+    ls.disc = SunDiscDirections(s, lighting.SunAngularRadius(), options.sun_samples);
     if (lighting.use_env && lighting.ground) {
       ls.ground = std::make_unique<GroundLight>(*lighting.ground, model, s, ls.sun_e,
                                                 lighting.env.HorizontalSkyIrradiance(),

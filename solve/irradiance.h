@@ -148,6 +148,12 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
                                               const std::vector<Lighting>& lightings,
                                               const IrradianceOptions& options = {});
 
+// n unit directions spread over the sun's disc of `angular_radius` (radians) around unit sun_dir,
+// uniform in area (a Fibonacci spiral from the centre out; n = 1: the centre); `rim` more on the
+// disc's edge, evenly round it, appended.
+std::vector<Eigen::Vector3d> SunDiscDirections(const Eigen::Vector3d& sun_dir,
+                                               double angular_radius, int n, int rim = 0);
+
 // Beyond §4.1: the light the model's faces send each other by way of the ground field
 // (Lighting::ground): the walls light the ground around them (GroundWalls), the ground lights
 // the faces. Geometry only, shared by every time lit by that field.
