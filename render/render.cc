@@ -107,8 +107,8 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
   const std::vector<Eigen::Vector3d> disc =
       SunDiscDirections(s, lighting.SunAngularRadius(), options.soft_shadows ? ss * ss : 1);
   const int disc_points = static_cast<int>(disc.size());
-  int disc_stride = 5;  // a prime that does not divide the count: coprime with it
-  while (disc_points % disc_stride == 0) disc_stride += 2;
+  // A stride coprime with the count (a square of at most 16^2: 5, or 7 when 5 divides it).
+  const int disc_stride = disc_points % 5 == 0 ? 7 : 5;
   const std::vector<Eigen::Vector3d> rim =
       options.soft_shadows ? SunDiscDirections(s, lighting.SunAngularRadius(), 0, 4)
                            : std::vector<Eigen::Vector3d>();
@@ -182,9 +182,10 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
     Eigen::Vector3d n = mesh.Normal(hit.triangle);
     if (n.dot(d) > 0) n = -n;
     const Eigen::Vector3d p = pose.position + hit.t * d + offset * n;
-    const bool lit = n.dot(s) > 0 && !model.Occluded(p, s, 0.0);
-    for (const Eigen::Vector3d& r : rim)
-      if (n.dot(s) > 0 && model.Occluded(p, r, 0.0) == lit) return -2;
+    const bool faces_sun = n.dot(s) > 0;
+    const bool lit = faces_sun && !model.Occluded(p, s, 0.0);
+    for (size_t k = 0; faces_sun && k < rim.size(); ++k)
+      if (model.Occluded(p, rim[k], 0.0) == lit) return -2;
     return 2 * static_cast<int64_t>(hit.triangle) + (lit ? 1 : 0);
   };
   std::vector<int64_t> corners;

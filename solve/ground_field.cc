@@ -521,10 +521,13 @@ std::vector<Eigen::Vector3d> HiddenSkyExcess(const GroundWalls& walls, const Sky
 
 GroundLight::GroundLight(const GroundField& field, const RayCaster& model,
                          const Eigen::Vector3d& sun_dir, const Eigen::Vector3d& sun_e,
-                         const Eigen::Vector3d& sky_e, const SkyByDirection& sky)
-    : field_(&field), model_(&model), sun_dir_(sun_dir), sun_e_(sun_e), sky_e_(sky_e) {
-  if (sky) hidden_excess_ = HiddenSkyExcess(CastGroundWalls(field, model, true), sky, sky_e);
-}
+                         const Eigen::Vector3d& sky_e, std::vector<Eigen::Vector3d> hidden_excess)
+    : field_(&field),
+      model_(&model),
+      sun_dir_(sun_dir),
+      sun_e_(sun_e),
+      sky_e_(sky_e),
+      hidden_excess_(std::move(hidden_excess)) {}
 
 Eigen::Vector3d GroundLight::Radiance(const Eigen::Vector3d& q,
                                       const Eigen::Vector3d& to_viewer) const {

@@ -172,11 +172,12 @@ std::vector<Eigen::Vector3d> HiddenSkyExcess(const GroundWalls& walls, const Sky
 // on the model's albedos: the interreflection adds it (GroundBounce, solve/irradiance.h).
 class GroundLight {
  public:
-  // With `sky`, the sky a cell's walls hide is taken as it is in their directions
-  // (HiddenSkyExcess), as BuildGroundField read the albedos given GroundFieldTime::sky.
+  // `hidden_excess` (per cell, HiddenSkyExcess of the field's walls under this time's sky;
+  // empty: none): the sky a cell's walls hide taken as it is in their directions, as
+  // BuildGroundField read the albedos given GroundFieldTime::sky.
   GroundLight(const GroundField& field, const RayCaster& model, const Eigen::Vector3d& sun_dir,
               const Eigen::Vector3d& sun_e, const Eigen::Vector3d& sky_e,
-              const SkyByDirection& sky = {});
+              std::vector<Eigen::Vector3d> hidden_excess = {});
   // Radiance leaving ground point q (on the ground plane) towards unit direction `to_viewer`.
   Eigen::Vector3d Radiance(const Eigen::Vector3d& q, const Eigen::Vector3d& to_viewer) const;
   // Radiance arriving from unit direction d (d.z < 0) at `origin` (above the ground), the ray

@@ -540,14 +540,18 @@ TEST(GroundFieldTest, TheSkyAWallHidesIsTheSkyInItsDirections) {
   const Eigen::Vector3d up(0, 0, 1);
   const double rho = 0.3;
   const double want = rho / kPi * (kPi * ls / 2 + kPi * ln * (0.5 - h));
-  const GroundLight directional(*field, model, sun, no_sun, sky_e, north_bright);
+  const GroundWalls shaded = CastGroundWalls(*field, model, true);
+  const GroundLight directional(*field, model, sun, no_sun, sky_e,
+                                HiddenSkyExcess(shaded, north_bright, sky_e));
   const GroundLight mean(*field, model, sun, no_sun, sky_e);
   EXPECT_NEAR(directional.Radiance(q, up).x(), want, 1e-6 * want);
   EXPECT_GT(mean.Radiance(q, up).x(), 2 * want);
   EXPECT_NEAR(mean.Radiance(q, up).x(), rho / kPi * sky_e.x() * (1 - h), 1e-6);
   // A uniform sky of the same irradiance: the same light either way.
-  const GroundLight uniform(*field, model, sun, no_sun, sky_e,
-                            [&](const Eigen::Vector3d&) { return Eigen::Vector3d(sky_e / kPi); });
+  const GroundLight uniform(
+      *field, model, sun, no_sun, sky_e,
+      HiddenSkyExcess(
+          shaded, [&](const Eigen::Vector3d&) { return Eigen::Vector3d(sky_e / kPi); }, sky_e));
   EXPECT_NEAR(uniform.Radiance(q, up).x(), mean.Radiance(q, up).x(), 1e-9);
 }
 

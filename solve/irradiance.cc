@@ -36,16 +36,19 @@ double Seconds(std::chrono::steady_clock::time_point start) {
 
 std::vector<Eigen::Vector3d> SunDiscDirections(const Eigen::Vector3d& sun_dir,
                                                double angular_radius, int n, int rim) {
-  std::vector<Eigen::Vector3d> out;
-  if (n == 1) out.push_back(sun_dir);
   Eigen::Vector3d t, b;
   TangentFrame(sun_dir, &t, &b);
   const double radius = std::tan(angular_radius);
-  for (int m = 0; m < n && n > 1; ++m) {
-    // Fibonacci spiral over the disc: uniform in area.
-    const double rr = radius * std::sqrt((m + 0.5) / n);
-    const double phi = m * 2.399963229728653;
-    out.push_back((sun_dir + rr * (std::cos(phi) * t + std::sin(phi) * b)).normalized());
+  std::vector<Eigen::Vector3d> out;
+  if (n == 1) {
+    out.push_back(sun_dir);
+  } else {
+    for (int m = 0; m < n; ++m) {
+      // Fibonacci spiral over the disc: uniform in area.
+      const double rr = radius * std::sqrt((m + 0.5) / n);
+      const double phi = m * 2.399963229728653;
+      out.push_back((sun_dir + rr * (std::cos(phi) * t + std::sin(phi) * b)).normalized());
+    }
   }
   for (int m = 0; m < rim; ++m) {
     const double phi = 2 * kPi * m / rim;
@@ -324,6 +327,9 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
 
   const int nl = static_cast<int>(lightings.size());
   std::vector<LightingSetup> setup(nl);
+  // The walls each ground field's cells see (geometry only): cast once per field, shared by
+  // every lighting it lights.
+  std::vector<std::pair<const GroundField*, GroundWalls>> field_walls;
   // Vector flux: one set of region polygons per environment layout, one sky tree, shared by
   // every lighting (and each point's clipping by every lighting that uses it).
   std::vector<std::unique_ptr<EnvironmentRegions>> layouts;
@@ -340,11 +346,21 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
     // Sun-disc sample directions (stratified rings) for soft shadow edges.
     ls.disc = SunDiscDirections(s, lighting.SunAngularRadius(), options.sun_samples);
     if (lighting.use_env && lighting.ground) {
-      ls.ground = std::make_unique<GroundLight>(*lighting.ground, model, s, ls.sun_e,
-                                                lighting.env.HorizontalSkyIrradiance(),
-                                                [&lighting, ground_z](const Eigen::Vector3d& d) {
-                                                  return lighting.EscapedRadiance(d, ground_z);
-                                                });
+      const GroundField* field = lighting.ground.get();
+      auto walls = std::find_if(field_walls.begin(), field_walls.end(),
+                                [field](const auto& fw) { return fw.first == field; });
+      if (walls == field_walls.end())
+        walls = field_walls.insert(field_walls.end(),
+                                   {field, CastGroundWalls(*field, model, /*only_shaded=*/true)});
+      const Eigen::Vector3d sky_e = lighting.env.HorizontalSkyIrradiance();
+      ls.ground =
+          std::make_unique<GroundLight>(*field, model, s, ls.sun_e, sky_e,
+                                        HiddenSkyExcess(
+                                            walls->second,
+                                            [&lighting, ground_z](const Eigen::Vector3d& d) {
+                                              return lighting.EscapedRadiance(d, ground_z);
+                                            },
+                                            sky_e));
       if (vector_flux) {
         ls.above_only = lighting.env;
         ZeroBelowHorizon(&ls.above_only);

@@ -480,10 +480,8 @@ Lighting LightingPredictor::At(UtcTime utc, const Site& site, RelightSummary* su
   // weighted as the sky's times are (§5.1; by default by the sun's elevation, which sets how
   // bright the haze and the distant ground near the horizon are) or by the angular distance
   // between suns, as predicts the measured times best (ChooseFallbackWays).
-  bool any_relative = false;
-  for (size_t gi = 0; gi < fallback_way_.size(); ++gi)
-    any_relative =
-        any_relative || (IsMeasuredFallback(gi) && (fallback_way_[gi] & kFallbackRelative));
+  const bool any_relative = std::any_of(fallback_way_.begin(), fallback_way_.end(),
+                                        [](uint8_t way) { return way & kFallbackRelative; });
   const EnvironmentMap sky_now = any_relative ? SkyMeans(out.env, out.sky) : EnvironmentMap();
   const std::vector<double> sun_weights =
       SkyInterpWeights(skies_, sun_dir, ByDirection(options_.sky));

@@ -128,7 +128,8 @@ class LightingPredictor {
   std::vector<std::vector<Eigen::Vector3d>> fill_ratio_;
   std::vector<double> sun_az_;  // per measured time, radians from north eastwards
   std::vector<ResidualFrame> residual_frame_;
-  // Per layer and region, how a measured fallback carries to a new time: bits kFallbackRelative
+  // Per layer and region (0 for all but measured fallbacks), how a measured fallback carries to
+  // a new time: bits kFallbackRelative
   // (its ratio to the sky, else its radiance) and kFallbackBySun (the times weighted by the
   // angular distance between suns, else as the sky's).
   static constexpr uint8_t kFallbackRelative = 1, kFallbackBySun = 2;
