@@ -19,7 +19,7 @@ namespace {
 
 struct ImportArgs {
   std::string photos, list, cameras, site, timezone, time, target = "architecture", out, model,
-                                                           surroundings, sky_mask;
+                                                           surroundings, trees, sky_mask;
 };
 
 void Run(const ImportArgs& a) {
@@ -45,6 +45,7 @@ void Run(const ImportArgs& a) {
   }
   o.model = a.model;
   o.surroundings = a.surroundings;
+  o.trees = a.trees;
   o.sky_mask = a.sky_mask;
   o.log = [](const std::string& s) { std::fprintf(stderr, "rouen import: %s\n", s.c_str()); };
   const ImportSummary s = ImportPhotos(o, a.out);
@@ -94,6 +95,12 @@ void RegisterImport(CLI::App& app) {
       "building and hides its sky, and lights it as solved surfaces on a coarser grid\n"
       "([surroundings] spacing_m) whose albedos the landscape panoramas read too\n"
       "([surroundings] from_panoramas), never scored by validate;\n"
+      "--trees adds trees to the surroundings from a CSV whose header names its columns:\n"
+      "  name,x_m,y_m,height_m,crown_diameter_m[,crown_depth_m,trunk_diameter_m,base_z_m]\n"
+      "(east and north of the model's origin, the crown's top above the ground, the crown's\n"
+      "width and depth, default round; OpenStreetMap's natural=tree height and\n"
+      "diameter_crown): each a crown (an ellipsoid) on a trunk, its own block; a tree the\n"
+      "model lacks casts a shadow rouen cannot see coming and hides the wall behind it;\n"
       "--sky-mask auto segments the sky photos' sky, a mask image (nonzero = sky, the sky\n"
       "photos' size) keeps those pixels.\n"
       "The session is written to OUT.tmp-<pid> and renamed at the end; on error or Ctrl-C "
@@ -118,6 +125,9 @@ void RegisterImport(CLI::App& app) {
   c->add_option("--surroundings", a->surroundings,
                 "Coarse geometry around the building (OBJ, its groups their own blocks), copied "
                 "into the session");
+  c->add_option("--trees", a->trees,
+                "Trees (CSV: name,x_m,y_m,height_m,crown_diameter_m,...) added to the "
+                "surroundings");
   c->add_option("--sky-mask", a->sky_mask,
                 "Sky photos' sky pixels: 'auto' (segmented) or a mask image (nonzero = sky)");
   c->add_option("--out", a->out, "Session folder to create")->required();

@@ -1,7 +1,6 @@
 // rouen sun: solar position for a place and time, or for a CSV batch.
 #include <cstdio>
 #include <nlohmann/json.hpp>
-#include <sstream>
 
 #include "app/command_list.h"
 #include "app/commands.h"
@@ -22,24 +21,16 @@ struct SunArgs {
   bool have_lat = false, have_lon = false;
 };
 
-std::string Trim(const std::string& s) {
-  size_t a = s.find_first_not_of(" \t\r"), b = s.find_last_not_of(" \t\r");
-  return a == std::string::npos ? "" : s.substr(a, b - a + 1);
-}
-
 void RunBatch(const SunArgs& a) {
   const std::vector<std::string> lines = ReadTextLines(a.batch, "the CSV file");
   int lineno = 0;
   std::printf("utc,lat,lon,elev_m,azimuth_deg,elevation_deg,elevation_true_deg\n");
   for (const std::string& line : lines) {
     ++lineno;
-    std::string t = Trim(line);
+    const std::string t = Trimmed(line);
     if (t.empty() || t[0] == '#') continue;
     if (lineno == 1 && t.rfind("utc", 0) == 0) continue;  // header
-    std::vector<std::string> cols;
-    std::stringstream ss(t);
-    std::string c;
-    while (std::getline(ss, c, ',')) cols.push_back(Trim(c));
+    const std::vector<std::string> cols = CsvFields(t);
     if (cols.size() != 4)
       throw Error(a.batch + ":" + std::to_string(lineno) +
                   ": expected 4 columns utc,lat,lon,elev_m, got " + std::to_string(cols.size()));

@@ -472,6 +472,7 @@ void to_json(json& j, const SessionInfo& s) {
       {"surroundings", s.surroundings},
       {"notes", s.notes},
       {"extra", ExtraTables(s)}};
+  if (!s.trees.empty()) j["trees"] = s.trees;
 }
 
 void from_json(const json& j, SessionInfo& s) {
@@ -498,6 +499,14 @@ void from_json(const json& j, SessionInfo& s) {
   });
   r.model = Optional<std::string>(j, "model", "", str);
   r.surroundings = Optional<std::string>(j, "surroundings", "", str);
+  if (auto t = j.find("trees"); t != j.end() && !t->is_null()) {
+    if (!t->is_array()) throw Error("session info: key \"trees\" is not an array of block names");
+    for (const json& name : *t) {
+      if (!name.is_string())
+        throw Error("session info: key \"trees\" is not an array of block names");
+      r.trees.push_back(name.get<std::string>());
+    }
+  }
   r.notes = Optional<std::string>(j, "notes", "", str);
   auto it = j.find("extra");
   if (it != j.end() && !it->is_null()) {

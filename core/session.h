@@ -100,6 +100,9 @@ struct SessionInfo {
   // Optional relative path to the surroundings (OBJ): coarse geometry around the building (a
   // city model's or OpenStreetMap's footprints and heights), solved with it but not scored.
   std::string surroundings;
+  // The surroundings' blocks that are trees (`rouen import --trees`, core/trees.h): a tree no
+  // photo saw takes the albedo of the trees they saw (AlbedoOptions::block_kind).
+  std::vector<std::string> trees;
   std::string notes;
   // The typed tables of session.json's "extra" (one parser and one printer: from_json and
   // to_json below), with their keys:

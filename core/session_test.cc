@@ -405,6 +405,24 @@ TEST_F(SessionTest, BadInputsAreRefused) {
   ExpectLoadError("\"format_version\"");
 }
 
+// The surroundings' trees (import --trees) are a list of block names, or absent.
+TEST_F(SessionTest, TreesAreBlockNames) {
+  SessionInfo with = Info();
+  with.trees = {"lime", "plane.2"};
+  { SessionWriter w = SessionWriter::Create(dir_, with); }
+  EXPECT_EQ(Session::Load(dir_).info().trees, with.trees);
+  json info = json::parse(ReadFileToString(dir_ / "session.json"));
+  info["trees"] = "lime";
+  WriteFileAtomic(dir_ / "session.json", info.dump());
+  ExpectLoadError("\"trees\" is not an array of block names");
+  info["trees"] = json::array({"lime", 2});
+  WriteFileAtomic(dir_ / "session.json", info.dump());
+  ExpectLoadError("\"trees\" is not an array of block names");
+  info.erase("trees");
+  WriteFileAtomic(dir_ / "session.json", info.dump());
+  EXPECT_TRUE(Session::Load(dir_).info().trees.empty());
+}
+
 // Every journalled frame's file is whole: its sha256 matches and it decodes to its size.
 void ExpectWholeFrames(const Session& s, int width, int height) {
   for (const FrameRecord& f : s.frames()) {

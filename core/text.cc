@@ -19,6 +19,22 @@ std::string_view WithoutUtf8Bom(std::string_view text) {
   return text.substr(0, kBom.size()) == kBom ? text.substr(kBom.size()) : text;
 }
 
+std::string Trimmed(std::string_view text) {
+  const size_t a = text.find_first_not_of(" \t\r");
+  if (a == std::string_view::npos) return "";
+  return std::string(text.substr(a, text.find_last_not_of(" \t\r") + 1 - a));
+}
+
+std::vector<std::string> CsvFields(std::string_view line) {
+  std::vector<std::string> fields;
+  for (size_t at = 0;;) {
+    const size_t comma = line.find(',', at);
+    fields.push_back(Trimmed(line.substr(at, comma == line.npos ? line.npos : comma - at)));
+    if (comma == line.npos) return fields;
+    at = comma + 1;
+  }
+}
+
 bool ParseDecimal(std::string_view text, double* value) {
   size_t i = 0;
   const auto digits = [&] {

@@ -16,6 +16,13 @@ std::string_view WithoutUtf8Bom(std::string_view text);
 // folder, not <what>").
 std::vector<std::string> ReadTextLines(const std::string& path, const std::string& what);
 
+// `text` without the spaces, tabs and carriage returns around it.
+std::string Trimmed(std::string_view text);
+
+// The comma-separated fields of one CSV line, each Trimmed (no quoting: rouen's CSV files hold
+// numbers and names). An empty line is one empty field.
+std::vector<std::string> CsvFields(std::string_view line);
+
 // A decimal number as people write one, the whole of `text`: [+-] digits [. digits]
 // [e|E [+-] digits] (".5" and "5." too), finite. False for anything else -- blanks around it,
 // hexadecimal ("0x10", which std::stod reads as 16), "inf", "nan", "1,5", "1e400".

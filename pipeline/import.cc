@@ -429,17 +429,41 @@ void RequireModelFile(const fs::path& model) {
   if (!fs::is_regular_file(model, ec)) throw Error(model.string() + ": no such model file");
 }
 
-// The building model and its surroundings (either may be empty), checked before they are
-// copied: each must parse and have faces (ReadObj), and no block may be in both.
-void CheckModels(const fs::path& model, const fs::path& surroundings) {
-  if (!surroundings.empty() && model.empty())
-    throw Error(surroundings.string() + ": surroundings need the building's model (--model)");
-  if (model.empty()) return;
-  RequireModelFile(model);
-  Mesh mesh = ReadObj(model.string());
-  if (surroundings.empty()) return;
-  RequireModelFile(surroundings);
-  AppendObj(surroundings.string(), &mesh);
+// The trees' OBJ text (core/trees.h), "" without trees.
+std::string TreesObj(const ImportOptions& o, int* count) {
+  if (o.trees.empty()) return "";
+  const std::vector<Tree> trees = ReadTrees(o.trees.string(), o.tree_mesh);
+  *count = static_cast<int>(trees.size());
+  return "# trees from " + o.trees.filename().string() + "\n" + TreesObjText(trees, o.tree_mesh);
+}
+
+// The building model, its surroundings and the trees' OBJ text (any may be empty), checked
+// before they are written: each must parse and have faces (ReadObj), and no block may be in two.
+void CheckModels(const ImportOptions& o, const std::string& trees_obj) {
+  if (!o.surroundings.empty() && o.model.empty())
+    throw Error(o.surroundings.string() + ": surroundings need the building's model (--model)");
+  if (!o.trees.empty() && o.model.empty())
+    throw Error(o.trees.string() + ": trees need the building's model (--model)");
+  if (o.model.empty()) return;
+  RequireModelFile(o.model);
+  Mesh mesh = ReadObj(o.model.string());
+  if (!o.surroundings.empty()) {
+    RequireModelFile(o.surroundings);
+    AppendObj(o.surroundings.string(), &mesh);
+  }
+  if (trees_obj.empty()) return;
+  try {
+    mesh.Append(ParseObj(trees_obj, o.trees.string()));
+  } catch (const Error& e) {
+    throw Error(o.trees.string() + ": " + e.what());
+  }
+}
+
+// The session's surroundings: the given OBJ's text (if any) followed by the trees' (if any).
+std::string SurroundingsText(const ImportOptions& o, const std::string& trees_obj) {
+  std::string text = o.surroundings.empty() ? "" : ReadFileToString(o.surroundings);
+  if (!text.empty() && !trees_obj.empty() && text.back() != '\n') text += '\n';
+  return text + trees_obj;
 }
 
 // A sky mask file must be the size of every sky photo (the mask applies to each).
@@ -497,7 +521,10 @@ ImportSummary ImportPhotos(const ImportOptions& o, const fs::path& out) {
   if (fs::exists(out) && !(fs::is_directory(out) && fs::is_empty(out)))
     throw Error(out_name + ": already exists; choose a new session folder");
   CheckNewFolderPlace(out_name, out);
-  CheckModels(o.model, o.surroundings);
+  ImportSummary summary;
+  const std::string trees_obj = TreesObj(o, &summary.trees);
+  CheckModels(o, trees_obj);
+  const std::string surroundings = SurroundingsText(o, trees_obj);
 
   std::vector<std::string> notes;
   std::vector<Photo> photos = PlanImport(o, &notes);
@@ -530,7 +557,6 @@ ImportSummary ImportPhotos(const ImportOptions& o, const fs::path& out) {
   }
   fs::remove_all(tmp, ec);
   WatchForTemporaries(tmp.parent_path().empty() ? fs::path(".") : tmp.parent_path());
-  ImportSummary summary;
   int& slots = summary.slots;
   int& groups = summary.brackets;
   int& hdr = summary.hdr;
@@ -538,7 +564,8 @@ ImportSummary ImportPhotos(const ImportOptions& o, const fs::path& out) {
     // The session names its model and sky mask; their files are copied into it.
     std::string mask_file;
     if (!o.model.empty()) info.model = "model.obj";
-    if (!o.surroundings.empty()) info.surroundings = "surroundings.obj";
+    if (!surroundings.empty()) info.surroundings = "surroundings.obj";
+    if (!trees_obj.empty()) info.trees = ParseObj(trees_obj, o.trees.string()).block_names;
     if (!o.sky_mask.empty()) {
       SkyMaskSpec spec;
       spec.automatic = o.sky_mask == "auto";
@@ -558,8 +585,7 @@ ImportSummary ImportPhotos(const ImportOptions& o, const fs::path& out) {
     }
     SessionWriter writer = SessionWriter::Create(tmp, info);
     if (!o.model.empty()) WriteFileAtomic(tmp / info.model, ReadFileToString(o.model));
-    if (!o.surroundings.empty())
-      WriteFileAtomic(tmp / info.surroundings, ReadFileToString(o.surroundings));
+    if (!surroundings.empty()) WriteFileAtomic(tmp / info.surroundings, surroundings);
     if (!mask_file.empty()) WriteFileAtomic(tmp / mask_file, ReadFileToString(o.sky_mask));
     json sources = json::array();
     std::set<std::string> group_names;
@@ -602,6 +628,12 @@ ImportSummary ImportPhotos(const ImportOptions& o, const fs::path& out) {
     SessionInfo done_info = writer.info();
     done_info.extra["import"] = {{"photos", fs::absolute(o.photos).lexically_normal().string()},
                                  {"frames", sources}};
+    if (!o.trees.empty()) {
+      done_info.extra["import"]["trees"] = {
+          {"file", fs::absolute(o.trees).lexically_normal().string()},
+          {"sha256", Sha256File(o.trees)},
+          {"count", summary.trees}};
+    }
     writer.UpdateInfo(done_info);
   } catch (...) {
     fs::remove_all(tmp, ec);
@@ -620,6 +652,9 @@ ImportSummary ImportPhotos(const ImportOptions& o, const fs::path& out) {
     throw Error(out_name + ": cannot finish the session: " + e.what());
   }
   for (const std::string& n : notes) Log(o, "note: " + n);
+  if (summary.trees > 0)
+    Log(o, std::to_string(summary.trees) + (summary.trees == 1 ? " tree" : " trees") + " from " +
+               o.trees.string() + " added to the surroundings (a crown on a trunk each)");
   summary.photos = static_cast<int>(photos.size());
   return summary;
 }

@@ -36,6 +36,7 @@
 #include "core/session.h"
 #include "core/solar.h"
 #include "core/time.h"
+#include "core/trees.h"
 
 namespace rouen {
 
@@ -57,12 +58,17 @@ struct ImportOptions {
   // Coarse geometry around it (OBJ, e.g. footprints and heights from a city model), copied
   // into the session as its surroundings (SessionInfo::surroundings); needs `model`.
   std::filesystem::path surroundings;
+  // Trees (a CSV, core/trees.h: position, height, crown per tree), each made a crown on a trunk
+  // and added to the session's surroundings as its own block; needs `model`.
+  std::filesystem::path trees;
+  TreeMeshOptions tree_mesh;
   std::string sky_mask;  // "", "auto" or a mask image copied into the session
   std::function<void(const std::string&)> log;  // notes
 };
 
 struct ImportSummary {
   int photos = 0, hdr = 0, brackets = 0, slots = 0;
+  int trees = 0;  // made from ImportOptions::trees
   // The photos taken with the sun's whole disc below the horizon at the site, "NAME (UTC,
   // sun -12.3 deg)": a wrong camera clock, time zone or site, or calibration photos taken at
   // night; `rouen status` lists the slots the solve cannot use.

@@ -880,6 +880,15 @@ SolveResult SolveSession(const Session& session, const CalibResult& calib,
   std::vector<Lighting> lighting;
   for (const SlotSolve& ss : r.slots) lighting.push_back(ss.lighting);
   r.albedo_options = options.config.albedo;
+  // Trees are a kind of their own: one no photo saw takes the trees' albedos, not the walls'.
+  r.albedo_options.block_kind.assign(r.mesh.block_names.size(), 0);
+  for (const std::string& tree : session.info().trees) {
+    const auto it = std::find(r.mesh.block_names.begin(), r.mesh.block_names.end(), tree);
+    if (it == r.mesh.block_names.end())
+      throw Error("session.json: tree '" + tree + "' is no block of " +
+                  session.info().surroundings);
+    r.albedo_options.block_kind[it - r.mesh.block_names.begin()] = 1;
+  }
   AlbedoOptions with_model = r.albedo_options;  // the vector-flux irradiance projects its faces
   with_model.irradiance.mesh = &r.mesh;
   with_model.irradiance.cancel = options.cancel;

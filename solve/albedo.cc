@@ -751,29 +751,37 @@ static AlbedoResult SolveWeighted(const SurfaceGrid& grid,
     ApplyFill(plan, &res);
     category = plan.category_out;
   }
-  // The rest: the block median (global median as a fallback).
+  // The rest: the block median, else the median of the blocks of its kind, else the global one.
+  const auto kind_of = [&](int block) {
+    return block >= 0 && block < static_cast<int>(options.block_kind.size())
+               ? options.block_kind[block]
+               : 0;
+  };
   std::vector<std::array<std::vector<double>, 6>> block_vals(nblocks + 1);
+  std::map<int, std::array<std::vector<double>, 6>> kind_vals;
   std::array<std::vector<double>, 6> all_vals;
   for (int i = 0; i < n; ++i) {
     if (category[i] == 0 || category[i] == 4) continue;
+    auto& kind = kind_vals[kind_of(grid.points[i].block)];
     for (int c = 0; c < 3; ++c) {
-      block_vals[grid.points[i].block + 1][c].push_back(res.rho_se[i][c]);
-      block_vals[grid.points[i].block + 1][c + 3].push_back(res.rho_sun[i][c]);
-      all_vals[c].push_back(res.rho_se[i][c]);
-      all_vals[c + 3].push_back(res.rho_sun[i][c]);
+      for (auto* vals : {&block_vals[grid.points[i].block + 1], &kind, &all_vals}) {
+        (*vals)[c].push_back(res.rho_se[i][c]);
+        (*vals)[c + 3].push_back(res.rho_sun[i][c]);
+      }
     }
   }
   for (int b = -1; b < nblocks; ++b) {
-    auto& vals = block_vals[b + 1];
     bool any = false;
     for (int i = 0; i < n && !any; ++i) any = category[i] == 0 && grid.points[i].block == b;
     if (!any) continue;
+    const auto kind = kind_vals.find(kind_of(b));
+    const auto& vals = !block_vals[b + 1][0].empty() ? block_vals[b + 1]
+                       : kind != kind_vals.end()     ? kind->second
+                                                     : all_vals;
     Eigen::Vector3d se, sun;
     for (int c = 0; c < 3; ++c) {
-      const auto& vs = vals[c].empty() ? all_vals[c] : vals[c];
-      const auto& vu = vals[c + 3].empty() ? all_vals[c + 3] : vals[c + 3];
-      se[c] = Median(vs);
-      sun[c] = Median(vu);
+      se[c] = Median(vals[c]);
+      sun[c] = Median(vals[c + 3]);
     }
     for (int i = 0; i < n; ++i) {
       if (category[i] != 0 || grid.points[i].block != b) continue;

@@ -139,6 +139,11 @@ struct AlbedoOptions {
   // block and plane within this radius, else of the same block within 4x the radius (0: off);
   // beyond that, the block median.
   double fill_radius_m = 3.0;
+  // The kind of each block (by index; blocks beyond the vector are kind 0): a block no photo saw
+  // takes the median albedos of the observed blocks of its kind, else of every observed block
+  // (the session solve makes trees kind 1: a crown no panorama saw takes the trees' dark green,
+  // not the walls' albedo).
+  std::vector<int> block_kind;
   // Beyond the paper: from the second outer iteration on, each time-of-day slot is weighted by
   // (median relative residual of all slots / its own)^2, at most 1, so a slot whose lighting
   // model fits worse (typically a low sun) pulls the albedos less.

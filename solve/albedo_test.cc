@@ -525,6 +525,49 @@ TEST(AlbedoTest, UnobservedPointsAreFilledAndFlagged) {
   EXPECT_EQ(r.summary.points_observed, w.grid.size() - filled);
 }
 
+// A block no photo saw takes the median albedos of the observed blocks of its kind: two dark
+// "trees" beside a box on a plaza, one unseen, which takes the seen tree's albedo rather than
+// the median of every observed point (the plaza's and the box's).
+TEST(AlbedoTest, ABlockNoPhotoSawTakesTheAlbedoOfItsKind) {
+  World w;
+  testing::AddHorizontalRect(&w.mesh, -8, 8, -8, 8, 0, true, w.mesh.AddBlock("plaza"));
+  testing::AddBox(&w.mesh, {-1, -1, 0}, {1, 1, 3}, w.mesh.AddBlock("box"));
+  testing::AddBox(&w.mesh, {4, -1, 0}, {5, 0, 2}, w.mesh.AddBlock("tree_seen"));
+  testing::AddBox(&w.mesh, {-5, 4, 0}, {-4, 5, 2}, w.mesh.AddBlock("tree_unseen"));
+  GridOptions go;
+  go.spacing_m = 0.5;
+  go.block_spacing_m["plaza"] = 2.0;
+  w.grid = BuildSurfaceGrid(w.mesh, go);
+  w.rc = std::make_unique<RayCaster>(w.mesh);
+  CacheAndSuns(&w, {100, 160, 220, 260}, 35);
+  const Eigen::Vector3d leaves(0.08, 0.15, 0.05), stone(0.45, 0.4, 0.35);
+  for (const auto& p : w.grid.points) {
+    w.rho_se.push_back(p.block >= 2 ? leaves : stone);
+    w.rho_sun.push_back(p.block >= 2 ? leaves : stone);
+  }
+  const auto irr = Irradiance(w);
+  std::vector<Observation> kept;
+  for (const Observation& o : Observe(w, irr)) {
+    if (w.grid.points[o.point].block != 3) kept.push_back(o);
+  }
+  AlbedoOptions kinds;
+  kinds.block_kind = {0, 0, 1, 1};
+  const AlbedoResult by_kind = SolveAlbedoFixedIrradiance(w.grid, kept, irr, kinds);
+  const AlbedoResult by_all = SolveAlbedoFixedIrradiance(w.grid, kept, irr);
+  int unseen = 0;
+  for (int i = 0; i < w.grid.size(); ++i) {
+    if (w.grid.points[i].block != 3) continue;
+    ++unseen;
+    EXPECT_TRUE(by_kind.flags[i] & kAlbedoNoObservations);
+    // Consistent photos: the seen tree's points are its albedo to the solve's precision.
+    EXPECT_LT((by_kind.rho_se[i] - leaves).cwiseAbs().maxCoeff(), 0.01) << i;
+    EXPECT_LT((by_kind.rho_sun[i] - leaves).cwiseAbs().maxCoeff(), 0.01) << i;
+    // Without kinds the stone's, which holds most observed points.
+    EXPECT_LT((by_all.rho_se[i] - stone).cwiseAbs().maxCoeff(), 0.01) << i;
+  }
+  EXPECT_GT(unseen, 10);
+}
+
 TEST(AlbedoTest, GapsAreFilledFromTheSameFace) {
   const World w = MakeWorld();
   const auto irr = Irradiance(w);

@@ -59,13 +59,6 @@ constexpr double kRefineWithin = 0.25;
 // Levenberg-Marquardt stops when a step is this small relative to the parameters.
 constexpr double kParameterTolerance = 1e-10;
 
-// `s` without leading and trailing spaces and tabs.
-std::string Trimmed(std::string_view s) {
-  const size_t a = s.find_first_not_of(" \t");
-  if (a == std::string_view::npos) return "";
-  return std::string(s.substr(a, s.find_last_not_of(" \t") + 1 - a));
-}
-
 // The whole of `s` as a number (nan and inf included: the caller names them).
 bool ParseFullDouble(const std::string& s, double* v) {
   const auto r = std::from_chars(s.data(), s.data() + s.size(), *v);
@@ -575,14 +568,7 @@ std::vector<SkySample> ReadSkySamplesCsv(const std::string& path) {
     const std::string where = path + ":" + std::to_string(n + 1);
     const std::string line = Trimmed(lines[n]);
     if (line.empty() || line.front() == '#') continue;
-    std::vector<std::string> f;
-    for (size_t at = 0;;) {
-      const size_t comma = line.find(',', at);
-      f.push_back(
-          Trimmed(std::string_view(line).substr(at, comma == line.npos ? line.npos : comma - at)));
-      if (comma == line.npos) break;
-      at = comma + 1;
-    }
+    const std::vector<std::string> f = CsvFields(line);
     double v0 = 0;
     const bool header = first && !ParseFullDouble(f[0], &v0);
     first = false;

@@ -19,6 +19,7 @@
 #include "core/exif.h"
 #include "core/files.h"
 #include "core/image.h"
+#include "core/mesh.h"
 #include "core/session.h"
 #include "core/solar.h"
 #include "core/time.h"
@@ -677,6 +678,37 @@ TEST(ImportTest, ModelSkyMaskNdFiltersAndCalibFiles) {
   expect_fail(
       common + " --model " + Q(dir / "tower.obj") + " --surroundings " + Q(dir / "tower.obj"),
       "tower.obj: block 'tower' is in both models (rename the group in one of them)");
+  // Trees join the surroundings (after the given OBJ, a block each), or are them.
+  WriteText(dir / "trees.csv", "name,x_m,y_m,height_m,crown_diameter_m\nlime,3,8,9,5\n");
+  r = RunRouen(common + " --model " + Q(dir / "tower.obj") + " --surroundings " +
+               Q(dir / "houses.obj") + " --trees " + Q(dir / "trees.csv") + " --out " +
+               Q(dir / "s3"));
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("1 tree from"), std::string::npos) << r.out;
+  const Session s3 = Session::Load(dir / "s3");
+  EXPECT_EQ(s3.info().surroundings, "surroundings.obj");
+  const std::string with_trees = ReadFileToString(dir / "s3" / "surroundings.obj");
+  EXPECT_EQ(with_trees.rfind(ReadFileToString(dir / "houses.obj"), 0), 0u);
+  EXPECT_EQ(ReadObj((dir / "s3" / "surroundings.obj").string()).block_names,
+            (std::vector<std::string>{"house_1", "lime"}));
+  EXPECT_EQ(s3.info().extra.at("import").at("trees").at("count"), 1);
+  EXPECT_EQ(s3.info().trees, (std::vector<std::string>{"lime"}));
+  r = RunRouen("status " + Q(dir / "s3"));
+  EXPECT_NE(r.out.find("with surroundings surroundings.obj (1 tree)"), std::string::npos) << r.out;
+  r = RunRouen(common + " --model " + Q(dir / "tower.obj") + " --trees " + Q(dir / "trees.csv") +
+               " --out " + Q(dir / "s4"));
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_EQ(ReadObj((dir / "s4" / "surroundings.obj").string()).block_names,
+            (std::vector<std::string>{"lime"}));
+  expect_fail(common + " --trees " + Q(dir / "trees.csv"),
+              "trees.csv: trees need the building's model (--model)");
+  WriteText(dir / "trees2.csv", "name,x_m,y_m,height_m,crown_diameter_m\nhouse_1,3,8,9,5\n");
+  expect_fail(common + " --model " + Q(dir / "tower.obj") + " --surroundings " +
+                  Q(dir / "houses.obj") + " --trees " + Q(dir / "trees2.csv"),
+              "trees2.csv: block 'house_1' is in both models");
+  WriteText(dir / "trees2.csv", "name,x_m,y_m,height_m,crown_diameter_m\nlime,3,8,-9,5\n");
+  expect_fail(common + " --model " + Q(dir / "tower.obj") + " --trees " + Q(dir / "trees2.csv"),
+              "trees2.csv:2: height_m must be positive");
   WritePng(dir / "small.png", 8, 8, 200);
   expect_fail(common + " --sky-mask " + Q(dir / "small.png"), "small.png");
   WriteText(dir / "list2.txt", "sun1.jpg - target=sun nd=4.5,4\n");

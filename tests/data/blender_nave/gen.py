@@ -456,6 +456,7 @@ def main():
     os.makedirs(os.path.join(out, "passes"), exist_ok=True)  # not photos: rouen import skips it
     base.write_obj(os.path.join(out, "building.obj"), blocks)
     tower.write_surroundings_obj(os.path.join(out, "surroundings.obj"), SURROUNDINGS)
+    tower.write_trees_csv(os.path.join(out, "trees.csv"), SURROUNDINGS)
     tris = base.triangles(blocks)
     building, others, sky = tower.build_scene(blocks, BLOCK_MATERIALS, SURROUNDING_MATERIALS,
                                               SURROUNDINGS)

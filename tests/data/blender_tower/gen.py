@@ -169,6 +169,22 @@ def write_surroundings_obj(path, surroundings=SURROUNDINGS):
         f.write("\n".join(lines))
 
 
+TRUNK_R = 0.4  # every tree's trunk radius (m) in build_scene
+
+
+def write_trees_csv(path, surroundings=SURROUNDINGS):
+    """The trees as a survey or OpenStreetMap's natural=tree (height, diameter_crown) records
+    them, for `rouen import --trees`: position, the crown's top, its diameter, the trunk's."""
+    rows = ["# rouen validation world (Blender/Cycles): the trees (round crowns on trunks), by gen.py",
+            "name,x_m,y_m,height_m,crown_diameter_m,trunk_diameter_m"]
+    for name, (_, geo) in surroundings.items():
+        if "tree" in geo:
+            x, y, r, z = geo["tree"]
+            rows.append(f"{name},{x:g},{y:g},{z + r:g},{2 * r:g},{2 * TRUNK_R:g}")
+    with open(path, "w") as f:
+        f.write("\n".join(rows) + "\n")
+
+
 def check_outward(blocks):
     """Every face is counter-clockwise from outside: a point just in front of it lies outside
     the building, i.e. a ray from it going up (the building is open only at the ground)
@@ -211,7 +227,7 @@ def build_scene(blocks, block_materials=BLOCK_MATERIALS,
             others.append(base.mesh_object(name, polys, mats[mat]))
         else:
             x, y, r, z = geo["tree"]
-            others.extend(base.tree_object(name, x, y, mats["crown"], mats["trunk"], trunk_r=0.4,
+            others.extend(base.tree_object(name, x, y, mats["crown"], mats["trunk"], trunk_r=TRUNK_R,
                                            trunk_h=z - 0.5 * r, crown_r=r, crown_z=z))
     sky = base.nishita_world(base.SITE["height_m"])
     base.setup_render()
@@ -291,10 +307,11 @@ def main():
     ap.add_argument("--times", default="", help="comma-separated slot indices (default: all)")
     ap.add_argument("--no-checks", action="store_true")
     ap.add_argument("--surroundings-only", action="store_true",
-                    help="write OUT/surroundings.obj and render nothing")
+                    help="write OUT/surroundings.obj and OUT/trees.csv and render nothing")
     a = ap.parse_args(argv)
     if a.surroundings_only:
         write_surroundings_obj(os.path.join(os.path.abspath(a.out), "surroundings.obj"))
+        write_trees_csv(os.path.join(os.path.abspath(a.out), "trees.csv"))
         return
     base.SITE.update(SITE)  # `rouen sun` (base.rouen_sun) asks for this site
     out = os.path.abspath(a.out)
@@ -307,6 +324,7 @@ def main():
     check_outward(blocks)
     base.write_obj(os.path.join(out, "building.obj"), blocks)
     write_surroundings_obj(os.path.join(out, "surroundings.obj"))
+    write_trees_csv(os.path.join(out, "trees.csv"))
     tris = base.triangles(blocks)
     building, others, sky = build_scene(blocks)
     passes = light_pass_output(tmpdir)
