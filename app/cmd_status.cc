@@ -73,6 +73,14 @@ void PrintProblems(const std::vector<const StatusProblem*>& problems) {
   }
 }
 
+// " with surroundings FILE (N trees)", "" without surroundings.
+std::string SurroundingsText(const SessionInfo& info) {
+  if (info.surroundings.empty()) return "";
+  const size_t n = info.trees.size();
+  return " with surroundings " + info.surroundings +
+         (n == 0 ? "" : " (" + std::to_string(n) + (n == 1 ? " tree)" : " trees)"));
+}
+
 void Run(const StatusArgs& a) {
   namespace fs = std::filesystem;
   const auto start = std::chrono::steady_clock::now();
@@ -83,18 +91,11 @@ void Run(const StatusArgs& a) {
   const SessionStatus s = ReadSessionStatus(dir, options);
   if (!a.json.empty()) WriteFileAtomic(a.json, StatusToJson(s).dump(2) + "\n");
 
-  std::printf("%s: %d frames in %zu slot(s); rig %s; site %.5f, %.5f, %.0f m (%s); model %s%s\n",
-              dir.c_str(), s.frames, s.slots.size(),
-              s.info.rig.empty() ? "(none)" : s.info.rig.c_str(), s.info.site.lat_deg,
-              s.info.site.lon_deg, s.info.site.height_m, s.info.site_source.c_str(),
-              s.info.model.empty() ? "(none)" : s.info.model.c_str(),
-              s.info.surroundings.empty()
-                  ? ""
-                  : (" with surroundings " + s.info.surroundings +
-                     (s.info.trees.empty() ? ""
-                                           : " (" + std::to_string(s.info.trees.size()) +
-                                                 (s.info.trees.size() == 1 ? " tree)" : " trees)")))
-                        .c_str());
+  std::printf(
+      "%s: %d frames in %zu slot(s); rig %s; site %.5f, %.5f, %.0f m (%s); model %s%s\n",
+      dir.c_str(), s.frames, s.slots.size(), s.info.rig.empty() ? "(none)" : s.info.rig.c_str(),
+      s.info.site.lat_deg, s.info.site.lon_deg, s.info.site.height_m, s.info.site_source.c_str(),
+      s.info.model.empty() ? "(none)" : s.info.model.c_str(), SurroundingsText(s.info).c_str());
   std::printf("capture: %s\n", !s.capture_complete   ? "not recorded in session.json"
                                : *s.capture_complete ? "complete"
                                                      : "unfinished");

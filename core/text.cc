@@ -68,7 +68,11 @@ std::vector<std::string> ReadTextLines(const std::string& path, const std::strin
   if (!in) throw Error(path + ": cannot open " + what);
   const std::string all((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   if (in.bad()) throw Error(path + ": cannot read " + what);
-  const std::string_view text = WithoutUtf8Bom(all);
+  return TextLines(all);
+}
+
+std::vector<std::string> TextLines(std::string_view text) {
+  text = WithoutUtf8Bom(text);
   std::vector<std::string> lines;
   size_t pos = 0;
   while (pos < text.size()) {

@@ -11,7 +11,10 @@ namespace rouen {
 // `text` without a leading UTF-8 byte-order mark (EF BB BF).
 std::string_view WithoutUtf8Bom(std::string_view text);
 
-// The lines of a text file, without the byte-order mark and without '\n' or "\r\n" ends.
+// The lines of `text`, without a byte-order mark and without '\n' or "\r\n" ends.
+std::vector<std::string> TextLines(std::string_view text);
+
+// The lines of a text file (TextLines).
 // Throws rouen::Error "<path>: cannot open <what>" when the file cannot be read (or "is a
 // folder, not <what>").
 std::vector<std::string> ReadTextLines(const std::string& path, const std::string& what);

@@ -4,6 +4,7 @@
 #include <map>
 #include <optional>
 #include <set>
+#include <utility>
 
 #include "core/angles.h"
 #include "core/error.h"
@@ -16,14 +17,15 @@ void TreeMeshOptions::Validate() const {
     throw Error("trees: trunk_diameter_m must be a finite length >= 0");
   if (crown_segments < 3 || crown_segments > 256 || crown_rings < 2 || crown_rings > 256 ||
       trunk_segments < 3 || trunk_segments > 256)
-    throw Error("trees: crown_segments and trunk_segments must be in 3..256, crown_rings in 2..256");
+    throw Error(
+        "trees: crown_segments and trunk_segments must be in 3..256, crown_rings in 2..256");
 }
 
 namespace {
 
 enum Column { kName, kX, kY, kHeight, kCrownDiameter, kCrownDepth, kTrunkDiameter, kBaseZ, kCount };
 constexpr const char* kColumnNames[kCount] = {
-    "name", "x_m", "y_m", "height_m", "crown_diameter_m", "crown_depth_m", "trunk_diameter_m",
+    "name",    "x_m", "y_m", "height_m", "crown_diameter_m", "crown_depth_m", "trunk_diameter_m",
     "base_z_m"};
 
 bool IsWord(const std::string& s) {
@@ -36,21 +38,16 @@ bool IsWord(const std::string& s) {
   return true;
 }
 
-}  // namespace
-
-std::vector<Tree> ParseTrees(std::string_view text, const std::string& name,
-                             const TreeMeshOptions& options) {
+// The trees of a CSV file's lines (ParseTrees).
+std::vector<Tree> TreesOfLines(const std::vector<std::string>& lines, const std::string& name,
+                               const TreeMeshOptions& options) {
   options.Validate();
-  text = WithoutUtf8Bom(text);
   std::vector<int> column_of;  // CSV field -> Column
   std::vector<Tree> trees;
   std::map<std::string, int> line_of_name;
   int line_number = 0;
-  for (size_t pos = 0; pos < text.size();) {
-    size_t end = text.find('\n', pos);
-    if (end == std::string_view::npos) end = text.size();
-    const std::string line = Trimmed(text.substr(pos, end - pos));
-    pos = end + 1;
+  for (const std::string& text : lines) {
+    const std::string line = Trimmed(text);
     ++line_number;
     const std::string where = name + ":" + std::to_string(line_number);
     if (line.empty() || line.front() == '#') continue;
@@ -99,10 +96,9 @@ std::vector<Tree> ParseTrees(std::string_view text, const std::string& name,
     tree.crown_depth_m = value[kCrownDepth].value_or(tree.crown_diameter_m);
     tree.trunk_diameter_m = value[kTrunkDiameter].value_or(options.trunk_diameter_m);
     tree.base_z_m = value[kBaseZ].value_or(0.0);
-    for (int c : {kHeight, kCrownDiameter, kCrownDepth}) {
-      const double v = c == kHeight          ? tree.height_m
-                       : c == kCrownDiameter ? tree.crown_diameter_m
-                                             : tree.crown_depth_m;
+    for (const auto& [v, c] :
+         {std::pair{tree.height_m, kHeight}, std::pair{tree.crown_diameter_m, kCrownDiameter},
+          std::pair{tree.crown_depth_m, kCrownDepth}}) {
       if (!(v > 0)) throw Error(where + ": " + kColumnNames[c] + " must be positive");
     }
     if (tree.crown_depth_m > tree.height_m)
@@ -122,10 +118,15 @@ std::vector<Tree> ParseTrees(std::string_view text, const std::string& name,
   return trees;
 }
 
+}  // namespace
+
+std::vector<Tree> ParseTrees(std::string_view text, const std::string& name,
+                             const TreeMeshOptions& options) {
+  return TreesOfLines(TextLines(text), name, options);
+}
+
 std::vector<Tree> ReadTrees(const std::string& path, const TreeMeshOptions& options) {
-  std::string text;
-  for (const std::string& line : ReadTextLines(path, "a trees CSV")) text += line + "\n";
-  return ParseTrees(text, path, options);
+  return TreesOfLines(ReadTextLines(path, "a trees CSV"), path, options);
 }
 
 std::string TreesObjText(const std::vector<Tree>& trees, const TreeMeshOptions& options) {

@@ -21,7 +21,7 @@
 namespace rouen {
 
 struct Tree {
-  std::string name;  // the tree's block in the surroundings
+  std::string name;                                    // the tree's block in the surroundings
   Eigen::Vector2d position = Eigen::Vector2d::Zero();  // east, north (m)
   double base_z_m = 0;
   double height_m = 0;          // the crown's top above base_z_m

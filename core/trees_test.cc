@@ -3,7 +3,6 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
-
 #include <cmath>
 #include <map>
 #include <string>
@@ -45,9 +44,10 @@ TEST(TreesTest, ColumnsInAnyOrderWithTheirDefaults) {
   EXPECT_EQ(trees[0].base_z_m, 0);
   EXPECT_EQ(trees[1].name, "plane.2");
   // Without a name the line names the tree; without a trunk the options give it.
-  const std::vector<Tree> unnamed = ParseTrees("x_m,y_m,height_m,crown_diameter_m,crown_depth_m,"
-                                               "base_z_m\n1,2,9,6,4,1.5\n",
-                                               "t.csv", TreeMeshOptions{.trunk_diameter_m = 0.4});
+  const std::vector<Tree> unnamed = ParseTrees(
+      "x_m,y_m,height_m,crown_diameter_m,crown_depth_m,"
+      "base_z_m\n1,2,9,6,4,1.5\n",
+      "t.csv", TreeMeshOptions{.trunk_diameter_m = 0.4});
   ASSERT_EQ(unnamed.size(), 1u);
   EXPECT_EQ(unnamed[0].name, "tree_2");
   EXPECT_EQ(unnamed[0].trunk_diameter_m, 0.4);
@@ -59,7 +59,8 @@ TEST(TreesTest, BadFilesAreNamedWithTheLine) {
   const std::string header = "name,x_m,y_m,height_m,crown_diameter_m\n";
   EXPECT_EQ(ErrorOf(""), "trees.csv: no header and no trees");
   EXPECT_EQ(ErrorOf(header), "trees.csv: a header and no trees");
-  EXPECT_EQ(ErrorOf("x_m,y_m,height_m\n"), "trees.csv:1: the header has no column 'crown_diameter_m'");
+  EXPECT_EQ(ErrorOf("x_m,y_m,height_m\n"),
+            "trees.csv:1: the header has no column 'crown_diameter_m'");
   EXPECT_NE(ErrorOf("x_m,y_m,height_m,crown_diameter_m,girth\n").find("1: unknown column 'girth'"),
             std::string::npos);
   EXPECT_EQ(ErrorOf("x_m,y_m,x_m\n"), "trees.csv:1: column 'x_m' given twice");
@@ -108,8 +109,7 @@ TEST(TreesTest, ACrownIsAClosedEllipsoidOnATrunkThatMeetsIt) {
       crown = crown && std::abs(e - 1) < 1e-5;
       top = std::max(top, m.vertices[tri[k]].z());
     }
-    const Eigen::Vector3d mid =
-        (m.vertices[tri[0]] + m.vertices[tri[1]] + m.vertices[tri[2]]) / 3;
+    const Eigen::Vector3d mid = (m.vertices[tri[0]] + m.vertices[tri[1]] + m.vertices[tri[2]]) / 3;
     if (crown) {
       ++crown_triangles;
       // Its signed volume (divergence theorem): positive when wound counter-clockwise outside.

@@ -429,14 +429,6 @@ void RequireModelFile(const fs::path& model) {
   if (!fs::is_regular_file(model, ec)) throw Error(model.string() + ": no such model file");
 }
 
-// The trees' OBJ text (core/trees.h), "" without trees.
-std::string TreesObj(const ImportOptions& o, int* count) {
-  if (o.trees.empty()) return "";
-  const std::vector<Tree> trees = ReadTrees(o.trees.string(), o.tree_mesh);
-  *count = static_cast<int>(trees.size());
-  return "# trees from " + o.trees.filename().string() + "\n" + TreesObjText(trees, o.tree_mesh);
-}
-
 // The building model, its surroundings and the trees' OBJ text (any may be empty), checked
 // before they are written: each must parse and have faces (ReadObj), and no block may be in two.
 void CheckModels(const ImportOptions& o, const std::string& trees_obj) {
@@ -522,7 +514,12 @@ ImportSummary ImportPhotos(const ImportOptions& o, const fs::path& out) {
     throw Error(out_name + ": already exists; choose a new session folder");
   CheckNewFolderPlace(out_name, out);
   ImportSummary summary;
-  const std::string trees_obj = TreesObj(o, &summary.trees);
+  const std::vector<Tree> trees =
+      o.trees.empty() ? std::vector<Tree>{} : ReadTrees(o.trees.string(), o.tree_mesh);
+  summary.trees = static_cast<int>(trees.size());
+  const std::string trees_obj = trees.empty() ? ""
+                                              : "# trees from " + o.trees.filename().string() +
+                                                    "\n" + TreesObjText(trees, o.tree_mesh);
   CheckModels(o, trees_obj);
   const std::string surroundings = SurroundingsText(o, trees_obj);
 
@@ -565,7 +562,7 @@ ImportSummary ImportPhotos(const ImportOptions& o, const fs::path& out) {
     std::string mask_file;
     if (!o.model.empty()) info.model = "model.obj";
     if (!surroundings.empty()) info.surroundings = "surroundings.obj";
-    if (!trees_obj.empty()) info.trees = ParseObj(trees_obj, o.trees.string()).block_names;
+    for (const Tree& t : trees) info.trees.push_back(t.name);
     if (!o.sky_mask.empty()) {
       SkyMaskSpec spec;
       spec.automatic = o.sky_mask == "auto";

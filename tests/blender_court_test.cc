@@ -33,7 +33,7 @@ struct UserRun {
   nlohmann::json validation;
 };
 UserRun UserPath(const fs::path& dir, const std::string& name, const std::string& import_extra,
-             int heldout) {
+                 int heldout) {
   UserRun run;
   const fs::path session = dir / (name + "_session");
   run.scene = dir / (name + "_scene");
@@ -58,8 +58,7 @@ TEST(BlenderCourtTest, TreesTheUserGivesShadeTheWallsAndHideThemFromTheViews) {
   const nlohmann::json truth = nlohmann::json::parse(ReadFileToString(Data() / "truth.json"));
   const int heldout = truth["heldout_slot"].get<int>();
   const UserRun bare = UserPath(dir, "bare", "", heldout);
-  const UserRun trees =
-      UserPath(dir, "trees", " --trees " + Q(Data() / "trees.csv"), heldout);
+  const UserRun trees = UserPath(dir, "trees", " --trees " + Q(Data() / "trees.csv"), heldout);
   ASSERT_TRUE(bare.validation.contains("photos") && trees.validation.contains("photos"));
   ASSERT_EQ(bare.validation["photos"].size(), trees.validation["photos"].size());
 
@@ -74,13 +73,13 @@ TEST(BlenderCourtTest, TreesTheUserGivesShadeTheWallsAndHideThemFromTheViews) {
     ASSERT_EQ(t["view"], b["view"]);
     const std::string view = t["view"];
     const double measured = t["measured"]["psnr_db"], predicted = t["predicted"]["psnr_db"];
-    std::printf("%s: measured %.2f -> %.2f dB (median %.4f), predicted %.2f -> %.2f dB "
-                "(median %.4f), pixels %d -> %d\n",
-                view.c_str(), b["measured"]["psnr_db"].get<double>(), measured,
-                t["measured"]["median_rel_error"].get<double>(),
-                b["predicted"]["psnr_db"].get<double>(), predicted,
-                t["predicted"]["median_rel_error"].get<double>(),
-                b["measured"]["pixels"].get<int>(), t["measured"]["pixels"].get<int>());
+    std::printf(
+        "%s: measured %.2f -> %.2f dB (median %.4f), predicted %.2f -> %.2f dB "
+        "(median %.4f), pixels %d -> %d\n",
+        view.c_str(), b["measured"]["psnr_db"].get<double>(), measured,
+        t["measured"]["median_rel_error"].get<double>(), b["predicted"]["psnr_db"].get<double>(),
+        predicted, t["predicted"]["median_rel_error"].get<double>(),
+        b["measured"]["pixels"].get<int>(), t["measured"]["pixels"].get<int>());
     EXPECT_GE(measured, 35) << view;
     EXPECT_GE(predicted, 35) << view;
     EXPECT_GE(measured, predicted - 0.5) << view;
