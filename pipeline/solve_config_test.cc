@@ -76,10 +76,11 @@ TEST(SolveConfigTest, EveryFieldRoundTripsThroughItsJson) {
   EXPECT_EQ(back.env_stereo.sky_irradiance, EnvSkyIrradiance::kAmbient);
   EXPECT_FALSE(back.surroundings_from_panoramas);
   EXPECT_FALSE(back.environment.fill_band_residual);
-  EXPECT_EQ(DefaultSolveConfig(false).albedo.sun_lobe.model, LobeModel::kLafortune);
-  c.albedo.sun_lobe.model = std::nullopt;  // "auto": both fitted
-  EXPECT_FALSE(ApplySolveConfig(SolveConfigJson(c), DefaultSolveConfig(false), "x")
-                   .albedo.sun_lobe.model.has_value());
+  EXPECT_FALSE(DefaultSolveConfig(false).albedo.sun_lobe.model.has_value());  // "auto"
+  c.albedo.sun_lobe.model = LobeModel::kLafortune;                            // eq. 13's alone
+  EXPECT_EQ(
+      ApplySolveConfig(SolveConfigJson(c), DefaultSolveConfig(false), "x").albedo.sun_lobe.model,
+      LobeModel::kLafortune);
   EXPECT_EQ(back.response.method, ResponseMethod::kRobertson);
   EXPECT_EQ(back.response.samples_per_bracket, 400);
   EXPECT_TRUE(back.merge.ghost_removal);

@@ -31,11 +31,14 @@ void CheckSizes(const SurfaceGrid& grid, const AlbedoResult& albedo, const SlotI
 // §4.2.1: the sky and environment a block's lobe reflects towards v from surface point p:
 // samples x samples stratified directions, the first half drawn about v's mirror direction with
 // the lobe's MirrorExponent and the rest cosine-distributed about the normal, each weighing
-// f_s(u, v) L(u) by MixtureWeight. Directions the model blocks bring nothing (its light
-// reflected through the lobe is left out).
+// f_s(u, v) L(u) by MixtureWeight. A direction the model blocks brings the diffuse radiance of
+// the grid point it meets (as the albedo solve's lobe light has it: solve/albedo.cc Pieces), none
+// where it meets a back face.
 Eigen::Vector3d SkyLobeLight(const SpecularLobe& lobe, const Eigen::Vector3d& n,
                              const Eigen::Vector3d& v, const Eigen::Vector3d& p,
-                             const Lighting& lighting, const RayCaster& model, int samples) {
+                             const Lighting& lighting, const RayCaster& model,
+                             const SurfaceGrid& grid, const AlbedoResult& albedo,
+                             const SlotIrradiance& irr, int samples) {
   const Eigen::Vector3d m = 2 * v.dot(n) * n - v;
   const double e = lobe.MirrorExponent();
   uint64_t seed = 0;
@@ -58,8 +61,19 @@ Eigen::Vector3d SkyLobeLight(const SpecularLobe& lobe, const Eigen::Vector3d& n,
       const Eigen::Vector3d u =
           about_mirror ? DrawAboutAxis(m, e, u1, u2) : DrawAboutAxis(n, 1, u1, u2);
       const double w = MixtureWeight(n, m, u, e, cosine, mirror);
-      if (!(w > 0) || model.Occluded(p, u, 0.0)) continue;
-      sum += lobe.Eval(n, u, v).cwiseProduct(lighting.EscapedRadiance(u, p.z())) * w;
+      if (!(w > 0)) continue;
+      const RayHit hit = model.Intersect(p, u, 0.0);
+      Eigen::Vector3d radiance;
+      if (!hit.hit) {
+        radiance = lighting.EscapedRadiance(u, p.z());
+      } else {
+        const int j = grid.NearestPoint(hit.triangle, hit.u, hit.v);
+        if (j < 0 || grid.points[j].normal.dot(u) >= 0) continue;
+        radiance = (albedo.rho_sun[j].cwiseProduct(irr.sun[j]) +
+                    albedo.rho_se[j].cwiseProduct(irr.se[j])) /
+                   kPi;
+      }
+      sum += lobe.Eval(n, u, v).cwiseProduct(radiance) * w;
     }
   }
   return sum;
@@ -155,7 +169,8 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
                           : -1;
     const SpecularLobe sky_lobe = BlockLobe(albedo.sky_lobes, block);
     if (!sky_lobe.IsZero())
-      specular = SkyLobeLight(sky_lobe, n, -dir, p, lighting, model, options.sky_lobe_samples);
+      specular = SkyLobeLight(sky_lobe, n, -dir, p, lighting, model, grid, albedo, irr,
+                              options.sky_lobe_samples);
     if (cosi > 0 && !model.Occluded(p, to_sun, 0.0)) {
       e_sun = sun_e * (cosi * RetroFactor(BlockRetro(albedo.retro, block), n, s, -dir));
       // §4.2: the block's sun lobe (eq. 13) under the sun's irradiance on the surface.

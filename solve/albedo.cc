@@ -29,7 +29,8 @@ double Seconds(std::chrono::steady_clock::time_point start) {
 // One equation of eqs. 11-12 for a point: y = pi I = rho_se e_se + rho_sun e_sun, per channel.
 struct Equation {
   Eigen::Vector3d y, e_se, e_sun;
-  double weight = 1;  // slot reliability (1 = full)
+  double weight = 1;                                   // slot reliability (1 = full)
+  Eigen::Vector3d measured = Eigen::Vector3d::Zero();  // pi x Observation::measured
 };
 
 enum class Mode { kBoth, kSeOnly };
@@ -89,7 +90,8 @@ PointFit FitPoint(const std::vector<Equation>& eqs, Mode mode, const Eigen::Vect
   const int n = static_cast<int>(eqs.size());
   PointFit fit;
   fit.weights.assign(n, 1.0);
-  // Relative errors: sigma_k = pi I_k, floored at o.relative_error_floor x the channel mean.
+  // Relative errors: sigma_k = pi I_k (of what the photo measured, where light was taken out of
+  // I_k), floored at o.relative_error_floor x the channel mean.
   Eigen::Vector3d mean_y = Eigen::Vector3d::Zero(), mean_e = Eigen::Vector3d::Zero();
   for (const auto& q : eqs) {
     mean_y += q.y;
@@ -100,8 +102,9 @@ PointFit FitPoint(const std::vector<Equation>& eqs, Mode mode, const Eigen::Vect
   std::vector<Eigen::Vector3d> inv_sigma(n);
   for (int k = 0; k < n; ++k) {
     for (int c = 0; c < 3; ++c) {
-      inv_sigma[k][c] = std::sqrt(eqs[k].weight) /
-                        std::max({eqs[k].y[c], o.relative_error_floor * mean_y[c], 1e-30});
+      inv_sigma[k][c] =
+          std::sqrt(eqs[k].weight) /
+          std::max({eqs[k].y[c], eqs[k].measured[c], o.relative_error_floor * mean_y[c], 1e-30});
     }
   }
   const int unknowns = mode == Mode::kBoth ? 2 : 1;
@@ -659,7 +662,8 @@ static AlbedoResult SolveWeighted(const SurfaceGrid& grid,
       if (!((irr.se[ob.point] + irr.sun[ob.point]).maxCoeff() > dark[ob.slot])) continue;
       const ShadingFactors f = FactorsOf(grid, ob, shading);
       eqs.push_back({kPi * ob.radiance.cast<double>(), irr.se[ob.point] * f.se,
-                     irr.sun[ob.point] * f.sun, slot_weight.empty() ? 1.0 : slot_weight[ob.slot]});
+                     irr.sun[ob.point] * f.sun, slot_weight.empty() ? 1.0 : slot_weight[ob.slot],
+                     kPi * ob.measured.cast<double>()});
     }
     return eqs;
   };
@@ -1265,6 +1269,7 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
             lobe_light += sky.Eval(gp.normal, p.to_light.cast<double>(), ob.view_dir.cast<double>())
                               .cwiseProduct(p.irradiance.cast<double>());
         }
+        ob.measured = ob.measured.cwiseMax(ob.radiance);
         ob.radiance = (ob.radiance - lobe_light.cast<float>()).cwiseMax(0.f);
       }
       return SolveWeighted(grid, diffuse, irr, options, slot_weight, &shading, &fill);

@@ -38,6 +38,10 @@ struct Observation {
   int photo = 0;
   Eigen::Vector3f radiance = Eigen::Vector3f::Zero();   // I, relative radiance
   Eigen::Vector3f view_dir = Eigen::Vector3f::UnitZ();  // unit ENU, from the point to the camera
+  // What the photo measured when `radiance` is what is left of it once light is taken out (the
+  // specular lobes'): the albedo fit's relative error is of the larger, the photo's error being
+  // of what it measured. Zero: `radiance` is what was measured.
+  Eigen::Vector3f measured = Eigen::Vector3f::Zero();
 };
 
 struct ObservationOptions {

@@ -32,8 +32,8 @@ fs::path Data() { return fs::path(ROUEN_SOURCE_DIR) / "tests/data/blender_nave";
 
 // Import, solve (the held-out slot kept out of the albedos) and validate the held-out slot:
 // the church alone, the church with its surroundings and the ground field off ([ground_field]
-// enabled = false), with them by default (the field on, as the surroundings are given), and
-// with the specular lobes' two models tried ("auto").
+// enabled = false), with them by default (the field on, as the surroundings are given; the
+// specular lobes' two models tried), and with eq. 13's lobe alone.
 class BlenderNaveTest : public ::testing::Test {
  protected:
   struct Run {
@@ -48,9 +48,9 @@ class BlenderNaveTest : public ::testing::Test {
     WriteFileAtomic(no_field, "[ground_field]\nenabled = false\n");
     around_ = new Run(UserPath("around", surroundings, " --config " + Q(no_field)));
     field_ = new Run(UserPath("field", surroundings));
-    const fs::path glossy = *dir_ / "glossy.toml";
-    WriteFileAtomic(glossy, "[albedo.sun_lobe]\nmodel = \"auto\"\n");
-    auto_ = new Run(UserPath("auto", surroundings, " --config " + Q(glossy)));
+    const fs::path eq13 = *dir_ / "eq13.toml";
+    WriteFileAtomic(eq13, "[albedo.sun_lobe]\nmodel = \"lafortune\"\n");
+    lafortune_ = new Run(UserPath("lafortune", surroundings, " --config " + Q(eq13)));
   }
   static void TearDownTestSuite() {
     fs::remove_all(*dir_);
@@ -58,7 +58,7 @@ class BlenderNaveTest : public ::testing::Test {
     delete alone_;
     delete around_;
     delete field_;
-    delete auto_;
+    delete lafortune_;
   }
   static fs::path Scene(const std::string& name) { return *dir_ / (name + "_scene"); }
   static Run UserPath(const std::string& name, const std::string& surroundings,
@@ -86,7 +86,7 @@ class BlenderNaveTest : public ::testing::Test {
     ASSERT_TRUE(alone_->validation.contains("photos")) << alone_->log;
     ASSERT_TRUE(around_->validation.contains("photos")) << around_->log;
     ASSERT_TRUE(field_->validation.contains("photos")) << field_->log;
-    ASSERT_TRUE(auto_->validation.contains("photos")) << auto_->log;
+    ASSERT_TRUE(lafortune_->validation.contains("photos")) << lafortune_->log;
     ASSERT_EQ(alone_->validation["photos"].size(), around_->validation["photos"].size());
   }
 
@@ -94,13 +94,13 @@ class BlenderNaveTest : public ::testing::Test {
   static Run* alone_;
   static Run* around_;
   static Run* field_;
-  static Run* auto_;
+  static Run* lafortune_;
 };
 fs::path* BlenderNaveTest::dir_ = nullptr;
 BlenderNaveTest::Run* BlenderNaveTest::alone_ = nullptr;
 BlenderNaveTest::Run* BlenderNaveTest::around_ = nullptr;
 BlenderNaveTest::Run* BlenderNaveTest::field_ = nullptr;
-BlenderNaveTest::Run* BlenderNaveTest::auto_ = nullptr;
+BlenderNaveTest::Run* BlenderNaveTest::lafortune_ = nullptr;
 
 // The houses are solved with the church (they shade it, hide its sky and light it) but never
 // scored: every view scores the same pixels of the church with or without them (no house
@@ -224,17 +224,18 @@ TEST_F(BlenderNaveTest, TheGroundFieldSeesTheSquareAsTheWallsSeeIt) {
 // The slate roof (Principled specular 0.5, roughness 0.35: GGX with alpha 0.1225 and a
 // dielectric's F0 0.04, seen near its mirror direction by the glint view at 09:00). Eq. 13's
 // lobe cannot be fifty times brighter at grazing than near normal incidence; the microfacet
-// lobe, tried beside it, is kept, with the material's roughness, and where the photos determine
-// the roof's albedos they come out nearer its base colour: the sun's within the 5%, the
-// sky's (its reflection of the sky now in the lobe, not in the diffuse albedo) nearer than with
-// eq. 13's lobe.
+// lobe, tried beside it by default, is kept, with the material's roughness. It explains the
+// glint photographed at 09:00 (eq. 13's lobe leaves that photo at 18 dB), and where the photos
+// determine the roof's albedos they come out nearer its base colour: the sun's within the
+// issue's 5%, the sky's (its reflection of the sky now in the lobe, not in the diffuse albedo)
+// nearer than with eq. 13's lobe.
 TEST_F(BlenderNaveTest, TheSlateRoofsGlintIsAMicrofacetLobe) {
   Mesh mesh;
-  const SceneModel scene = ReadScene(Scene("auto"), &mesh);
+  const SceneModel scene = ReadScene(Scene("field"), &mesh);
   const auto roof = std::find(mesh.block_names.begin(), mesh.block_names.end(), "roof");
   ASSERT_NE(roof, mesh.block_names.end());
   const SpecularLobe lobe = BlockLobe(scene.albedo.sun_lobes, roof - mesh.block_names.begin());
-  ASSERT_FALSE(lobe.IsZero()) << auto_->log;
+  ASSERT_FALSE(lobe.IsZero()) << field_->log;
   EXPECT_EQ(lobe.model, LobeModel::kMicrofacet) << lobe.Text();
   EXPECT_NEAR(std::sqrt(2 / (lobe.n + 2)), 0.1225, 0.1 * 0.1225) << lobe.Text();
   // The same lobe reflects the sky (one material).
@@ -243,31 +244,50 @@ TEST_F(BlenderNaveTest, TheSlateRoofsGlintIsAMicrofacetLobe) {
 
   // Both albedos where the photos determine both: the roof's points seen in sun and in shadow
   // (the west end, in the facade's shadow at some training times). Elsewhere the roof is never in
-  // shadow, eq. 11 is missing and its rho_se rests on the block-ratio prior: with the microfacet
-  // lobe its median there is printed, not asserted (the low-sun slot pulls it towards zero).
-  light_passes::BlockAlbedos(Data(), Scene("auto"));
-  const auto with_lafortune = light_passes::BlockAlbedos(Data(), Scene("field"), true);
-  const auto with_auto = light_passes::BlockAlbedos(Data(), Scene("auto"), true);
-  ASSERT_EQ(with_lafortune.size(), with_auto.size());
-  for (size_t k = 0; k < with_auto.size(); ++k) {
-    const light_passes::BlockAlbedo &a = with_auto[k], &l = with_lafortune[k];
+  // shadow, eq. 11 is missing and its rho_se rests on the block-ratio prior.
+  const auto with_lafortune = light_passes::BlockAlbedos(Data(), Scene("lafortune"), true);
+  const auto with_micro = light_passes::BlockAlbedos(Data(), Scene("field"), true);
+  ASSERT_EQ(with_lafortune.size(), with_micro.size());
+  for (size_t k = 0; k < with_micro.size(); ++k) {
+    const light_passes::BlockAlbedo &a = with_micro[k], &l = with_lafortune[k];
     if (a.block != "roof") continue;
     EXPECT_NEAR(a.rho_sun / a.base, 1.0, 0.05) << a.channel;
     EXPECT_LT(std::abs(a.rho_se / a.base - 1), std::abs(l.rho_se / l.base - 1)) << a.channel;
   }
-  // The views at the held-out evening, printed. The glint view (view0) gained 0.1 dB with the
-  // microfacet lobe until the walls lit the field's ground; since, the two lobes explain it
-  // alike (41.6 against 41.7 dB). The south-east view loses about 7 dB: east of the facade's
-  // shadow the roof is never in shadow, and with the microfacet lobe its rho_se there is 28% low
-  // in blue.
+
+  // The glint view at 09:00, a training photo: the roof's glint, up to 200 times its diffuse
+  // light, explained by the microfacet lobe (issue's bar for training photos: 35 dB).
+  const fs::path json = *dir_ / "glint_0900.json";
+  const auto glint_psnr = [&](const std::string& name) {
+    const Result r = RunRouen("validate " + Q(Scene(name)) + " --session " +
+                              Q(*dir_ / (name + "_session")) + " --slot 0 --json " + Q(json));
+    EXPECT_EQ(r.code, 0) << r.out;
+    const nlohmann::json v = nlohmann::json::parse(ReadFileToString(json));
+    for (const nlohmann::json& p : v["photos"])
+      if (p["view"] == "slot0/architecture/view0") return p["measured"]["psnr_db"].get<double>();
+    ADD_FAILURE() << "no glint view at slot 0";
+    return 0.0;
+  };
+  const double micro_0900 = glint_psnr("field"), lafortune_0900 = glint_psnr("lafortune");
+  std::printf("glint view at 09:00: eq. 13's lobe %.2f dB, the microfacet lobe %.2f dB\n",
+              lafortune_0900, micro_0900);
+  EXPECT_GE(micro_0900, 35);
+
+  // The views at the held-out evening: none explained worse than with eq. 13's lobe (0.3 dB,
+  // the sky lobe's sampling noise in the render), the south-east view, where the roof fills a
+  // third of the building's pixels, better.
   for (size_t k = 0; k < field_->validation["photos"].size(); ++k) {
-    const nlohmann::json& l = field_->validation["photos"][k];
-    const nlohmann::json& a = auto_->validation["photos"][k];
+    const nlohmann::json& l = lafortune_->validation["photos"][k];
+    const nlohmann::json& a = field_->validation["photos"][k];
     ASSERT_EQ(l["view"], a["view"]);
     const double before = l["measured"]["psnr_db"], after = a["measured"]["psnr_db"];
-    std::printf("%s: eq. 13's lobe %.2f dB, auto %.2f dB (predicted %.2f -> %.2f)\n",
+    std::printf("%s: eq. 13's lobe %.2f dB, microfacet %.2f dB (predicted %.2f -> %.2f)\n",
                 l["view"].get<std::string>().c_str(), before, after,
                 l["predicted"]["psnr_db"].get<double>(), a["predicted"]["psnr_db"].get<double>());
+    EXPECT_GE(after, before - 0.3) << l["view"];
+    if (l["view"] == "slot4/architecture/view1") {
+      EXPECT_GT(after, before) << l["view"];
+    }
   }
 }
 
