@@ -3,9 +3,11 @@
 #include <tbb/parallel_for.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <optional>
 #include <string>
 
 #include "core/angles.h"
@@ -28,17 +30,40 @@ void CheckSizes(const SurfaceGrid& grid, const AlbedoResult& albedo, const SlotI
   }
 }
 
-// §4.2.1: the sky and environment a block's lobe reflects towards v from surface point p:
-// samples x samples stratified directions, the first half drawn about v's mirror direction with
-// the lobe's MirrorExponent and the rest cosine-distributed about the normal, each weighing
-// f_s(u, v) L(u) by MixtureWeight. A direction the model blocks brings the diffuse radiance of
-// the grid point it meets (as the albedo solve's lobe light has it: solve/albedo.cc Pieces), none
-// where it meets a back face.
-Eigen::Vector3d SkyLobeLight(const SpecularLobe& lobe, const Eigen::Vector3d& n,
+// A sky lobe and its directional albedo (LobeDirectionalAlbedo) at kAlbedoSteps + 1 view
+// angles, cos 0 to 1, between which it is interpolated.
+struct SkyLobe {
+  static constexpr int kAlbedoSteps = 128;
+  SpecularLobe lobe;
+  std::vector<double> albedo;
+
+  explicit SkyLobe(const SpecularLobe& l) : lobe(l), albedo(kAlbedoSteps + 1) {
+    tbb::parallel_for(0, kAlbedoSteps + 1, [&](int k) {
+      albedo[k] = LobeDirectionalAlbedo(lobe, static_cast<double>(k) / kAlbedoSteps);
+    });
+  }
+  double AlbedoAt(double cos_view) const {
+    const double x = std::clamp(cos_view, 0.0, 1.0) * kAlbedoSteps;
+    const int k = std::min(static_cast<int>(x), kAlbedoSteps - 1);
+    return albedo[k] + (x - k) * (albedo[k + 1] - albedo[k]);
+  }
+};
+
+// §4.2.1: the sky and environment a block's lobe reflects towards v from surface point p, as
+// the lobe's directional albedo times the mean radiance the lobe sees: samples x samples
+// stratified directions, the first half drawn about v's mirror direction with the lobe's
+// MirrorExponent and the rest cosine-distributed about the normal, each weighing L(u) by
+// f_s(u, v) and MixtureWeight. The ratio leaves out the spread of those weights (a lobe at
+// grazing is stretched far from its draws' density), which summing f_s L alone carries into
+// every pixel as noise; L's own variation over the lobe remains. A direction the model blocks
+// brings the diffuse radiance of the grid point it meets (as the albedo solve's lobe light has
+// it: solve/albedo.cc Pieces), none where it meets a back face.
+Eigen::Vector3d SkyLobeLight(const SkyLobe& sky_lobe, const Eigen::Vector3d& n,
                              const Eigen::Vector3d& v, const Eigen::Vector3d& p,
                              const Lighting& lighting, const RayCaster& model,
                              const SurfaceGrid& grid, const AlbedoResult& albedo,
                              const SlotIrradiance& irr, int samples) {
+  const SpecularLobe& lobe = sky_lobe.lobe;
   const Eigen::Vector3d m = 2 * v.dot(n) * n - v;
   const double e = lobe.MirrorExponent();
   uint64_t seed = 0;
@@ -50,6 +75,7 @@ Eigen::Vector3d SkyLobeLight(const SpecularLobe& lobe, const Eigen::Vector3d& n,
   }
   const int total = samples * samples, mirror = (total + 1) / 2, cosine = total - mirror;
   Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  double weights = 0;
   for (int a = 0; a < samples; ++a) {
     for (int b = 0; b < samples; ++b) {
       const int k = a * samples + b;
@@ -60,23 +86,24 @@ Eigen::Vector3d SkyLobeLight(const SpecularLobe& lobe, const Eigen::Vector3d& n,
       const double u1 = (j + HashUniformHigh(h)) / half, u2 = HashUniformLow(h);
       const Eigen::Vector3d u =
           about_mirror ? DrawAboutAxis(m, e, u1, u2) : DrawAboutAxis(n, 1, u1, u2);
-      const double w = MixtureWeight(n, m, u, e, cosine, mirror);
+      const double w = lobe.Shape(n, u, v) * MixtureWeight(n, m, u, e, cosine, mirror);
       if (!(w > 0)) continue;
+      weights += w;
       const RayHit hit = model.Intersect(p, u, 0.0);
-      Eigen::Vector3d radiance;
       if (!hit.hit) {
-        radiance = lighting.EscapedRadiance(u, p.z());
-      } else {
-        const int j = grid.NearestPoint(hit.triangle, hit.u, hit.v);
-        if (j < 0 || grid.points[j].normal.dot(u) >= 0) continue;
-        radiance = (albedo.rho_sun[j].cwiseProduct(irr.sun[j]) +
-                    albedo.rho_se[j].cwiseProduct(irr.se[j])) /
-                   kPi;
+        sum += w * lighting.EscapedRadiance(u, p.z());
+        continue;
       }
-      sum += lobe.Eval(n, u, v).cwiseProduct(radiance) * w;
+      const int g = grid.NearestPoint(hit.triangle, hit.u, hit.v);
+      if (g < 0 || grid.points[g].normal.dot(u) >= 0) continue;
+      sum +=
+          w *
+          (albedo.rho_sun[g].cwiseProduct(irr.sun[g]) + albedo.rho_se[g].cwiseProduct(irr.se[g])) /
+          kPi;
     }
   }
-  return sum;
+  if (!(weights > 0)) return Eigen::Vector3d::Zero();
+  return lobe.rho_s.cwiseProduct(sum) * (sky_lobe.AlbedoAt(v.dot(n)) / weights);
 }
 
 }  // namespace
@@ -127,6 +154,10 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
       options.soft_shadows ? SunDiscDirections(s, lighting.SunAngularRadius(), 0, 4)
                            : std::vector<Eigen::Vector3d>();
 
+  std::vector<std::optional<SkyLobe>> sky_lobes(albedo.sky_lobes.size());
+  for (size_t b = 0; b < sky_lobes.size(); ++b)
+    if (!albedo.sky_lobes[b].IsZero()) sky_lobes[b].emplace(albedo.sky_lobes[b]);
+
   // *hit_model: whether the ray hits the model (the alpha channel's coverage). `to_sun`: the
   // shadow ray's direction (a point of the sun's disc).
   auto shade = [&](const Eigen::Vector3d& dir, const Eigen::Vector3d& to_sun,
@@ -167,9 +198,8 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
     const int block = hit.triangle < static_cast<int>(mesh.triangle_block.size())
                           ? mesh.triangle_block[hit.triangle]
                           : -1;
-    const SpecularLobe sky_lobe = BlockLobe(albedo.sky_lobes, block);
-    if (!sky_lobe.IsZero())
-      specular = SkyLobeLight(sky_lobe, n, -dir, p, lighting, model, grid, albedo, irr,
+    if (block >= 0 && block < static_cast<int>(sky_lobes.size()) && sky_lobes[block])
+      specular = SkyLobeLight(*sky_lobes[block], n, -dir, p, lighting, model, grid, albedo, irr,
                               options.sky_lobe_samples);
     if (cosi > 0 && !model.Occluded(p, to_sun, 0.0)) {
       e_sun = sun_e * (cosi * RetroFactor(BlockRetro(albedo.retro, block), n, s, -dir));

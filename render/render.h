@@ -34,8 +34,9 @@ struct RenderOptions {
   // A fourth channel, alpha: the fraction of the pixel's samples whose ray hits the model (1 on
   // the building, 0 where every ray escapes). The colour channels are unchanged by it.
   bool alpha = false;
-  // §4.2.1: directions per axis (squared per shaded point) that sample a block's
-  // sky/environment lobe around the mirror direction.
+  // §4.2.1: directions per axis (squared per shaded point) that sample the mean radiance a
+  // block's sky/environment lobe sees, half about the mirror direction (its directional albedo
+  // is tabulated per render, no ray cast).
   int sky_lobe_samples = 4;
   void Validate() const;  // throws rouen::Error
 };

@@ -90,6 +90,24 @@ double MixtureWeight(const Eigen::Vector3d& n, const Eigen::Vector3d& m, const E
   return density > 0 ? cu / density : 0;
 }
 
+double LobeDirectionalAlbedo(const SpecularLobe& lobe, double cos_view, int strata) {
+  if (!(cos_view > 0)) return 0;
+  const double c = std::min(cos_view, 1.0);
+  const Eigen::Vector3d n = Eigen::Vector3d::UnitZ();
+  const Eigen::Vector3d v(std::sqrt(1 - c * c), 0, c), m(-v.x(), 0, c);
+  const double e = lobe.MirrorExponent();
+  const int count = strata * strata;
+  double sum = 0;
+  for (int a = 0; a < strata; ++a) {
+    for (int b = 0; b < strata; ++b) {
+      const double u1 = (a + 0.5) / strata, u2 = (b + 0.5) / strata;
+      for (const Eigen::Vector3d& u : {DrawAboutAxis(m, e, u1, u2), DrawAboutAxis(n, 1, u1, u2)})
+        sum += lobe.Shape(n, u, v) * MixtureWeight(n, m, u, e, count, count);
+    }
+  }
+  return sum;
+}
+
 void SunLobeOptions::Validate() const {
   if (min_samples < 1) throw Error("sun lobe: min_samples must be >= 1");
   if (max_samples < min_samples) throw Error("sun lobe: max_samples must be >= min_samples");

@@ -180,6 +180,12 @@ Eigen::Vector3d DrawAboutAxis(const Eigen::Vector3d& axis, double exponent, doub
 double MixtureWeight(const Eigen::Vector3d& n, const Eigen::Vector3d& m, const Eigen::Vector3d& u,
                      double exponent, int cosine_count, int mirror_count);
 
+// The lobe's directional albedo towards a viewer at `cos_view` from the normal: the integral of
+// Shape(n, u, v) cos over the hemisphere, what rho_s scales into the light it reflects of a
+// uniform unit sky. A quadrature of that mixture (`strata` x `strata` midpoints about the
+// mirror and as many cosine-distributed), no ray cast; 0 at or below grazing.
+double LobeDirectionalAlbedo(const SpecularLobe& lobe, double cos_view, int strata = 96);
+
 // One observation of a block for the fit of its sky/environment lobe.
 struct SkyLobeSample {
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
