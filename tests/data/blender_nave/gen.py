@@ -367,6 +367,12 @@ def main():
     ap.add_argument("--scale", type=float, default=1.0, help="multiplies every sample count")
     ap.add_argument("--times", default="", help="comma-separated slot indices (default: all)")
     ap.add_argument("--no-checks", action="store_true")
+    ap.add_argument("--only", default="",
+                    help="comma-separated camera names to render (default: all; the sun frame "
+                         "always): a second copy of some views, see --seed-offset")
+    ap.add_argument("--seed-offset", type=int, default=0,
+                    help="added to every frame's Cycles seed: another render of the same world, "
+                         "whose noise is independent (tests/probe/noise_ceiling.py)")
     ap.add_argument("--plan", action="store_true",
                     help="print the geometry, visibility and mirror checks; render nothing")
     a = ap.parse_args(argv)
@@ -502,10 +508,12 @@ def main():
         frames = {}
         for name, (ob, kind, k, role) in list(cams.items()) + [
                 ("sun", (sun_ob, "pinhole", sun_k, "sun"))]:
+            if a.only and name != "sun" and name not in a.only.split(","):
+                continue
             fname = f"t{s}_{name}.exr"
             passes.mute = role != "arch"
             gloss.mute = name != "glint"
-            seed = 1000 * s + len(frames)
+            seed = 1000 * s + len(frames) + a.seed_offset
             n = samples[role]
             cpu0 = time.process_time()
             secs = base.render(ob, k, os.path.join(out, fname), n, seed,
