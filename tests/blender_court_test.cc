@@ -12,7 +12,6 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "core/files.h"
 #include "tests/cli_util.h"
 #include "tests/light_passes.h"
 
@@ -21,45 +20,17 @@ namespace {
 
 namespace fs = std::filesystem;
 using cli_test::Q;
-using cli_test::Result;
-using cli_test::RunRouen;
 
 fs::path Data() { return fs::path(ROUEN_SOURCE_DIR) / "tests/data/blender_court"; }
 
-// Import, solve with the held-out slot out of the albedos, and validate that slot: the scene
-// and the figures (rouen validate --json), or a failed test.
-struct UserRun {
-  fs::path scene;
-  nlohmann::json validation;
-};
-UserRun UserPath(const fs::path& dir, const std::string& name, const std::string& import_extra,
-                 int heldout) {
-  UserRun run;
-  const fs::path session = dir / (name + "_session");
-  run.scene = dir / (name + "_scene");
-  Result r = RunRouen(light_passes::ImportCommand(Data()) + " --surroundings " +
-                      Q(Data() / "surroundings.obj") + import_extra + " --out " + Q(session));
-  EXPECT_EQ(r.code, 0) << r.out;
-  if (r.code != 0) return run;
-  r = RunRouen("solve " + Q(session) + " --out " + Q(run.scene) + " --holdout-slot " +
-               std::to_string(heldout));
-  EXPECT_EQ(r.code, 0) << r.out;
-  if (r.code != 0) return run;
-  const fs::path json = dir / (name + ".json");
-  r = RunRouen("validate " + Q(run.scene) + " --session " + Q(session) + " --slot " +
-               std::to_string(heldout) + " --json " + Q(json));
-  EXPECT_EQ(r.code, 0) << r.out;
-  if (r.code == 0) run.validation = nlohmann::json::parse(ReadFileToString(json));
-  return run;
-}
-
 TEST(BlenderCourtTest, TreesTheUserGivesShadeTheWallsAndHideThemFromTheViews) {
   const fs::path dir = cli_test::TempDir("blender_court");
-  const nlohmann::json truth = nlohmann::json::parse(ReadFileToString(Data() / "truth.json"));
-  const int heldout = truth["heldout_slot"].get<int>();
-  const UserRun bare = UserPath(dir, "bare", "", heldout);
-  const UserRun trees = UserPath(dir, "trees", " --trees " + Q(Data() / "trees.csv"), heldout);
-  ASSERT_TRUE(bare.validation.contains("photos") && trees.validation.contains("photos"));
+  const std::string surroundings = " --surroundings " + Q(Data() / "surroundings.obj");
+  const light_passes::HeldOutRun bare = light_passes::RunHeldOut(Data(), dir, "bare", surroundings);
+  const light_passes::HeldOutRun trees = light_passes::RunHeldOut(
+      Data(), dir, "trees", surroundings + " --trees " + Q(Data() / "trees.csv"));
+  ASSERT_TRUE(bare.validation.contains("photos")) << bare.log;
+  ASSERT_TRUE(trees.validation.contains("photos")) << trees.log;
   ASSERT_EQ(bare.validation["photos"].size(), trees.validation["photos"].size());
 
   // Every held-out view at the evening sun (9 degrees high) meets the 35 dB under the

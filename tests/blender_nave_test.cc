@@ -36,21 +36,20 @@ fs::path Data() { return fs::path(ROUEN_SOURCE_DIR) / "tests/data/blender_nave";
 // specular lobes' two models tried), and with eq. 13's lobe alone.
 class BlenderNaveTest : public ::testing::Test {
  protected:
-  struct Run {
-    std::string log;
-    nlohmann::json validation;  // rouen validate --json
-  };
+  using Run = light_passes::HeldOutRun;
   static void SetUpTestSuite() {
     dir_ = new fs::path(cli_test::TempDir("blender_nave"));
-    alone_ = new Run(UserPath("alone", ""));
+    alone_ = new Run(light_passes::RunHeldOut(Data(), *dir_, "alone", ""));
     const std::string surroundings = " --surroundings " + Q(Data() / "surroundings.obj");
     const fs::path no_field = *dir_ / "no_field.toml";
     WriteFileAtomic(no_field, "[ground_field]\nenabled = false\n");
-    around_ = new Run(UserPath("around", surroundings, " --config " + Q(no_field)));
-    field_ = new Run(UserPath("field", surroundings));
+    around_ = new Run(light_passes::RunHeldOut(Data(), *dir_, "around", surroundings,
+                                               " --config " + Q(no_field)));
+    field_ = new Run(light_passes::RunHeldOut(Data(), *dir_, "field", surroundings));
     const fs::path eq13 = *dir_ / "eq13.toml";
     WriteFileAtomic(eq13, "[albedo.sun_lobe]\nmodel = \"lafortune\"\n");
-    lafortune_ = new Run(UserPath("lafortune", surroundings, " --config " + Q(eq13)));
+    lafortune_ = new Run(
+        light_passes::RunHeldOut(Data(), *dir_, "lafortune", surroundings, " --config " + Q(eq13)));
   }
   static void TearDownTestSuite() {
     fs::remove_all(*dir_);
@@ -59,28 +58,6 @@ class BlenderNaveTest : public ::testing::Test {
     delete around_;
     delete field_;
     delete lafortune_;
-  }
-  static fs::path Scene(const std::string& name) { return *dir_ / (name + "_scene"); }
-  static Run UserPath(const std::string& name, const std::string& surroundings,
-                      const std::string& solve_options = "") {
-    const nlohmann::json truth = nlohmann::json::parse(ReadFileToString(Data() / "truth.json"));
-    const std::string heldout = std::to_string(truth["heldout_slot"].get<int>());
-    const fs::path session = *dir_ / (name + "_session"), scene = Scene(name);
-    Run run;
-    Result r =
-        RunRouen(light_passes::ImportCommand(Data()) + surroundings + " --out " + Q(session));
-    run.log += r.out;
-    if (r.code != 0) return run;
-    r = RunRouen("solve " + Q(session) + " --out " + Q(scene) + " --holdout-slot " + heldout +
-                 solve_options);
-    run.log += r.out;
-    if (r.code != 0) return run;
-    const fs::path json = *dir_ / (name + "_validation.json");
-    r = RunRouen("validate " + Q(scene) + " --session " + Q(session) + " --slot " + heldout +
-                 " --json " + Q(json));
-    run.log += r.out;
-    if (r.code == 0) run.validation = nlohmann::json::parse(ReadFileToString(json));
-    return run;
   }
   void SetUp() override {
     ASSERT_TRUE(alone_->validation.contains("photos")) << alone_->log;
@@ -129,7 +106,7 @@ TEST_F(BlenderNaveTest, AHouseOnlyThePanoramasSeeIsReadFromThem) {
       << field_->log;
   int channels = 0;
   for (const light_passes::BlockAlbedo& a :
-       light_passes::SurroundingAlbedos(Data(), Scene("field"))) {
+       light_passes::SurroundingAlbedos(Data(), field_->scene)) {
     if (a.block != "house_sw") continue;
     ++channels;
     EXPECT_GT(a.points, 20) << a.channel;
@@ -184,8 +161,8 @@ TEST_F(BlenderNaveTest, TheGroundFieldSeesTheSquareAsTheWallsSeeIt) {
   // times, the sun's radiance from the telephoto frame is within 3% (blender_sun_test) and the
   // rest of the light (up to 40% of it there) within 12.5%: 8% per block and channel.
   const nlohmann::json truth = nlohmann::json::parse(ReadFileToString(Data() / "truth.json"));
-  const auto field = light_passes::TermTable(Data(), Scene("field"));
-  const auto around = light_passes::TermTable(Data(), Scene("around"));
+  const auto field = light_passes::TermTable(Data(), field_->scene);
+  const auto around = light_passes::TermTable(Data(), around_->scene);
   int worse_without = 0;
   for (const auto& [block, t] : truth["blocks"].items()) {
     if (t["glossy"].get<bool>()) continue;
@@ -199,7 +176,7 @@ TEST_F(BlenderNaveTest, TheGroundFieldSeesTheSquareAsTheWallsSeeIt) {
   EXPECT_GT(worse_without, 0) << "the environment's ground lights the walls right already";
 
   // The sun pseudo-albedos of the matte blocks within the 5% of the base colours.
-  for (const light_passes::BlockAlbedo& a : light_passes::BlockAlbedos(Data(), Scene("field")))
+  for (const light_passes::BlockAlbedo& a : light_passes::BlockAlbedos(Data(), field_->scene))
     if (!a.glossy) {
       EXPECT_NEAR(a.rho_sun / a.base, 1.0, 0.05) << a.block << " " << a.channel;
     }
@@ -231,7 +208,7 @@ TEST_F(BlenderNaveTest, TheGroundFieldSeesTheSquareAsTheWallsSeeIt) {
 // nearer than with eq. 13's lobe.
 TEST_F(BlenderNaveTest, TheSlateRoofsGlintIsAMicrofacetLobe) {
   Mesh mesh;
-  const SceneModel scene = ReadScene(Scene("field"), &mesh);
+  const SceneModel scene = ReadScene(field_->scene, &mesh);
   const auto roof = std::find(mesh.block_names.begin(), mesh.block_names.end(), "roof");
   ASSERT_NE(roof, mesh.block_names.end());
   const SpecularLobe lobe = BlockLobe(scene.albedo.sun_lobes, roof - mesh.block_names.begin());
@@ -245,8 +222,8 @@ TEST_F(BlenderNaveTest, TheSlateRoofsGlintIsAMicrofacetLobe) {
   // Both albedos where the photos determine both: the roof's points seen in sun and in shadow
   // (the west end, in the facade's shadow at some training times). Elsewhere the roof is never in
   // shadow, eq. 11 is missing and its rho_se rests on the block-ratio prior.
-  const auto with_lafortune = light_passes::BlockAlbedos(Data(), Scene("lafortune"), true);
-  const auto with_micro = light_passes::BlockAlbedos(Data(), Scene("field"), true);
+  const auto with_lafortune = light_passes::BlockAlbedos(Data(), lafortune_->scene, true);
+  const auto with_micro = light_passes::BlockAlbedos(Data(), field_->scene, true);
   ASSERT_EQ(with_lafortune.size(), with_micro.size());
   for (size_t k = 0; k < with_micro.size(); ++k) {
     const light_passes::BlockAlbedo &a = with_micro[k], &l = with_lafortune[k];
@@ -258,9 +235,9 @@ TEST_F(BlenderNaveTest, TheSlateRoofsGlintIsAMicrofacetLobe) {
   // The glint view at 09:00, a training photo: the roof's glint, up to 200 times its diffuse
   // light, explained by the microfacet lobe (issue's bar for training photos: 35 dB).
   const fs::path json = *dir_ / "glint_0900.json";
-  const auto glint_psnr = [&](const std::string& name) {
-    const Result r = RunRouen("validate " + Q(Scene(name)) + " --session " +
-                              Q(*dir_ / (name + "_session")) + " --slot 0 --json " + Q(json));
+  const auto glint_psnr = [&](const Run& run) {
+    const Result r = RunRouen("validate " + Q(run.scene) + " --session " + Q(run.session) +
+                              " --slot 0 --json " + Q(json));
     EXPECT_EQ(r.code, 0) << r.out;
     const nlohmann::json v = nlohmann::json::parse(ReadFileToString(json));
     for (const nlohmann::json& p : v["photos"])
@@ -268,7 +245,7 @@ TEST_F(BlenderNaveTest, TheSlateRoofsGlintIsAMicrofacetLobe) {
     ADD_FAILURE() << "no glint view at slot 0";
     return 0.0;
   };
-  const double micro_0900 = glint_psnr("field"), lafortune_0900 = glint_psnr("lafortune");
+  const double micro_0900 = glint_psnr(*field_), lafortune_0900 = glint_psnr(*lafortune_);
   std::printf("glint view at 09:00: eq. 13's lobe %.2f dB, the microfacet lobe %.2f dB\n",
               lafortune_0900, micro_0900);
   EXPECT_GE(micro_0900, 35);

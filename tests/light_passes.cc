@@ -345,4 +345,28 @@ std::string ImportCommand(const fs::path& data) {
          cli_test::Q(data / "building.obj") + " --sky-mask auto";
 }
 
+HeldOutRun RunHeldOut(const fs::path& data, const fs::path& dir, const std::string& name,
+                      const std::string& import_options, const std::string& solve_options) {
+  const nlohmann::json truth = nlohmann::json::parse(ReadFileToString(data / "truth.json"));
+  const std::string heldout = std::to_string(truth["heldout_slot"].get<int>());
+  HeldOutRun run;
+  run.session = dir / (name + "_session");
+  run.scene = dir / (name + "_scene");
+  cli_test::Result r = cli_test::RunRouen(ImportCommand(data) + import_options + " --out " +
+                                          cli_test::Q(run.session));
+  run.log += r.out;
+  if (r.code != 0) return run;
+  r = cli_test::RunRouen("solve " + cli_test::Q(run.session) + " --out " + cli_test::Q(run.scene) +
+                         " --holdout-slot " + heldout + solve_options);
+  run.log += r.out;
+  if (r.code != 0) return run;
+  const fs::path json = dir / (name + "_validation.json");
+  r = cli_test::RunRouen("validate " + cli_test::Q(run.scene) + " --session " +
+                         cli_test::Q(run.session) + " --slot " + heldout + " --json " +
+                         cli_test::Q(json));
+  run.log += r.out;
+  if (r.code == 0) run.validation = nlohmann::json::parse(ReadFileToString(json));
+  return run;
+}
+
 }  // namespace rouen::light_passes

@@ -8,6 +8,7 @@
 #include <Eigen/Core>
 #include <filesystem>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -28,6 +29,20 @@ GroundPrediction GroundBesideWalls(const std::filesystem::path& data,
 // `rouen import` of the world in `data` as a user runs it (its photos, list, cameras, the site
 // from truth.json, building.obj, the sky segmented): append " --surroundings ..." and " --out ...".
 std::string ImportCommand(const std::filesystem::path& data);
+
+// The user's path on the world in `data`, held out at its truth.json's held-out slot: `rouen
+// import` (ImportCommand and `import_options`) into dir/<name>_session, `rouen solve
+// --holdout-slot` (and `solve_options`) into dir/<name>_scene, `rouen validate --json` of that
+// slot. `log` holds every command's output; `validation` validate's JSON, empty when a command
+// failed (the caller asserts on it, with the log).
+struct HeldOutRun {
+  std::filesystem::path session, scene;
+  std::string log;
+  nlohmann::json validation;
+};
+HeldOutRun RunHeldOut(const std::filesystem::path& data, const std::filesystem::path& dir,
+                      const std::string& name, const std::string& import_options,
+                      const std::string& solve_options = "");
 
 // Sums over a set of visible grid points: Cycles' passes x pi and rouen's terms in the same
 // units (the block's Burley factor for the sun, its ambient factor for the rest).

@@ -480,6 +480,9 @@ def main():
         ob = base.blender_camera(name, "equirect", *PANO_SIZE)
         base.place_camera(ob, "equirect", level, eye)
         cams[name] = (ob, "equirect", pano_k, "pano")
+    unknown = set(a.only.split(",")) - set(cams) if a.only else set()
+    if unknown:
+        raise SystemExit(f"--only: no camera {', '.join(sorted(unknown))} (cameras: {', '.join(cams)})")
     sun_k = base.pinhole_intrinsics(*SUN_SIZE, SUN_HFOV_DEG)
     sun_ob = base.blender_camera("sun", "pinhole", *SUN_SIZE, SUN_HFOV_DEG)
     targets = {n: "architecture" for n, *_ in views}
