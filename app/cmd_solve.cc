@@ -49,6 +49,13 @@ void Run(const SolveArgs& a) {
     throw Error("rouen solve needs a SESSION folder and --out SCENE (see rouen solve --help)");
   request.force = a.force;
   request.log = [](const std::string& s) { std::fprintf(stderr, "solve: %s\n", s.c_str()); };
+  request.progress = [](const SolveEvent& e) {
+    if (e.fraction == 0)
+      std::fprintf(stderr, "solve: stage %d of %d: %s\n", e.index, e.count, e.stage.c_str());
+    else if (e.fraction < 1)
+      std::fprintf(stderr, "solve: stage %d of %d: %s %.0f%% (%s)\n", e.index, e.count,
+                   e.stage.c_str(), 100 * e.fraction, e.message.c_str());
+  };
   const SceneSolve r = SolveSessionFolder(request);
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

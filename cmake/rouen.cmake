@@ -1,8 +1,9 @@
 # rouen_library(NAME DIRS dir... PUBLIC deps... PRIVATE deps...)
 # One library per folder: every *.cc under DIRS except *_test.cc; the *_test.cc files beside
-# the code become one GoogleTest binary NAME_test run by CTest.
+# the code become one GoogleTest binary NAME_test run by CTest (SHARED_SETUP suites: see
+# rouen_discover_tests).
 function(rouen_library name)
-  cmake_parse_arguments(ARG "" "" "DIRS;PUBLIC;PRIVATE;TEST_DEPS" ${ARGN})
+  cmake_parse_arguments(ARG "" "" "DIRS;PUBLIC;PRIVATE;TEST_DEPS;SHARED_SETUP" ${ARGN})
   set(sources)
   set(tests)
   foreach(dir ${ARG_DIRS})
@@ -27,6 +28,29 @@ function(rouen_library name)
     target_compile_definitions(${name}_test PRIVATE
       ROUEN_SHARED_DIR="${PROJECT_SOURCE_DIR}/../shared"
       ROUEN_SOURCE_DIR="${PROJECT_SOURCE_DIR}")
-    gtest_discover_tests(${name}_test DISCOVERY_TIMEOUT 60 PROPERTIES LABELS unit)
+    rouen_discover_tests(${name}_test LABEL unit SHARED_SETUP ${ARG_SHARED_SETUP})
   endif()
+endfunction()
+
+# rouen_discover_tests(TARGET LABEL label [SHARED_SETUP suite...])
+# One CTest entry per GoogleTest test of TARGET, except the SHARED_SETUP suites: each of those
+# is one entry running all its tests in one process, so that a costly SetUpTestSuite (a
+# session captured, scenes solved) runs once rather than once per test.
+function(rouen_discover_tests target)
+  cmake_parse_arguments(ARG "" "LABEL" "SHARED_SETUP" ${ARGN})
+  set(filter "")
+  foreach(suite ${ARG_SHARED_SETUP})
+    string(APPEND filter ":${suite}.*")
+  endforeach()
+  if(filter)
+    string(SUBSTRING "${filter}" 1 -1 filter)
+    gtest_discover_tests(${target} DISCOVERY_TIMEOUT 60 TEST_FILTER "-${filter}"
+                         PROPERTIES LABELS ${ARG_LABEL})
+  else()
+    gtest_discover_tests(${target} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS ${ARG_LABEL})
+  endif()
+  foreach(suite ${ARG_SHARED_SETUP})
+    add_test(NAME ${suite} COMMAND ${target} --gtest_filter=${suite}.*)
+    set_tests_properties(${suite} PROPERTIES LABELS ${ARG_LABEL})
+  endforeach()
 endfunction()

@@ -16,6 +16,7 @@
 #include "core/solar.h"
 #include "core/temporaries.h"
 #include "core/version.h"
+#include "pipeline/solve_controller.h"
 
 namespace rouen {
 namespace fs = std::filesystem;
@@ -224,6 +225,7 @@ SceneSolve SolveSessionFolder(const SolveFolderRequest& request) {
   po.work_dir = work;
   po.exclude_albedo_slots = request.holdout_slots;
   po.log = request.log;
+  po.progress = request.progress;
   po.cancel = request.cancel;
   return SolveToScene(session, po, out, request.force);
 }

@@ -65,8 +65,9 @@ struct SolveFolderRequest {
   bool quick = false;
   std::string config_file;
   nlohmann::json config_overrides = nlohmann::json::object();
-  bool force = false;  // solve even when `out` is up to date
-  std::function<void(const std::string&)> log;
+  bool force = false;                               // solve even when `out` is up to date
+  std::function<void(const std::string&)> log;      // what each stage found, as lines
+  std::function<void(const SolveEvent&)> progress;  // each solve stage's start, progress, end
   // Stops the solve (Cancelled) when requested, within a few milliseconds of work; the scene
   // is then left as it was (not owned; null: the solve runs to its end).
   const Cancellation* cancel = nullptr;

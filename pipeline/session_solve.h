@@ -28,6 +28,17 @@
 
 namespace rouen {
 
+// One step of a solve's progress, for a progress bar or a log (SolveController's stages): the
+// stage, its number (1-based) of how many, how far through it (0 as it starts, 1 when done), a
+// line a person reads, and when the stage is done its figures (its "seconds", the counts it made).
+struct SolveEvent {
+  std::string stage;
+  int index = 0, count = 0;
+  double fraction = 0;
+  std::string message;
+  std::vector<std::pair<std::string, double>> figures;
+};
+
 struct PipelineOptions {
   std::filesystem::path work_dir;         // calib/ is written here
   std::vector<int> exclude_albedo_slots;  // held-out slots: their architecture photos unused
@@ -35,7 +46,8 @@ struct PipelineOptions {
   SolveConfig config = DefaultSolveConfig(false);
   // A response curve known from an earlier calibration: used instead of recovering one.
   std::optional<ResponseCurve> response;
-  std::function<void(const std::string&)> log;  // progress lines
+  std::function<void(const std::string&)> log;      // what each stage found, as lines
+  std::function<void(const SolveEvent&)> progress;  // each stage's start, progress and end
   // Polled between stages and inside the long ones (not owned; null: the solve runs to its
   // end); a requested cancellation stops the work with Cancelled.
   const Cancellation* cancel = nullptr;
@@ -132,11 +144,6 @@ struct SolveResult {
   // The ground as a light field (SolveConfig::ground_field), shared by every slot's lighting.
   std::shared_ptr<const GroundField> ground_field;
 };
-
-// Sun, sky and environment per slot; irradiance at the surface grid; pseudo-albedos from the
-// architecture photos of the slots not excluded.
-SolveResult SolveSession(const Session& session, const CalibResult& calib,
-                         const PipelineOptions& options);
 
 // Irradiance of the solved model's grid under other lighting (a novel time), with the
 // interreflection from the recovered albedos, computed as SolveSession computed the slots'.

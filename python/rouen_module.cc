@@ -232,7 +232,8 @@ class PyScene {
 // rouen.solve: the same call `rouen solve` makes (SolveSessionFolder).
 PyScene Solve(const py::object& session, const py::object& out,
               const std::vector<int>& holdout_slots, bool quick, const py::object& config,
-              const py::object& work, bool force, const py::object& log, Cancellation* cancel) {
+              const py::object& work, bool force, const py::object& log, Cancellation* cancel,
+              const py::object& progress) {
   SolveFolderRequest request;
   request.session = py::isinstance<PySession>(session)
                         ? std::filesystem::path(session.cast<const PySession&>().Path())
@@ -247,6 +248,17 @@ PyScene Solve(const py::object& session, const py::object& out,
     request.config_file = PathOf(config).string();
   request.force = force;
   request.log = PythonLog(log);
+  if (!progress.is_none()) {
+    request.progress = [progress](const SolveEvent& e) {
+      py::gil_scoped_acquire gil;
+      py::dict figures;
+      for (const auto& [name, value] : e.figures) figures[py::str(name)] = value;
+      progress(py::dict(py::arg("stage") = e.stage, py::arg("index") = e.index,
+                        py::arg("count") = e.count, py::arg("fraction") = e.fraction,
+                        py::arg("message") = e.message, py::arg("figures") = figures));
+      if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+    };
+  }
   Cancellation own;  // Ctrl-C's, when the caller gave none
   Cancellation* token = cancel != nullptr ? cancel : &own;
   request.cancel = token;
@@ -329,12 +341,14 @@ PYBIND11_MODULE(rouen, m) {
   m.def("solve", &Solve, py::arg("session"), py::arg("out"),
         py::arg("holdout_slots") = std::vector<int>{}, py::arg("quick") = false,
         py::arg("config") = py::none(), py::arg("work") = py::none(), py::arg("force") = false,
-        py::arg("log") = py::none(), py::arg("cancel") = nullptr,
+        py::arg("log") = py::none(), py::arg("cancel") = nullptr, py::arg("progress") = py::none(),
         "Calibrate and solve a session into the scene folder `out` (as rouen solve); "
         "`config` is a TOML file or a dict of the options rouen solve --print-config lists. "
         "Does nothing when `out` is up to date. Returns the Scene. A `cancel` token "
         "(rouen.Cancellation) requested from another thread, or Ctrl-C, stops it early "
-        "(rouen.Cancelled, KeyboardInterrupt) with no scene written.");
+        "(rouen.Cancelled, KeyboardInterrupt) with no scene written. `progress` is called with "
+        "a dict per step of the solve's stages: stage, index, count (the stages), fraction "
+        "(0 as the stage starts, 1 when done), message and, when done, its figures.");
   m.def(
       "read_image",
       [](const py::object& path) { return ToArray(ReadImage(PathOf(path).string())); },

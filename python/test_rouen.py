@@ -37,10 +37,12 @@ class QuickDemoTest(unittest.TestCase):
         run_rouen("demo", "--quick", "--out", cls.dir)
         cls.session_dir = os.path.join(cls.dir, "session")
         cls.lines = []
+        cls.events = []
         # The demo's calibration (DIR/work) is reused: same session files and options.
         cls.scene = rouen.solve(rouen.Session(cls.session_dir), os.path.join(cls.tmp.name, "py.scene"),
                                 holdout_slots=[HELD_OUT], quick=True,
-                                work=os.path.join(cls.dir, "work"), log=cls.lines.append)
+                                work=os.path.join(cls.dir, "work"), log=cls.lines.append,
+                                progress=cls.events.append)
 
     @classmethod
     def tearDownClass(cls):
@@ -60,6 +62,21 @@ class QuickDemoTest(unittest.TestCase):
         self.assertEqual(self.scene.holdout_slots, [HELD_OUT])
         self.assertEqual(len(self.scene.slot_times), 5)
         self.assertEqual(self.scene.config["response"]["max_brackets"], 6)  # quick
+
+    def test_progress_tells_each_stage_in_order(self):
+        ends = [e for e in self.events if e["fraction"] == 1]
+        starts = [e["stage"] for e in self.events if e["fraction"] == 0]
+        self.assertEqual(starts, [e["stage"] for e in ends])
+        self.assertEqual(starts[:2], ["model", "lighting"])
+        self.assertEqual(starts[-1], "pseudo-albedos")
+        self.assertEqual([e["index"] for e in ends], list(range(1, ends[0]["count"] + 1)))
+        for e in ends:
+            self.assertGreaterEqual(e["figures"]["seconds"], 0, e)
+        grid = next(e for e in ends if e["stage"] == "surface grid")
+        self.assertIn(f"surface grid: {int(grid['figures']['grid_points'])} points", self.lines)
+        lit = [e["fraction"] for e in self.events if e["stage"] == "lighting"]
+        self.assertEqual(lit, sorted(lit))
+        self.assertEqual(len(lit), 5 + 1)  # the start, then a step per slot (the last its end)
 
     def test_render_is_the_clis_image(self):
         view = self.scene.views[0]
