@@ -18,8 +18,9 @@ namespace rouen {
 namespace {
 
 struct ImportArgs {
-  std::string photos, list, cameras, site, timezone, time, target = "architecture", out, model,
-                                                           surroundings, trees, sky_mask;
+  std::string photos, list, cameras, site, timezone, time,
+      target = "architecture", out, model, surroundings, trees, sky_mask, colmap, colmap_control;
+  double colmap_max_rms_m = 0.5;
 };
 
 void Run(const ImportArgs& a) {
@@ -27,6 +28,9 @@ void Run(const ImportArgs& a) {
   o.photos = a.photos;
   o.list = a.list;
   o.cameras = a.cameras;
+  o.colmap = a.colmap;
+  o.colmap_control = a.colmap_control;
+  o.colmap_max_rms_m = a.colmap_max_rms_m;
   o.site = ParseSiteOption(a.site, "--site");
   try {
     o.target = ParseTarget(a.target);
@@ -61,6 +65,11 @@ void Run(const ImportArgs& a) {
                  "site; calibration photos may be taken at night, a slot the solve uses may not)\n",
                  s.night.size(), some.c_str(), s.night.size() > 3 ? "\n  ..." : "");
   }
+  if (s.colmap_photos > 0)
+    std::printf(
+        "  %d photos posed from the COLMAP model (alignment residual RMS %.3f m, largest "
+        "%.3f m over %d control points)\n",
+        s.colmap_photos, s.colmap_rms_m, s.colmap_max_m, s.colmap_control_points);
   std::printf("next: rouen status %s\n", a.out.c_str());
 }
 
@@ -89,6 +98,12 @@ void RegisterImport(CLI::App& app) {
       "\"pose\"\n"
       "(an object, or a pose file from `rouen calib pose`), files relative to the JSON:\n"
       "  {\"*\": {\"lens\": \"mycam.json\"}, \"group=west\": {\"pose\": \"west-pose.json\"}}\n"
+      "--colmap DIR: a COLMAP sparse model (cameras, images, points3D; .bin or .txt, e.g.\n"
+      "sparse/0 of `colmap mapper`) gives each photo it registered (by its listed path, else\n"
+      "its file name) its intrinsics and pose; CAMERAS gives the others. Its frame is aligned\n"
+      "to the site by --colmap-control, a CSV of 3 or more points known in both, not on one\n"
+      "line, whose header names x,y,z (the model's frame) and east_m,north_m,up_m (metres from\n"
+      "--site); the residual is printed and one beyond --colmap-max-rms-m refused.\n"
       "--model copies the building (OBJ; its groups are the blocks) into the session;\n"
       "--surroundings adds coarse geometry around it (OBJ: houses across the street, a city\n"
       "model's or OpenStreetMap's footprints extruded to their heights): it shades the\n"
@@ -113,6 +128,12 @@ void RegisterImport(CLI::App& app) {
                 "List file: 'image seconds [ISO-time] [group=NAME] [target=T] [nd=D]'");
   c->add_option("--cameras,--poses", a->cameras,
                 "JSON: image, group=NAME or * -> {intrinsics or lens file, pose or pose file}");
+  c->add_option("--colmap", a->colmap,
+                "COLMAP sparse model folder: intrinsics and poses of the photos it registered");
+  c->add_option("--colmap-control", a->colmap_control,
+                "CSV of control points (x,y,z,east_m,north_m,up_m) aligning --colmap to the site");
+  c->add_option("--colmap-max-rms-m", a->colmap_max_rms_m,
+                "Largest alignment residual RMS accepted, metres (default 0.5)");
   c->add_option("--site", a->site, "Site LAT,LON,H (degrees, degrees east, metres)")->required();
   c->add_option("--timezone", a->timezone,
                 "UTC offset of the camera clock (+HH:MM) for EXIF times without one");

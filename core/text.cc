@@ -20,9 +20,10 @@ std::string_view WithoutUtf8Bom(std::string_view text) {
 }
 
 std::string Trimmed(std::string_view text) {
-  const size_t a = text.find_first_not_of(" \t\r");
+  constexpr std::string_view kSpace = " \t\r\n\f\v";
+  const size_t a = text.find_first_not_of(kSpace);
   if (a == std::string_view::npos) return "";
-  return std::string(text.substr(a, text.find_last_not_of(" \t\r") + 1 - a));
+  return std::string(text.substr(a, text.find_last_not_of(kSpace) + 1 - a));
 }
 
 std::vector<std::string> CsvFields(std::string_view line) {

@@ -19,7 +19,7 @@ std::vector<std::string> TextLines(std::string_view text);
 // folder, not <what>").
 std::vector<std::string> ReadTextLines(const std::string& path, const std::string& what);
 
-// `text` without the spaces, tabs and carriage returns around it.
+// `text` without the white space around it (spaces, tabs, carriage returns, line ends).
 std::string Trimmed(std::string_view text);
 
 // The comma-separated fields of one CSV line, each Trimmed (no quoting: rouen's CSV files hold

@@ -12,6 +12,7 @@
 #include <sstream>
 #include <tuple>
 
+#include "calib/colmap.h"
 #include "core/camera.h"
 #include "core/error.h"
 #include "core/exif.h"
@@ -424,6 +425,56 @@ void AttachCameras(const fs::path& cameras_file, std::vector<Photo>& photos) {
   }
 }
 
+// The photos a COLMAP model registered take its intrinsics and pose, its frame aligned to the
+// site by the control points (ImportOptions::colmap).
+void AttachColmap(const ImportOptions& o, std::vector<Photo>& photos, ImportSummary* summary) {
+  if (o.colmap_control.empty())
+    throw Error(o.colmap.string() +
+                ": a COLMAP model's frame is its own; give --colmap-control with 3 or more "
+                "points known in both the model and the site");
+  if (!(o.colmap_max_rms_m > 0))
+    throw Error("--colmap-max-rms-m must be a positive number of metres");
+  const ColmapModel model = ReadColmapModel(o.colmap);
+  const std::vector<ControlPoint> control = ReadControlPoints(o.colmap_control);
+  std::vector<Eigen::Vector3d> from, to;
+  for (const ControlPoint& c : control) {
+    from.push_back(c.model);
+    to.push_back(c.enu);
+  }
+  SimilarityFit fit;
+  try {
+    fit = FitSimilarity(from, to);
+  } catch (const Error& e) {
+    throw Error(o.colmap_control.string() + ": " + e.what());
+  }
+  char residual[160];
+  std::snprintf(residual, sizeof residual,
+                "residual RMS %.3f m, largest %.3f m over %d control points (scale %.6g)",
+                fit.rms_m, fit.max_m, fit.points, fit.transform.scale);
+  if (fit.rms_m > o.colmap_max_rms_m)
+    throw Error(o.colmap_control.string() + ": the alignment of " + o.colmap.string() +
+                " leaves a " + residual + ", beyond --colmap-max-rms-m " +
+                std::to_string(o.colmap_max_rms_m) +
+                " m: a point given in the wrong frame, order or units?");
+  Log(o, "COLMAP model " + o.colmap.string() + " (" + std::to_string(model.images.size()) +
+             " images) aligned to the site: " + residual);
+  summary->colmap_control_points = fit.points;
+  summary->colmap_rms_m = fit.rms_m;
+  summary->colmap_max_m = fit.max_m;
+  for (Photo& p : photos) {
+    const ColmapImage* im = model.Find(p.name);
+    if (!im) continue;
+    if (im->intrinsics.width != p.meta.width || im->intrinsics.height != p.meta.height)
+      throw Error(o.colmap.string() + ": image " + im->name + " is " +
+                  std::to_string(im->intrinsics.width) + "x" +
+                  std::to_string(im->intrinsics.height) + " but " + p.name + " is " +
+                  std::to_string(p.meta.width) + "x" + std::to_string(p.meta.height));
+    p.intrinsics = im->intrinsics;
+    p.pose = fit.transform.Apply(im->pose);
+    ++summary->colmap_photos;
+  }
+}
+
 void RequireModelFile(const fs::path& model) {
   std::error_code ec;
   if (!fs::is_regular_file(model, ec)) throw Error(model.string() + ": no such model file");
@@ -525,6 +576,7 @@ ImportSummary ImportPhotos(const ImportOptions& o, const fs::path& out) {
 
   std::vector<std::string> notes;
   std::vector<Photo> photos = PlanImport(o, &notes);
+  if (!o.colmap.empty()) AttachColmap(o, photos, &summary);
   if (!o.cameras.empty()) AttachCameras(o.cameras, photos);
   CheckSkyMask(o.sky_mask, photos);
   // Journal order: by bracket, then capture time.

@@ -50,6 +50,15 @@ struct ImportOptions {
   // "LENS.json", "pose": {...} | "POSE.json"}}: an image's own entry, else its list group's,
   // else "*". File names are relative to the cameras file.
   std::filesystem::path cameras;
+  // A COLMAP sparse model (calib/colmap.h: cameras, images, points3D, binary or text): each
+  // photo it registered (matched by its listed path, else by its file name) takes its
+  // intrinsics and pose from it; the cameras file gives the others (e.g. panoramas). Its frame
+  // is aligned to the site's east-north-up metres by a similarity fitted to the control points
+  // of `colmap_control` (ReadControlPoints: 3 or more, not on a line); an alignment whose
+  // residual RMS exceeds `colmap_max_rms_m` is refused.
+  std::filesystem::path colmap;
+  std::filesystem::path colmap_control;
+  double colmap_max_rms_m = 0.5;
   Site site;
   std::optional<int> timezone_minutes;  // UTC offset of the camera clock
   std::optional<UtcTime> time;          // for photos that carry no time at all
@@ -69,6 +78,10 @@ struct ImportOptions {
 struct ImportSummary {
   int photos = 0, hdr = 0, brackets = 0, slots = 0;
   int trees = 0;  // made from ImportOptions::trees
+  // ImportOptions::colmap: the photos posed from it, the alignment's control points and its
+  // residual (RMS and largest, metres).
+  int colmap_photos = 0, colmap_control_points = 0;
+  double colmap_rms_m = 0, colmap_max_m = 0;
   // The photos taken with the sun's whole disc below the horizon at the site, "NAME (UTC,
   // sun -12.3 deg)": a wrong camera clock, time zone or site, or calibration photos taken at
   // night; `rouen status` lists the slots the solve cannot use.

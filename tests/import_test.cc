@@ -5,6 +5,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -15,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "core/angles.h"
 #include "core/error.h"
 #include "core/exif.h"
 #include "core/files.h"
@@ -262,6 +264,101 @@ TEST(ImportTest, TimezoneSlotsGroupsPosesAndExr) {
   const Image back = s.LoadFrame(by["sky.exr"]);
   ASSERT_EQ(back.data.size(), hdr.data.size());
   for (size_t i = 0; i < hdr.data.size(); ++i) EXPECT_EQ(back.data[i], hdr.data[i]);
+  fs::remove_all(dir);
+}
+
+// Photos posed by photogrammetry: a COLMAP sparse model in its own frame (here the site's
+// turned 30 degrees, scaled by 0.2 and moved) registered two of the three photos; control
+// points known in both frames align it, and each registered photo lands at its site pose.
+// A control point in the wrong frame is refused with the residual named.
+TEST(ImportTest, ColmapModelAlignedByControlPoints) {
+  const fs::path dir = TempDir("colmap");
+  const fs::path photos = dir / "photos";
+  fs::create_directories(photos / "day");
+  WriteJpeg(photos / "day" / "p1.jpg", 32, 24, 1.f / 100, "2024:06:21 09:00:00");
+  WriteJpeg(photos / "day" / "p2.jpg", 32, 24, 1.f / 100, "2024:06:21 09:00:05");
+  WriteJpeg(photos / "day" / "pano.jpg", 64, 32, 1.f / 100, "2024:06:21 09:00:09");
+  WriteText(dir / "list.txt",
+            "day/p1.jpg - group=a\nday/p2.jpg - group=b\nday/pano.jpg - target=landscape\n");
+  // site = s R x_model + t
+  const double s = 5.0, c = std::cos(kPi / 6), n = std::sin(kPi / 6);
+  const Eigen::Matrix3d rot = (Eigen::Matrix3d() << c, -n, 0, n, c, 0, 0, 0, 1).finished();
+  const Eigen::Vector3d t(12, -7, 0.5);
+  auto to_model = [&](const Eigen::Vector3d& site) -> Eigen::Vector3d {
+    return rot.transpose() * (site - t) / s;
+  };
+  const Pose truth[2] = {Pose::LookAt({30, -40, 1.6}, {0, 0, 10}),
+                         Pose::LookAt({-20, -35, 1.7}, {0, 0, 12})};
+  std::string images;
+  for (int i = 0; i < 2; ++i) {
+    // The camera in the model's frame: the same axes turned back, its centre mapped.
+    const Eigen::Matrix3d r = (rot.transpose() * truth[i].rotation).transpose();
+    const Eigen::Quaterniond q(r);
+    const Eigen::Vector3d tt = -(r * to_model(truth[i].position));
+    char line[300];
+    std::snprintf(line, sizeof line,
+                  "%d %.17g %.17g %.17g %.17g %.17g %.17g %.17g 1 day/p%d.jpg\n\n", i + 1, q.w(),
+                  q.x(), q.y(), q.z(), tt.x(), tt.y(), tt.z(), i + 1);
+    images += line;
+  }
+  fs::create_directories(dir / "sparse");
+  WriteText(dir / "sparse" / "cameras.txt", "1 OPENCV 32 24 30 31 16 12 -0.1 0.01 0 0\n");
+  WriteText(dir / "sparse" / "images.txt", images);
+  std::string control = "# surveyed corners\nx,y,z,east_m,north_m,up_m\n";
+  for (const Eigen::Vector3d site : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(10, 0, 0),
+                                     Eigen::Vector3d(0, 20, 0), Eigen::Vector3d(0, 0, 15)}) {
+    const Eigen::Vector3d m = to_model(site);
+    char line[200];
+    std::snprintf(line, sizeof line, "%.17g,%.17g,%.17g,%g,%g,%g\n", m.x(), m.y(), m.z(), site.x(),
+                  site.y(), site.z());
+    control += line;
+  }
+  WriteText(dir / "control.csv", control);
+  WriteText(dir / "cameras.json", R"({"day/pano.jpg": {
+      "intrinsics": {"projection": "equirect", "width": 64, "height": 32},
+      "pose": {"rotation": [[1,0,0],[0,1,0],[0,0,1]], "position": [0, -30, 1.6]}}})");
+  const std::string base = "import --photos " + Q(photos) + " --list " + Q(dir / "list.txt") +
+                           " --colmap " + Q(dir / "sparse") + " --cameras " +
+                           Q(dir / "cameras.json") + " --timezone +02:00 --site 48.8566,2.3522,35";
+  Result r =
+      RunRouen(base + " --colmap-control " + Q(dir / "control.csv") + " --out " + Q(dir / "s"));
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("2 photos posed from the COLMAP model (alignment residual RMS 0.000 m"),
+            std::string::npos)
+      << r.out;
+  const Session session = Session::Load(dir / "s");
+  const auto sources = SourcesById(session);
+  int posed = 0;
+  for (const FrameRecord& f : session.frames()) {
+    const std::string src = sources.at(f.id).at("source");
+    ASSERT_TRUE(f.pose && f.intrinsics) << src;
+    if (src == "day/pano.jpg") {
+      EXPECT_EQ(f.intrinsics->projection, Projection::kEquirect);
+      continue;
+    }
+    const Pose& want = truth[src == "day/p1.jpg" ? 0 : 1];
+    EXPECT_LT((f.pose->position - want.position).norm(), 1e-9) << src;
+    EXPECT_LT((f.pose->rotation - want.rotation).norm(), 1e-9) << src;
+    EXPECT_EQ(f.intrinsics->fy, 31);
+    EXPECT_EQ(f.intrinsics->k1, -0.1);
+    ++posed;
+  }
+  EXPECT_EQ(posed, 2);
+
+  // One control point given in the site's frame on both sides: refused, naming the residual.
+  std::string wrong = control;
+  wrong += "1,1,1,1,1,1\n";
+  WriteText(dir / "wrong.csv", wrong);
+  r = RunRouen(base + " --colmap-control " + Q(dir / "wrong.csv") + " --out " + Q(dir / "t"));
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.out.find((dir / "wrong.csv").string() + ": the alignment of "), std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("beyond --colmap-max-rms-m"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(dir / "t"));
+  // Without control points the model's frame is not the site's: refused.
+  r = RunRouen(base + " --out " + Q(dir / "t"));
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.out.find("give --colmap-control"), std::string::npos) << r.out;
   fs::remove_all(dir);
 }
 
