@@ -25,11 +25,17 @@ struct CameraModel {
 };
 
 // COLMAP's camera models (its documentation's table), in model_id order.
-constexpr CameraModel kModels[] = {
-    {"SIMPLE_PINHOLE", 0, 3}, {"PINHOLE", 1, 4},  {"SIMPLE_RADIAL", 2, 4},
-    {"RADIAL", 3, 5},         {"OPENCV", 4, 8},   {"OPENCV_FISHEYE", 5, 8},
-    {"FULL_OPENCV", 6, 12},   {"FOV", 7, 5},      {"SIMPLE_RADIAL_FISHEYE", 8, 4},
-    {"RADIAL_FISHEYE", 9, 5}, {"THIN_PRISM_FISHEYE", 10, 12}};
+constexpr CameraModel kModels[] = {{"SIMPLE_PINHOLE", 0, 3},
+                                   {"PINHOLE", 1, 4},
+                                   {"SIMPLE_RADIAL", 2, 4},
+                                   {"RADIAL", 3, 5},
+                                   {"OPENCV", 4, 8},
+                                   {"OPENCV_FISHEYE", 5, 8},
+                                   {"FULL_OPENCV", 6, 12},
+                                   {"FOV", 7, 5},
+                                   {"SIMPLE_RADIAL_FISHEYE", 8, 4},
+                                   {"RADIAL_FISHEYE", 9, 5},
+                                   {"THIN_PRISM_FISHEYE", 10, 12}};
 
 const CameraModel* ModelByName(const std::string& name) {
   for (const CameraModel& m : kModels)
@@ -201,8 +207,7 @@ std::vector<ColmapImage> ReadImagesText(const fs::path& file,
     if (f.empty()) continue;
     const std::string where = file.string() + ":" + std::to_string(number) + ": ";
     try {
-      if (f.size() < 10)
-        throw Error("expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME");
+      if (f.size() < 10) throw Error("expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME");
       ColmapImage im;
       im.id = static_cast<int>(ToInt(f[0]));
       const double q[4] = {ToDouble(f[1]), ToDouble(f[2]), ToDouble(f[3]), ToDouble(f[4])};
@@ -302,8 +307,7 @@ std::map<int, Intrinsics> ReadCamerasBinary(const fs::path& file) {
       if (!cameras
                .emplace(static_cast<int>(id),
                         ToIntrinsics(*m, static_cast<int64_t>(std::min<uint64_t>(width, 1 << 30)),
-                                     static_cast<int64_t>(std::min<uint64_t>(height, 1 << 30)),
-                                     p))
+                                     static_cast<int64_t>(std::min<uint64_t>(height, 1 << 30)), p))
                .second)
         throw Error("given twice");
     } catch (const Error& e) {
@@ -432,8 +436,9 @@ SimilarityFit FitSimilarity(const std::vector<Eigen::Vector3d>& from,
   for (const Eigen::Matrix3d* s : {&sxx, &syy}) {
     const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::Matrix3d>(*s).singularValues();
     if (!(sv[0] > 0) || sv[1] < 1e-10 * sv[0])
-      throw Error("similarity: the points lie on a line (or coincide); give 3 or more not on "
-                  "one line");
+      throw Error(
+          "similarity: the points lie on a line (or coincide); give 3 or more not on "
+          "one line");
   }
   Eigen::JacobiSVD<Eigen::Matrix3d> svd(cov / n, Eigen::ComputeFullU | Eigen::ComputeFullV);
   Eigen::Matrix3d s = Eigen::Matrix3d::Identity();

@@ -33,8 +33,8 @@ std::string ColmapPoseText(const Pose& p) {
   const Eigen::Quaterniond q(r);
   const Eigen::Vector3d t = -(r * p.position);
   char buf[256];
-  std::snprintf(buf, sizeof buf, "%.17g %.17g %.17g %.17g %.17g %.17g %.17g", q.w(), q.x(),
-                q.y(), q.z(), t.x(), t.y(), t.z());
+  std::snprintf(buf, sizeof buf, "%.17g %.17g %.17g %.17g %.17g %.17g %.17g", q.w(), q.x(), q.y(),
+                q.z(), t.x(), t.y(), t.z());
   return buf;
 }
 
@@ -163,8 +163,9 @@ TEST_F(ColmapTest, ColmapsBinaryModelReadsAsItsText) {
   // Cut short, a binary file is named with the byte where it ends.
   const std::string cameras = ReadFileToString(dir_ / "bin" / "cameras.bin");
   WriteFileAtomic(dir_ / "bin" / "cameras.bin", cameras.substr(0, cameras.size() - 5));
-  EXPECT_NE(ErrorOf([&] { ReadColmapModel(dir_ / "bin"); })
-                .find((dir_ / "bin" / "cameras.bin").string() + ": at byte "),
+  EXPECT_NE(ErrorOf([&] {
+              ReadColmapModel(dir_ / "bin");
+            }).find((dir_ / "bin" / "cameras.bin").string() + ": at byte "),
             std::string::npos);
   EXPECT_NE(ErrorOf([&] { ReadColmapModel(dir_ / "bin"); }).find("ends early"), std::string::npos);
 }
@@ -181,8 +182,9 @@ TEST_F(ColmapTest, BadModelsAreNamedWithTheirFileAndLine) {
   EXPECT_EQ(ErrorOf([&] { ReadColmapModel(dir_ / "txt"); }),
             cams.string() + ":2: 'abc' is not a finite number");
   WriteFileAtomic(cams, "1 FOV 640 480 500 500 320 240 0.9\n");
-  EXPECT_NE(ErrorOf([&] { ReadColmapModel(dir_ / "txt"); })
-                .find(cams.string() + ":1: camera model FOV cannot be carried over"),
+  EXPECT_NE(ErrorOf([&] {
+              ReadColmapModel(dir_ / "txt");
+            }).find(cams.string() + ":1: camera model FOV cannot be carried over"),
             std::string::npos);
   WriteFileAtomic(cams, "1 FULL_OPENCV 640 480 500 500 320 240 0 0 0 0 0 0.1 0 0\n");
   EXPECT_NE(ErrorOf([&] { ReadColmapModel(dir_ / "txt"); }).find("rational distortion"),
@@ -200,7 +202,8 @@ TEST(FitSimilarity, RecoversAKnownTransformExactly) {
   truth.scale = 2.5;
   truth.rotation = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, -2, 0.5).normalized()).matrix();
   truth.translation = Eigen::Vector3d(100, -20, 3);
-  const std::vector<Eigen::Vector3d> from = {{0, 0, 0}, {1, 0, 0}, {0, 2, 0}, {1, 1, 3}, {-2, 1, 1}};
+  const std::vector<Eigen::Vector3d> from = {
+      {0, 0, 0}, {1, 0, 0}, {0, 2, 0}, {1, 1, 3}, {-2, 1, 1}};
   std::vector<Eigen::Vector3d> to;
   for (const auto& x : from) to.push_back(truth.Apply(x));
   const SimilarityFit fit = FitSimilarity(from, to);
@@ -227,13 +230,17 @@ TEST(FitSimilarity, ReportsTheResidualAndRefusesWhatFixesNoRotation) {
   EXPECT_GT(fit.transform.rotation.determinant(), 0.999);
   EXPECT_GT(fit.rms_m, 0.5);
   EXPECT_GE(fit.max_m, fit.rms_m);
-  EXPECT_EQ(ErrorOf([&] { FitSimilarity({{0, 0, 0}, {1, 1, 1}}, {{0, 0, 0}, {1, 1, 1}}); }),
+  EXPECT_EQ(ErrorOf([&] {
+              FitSimilarity({{0, 0, 0}, {1, 1, 1}}, {{0, 0, 0}, {1, 1, 1}});
+            }),
             "similarity: 2 point pairs; at least 3 not on a line");
   EXPECT_NE(ErrorOf([&] {
               FitSimilarity({{0, 0, 0}, {1, 1, 1}, {2, 2, 2}}, {{0, 0, 0}, {1, 0, 0}, {2, 0, 0}});
             }).find("lie on a line"),
             std::string::npos);
-  EXPECT_NE(ErrorOf([&] { FitSimilarity({{0, 0, 0}}, {}); }).find("1 points to map onto 0"),
+  EXPECT_NE(ErrorOf([&] {
+              FitSimilarity({{0, 0, 0}}, {});
+            }).find("1 points to map onto 0"),
             std::string::npos);
 }
 

@@ -31,14 +31,16 @@ double Now() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-bool Contains(const std::vector<int>& v, int x) { return std::find(v.begin(), v.end(), x) != v.end(); }
+bool Contains(const std::vector<int>& v, int x) {
+  return std::find(v.begin(), v.end(), x) != v.end();
+}
 
 }  // namespace
 
 const std::vector<std::string>& SolveController::Stages() {
   static const std::vector<std::string> stages = {
-      "model",        "lighting",       "ground reflection", "ground field",
-      "surface grid", "observations",   "pseudo-albedos"};
+      "model",        "lighting",     "ground reflection", "ground field",
+      "surface grid", "observations", "pseudo-albedos"};
   return stages;
 }
 
@@ -319,7 +321,9 @@ void SolveController::BuildGroundField() {
     MakeGroundField();
     Lap("ground field", Now() - stage_start_);
   }
-  End(kGroundField, {{"cells", r_.ground_field ? static_cast<double>(r_.ground_field->nx) * r_.ground_field->ny : 0.0}});
+  End(kGroundField,
+      {{"cells",
+        r_.ground_field ? static_cast<double>(r_.ground_field->nx) * r_.ground_field->ny : 0.0}});
 }
 
 void SolveController::MakeGroundField() {
@@ -394,10 +398,9 @@ void SolveController::CollectObservations() {
   observations_ = rouen::CollectObservations(r_.grid, *r_.caster, photos_,
                                              options_.config.albedo.observation, &os, &sun_dirs);
   if (photos_.size() > panoramas_from) {
-    const auto from_panoramas =
-        std::count_if(observations_.begin(), observations_.end(), [&](const Observation& o) {
-          return static_cast<size_t>(o.photo) >= panoramas_from;
-        });
+    const auto from_panoramas = std::count_if(
+        observations_.begin(), observations_.end(),
+        [&](const Observation& o) { return static_cast<size_t>(o.photo) >= panoramas_from; });
     Log(std::to_string(from_panoramas) + " observations of the surroundings in " +
         std::to_string(photos_.size() - panoramas_from) + " landscape panoramas");
   }
@@ -453,8 +456,7 @@ void SolveController::SolveAlbedos() {
       for (size_t k = 0; k < r_.slots.size(); ++k) lighting[k].ground = r_.ground_field;
       r_.albedo = SolveAlbedo(r_.grid, r_.hemisphere, *r_.caster, lighting, observations_,
                               with_model, &r_.irradiance, &r_.albedo);
-      Log("pseudo-albedos with the walls' light on the ground: " +
-          r_.albedo.summary.BriefReport());
+      Log("pseudo-albedos with the walls' light on the ground: " + r_.albedo.summary.BriefReport());
       Lap("ground field and pseudo-albedos with the walls' light", Now() - again_start);
     }
   }
@@ -501,8 +503,8 @@ void SolveController::LogFitted() const {
   };
   const AlbedoSummary& as = r_.albedo.summary;
   if (r_.albedo_options.sun_lobe.fit) {
-    log_lobes("sun specular lobe per block (§4.2.2, eq. 15):", r_.albedo.sun_lobes,
-              as.lobe_samples, as.lobe_cost_zero, as.lobe_cost_fitted);
+    log_lobes("sun specular lobe per block (§4.2.2, eq. 15):", r_.albedo.sun_lobes, as.lobe_samples,
+              as.lobe_cost_zero, as.lobe_cost_fitted);
   }
   if (r_.albedo_options.sun_lobe.fit && r_.albedo_options.sky_lobe.fit) {
     log_lobes("sky and environment lobe per block (§4.2.1, eq. 14; blocks with a sun lobe):",

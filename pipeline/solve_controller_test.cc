@@ -36,8 +36,8 @@ class SolveControllerTest : public ::testing::Test {
     session_ = new Session(Session::Load(*dir_ / "session"));
     options_ = new PipelineOptions;
     options_->work_dir = *dir_ / "work";
-    options_->config = SessionSolveConfig(session_->info(),
-                                          (*dir_ / "session" / "session.json").string(), true);
+    options_->config =
+        SessionSolveConfig(session_->info(), (*dir_ / "session" / "session.json").string(), true);
     options_->exclude_albedo_slots = {heldout_};
     calib_ = new CalibResult(CalibrateSession(*session_, *options_));
   }
@@ -107,7 +107,8 @@ TEST_F(SolveControllerTest, SolveLightingLightsEverySlotAtItsTime) {
   for (const SlotSolve& s : r.slots) {
     const HdrGroup& sky = calib_->groups.at(BracketName(s.slot, Target::kSky, 0));
     EXPECT_EQ(s.utc.Iso8601(), sky.utc.Iso8601()) << s.slot;
-    EXPECT_LT((s.lighting.sun_dir - ComputeSunPosition(sky.utc, site).DirectionEnu()).norm(), 1e-12);
+    EXPECT_LT((s.lighting.sun_dir - ComputeSunPosition(sky.utc, site).DirectionEnu()).norm(),
+              1e-12);
     EXPECT_TRUE(s.lighting.sun_radiance.allFinite());
     EXPECT_GT(s.lighting.sun_radiance.minCoeff(), 0);
     EXPECT_GT(s.sky_summary.samples, 0);
