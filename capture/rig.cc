@@ -142,14 +142,17 @@ class RigReader {
 }  // namespace
 
 const std::vector<std::string>& RigKinds() {
-  static const std::vector<std::string> kinds = {"sim",           "replay",      "uvc-webcam",
-                                                 "rpi-libcamera", "gige-aravis", "aravis-fake"};
+  static const std::vector<std::string> kinds = {
+      "sim", "replay", "uvc-webcam", "rpi-libcamera", "gige-aravis", "aravis-fake", "gphoto2"};
   return kinds;
 }
 
 std::string RigConfig::LensPath(Target target) const {
   auto it = camera.target_lens.find(target);
-  const std::string& file = it != camera.target_lens.end() ? it->second : camera.lens;
+  return Resolve(it != camera.target_lens.end() ? it->second : camera.lens);
+}
+
+std::string RigConfig::Resolve(const std::string& file) const {
   if (file.empty()) return {};
   std::filesystem::path p(file);
   if (p.is_relative()) p = std::filesystem::path(path).parent_path() / p;
@@ -180,6 +183,83 @@ nlohmann::json TableAsJson(const toml::table& table, const std::string& name) {
   }
 }
 
+// [camera] keys of the streaming drivers (V4L2, libcamera, Aravis), and of gphoto2 rigs.
+const std::vector<std::string>& StreamingKeys() {
+  static const std::vector<std::string> keys = {"device",       "width",   "height",
+                                                "pixel_format", "buffers", "control_latency_frames",
+                                                "timeout_s"};
+  return keys;
+}
+const std::vector<std::string>& Gphoto2Keys() {
+  static const std::vector<std::string> keys = {"model",
+                                                "port",
+                                                "serial",
+                                                "download_dir",
+                                                "aperture_f",
+                                                "max_attempts",
+                                                "backoff_initial_s",
+                                                "backoff_max_s",
+                                                "capture_timeout_s",
+                                                "exif_tolerance_stops",
+                                                "base_iso",
+                                                "delete_on_camera"};
+  return keys;
+}
+
+// Every [camera] key of every kind (ParseGphoto2Camera says which kind a key belongs to).
+std::vector<std::string> CameraKeys() {
+  std::vector<std::string> keys = {"id", "lens"};
+  for (const auto* list : {&StreamingKeys(), &Gphoto2Keys()})
+    keys.insert(keys.end(), list->begin(), list->end());
+  return keys;
+}
+
+// A gphoto2 rig's [camera] (bounds as Gphoto2Options::Validate's); refuses keys of other kinds,
+// and gphoto2 keys in rigs of other kinds.
+void ParseGphoto2Camera(const RigReader& r, const toml::table* t, const std::string& kind,
+                        Gphoto2CameraConfig* g) {
+  if (!t) return;
+  const bool gphoto2 = kind == "gphoto2";
+  for (const std::string& key : gphoto2 ? StreamingKeys() : Gphoto2Keys()) {
+    const toml::node* n = t->get(key);
+    if (!n) continue;
+    if (gphoto2)
+      r.Fail(n, "[camera] '" + key +
+                    "' is not used by gphoto2 rigs (the camera's own settings decide its image "
+                    "size and format; name the camera with 'model', 'port' or 'serial'; the "
+                    "capture waits 'capture_timeout_s' for each file)");
+    r.Fail(n,
+           "[camera] '" + key + "' is for gphoto2 rigs only (this rig's kind is '" + kind + "')");
+  }
+  if (!gphoto2) return;
+  auto within = [&](const char* key, double v, double lo, double hi, bool lo_open,
+                    const char* what) {
+    if ((lo_open ? v > lo : v >= lo) && v <= hi) return;
+    r.Fail(t->get(key), std::string("[camera] '") + key + "' must be " + what);
+  };
+  g->model = r.String(t, "camera", "model", g->model);
+  g->port = r.String(t, "camera", "port", g->port);
+  g->serial = r.String(t, "camera", "serial", g->serial);
+  g->download_dir = r.String(t, "camera", "download_dir", g->download_dir);
+  g->aperture_f = r.Number(t, "camera", "aperture_f", g->aperture_f);
+  if (g->aperture_f != 0)
+    within("aperture_f", g->aperture_f, 0.5, 128, false,
+           "0 (as the camera is set) or an f-number within 0.5..128");
+  g->max_attempts = r.Int(t, "camera", "max_attempts", g->max_attempts, 1, 100);
+  g->backoff_initial_s = r.Number(t, "camera", "backoff_initial_s", g->backoff_initial_s);
+  within("backoff_initial_s", g->backoff_initial_s, 0, 60, true, "within (0, 60] s");
+  g->backoff_max_s = r.Number(t, "camera", "backoff_max_s", g->backoff_max_s);
+  within("backoff_max_s", g->backoff_max_s, g->backoff_initial_s, 600, false,
+         "at least backoff_initial_s and at most 600 s");
+  g->capture_timeout_s = r.Number(t, "camera", "capture_timeout_s", g->capture_timeout_s);
+  within("capture_timeout_s", g->capture_timeout_s, 0, 3600, true, "within (0, 3600] s");
+  g->exif_tolerance_stops = r.Number(t, "camera", "exif_tolerance_stops", g->exif_tolerance_stops);
+  within("exif_tolerance_stops", g->exif_tolerance_stops, 0, 10, true, "within (0, 10] stops");
+  g->base_iso = r.Number(t, "camera", "base_iso", g->base_iso);
+  within("base_iso", g->base_iso, 0, 1e6, true, "a positive ISO");
+  g->delete_on_camera = r.Bool(t, "camera", "delete_on_camera", g->delete_on_camera);
+}
+
 }  // namespace
 
 nlohmann::json ParseTomlAsJson(const std::string& text, const std::string& name) {
@@ -193,9 +273,7 @@ RigConfig ParseRig(const std::string& text, const std::string& name) {
   static const std::map<std::string, std::vector<std::string>> kSchema = {
       {"rig", {"name", "kind", "seed", "quick"}},
       {"site", {"lat_deg", "lon_deg", "height_m"}},
-      {"camera",
-       {"id", "device", "width", "height", "pixel_format", "buffers", "control_latency_frames",
-        "timeout_s", "lens"}},
+      {"camera", CameraKeys()},
       {"lens", {}},  // target = lens file
       {"gps", {"source", "device", "baud", "host", "port", "timeout_s"}},
       {"nd", {"sun_density"}},
@@ -259,6 +337,7 @@ RigConfig ParseRig(const std::string& text, const std::string& name) {
   if (!(cam.timeout_s > 0 && cam.timeout_s <= 600))
     r.Fail(t_cam ? t_cam->get("timeout_s") : nullptr, "[camera] timeout_s must be in (0, 600]");
   cam.lens = r.String(t_cam, "camera", "lens", "");
+  ParseGphoto2Camera(r, t_cam, rig.kind, &cam.gphoto2);
   if (const toml::table* t_lens = r.Table("lens", false)) {
     for (const auto& [key, node] : *t_lens) {
       Target target;

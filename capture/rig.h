@@ -19,8 +19,26 @@ namespace rouen {
 
 // The rig kinds this code knows (whether this build has the driver is decided when the rig is
 // opened): sim, replay, uvc-webcam (V4L2), rpi-libcamera, gige-aravis, aravis-fake (the
-// simulated world served through Aravis's in-process fake camera).
+// simulated world served through Aravis's in-process fake camera), gphoto2 (DSLR, mirrorless
+// and 360-degree still cameras over USB PTP or PTP/IP, through libgphoto2).
 const std::vector<std::string>& RigKinds();
+
+// [camera] keys of gphoto2 rigs (capture/gphoto2's Gphoto2Options, whose defaults these are).
+struct Gphoto2CameraConfig {
+  std::string model;   // libgphoto2's model name; "" = whatever is on `port`
+  std::string port;    // "usb:001,004", "ptpip:192.168.1.1"; "" = the first camera found
+  std::string serial;  // the camera's serial number; "" = any
+  // Where the camera's files are kept as it wrote them (relative: to the rig's folder); "" = a
+  // temporary folder, removed when the camera is closed.
+  std::string download_dir;
+  double aperture_f = 0;  // set when the rig opens the camera; 0 = as the camera is set
+  int max_attempts = 5;   // tries per operation after Device Busy / I/O errors
+  double backoff_initial_s = 0.05, backoff_max_s = 2.0;
+  double capture_timeout_s = 30;  // for the new file, beyond the exposure time
+  double exif_tolerance_stops = 1.0 / 6;
+  double base_iso = 100;  // the ISO of gain 1
+  bool delete_on_camera = true;
+};
 
 struct CameraConfig {
   std::string id = "cam0";  // the name frames are journalled under
@@ -36,6 +54,7 @@ struct CameraConfig {
   // target may use another lens (e.g. a fisheye for the sky). Empty: unknown.
   std::string lens;
   std::map<Target, std::string> target_lens;
+  Gphoto2CameraConfig gphoto2;  // gphoto2 rigs only
 };
 
 struct GpsConfig {
@@ -73,6 +92,8 @@ struct RigConfig {
   bool simulated() const { return kind == "sim" || kind == "aravis-fake"; }
   // A lens file path resolved against the rig's folder ("" when none).
   std::string LensPath(Target target) const;
+  // `file` resolved against the rig's folder (absolute paths and "" unchanged).
+  std::string Resolve(const std::string& file) const;
 };
 
 // TOML text as JSON (tables as objects), the one conversion of rouen's TOML files (rigs, solve

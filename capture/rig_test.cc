@@ -6,6 +6,7 @@
 #include <fstream>
 
 #include "core/error.h"
+#include "core/lens.h"
 
 namespace rouen {
 namespace {
@@ -228,6 +229,72 @@ TEST(RigTest, PlanListsSitesAndExposuresAreBounded) {
   ExpectErrorAt(with("[rig]\n", "[rig]\nseed = -1\n"), "'seed' must be an integer within 0..");
 }
 
+// The shipped gphoto2 rigs: a DSLR over USB (bracket plan, ND for the sun, a fisheye for the
+// sky) and a 360-degree camera over PTP/IP for the sky and the landscape (an equirect lens).
+TEST(RigTest, Gphoto2RigsCarryTheirCameraAndLenses) {
+  const std::filesystem::path rigs = std::filesystem::path(ROUEN_SOURCE_DIR) / "rigs";
+  const RigConfig dslr = LoadRig(rigs / "dslr-gphoto2.toml");
+  EXPECT_EQ(dslr.kind, "gphoto2");
+  EXPECT_FALSE(dslr.simulated());
+  EXPECT_EQ(dslr.camera.id, "dslr0");
+  EXPECT_TRUE(dslr.camera.gphoto2.port.empty());  // the first camera found
+  EXPECT_DOUBLE_EQ(dslr.camera.gphoto2.aperture_f, 8.0);
+  EXPECT_FALSE(dslr.camera.gphoto2.delete_on_camera);
+  EXPECT_EQ(dslr.camera.gphoto2.max_attempts, 5);
+  EXPECT_DOUBLE_EQ(dslr.camera.gphoto2.exif_tolerance_stops, 0.17);
+  EXPECT_DOUBLE_EQ(dslr.plan.sun_nd_density, 5.0);
+  EXPECT_EQ(dslr.plan.targets.size(), 5u);
+  EXPECT_EQ(dslr.views.at(Target::kArchitecture), 4);
+  EXPECT_EQ(dslr.on_device_lost, DeviceLostPolicy::kReconnect);
+  const LensFile body = ReadLensFile(dslr.LensPath(Target::kArchitecture));
+  const LensFile sky = ReadLensFile(dslr.LensPath(Target::kSky));
+  EXPECT_EQ(body.intrinsics.projection, Projection::kPinhole);
+  EXPECT_EQ(sky.intrinsics.projection, Projection::kFisheye);
+  EXPECT_EQ(sky.intrinsics.width, body.intrinsics.width);  // the same body's JPEG size
+
+  const RigConfig pano = LoadRig(rigs / "360-gphoto2.toml");
+  EXPECT_EQ(pano.kind, "gphoto2");
+  EXPECT_EQ(pano.camera.gphoto2.port, "ptpip:192.168.1.1");
+  EXPECT_EQ(pano.camera.gphoto2.model, "PTP/IP Camera");
+  EXPECT_EQ(pano.plan.targets, (std::vector<Target>{Target::kSky, Target::kLandscape}));
+  EXPECT_DOUBLE_EQ(pano.plan.sun_nd_density, 0.0);
+  for (Target t : pano.plan.targets) {
+    const LensFile lens = ReadLensFile(pano.LensPath(t));
+    EXPECT_EQ(lens.intrinsics.projection, Projection::kEquirect) << TargetName(t);
+    EXPECT_EQ(lens.intrinsics.width, 2 * lens.intrinsics.height) << TargetName(t);
+  }
+}
+
+// gphoto2's [camera] keys belong to gphoto2 rigs, the streaming drivers' to theirs; values out
+// of range name the file, the line and the key.
+TEST(RigTest, Gphoto2CameraKeysAreCheckedByKind) {
+  const std::string gphoto2 =
+      "[rig]\nname = \"g\"\nkind = \"gphoto2\"\n[site]\nlat_deg = 1\nlon_deg = 2\n"
+      "[camera]\nmodel = \"Canon EOS 5D Mark IV\"\nserial = \"0123\"\n"
+      "max_attempts = 3\nbackoff_initial_s = 0.2\n";
+  const RigConfig g = ParseRig(gphoto2, "g.toml");
+  EXPECT_EQ(g.camera.gphoto2.model, "Canon EOS 5D Mark IV");
+  EXPECT_EQ(g.camera.gphoto2.serial, "0123");
+  EXPECT_EQ(g.camera.gphoto2.max_attempts, 3);
+  EXPECT_DOUBLE_EQ(g.camera.gphoto2.backoff_initial_s, 0.2);
+  EXPECT_DOUBLE_EQ(g.camera.gphoto2.capture_timeout_s, 30);  // Gphoto2Options' default
+  ExpectErrorAt(Replaced(kField, "device = \"/dev/video2\"", "port = \"usb:001,004\""),
+                "bad.toml:10: [camera] 'port' is for gphoto2 rigs only (this rig's kind is "
+                "'uvc-webcam')");
+  ExpectErrorAt(gphoto2 + "pixel_format = \"YUYV\"\n",
+                "bad.toml:12: [camera] 'pixel_format' is not used by gphoto2 rigs");
+  ExpectErrorAt(gphoto2 + "device = \"/dev/video0\"\n", "name the camera with 'model'");
+  ExpectErrorAt(Replaced(gphoto2, "max_attempts = 3", "max_attempts = 0"),
+                "bad.toml:10: [camera] 'max_attempts' must be an integer within 1..100");
+  ExpectErrorAt(gphoto2 + "backoff_max_s = 0.1\n",
+                "bad.toml:12: [camera] 'backoff_max_s' must be at least backoff_initial_s");
+  ExpectErrorAt(gphoto2 + "aperture_f = 300\n", "bad.toml:12: [camera] 'aperture_f'");
+  ExpectErrorAt(gphoto2 + "delete_on_camera = \"no\"\n",
+                "'delete_on_camera' must be true or false");
+  ExpectErrorAt(gphoto2 + "exif_tolerance_stops = 0\n",
+                "'exif_tolerance_stops' must be within (0, 10]");
+}
+
 TEST(RigTest, EveryShippedRigParses) {
   int n = 0;
   for (const auto& e :
@@ -237,7 +304,8 @@ TEST(RigTest, EveryShippedRigParses) {
     EXPECT_FALSE(r.name.empty()) << e.path();
     ++n;
   }
-  EXPECT_GE(n, 6);  // sim, replay, uvc-webcam, rpi-libcamera, gige-aravis, aravis-fake
+  EXPECT_GE(n, 8);  // sim, replay, uvc-webcam, rpi-libcamera, gige-aravis, aravis-fake, and
+                    // the gphoto2 DSLR and 360-degree rigs
 }
 
 }  // namespace

@@ -26,6 +26,9 @@
 #ifdef ROUEN_HAVE_GPSD
 #include "capture/gpsd/gpsd.h"
 #endif
+#ifdef ROUEN_HAVE_GPHOTO2
+#include "capture/gphoto2/gphoto2_camera.h"
+#endif
 #include "capture/replay/replay_devices.h"
 #include "capture/sim/sim_devices.h"
 #include "core/error.h"
@@ -154,6 +157,33 @@ std::unique_ptr<Camera> OpenFieldCamera(const RigConfig& rig, const OpenRigOptio
     NoDriver(rig, "aravis", "libaravis-dev");
 #endif
   }
+  if (rig.kind == "gphoto2") {
+#ifdef ROUEN_HAVE_GPHOTO2
+    const Gphoto2CameraConfig& g = c.gphoto2;
+    Gphoto2Options o;
+    o.model = g.model;
+    o.port = g.port;
+    o.serial = g.serial;
+    o.download_dir = rig.Resolve(g.download_dir);
+    o.max_attempts = g.max_attempts;
+    o.backoff_initial_s = g.backoff_initial_s;
+    o.backoff_max_s = g.backoff_max_s;
+    o.capture_timeout_s = g.capture_timeout_s;
+    o.exif_tolerance_stops = g.exif_tolerance_stops;
+    o.base_iso = g.base_iso;
+    o.delete_on_camera = g.delete_on_camera;
+    try {
+      o.Validate();
+    } catch (const Error& e) {
+      throw Error(rig.path + ": [camera]: " + e.what());
+    }
+    auto cam = std::make_unique<Gphoto2Camera>(o);
+    if (g.aperture_f > 0) cam->SetAperture(g.aperture_f);
+    return cam;
+#else
+    NoDriver(rig, "gphoto2", "libgphoto2-dev");
+#endif
+  }
   throw Error(rig.path + ": rig kind '" + rig.kind + "' has no field camera");
 }
 
@@ -238,6 +268,9 @@ std::vector<std::string> BuiltDrivers() {
 #ifdef ROUEN_HAVE_GPSD
   d.push_back("gpsd");
 #endif
+#ifdef ROUEN_HAVE_GPHOTO2
+  d.push_back("gphoto2");
+#endif
   return d;
 }
 
@@ -305,6 +338,11 @@ nlohmann::json ListDevices() {
            {"id", a.id},
            {"description", a.vendor + " " + a.model + " (" + a.protocol + ", " + a.address +
                                ", serial " + a.serial + ")"}});
+  });
+#endif
+#ifdef ROUEN_HAVE_GPHOTO2
+  guarded("gphoto2", [&] {
+    for (const auto& c : DescribeGphoto2Cameras(ListGphoto2Cameras())) out["cameras"].push_back(c);
   });
 #endif
 #ifdef ROUEN_HAVE_USB

@@ -17,7 +17,8 @@
 
 namespace rouen {
 
-// Drivers compiled into this build ("v4l2", "nmea", "aravis", "libcamera", "usb", "gpsd").
+// Drivers compiled into this build ("v4l2", "nmea", "aravis", "libcamera", "usb", "gpsd",
+// "gphoto2").
 std::vector<std::string> BuiltDrivers();
 
 class V4l2Io;

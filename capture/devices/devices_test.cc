@@ -6,6 +6,11 @@
 #include <set>
 
 #include "capture/v4l2/fake_v4l2.h"
+#ifdef ROUEN_HAVE_GPHOTO2
+#include <stdlib.h>
+
+#include "capture/gphoto2/testing/ptpip_responder.h"
+#endif
 #include "core/error.h"
 #include "core/files.h"
 
@@ -33,6 +38,9 @@ TEST(DevicesTest, BuildHasEveryDriverThisMachineCanBuild) {
   EXPECT_TRUE(built.count("nmea"));
 #ifdef ROUEN_HAVE_ARAVIS
   EXPECT_TRUE(built.count("aravis"));
+#endif
+#ifdef ROUEN_HAVE_GPHOTO2
+  EXPECT_TRUE(built.count("gphoto2"));
 #endif
 }
 
@@ -176,6 +184,110 @@ TEST(DevicesTest, WebcamUnpluggedMidCaptureReconnectsAndCompletes) {
     EXPECT_EQ(f.nd_density > 0, f.target == Target::kSun) << f.group;
   fs::remove_all(dir);
 }
+
+// A gphoto2 rig (rigs/dslr-gphoto2.toml's [camera] with the port of a PTP/IP camera double).
+std::string Gphoto2Rig(const std::string& port, const std::string& download_dir) {
+  return "[rig]\nname = \"g\"\nkind = \"gphoto2\"\n"
+         "[site]\nlat_deg = 49.44\nlon_deg = 1.10\n"
+         "[camera]\nid = \"dslr0\"\nport = \"" +
+         port + "\"\naperture_f = 5.6\ndownload_dir = \"" + download_dir +
+         "\"\nbackoff_initial_s = 0.001\nbackoff_max_s = 0.004\ncapture_timeout_s = 5\n"
+         "[gps]\nsource = \"none\"\n"
+         "[plan]\ntargets = [\"architecture\"]\nviews = { architecture = 2 }\n"
+         "start_exposure_s = 0.004\n"
+         "[capture]\non_device_lost = \"reconnect\"\nreconnect_timeout_s = 5\n";
+}
+
+#ifdef ROUEN_HAVE_GPHOTO2
+// A private HOME (libgphoto2 keeps its PTP/IP GUID in $HOME/.gphoto) and a folder for the test.
+struct Gphoto2Home {
+  fs::path dir;
+  Gphoto2Home() {
+    std::string tmpl = (fs::temp_directory_path() / "rouen-devices-gphoto2-XXXXXX").string();
+    if (::mkdtemp(tmpl.data())) dir = tmpl;
+    ::setenv("HOME", dir.c_str(), 1);
+  }
+  ~Gphoto2Home() {
+    std::error_code ec;
+    fs::remove_all(dir, ec);
+  }
+};
+
+// The rig opens the camera on its port, journals under the rig's camera id, sets the rig's
+// aperture; when the connection drops mid-bracket, the rig's reconnect reopens it (the real
+// OpenRig path: OperatorCamera over a new Gphoto2Camera) and the bracket is redone.
+TEST(DevicesTest, Gphoto2RigCapturesAndReconnectsThroughOpenRig) {
+  Gphoto2Home home;
+  ASSERT_FALSE(home.dir.empty());
+  PtpIpResponder camera;
+  const RigConfig rig =
+      ParseRig(Gphoto2Rig(camera.PortPath(), (home.dir / "originals").string()), "g.toml");
+  RigDevices d = OpenRig(rig);
+  ASSERT_TRUE(d.camera && d.clock && d.reopen_camera);
+  EXPECT_EQ(d.camera->Id(), "dslr0");
+  EXPECT_DOUBLE_EQ(camera.Settings().f_number, 5.6);
+  EXPECT_TRUE(d.clock->IsLaptopClock());
+  d.plan.allow_night = true;  // the laptop's clock: any hour of the day
+
+  int frames = 0;
+  auto progress = [&](const CaptureProgress& p) {
+    // The double's scene needs two frames per view at 1/250 s (2 stops apart): drop the
+    // connection while the second frame of the first view downloads.
+    if (p.event.empty() && ++frames == 1) camera.DropDuring(ptp_op::kGetObject);
+  };
+  const fs::path dir = home.dir / "session";
+  SessionWriter writer = SessionWriter::Create(dir, SessionInfo{});
+  DeviceLossOptions loss{rig.on_device_lost, rig.reconnect_timeout_s, 0.01};
+  const CaptureSummary s =
+      CaptureController(d.Devices(), d.plan, rig.site, loss).Run(writer, progress, nullptr);
+  EXPECT_FALSE(s.stopped);
+  EXPECT_EQ(s.reconnects, 1);
+  const PtpIpResponderStats st = camera.Stats();
+  EXPECT_EQ(st.drops, 1);
+  EXPECT_EQ(st.connections, 2);
+  // Every capture but the one cut off is journalled, once.
+  EXPECT_EQ(static_cast<int>(writer.frames().size()), st.captures - 1);
+  EXPECT_EQ(st.downloads, st.captures - 1);
+  std::set<std::string> groups;
+  for (const FrameRecord& f : writer.frames()) {
+    groups.insert(f.group);
+    EXPECT_EQ(f.device, "dslr0");
+  }
+  EXPECT_EQ(groups,
+            (std::set<std::string>{"slot0/architecture/view0", "slot0/architecture/view1"}));
+  // The first view: one frame before the drop, then the whole bracket again.
+  ASSERT_GE(writer.frames().size(), 3u);
+  EXPECT_EQ(writer.frames()[1].group, "slot0/architecture/view0");
+  EXPECT_DOUBLE_EQ(writer.frames()[1].exposure_s, writer.frames()[0].exposure_s);
+  // The reopened camera got the rig's aperture back, and the files were kept.
+  EXPECT_DOUBLE_EQ(camera.Settings().f_number, 5.6);
+  int kept = 0;
+  for (const auto& e : fs::directory_iterator(home.dir / "originals")) kept += e.is_regular_file();
+  EXPECT_EQ(kept, st.downloads);
+  EXPECT_TRUE(camera.ProtocolErrors().empty());
+}
+
+// No camera on the rig's port: the error names the port.
+TEST(DevicesTest, Gphoto2RigWithoutItsCameraFailsNamingThePort) {
+  Gphoto2Home home;
+  std::string port;
+  {
+    PtpIpResponder gone;  // a port nobody listens on once it is closed
+    port = gone.PortPath();
+  }
+  const RigConfig rig = ParseRig(Gphoto2Rig(port, ""), "g.toml");
+  const std::string e = ErrorOf([&] { OpenRig(rig); });
+  EXPECT_NE(e.find(port), std::string::npos) << e;
+  EXPECT_NE(e.find("opening the camera"), std::string::npos) << e;
+}
+#else
+TEST(DevicesTest, Gphoto2RigWithoutTheDriverIsAClearError) {
+  const RigConfig rig = ParseRig(Gphoto2Rig("ptpip:127.0.0.1", ""), "g.toml");
+  const std::string e = ErrorOf([&] { OpenRig(rig); });
+  EXPECT_NE(e.find("g.toml"), std::string::npos) << e;
+  EXPECT_NE(e.find("libgphoto2-dev"), std::string::npos) << e;
+}
+#endif
 
 TEST(DevicesTest, UsbWatchStartsAndStopsWhereHotplugExists) {
   std::vector<std::string> events;
