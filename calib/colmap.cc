@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <iomanip>
 #include <map>
 #include <sstream>
 
@@ -403,6 +404,14 @@ ColmapModel ReadColmapModel(const fs::path& dir) {
     model.points = bin ? ReadPointsBinary(points_file) : ReadPointsText(points_file);
   if (model.images.empty()) throw Error(images_file.string() + ": no registered image");
   return model;
+}
+
+std::string SimilarityFit::BriefReport() const {
+  std::ostringstream os;
+  os << std::fixed << std::setprecision(3) << "residual RMS " << rms_m << " m, largest " << max_m
+     << " m over " << points << " control points (scale " << std::defaultfloat
+     << std::setprecision(6) << transform.scale << ")";
+  return os.str();
 }
 
 SimilarityFit FitSimilarity(const std::vector<Eigen::Vector3d>& from,

@@ -212,6 +212,8 @@ TEST(FitSimilarity, RecoversAKnownTransformExactly) {
   EXPECT_LT((fit.transform.translation - truth.translation).norm(), 1e-9);
   EXPECT_LT(fit.rms_m, 1e-9);
   EXPECT_EQ(fit.points, 5);
+  EXPECT_EQ(fit.BriefReport(),
+            "residual RMS 0.000 m, largest 0.000 m over 5 control points (scale 2.5)");
   // A pose carried along keeps its orientation relative to the points.
   const Pose p = Pose::LookAt({3, 4, 1}, {0, 0, 0});
   const Pose q = fit.transform.Apply(p);

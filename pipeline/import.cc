@@ -447,10 +447,7 @@ void AttachColmap(const ImportOptions& o, std::vector<Photo>& photos, ImportSumm
   } catch (const Error& e) {
     throw Error(o.colmap_control.string() + ": " + e.what());
   }
-  char residual[160];
-  std::snprintf(residual, sizeof residual,
-                "residual RMS %.3f m, largest %.3f m over %d control points (scale %.6g)",
-                fit.rms_m, fit.max_m, fit.points, fit.transform.scale);
+  const std::string residual = fit.BriefReport();
   if (fit.rms_m > o.colmap_max_rms_m)
     throw Error(o.colmap_control.string() + ": the alignment of " + o.colmap.string() +
                 " leaves a " + residual + ", beyond --colmap-max-rms-m " +
