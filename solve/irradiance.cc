@@ -560,25 +560,45 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
 
 namespace {
 
+// Per entry of a list of (point, weight): the weight times the factor of the point's reflection
+// of the sun's light and of the sky's towards where the list gathers light (RetroFactor,
+// AmbientRetroFactor). They depend on the geometry and the sun only: computed once per time,
+// used by every bounce.
+struct ReflectionFactors {
+  std::vector<double> sun, se;
+};
+
+// The factors of b's cell entries, each point sending light towards its cell's centre as
+// towards another point (AddInterreflection).
+ReflectionFactors CellFactors(const GroundBounce& b, const SurfaceGrid& grid,
+                              const std::vector<double>& retro, const Eigen::Vector3d& sun_dir) {
+  ReflectionFactors f{std::vector<double>(b.cell_point.size()),
+                      std::vector<double>(b.cell_point.size())};
+  tbb::parallel_for(size_t{0}, b.cells.size(), [&](size_t w) {
+    const Eigen::Vector3d centre = b.field->CellCentre(b.cells[w]);
+    for (int m = b.cell_begin[w]; m < b.cell_begin[w + 1]; ++m) {
+      const GridPoint& q = grid.points[b.cell_point[m]];
+      const double r = BlockRetro(retro, q.block);
+      const Eigen::Vector3d to_cell = (centre - q.position).normalized();
+      f.sun[m] = f.se[m] = b.cell_weight[m];
+      if (r != 0 && to_cell.allFinite()) {
+        f.sun[m] *= RetroFactor(r, q.normal, sun_dir, to_cell);
+        f.se[m] *= AmbientRetroFactor(r, q.normal, to_cell);
+      }
+    }
+  });
+  return f;
+}
+
 // The walls' irradiance on entry w of b.cells: (pi / N) sum over its rays of B_j / pi, each
-// point's light sent towards the cell as towards another point (AddInterreflection).
-Eigen::Vector3d WallsOnCell(const GroundBounce& b, size_t w, const SurfaceGrid& grid,
+// point's light sent towards the cell as towards another point (`f`: CellFactors).
+Eigen::Vector3d WallsOnCell(const GroundBounce& b, size_t w, const ReflectionFactors& f,
                             const std::vector<Eigen::Vector3d>& from_sun,
-                            const std::vector<Eigen::Vector3d>& from_se,
-                            const std::vector<double>& retro, const Eigen::Vector3d& sun_dir) {
-  const Eigen::Vector3d centre = b.field->CellCentre(b.cells[w]);
+                            const std::vector<Eigen::Vector3d>& from_se) {
   Eigen::Vector3d e = Eigen::Vector3d::Zero();
   for (int m = b.cell_begin[w]; m < b.cell_begin[w + 1]; ++m) {
     const int j = b.cell_point[m];
-    const GridPoint& q = grid.points[j];
-    const double r = BlockRetro(retro, q.block);
-    const Eigen::Vector3d to_cell = (centre - q.position).normalized();
-    if (r == 0 || !to_cell.allFinite()) {
-      e += b.cell_weight[m] * (from_sun[j] + from_se[j]);
-    } else {
-      e += b.cell_weight[m] * (from_sun[j] * RetroFactor(r, q.normal, sun_dir, to_cell) +
-                               from_se[j] * AmbientRetroFactor(r, q.normal, to_cell));
-    }
+    e += f.sun[m] * from_sun[j] + f.se[m] * from_se[j];
   }
   return e;
 }
@@ -706,8 +726,9 @@ std::vector<Eigen::Vector3f> GroundWallsIrradiance(const GroundBounce& b, const 
   const Eigen::Vector3d s = sun_dir.normalized();
   std::vector<Eigen::Vector3f> e(static_cast<size_t>(b.field->nx) * b.field->ny,
                                  Eigen::Vector3f::Zero());
+  const ReflectionFactors f = CellFactors(b, grid, retro, s);
   for (size_t w = 0; w < b.cells.size(); ++w)
-    e[b.cells[w]] = WallsOnCell(b, w, grid, from_sun, from_se, retro, s).cast<float>();
+    e[b.cells[w]] = WallsOnCell(b, w, f, from_sun, from_se).cast<float>();
   return e;
 }
 
@@ -737,6 +758,27 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
   std::vector<Eigen::Vector3d> se(n);
   if (ground && static_cast<int>(ground->point_begin.size()) != n + 1)
     throw Error("interreflection: the ground bounce was built for another grid");
+  // Per entry m of the hit lists (point i sees point j in count[m] directions): the count
+  // times j's reflection towards i of the sun's light and of the sky's.
+  ReflectionFactors f{std::vector<double>(lists.point.size()),
+                      std::vector<double>(lists.point.size())};
+  tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& range) {
+    for (int i = range.begin(); i < range.end(); ++i) {
+      for (int m = lists.begin[i]; m < lists.begin[i + 1]; ++m) {
+        const GridPoint& q = grid.points[lists.point[m]];
+        const double r = BlockRetro(retro, q.block);
+        f.sun[m] = f.se[m] = lists.count[m];
+        const Eigen::Vector3d to_i = grid.points[i].position - q.position;
+        const double d = to_i.norm();
+        if (r == 0 || !(d > 0)) continue;
+        const Eigen::Vector3d v = to_i / d;
+        f.sun[m] *= RetroFactor(r, q.normal, s, v);
+        f.se[m] *= AmbientRetroFactor(r, q.normal, v);
+      }
+    }
+  });
+  const ReflectionFactors cell_factors =
+      ground ? CellFactors(*ground, grid, retro, s) : ReflectionFactors{};
   std::vector<Eigen::Vector3d> walls_e;  // per cell of the ground bounce
   for (int pass = 0; pass < bounces; ++pass) {
     ThrowIfCancelled(cancel);
@@ -750,7 +792,7 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
       walls_e.assign(ground->cells.size(), Eigen::Vector3d::Zero());
       tbb::parallel_for(size_t{0}, ground->cells.size(), [&](size_t w) {
         walls_e[w] = ground->field->Albedo(ground->cells[w])
-                         .cwiseProduct(WallsOnCell(*ground, w, grid, from_sun, from_se, retro, s));
+                         .cwiseProduct(WallsOnCell(*ground, w, cell_factors, from_sun, from_se));
       });
     }
     tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& range) {
@@ -758,22 +800,7 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
         for (int m = lists.begin[i]; m < lists.begin[i + 1]; ++m) {
           const int j = lists.point[m];
-          const double c = lists.count[m];  // directions of point i that hit point j
-          const GridPoint& q = grid.points[j];
-          const double r = BlockRetro(retro, q.block);
-          if (r == 0) {
-            sum += c * (from_sun[j] + from_se[j]);
-            continue;
-          }
-          const Eigen::Vector3d to_i = grid.points[i].position - q.position;
-          const double d = to_i.norm();
-          if (!(d > 0)) {
-            sum += c * (from_sun[j] + from_se[j]);
-          } else {
-            const Eigen::Vector3d v = to_i / d;
-            sum += c * (from_sun[j] * RetroFactor(r, q.normal, s, v) +
-                        from_se[j] * AmbientRetroFactor(r, q.normal, v));
-          }
+          sum += f.sun[m] * from_sun[j] + f.se[m] * from_se[j];
         }
         // (B_j / pi) (pi / K)
         se[i] = irr->direct_se[i] + sum / K;
