@@ -20,7 +20,7 @@ namespace {
 struct ImportArgs {
   std::string photos, list, cameras, site, timezone, time,
       target = "architecture", out, model, surroundings, trees, sky_mask, colmap, colmap_control;
-  double colmap_max_rms_m = 0.5;
+  double colmap_max_rms_m = 0;  // 0: ImportOptions' default for the alignment's source
 };
 
 void Run(const ImportArgs& a) {
@@ -30,7 +30,7 @@ void Run(const ImportArgs& a) {
   o.cameras = a.cameras;
   o.colmap = a.colmap;
   o.colmap_control = a.colmap_control;
-  o.colmap_max_rms_m = a.colmap_max_rms_m;
+  if (a.colmap_max_rms_m > 0) o.colmap_max_rms_m = a.colmap_max_rms_m;
   o.site = ParseSiteOption(a.site, "--site");
   try {
     o.target = ParseTarget(a.target);
@@ -66,10 +66,8 @@ void Run(const ImportArgs& a) {
                  s.night.size(), some.c_str(), s.night.size() > 3 ? "\n  ..." : "");
   }
   if (s.colmap_photos > 0)
-    std::printf(
-        "  %d photos posed from the COLMAP model (alignment residual RMS %.3f m, largest "
-        "%.3f m over %d control points)\n",
-        s.colmap_photos, s.colmap_rms_m, s.colmap_max_m, s.colmap_control_points);
+    std::printf("  %d photos posed from the COLMAP model (alignment %s)\n", s.colmap_photos,
+                s.colmap_alignment.c_str());
   std::printf("next: rouen status %s\n", a.out.c_str());
 }
 
@@ -103,7 +101,10 @@ void RegisterImport(CLI::App& app) {
       "its file name) its intrinsics and pose; CAMERAS gives the others. Its frame is aligned\n"
       "to the site by --colmap-control, a CSV of 3 or more points known in both, not on one\n"
       "line, whose header names x,y,z (the model's frame) and east_m,north_m,up_m (metres from\n"
-      "--site); the residual is printed and one beyond --colmap-max-rms-m refused.\n"
+      "--site); without it, by the GPS positions in the registered photos' EXIF (3 or more\n"
+      "photos not on one line; their altitude taken on the datum of --site's height, a photo\n"
+      "without one put at that height). The residual is printed and one beyond\n"
+      "--colmap-max-rms-m refused (default 0.5 m with control points, 5 m with GPS).\n"
       "--model copies the building (OBJ; its groups are the blocks) into the session;\n"
       "--surroundings adds coarse geometry around it (OBJ: houses across the street, a city\n"
       "model's or OpenStreetMap's footprints extruded to their heights): it shades the\n"
@@ -133,7 +134,9 @@ void RegisterImport(CLI::App& app) {
   c->add_option("--colmap-control", a->colmap_control,
                 "CSV of control points (x,y,z,east_m,north_m,up_m) aligning --colmap to the site");
   c->add_option("--colmap-max-rms-m", a->colmap_max_rms_m,
-                "Largest alignment residual RMS accepted, metres (default 0.5)");
+                "Largest alignment residual RMS accepted, metres (default 0.5 with control "
+                "points, 5 with GPS)")
+      ->check(Positive());
   c->add_option("--site", a->site, "Site LAT,LON,H (degrees, degrees east, metres)")->required();
   c->add_option("--timezone", a->timezone,
                 "UTC offset of the camera clock (+HH:MM) for EXIF times without one");

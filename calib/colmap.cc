@@ -406,10 +406,10 @@ ColmapModel ReadColmapModel(const fs::path& dir) {
   return model;
 }
 
-std::string SimilarityFit::BriefReport() const {
+std::string SimilarityFit::BriefReport(const std::string& what) const {
   std::ostringstream os;
   os << std::fixed << std::setprecision(3) << "residual RMS " << rms_m << " m, largest " << max_m
-     << " m over " << points << " control points (scale " << std::defaultfloat
+     << " m over " << points << " " << what << " (scale " << std::defaultfloat
      << std::setprecision(6) << transform.scale << ")";
   return os.str();
 }

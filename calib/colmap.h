@@ -59,8 +59,9 @@ struct SimilarityFit {
   Similarity transform;
   double rms_m = 0, max_m = 0;  // residuals |T(from_i) - to_i| at the points, metres
   int points = 0;
-  // "residual RMS 0.012 m, largest 0.020 m over 4 control points (scale 5)"
-  std::string BriefReport() const;
+  // "residual RMS 0.012 m, largest 0.020 m over 4 control points (scale 5)", the points
+  // named by `what`.
+  std::string BriefReport(const std::string& what = "control points") const;
 };
 
 // The least-squares similarity taking `from` to `to` (Umeyama 1991: centroids, the SVD of the

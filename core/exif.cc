@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
@@ -108,6 +109,81 @@ bool IsRawFileName(const std::string& path) {
   return std::find(std::begin(kExt), std::end(kExt), ext) != std::end(kExt);
 }
 
+namespace {
+
+// The `n` numbers of a numeric attribute (float, double, int or rational values), or none
+// when it is absent, not numeric or of another length.
+std::optional<std::vector<double>> Numbers(const OIIO::ImageSpec& spec, const char* name, int n) {
+  const OIIO::ParamValue* p = Find(spec, name);
+  if (!p) return std::nullopt;
+  const OIIO::TypeDesc t = p->type();
+  std::vector<double> out;
+  if (t.vecsemantics == OIIO::TypeDesc::RATIONAL) {
+    if (p->nvalues() * static_cast<int>(t.numelements()) != n) return std::nullopt;
+    const auto* r = static_cast<const int32_t*>(p->data());
+    for (int i = 0; i < n; ++i)
+      out.push_back(r[2 * i + 1] != 0 ? static_cast<double>(r[2 * i]) / r[2 * i + 1]
+                                      : std::nan(""));
+  } else if (t.basetype >= OIIO::TypeDesc::UINT8 && t.basetype <= OIIO::TypeDesc::DOUBLE) {
+    // Any integer or floating type (EXIF's BYTE, SHORT, LONG; OIIO's float for RATIONAL).
+    // Integers by get_int: get_float would scale a BYTE to [0, 1].
+    const bool integer = t.basetype < OIIO::TypeDesc::HALF;
+    const int values = p->nvalues() * static_cast<int>(t.numelements()) * t.aggregate;
+    if (values != n) return std::nullopt;
+    for (int i = 0; i < n; ++i)
+      out.push_back(integer ? p->get_int_indexed(i) : p->get_float_indexed(i, std::nanf("")));
+  } else {
+    return std::nullopt;
+  }
+  return out;
+}
+
+// EXIF's GPS position: degrees, minutes and seconds with a hemisphere letter per axis.
+void ReadGps(const OIIO::ImageSpec& spec, PhotoMetadata* m) {
+  const auto lat = Numbers(spec, "GPS:Latitude", 3), lon = Numbers(spec, "GPS:Longitude", 3);
+  const auto lat_ref = NonEmptyString(spec, "GPS:LatitudeRef");
+  const auto lon_ref = NonEmptyString(spec, "GPS:LongitudeRef");
+  if (!lat && !lon) return;
+  if (!lat || !lon || !lat_ref || !lon_ref) {
+    m->gps_problem = "GPS:Latitude, GPS:Longitude or their N/S, E/W references missing";
+    return;
+  }
+  const auto angle = [&](const std::vector<double>& dms, const char* axis,
+                         double limit) -> std::optional<double> {
+    const bool ok = std::isfinite(dms[0]) && std::isfinite(dms[1]) && std::isfinite(dms[2]) &&
+                    dms[0] >= 0 && dms[1] >= 0 && dms[1] < 60 && dms[2] >= 0 && dms[2] < 60;
+    const double deg = dms[0] + dms[1] / 60 + dms[2] / 3600;
+    if (!ok || deg > limit) {
+      char buf[160];
+      std::snprintf(buf, sizeof buf, "GPS:%s %g, %g, %g is not degrees, minutes, seconds", axis,
+                    dms[0], dms[1], dms[2]);
+      m->gps_problem = buf;
+      return std::nullopt;
+    }
+    return deg;
+  };
+  const auto la = angle(*lat, "Latitude", 90), lo = angle(*lon, "Longitude", 180);
+  if (!la || !lo) return;
+  if (*lat_ref != "N" && *lat_ref != "S") {
+    m->gps_problem = "GPS:LatitudeRef \"" + *lat_ref + "\" is not N or S";
+    return;
+  }
+  if (*lon_ref != "E" && *lon_ref != "W") {
+    m->gps_problem = "GPS:LongitudeRef \"" + *lon_ref + "\" is not E or W";
+    return;
+  }
+  GpsPosition g;
+  g.lat_deg = *lat_ref == "S" ? -*la : *la;
+  g.lon_deg = *lon_ref == "W" ? -*lo : *lo;
+  if (const auto alt = Numbers(spec, "GPS:Altitude", 1); alt && std::isfinite((*alt)[0])) {
+    const auto below = Numbers(spec, "GPS:AltitudeRef", 1);
+    g.altitude_m = below && (*below)[0] == 1 ? -(*alt)[0] : (*alt)[0];
+  }
+  m->gps = g;
+}
+
+}  // namespace
+
 PhotoMetadata ReadPhotoMetadata(const std::string& path) {
   auto in = internal::OpenImageFile(path, "image");
   const OIIO::ImageSpec spec = in->spec();
@@ -153,6 +229,7 @@ PhotoMetadata ReadPhotoMetadata(const std::string& path) {
   if (!m.offset) m.offset = NonEmptyString(spec, "Exif:OffsetTime");
   m.make = NonEmptyString(spec, "Make");
   m.model = NonEmptyString(spec, "Model");
+  ReadGps(spec, &m);
   return m;
 }
 

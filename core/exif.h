@@ -12,6 +12,12 @@
 
 namespace rouen {
 
+// Where a photo was taken, as its camera's GPS wrote it in EXIF's GPS directory.
+struct GpsPosition {
+  double lat_deg = 0, lon_deg = 0;   // north- and east-positive degrees
+  std::optional<double> altitude_m;  // GPSAltitude, negative below its datum (sea level)
+};
+
 struct PhotoMetadata {
   std::optional<double> exposure_s;  // ExposureTime, seconds
   std::optional<double> f_number;    // FNumber
@@ -28,6 +34,12 @@ struct PhotoMetadata {
   int bits = 0;           // bits per stored sample (8, 16, 32 ...)
   bool is_float = false;  // half/float/double samples (EXR, HDR)
   bool is_raw = false;    // read through the libraw plugin (DNG, camera RAW)
+  // GPSLatitude/GPSLongitude with their N/S and E/W references, and GPSAltitude: empty when
+  // the photo has none. A GPS position present but unusable (a reference other than N/S or
+  // E/W, minutes or seconds out of range, a latitude beyond 90 deg) is left empty and
+  // `gps_problem` says why.
+  std::optional<GpsPosition> gps;
+  std::string gps_problem;
 };
 
 // Reads the metadata of an image file (no pixels). Throws rouen::Error naming the file when

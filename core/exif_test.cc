@@ -40,6 +40,54 @@ void WriteWithAttributes(const fs::path& path, const OIIO::ImageSpec& attrs) {
   ASSERT_TRUE(out->close());
 }
 
+// GPS as a phone writes it in a JPEG: degrees, minutes, seconds and a hemisphere per axis,
+// altitude with its above/below flag. South and west are negative; a bad reference or minutes
+// beyond 60 leave no position and say why; a photo without GPS has neither.
+TEST(ExifTest, GpsPositionFromItsDegreesMinutesSecondsAndHemispheres) {
+  const fs::path dir = TempDir("gps");
+  const auto write = [&](const std::string& name, const char* lat_ref, float lat_min,
+                         const char* lon_ref, int altitude_ref) {
+    OIIO::ImageSpec a;
+    const float lat[3] = {33, lat_min, 51.5f}, lon[3] = {151, 12, 36};
+    a.attribute("GPS:Latitude", OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, 3), lat);
+    a.attribute("GPS:LatitudeRef", lat_ref);
+    a.attribute("GPS:Longitude", OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, 3), lon);
+    a.attribute("GPS:LongitudeRef", lon_ref);
+    a.attribute("GPS:Altitude", 12.5f);
+    a.attribute("GPS:AltitudeRef", altitude_ref);
+    WriteWithAttributes(dir / name, a);
+    return (dir / name).string();
+  };
+  const PhotoMetadata sydney = ReadPhotoMetadata(write("s.jpg", "S", 51, "E", 1));
+  ASSERT_TRUE(sydney.gps) << sydney.gps_problem;
+  // float32 seconds: 1e-6 deg is 0.1 m.
+  EXPECT_NEAR(sydney.gps->lat_deg, -(33 + 51 / 60.0 + 51.5 / 3600), 1e-6);
+  EXPECT_NEAR(sydney.gps->lon_deg, 151 + 12 / 60.0 + 36 / 3600.0, 1e-6);
+  ASSERT_TRUE(sydney.gps->altitude_m);
+  EXPECT_NEAR(*sydney.gps->altitude_m, -12.5, 1e-6);  // below sea level
+  const PhotoMetadata north = ReadPhotoMetadata(write("n.jpg", "N", 51, "W", 0));
+  ASSERT_TRUE(north.gps) << north.gps_problem;
+  EXPECT_GT(north.gps->lat_deg, 33);
+  EXPECT_LT(north.gps->lon_deg, -151);
+  EXPECT_NEAR(*north.gps->altitude_m, 12.5, 1e-6);
+
+  const PhotoMetadata bad_ref = ReadPhotoMetadata(write("r.jpg", "X", 51, "E", 0));
+  EXPECT_FALSE(bad_ref.gps);
+  EXPECT_EQ(bad_ref.gps_problem, "GPS:LatitudeRef \"X\" is not N or S");
+  const PhotoMetadata bad_minutes = ReadPhotoMetadata(write("m.jpg", "N", 75, "E", 0));
+  EXPECT_FALSE(bad_minutes.gps);
+  EXPECT_NE(bad_minutes.gps_problem.find("GPS:Latitude 33, 75, 51.5"), std::string::npos)
+      << bad_minutes.gps_problem;
+
+  OIIO::ImageSpec none;
+  none.attribute("Make", "Acme");
+  WriteWithAttributes(dir / "none.jpg", none);
+  const PhotoMetadata without = ReadPhotoMetadata((dir / "none.jpg").string());
+  EXPECT_FALSE(without.gps);
+  EXPECT_TRUE(without.gps_problem.empty());
+  fs::remove_all(dir);
+}
+
 TEST(ExifTest, ReadsAttributesWrittenToJpeg) {
   const fs::path dir = TempDir("jpeg");
   OIIO::ImageSpec a;

@@ -17,6 +17,7 @@
 #include "core/error.h"
 #include "core/exif.h"
 #include "core/files.h"
+#include "core/geodesy.h"
 #include "core/image.h"
 #include "core/json_text.h"
 #include "core/lens.h"
@@ -425,39 +426,71 @@ void AttachCameras(const fs::path& cameras_file, std::vector<Photo>& photos) {
   }
 }
 
+// The similarity taking the COLMAP model's frame to the site's: from the control points, else
+// from the registered photos' GPS positions (ImportOptions::colmap).
+SimilarityFit AlignColmap(const ImportOptions& o, const ColmapModel& model,
+                          const std::vector<Photo>& photos, std::string* source) {
+  std::vector<Eigen::Vector3d> from, to;
+  if (!o.colmap_control.empty()) {
+    for (const ControlPoint& c : ReadControlPoints(o.colmap_control)) {
+      from.push_back(c.model);
+      to.push_back(c.enu);
+    }
+    *source = o.colmap_control.string();
+  } else {
+    // One pair per registered image: its centre in the model, its GPS position on the site.
+    const LocalFrame site(o.site);
+    std::vector<std::string> unusable;
+    std::set<std::string> used;
+    for (const Photo& p : photos) {
+      const ColmapImage* im = model.Find(p.name);
+      if (!im || used.count(im->name)) continue;  // a photo imported for two targets: once
+      if (!p.meta.gps) {
+        unusable.push_back(p.name + (p.meta.gps_problem.empty() ? ": no GPS position"
+                                                                : ": " + p.meta.gps_problem));
+        continue;
+      }
+      used.insert(im->name);
+      from.push_back(im->pose.position);
+      to.push_back(site.ToEnu({p.meta.gps->lat_deg, p.meta.gps->lon_deg,
+                               p.meta.gps->altitude_m.value_or(o.site.height_m)}));
+    }
+    if (from.size() < 3) {
+      std::string why = unusable.empty() ? "" : " (" + unusable.front() + ")";
+      throw Error(o.colmap.string() + ": " + std::to_string(from.size()) +
+                  " of the photos it registered carry a GPS position in EXIF" + why +
+                  "; aligning its frame to the site needs 3 or more, or --colmap-control with 3 "
+                  "or more points known in both the model and the site");
+    }
+    *source = "the GPS positions in " + std::to_string(from.size()) + " photos' EXIF";
+  }
+  try {
+    return FitSimilarity(from, to);
+  } catch (const Error& e) {
+    throw Error(*source + ": " + e.what());
+  }
+}
+
 // The photos a COLMAP model registered take its intrinsics and pose, its frame aligned to the
-// site by the control points (ImportOptions::colmap).
+// site (AlignColmap).
 void AttachColmap(const ImportOptions& o, std::vector<Photo>& photos, ImportSummary* summary) {
-  if (o.colmap_control.empty())
-    throw Error(o.colmap.string() +
-                ": a COLMAP model's frame is its own; give --colmap-control with 3 or more "
-                "points known in both the model and the site");
-  if (!(o.colmap_max_rms_m > 0))
+  const double max_rms_m = o.colmap_max_rms_m.value_or(o.colmap_control.empty() ? 5.0 : 0.5);
+  if (!(max_rms_m > 0) || !std::isfinite(max_rms_m))
     throw Error("--colmap-max-rms-m must be a positive number of metres");
   const ColmapModel model = ReadColmapModel(o.colmap);
-  const std::vector<ControlPoint> control = ReadControlPoints(o.colmap_control);
-  std::vector<Eigen::Vector3d> from, to;
-  for (const ControlPoint& c : control) {
-    from.push_back(c.model);
-    to.push_back(c.enu);
-  }
-  SimilarityFit fit;
-  try {
-    fit = FitSimilarity(from, to);
-  } catch (const Error& e) {
-    throw Error(o.colmap_control.string() + ": " + e.what());
-  }
-  const std::string residual = fit.BriefReport();
-  if (fit.rms_m > o.colmap_max_rms_m)
-    throw Error(o.colmap_control.string() + ": the alignment of " + o.colmap.string() +
-                " leaves a " + residual + ", beyond --colmap-max-rms-m " +
-                std::to_string(o.colmap_max_rms_m) +
-                " m: a point given in the wrong frame, order or units?");
+  std::string source;
+  const SimilarityFit fit = AlignColmap(o, model, photos, &source);
+  const std::string residual =
+      fit.BriefReport(o.colmap_control.empty() ? "GPS positions" : "control points");
+  if (fit.rms_m > max_rms_m)
+    throw Error(source + ": the alignment of " + o.colmap.string() + " leaves a " + residual +
+                ", beyond --colmap-max-rms-m " + std::to_string(max_rms_m) +
+                (o.colmap_control.empty()
+                     ? " m: a GPS position of another photo, or a reconstruction that is wrong?"
+                     : " m: a point given in the wrong frame, order or units?"));
   Log(o, "COLMAP model " + o.colmap.string() + " (" + std::to_string(model.images.size()) +
              " images) aligned to the site: " + residual);
-  summary->colmap_control_points = fit.points;
-  summary->colmap_rms_m = fit.rms_m;
-  summary->colmap_max_m = fit.max_m;
+  summary->colmap_alignment = residual;
   for (Photo& p : photos) {
     const ColmapImage* im = model.Find(p.name);
     if (!im) continue;

@@ -20,6 +20,7 @@
 #include "core/error.h"
 #include "core/exif.h"
 #include "core/files.h"
+#include "core/geodesy.h"
 #include "core/image.h"
 #include "core/mesh.h"
 #include "core/session.h"
@@ -267,6 +268,108 @@ TEST(ImportTest, TimezoneSlotsGroupsPosesAndExr) {
   fs::remove_all(dir);
 }
 
+// A COLMAP model's images.txt line for a camera at `site_pose`, the model's frame being the
+// site's under x_site = s rot x_model + t.
+std::string ColmapImageLine(int id, const std::string& name, const Pose& site_pose,
+                            const Eigen::Matrix3d& rot, double s, const Eigen::Vector3d& t) {
+  const Eigen::Matrix3d r = (rot.transpose() * site_pose.rotation).transpose();
+  const Eigen::Quaterniond q(r);
+  const Eigen::Vector3d tt = -(r * (rot.transpose() * (site_pose.position - t) / s));
+  char line[300];
+  std::snprintf(line, sizeof line, "%d %.17g %.17g %.17g %.17g %.17g %.17g %.17g 1 %s\n\n", id,
+                q.w(), q.x(), q.y(), q.z(), tt.x(), tt.y(), tt.z(), name.c_str());
+  return line;
+}
+
+// A JPEG carrying the GPS position `p` as EXIF writes it (degrees, minutes, seconds, hemisphere).
+void WriteJpegWithGps(const fs::path& path, const Site& p) {
+  OIIO::ImageSpec spec(32, 24, 3, OIIO::TypeDesc::UINT8);
+  spec.attribute("ExposureTime", 1.f / 100);
+  spec.attribute("Exif:DateTimeOriginal", "2024:06:21 09:00:00");
+  const auto dms = [](double deg, float out[3]) {
+    deg = std::abs(deg);
+    out[0] = static_cast<float>(std::floor(deg));
+    out[1] = static_cast<float>(std::floor((deg - out[0]) * 60));
+    out[2] = static_cast<float>((deg - out[0] - out[1] / 60.0) * 3600);
+  };
+  float lat[3], lon[3];
+  dms(p.lat_deg, lat);
+  dms(p.lon_deg, lon);
+  spec.attribute("GPS:Latitude", OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, 3), lat);
+  spec.attribute("GPS:LatitudeRef", p.lat_deg < 0 ? "S" : "N");
+  spec.attribute("GPS:Longitude", OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, 3), lon);
+  spec.attribute("GPS:LongitudeRef", p.lon_deg < 0 ? "W" : "E");
+  spec.attribute("GPS:Altitude", static_cast<float>(p.height_m));
+  std::vector<unsigned char> px(32 * 24 * 3, 90);
+  auto out = OIIO::ImageOutput::create(path.string());
+  ASSERT_TRUE(out);
+  ASSERT_TRUE(out->open(path.string(), spec));
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, px.data()));
+  ASSERT_TRUE(out->close());
+}
+
+// Without control points, a COLMAP model is aligned by its photos' GPS (issue 32's (a)): four
+// photos taken around a building, each with the position its GPS wrote, land at their site
+// poses; one GPS position 40 m off (a fix from the car park) is refused by the default 5 m
+// bound with the residual named, and accepted when the user raises the bound.
+TEST(ImportTest, ColmapModelAlignedByThePhotosGps) {
+  const fs::path dir = TempDir("colmap_gps");
+  const fs::path photos = dir / "photos";
+  fs::create_directories(photos);
+  const Site site{48.8566, 2.3522, 35};
+  const LocalFrame frame(site);
+  const double s = 0.2, c = std::cos(1.1), n = std::sin(1.1);
+  const Eigen::Matrix3d rot = (Eigen::Matrix3d() << c, -n, 0, n, c, 0, 0, 0, 1).finished();
+  const Eigen::Vector3d t(-3, 8, 2);
+  const std::vector<Pose> truth = {
+      Pose::LookAt({30, -40, 1.6}, {0, 0, 10}), Pose::LookAt({-20, -35, 1.7}, {0, 0, 12}),
+      Pose::LookAt({-45, 10, 1.5}, {0, 0, 8}), Pose::LookAt({25, 30, 1.8}, {0, 0, 9})};
+  std::string images, list;
+  for (size_t i = 0; i < truth.size(); ++i) {
+    const std::string name = "p" + std::to_string(i) + ".jpg";
+    WriteJpegWithGps(photos / name, frame.ToGeodetic(truth[i].position));
+    images += ColmapImageLine(static_cast<int>(i) + 1, name, truth[i], rot, s, t);
+    list += name + " - group=g" + std::to_string(i) + "\n";
+  }
+  WriteText(dir / "list.txt", list);
+  fs::create_directories(dir / "sparse");
+  WriteText(dir / "sparse" / "cameras.txt", "1 PINHOLE 32 24 30 30 16 12\n");
+  WriteText(dir / "sparse" / "images.txt", images);
+  const std::string base = "import --photos " + Q(photos) + " --list " + Q(dir / "list.txt") +
+                           " --colmap " + Q(dir / "sparse") +
+                           " --timezone +02:00 --site 48.8566,2.3522,35";
+  Result r = RunRouen(base + " --out " + Q(dir / "s"));
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("4 photos posed from the COLMAP model (alignment residual RMS 0.00"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("over 4 GPS positions"), std::string::npos) << r.out;
+  const Session session = Session::Load(dir / "s");
+  const auto sources = SourcesById(session);
+  ASSERT_EQ(session.frames().size(), truth.size());
+  for (const FrameRecord& f : session.frames()) {
+    const std::string src = sources.at(f.id).at("source");
+    const Pose& want = truth[src[1] - '0'];
+    ASSERT_TRUE(f.pose) << src;
+    // EXIF's float32 seconds of arc: about 1 mm on the ground.
+    EXPECT_LT((f.pose->position - want.position).norm(), 0.01) << src;
+    EXPECT_LT((f.pose->rotation - want.rotation).norm(), 1e-3) << src;
+  }
+
+  // One photo's GPS 40 m east of where it stood.
+  Site off = frame.ToGeodetic(truth[2].position + Eigen::Vector3d(40, 0, 0));
+  WriteJpegWithGps(photos / "p2.jpg", off);
+  r = RunRouen(base + " --out " + Q(dir / "t"));
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.out.find("the GPS positions in 4 photos' EXIF: the alignment of"), std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("beyond --colmap-max-rms-m 5"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(dir / "t"));
+  r = RunRouen(base + " --colmap-max-rms-m 50 --out " + Q(dir / "t"));
+  EXPECT_EQ(r.code, 0) << r.out;
+  fs::remove_all(dir);
+}
+
 // Photos posed by photogrammetry: a COLMAP sparse model in its own frame (here the site's
 // turned 30 degrees, scaled by 0.2 and moved) registered two of the three photos; control
 // points known in both frames align it, and each registered photo lands at its site pose.
@@ -290,17 +393,8 @@ TEST(ImportTest, ColmapModelAlignedByControlPoints) {
   const Pose truth[2] = {Pose::LookAt({30, -40, 1.6}, {0, 0, 10}),
                          Pose::LookAt({-20, -35, 1.7}, {0, 0, 12})};
   std::string images;
-  for (int i = 0; i < 2; ++i) {
-    // The camera in the model's frame: the same axes turned back, its centre mapped.
-    const Eigen::Matrix3d r = (rot.transpose() * truth[i].rotation).transpose();
-    const Eigen::Quaterniond q(r);
-    const Eigen::Vector3d tt = -(r * to_model(truth[i].position));
-    char line[300];
-    std::snprintf(line, sizeof line,
-                  "%d %.17g %.17g %.17g %.17g %.17g %.17g %.17g 1 day/p%d.jpg\n\n", i + 1, q.w(),
-                  q.x(), q.y(), q.z(), tt.x(), tt.y(), tt.z(), i + 1);
-    images += line;
-  }
+  for (int i = 0; i < 2; ++i)
+    images += ColmapImageLine(i + 1, "day/p" + std::to_string(i + 1) + ".jpg", truth[i], rot, s, t);
   fs::create_directories(dir / "sparse");
   WriteText(dir / "sparse" / "cameras.txt", "1 OPENCV 32 24 30 31 16 12 -0.1 0.01 0 0\n");
   WriteText(dir / "sparse" / "images.txt", images);
@@ -355,10 +449,14 @@ TEST(ImportTest, ColmapModelAlignedByControlPoints) {
       << r.out;
   EXPECT_NE(r.out.find("beyond --colmap-max-rms-m"), std::string::npos) << r.out;
   EXPECT_FALSE(fs::exists(dir / "t"));
-  // Without control points the model's frame is not the site's: refused.
+  // Without control points, and without GPS in the photos, the model's frame is not the
+  // site's: refused, naming a photo without GPS.
   r = RunRouen(base + " --out " + Q(dir / "t"));
   EXPECT_NE(r.code, 0);
-  EXPECT_NE(r.out.find("give --colmap-control"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("0 of the photos it registered carry a GPS position in EXIF (day/p"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("or --colmap-control"), std::string::npos) << r.out;
   fs::remove_all(dir);
 }
 
