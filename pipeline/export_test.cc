@@ -193,9 +193,12 @@ TEST_F(ExportTest, RenderSceneViewAddsAlphaAndTheHeader) {
   const RenderedView r = RenderSceneView(*scene_, request);
   const SolveResult& solved = scene_->solved;
   const Lighting& lighting = solved.slots[0].lighting;
-  const Image plain =
-      RenderView(solved.mesh, solved.grid, *solved.caster, solved.albedo, lighting,
-                 IrradianceFor(solved, lighting), view.intrinsics, view.pose, RenderOptions{});
+  // Its irradiance exact where the view looks (GridPointsInView), as RenderSceneView takes it.
+  const std::vector<uint8_t> in_view =
+      GridPointsInView(solved.grid, *solved.caster, view.intrinsics, view.pose);
+  const Image plain = RenderView(solved.mesh, solved.grid, *solved.caster, solved.albedo, lighting,
+                                 IrradianceFor(solved, lighting, &in_view), view.intrinsics,
+                                 view.pose, RenderOptions{});
   ASSERT_EQ(r.rgba.channels, 4);
   ASSERT_EQ(r.rgb.data.size(), plain.data.size());
   for (size_t i = 0; i < plain.data.size(); ++i) ASSERT_EQ(r.rgb.data[i], plain.data[i]) << i;

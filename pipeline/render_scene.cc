@@ -135,8 +135,13 @@ RenderedView RenderSceneViewUnder(const LoadedScene& scene, const RenderRequest&
   RenderedView out;
   out.lighting = std::move(lighting);
   const SolveResult& solved = scene.solved;
-  Log(log, "irradiance at " + std::to_string(solved.grid.size()) + " grid points");
-  const SlotIrradiance irr = IrradianceFor(solved, out.lighting);
+  // The direct light exact where the view looks, the rest only for what it bounces there.
+  const std::vector<uint8_t> in_view =
+      GridPointsInView(solved.grid, *solved.caster, request.intrinsics, request.pose);
+  const int64_t seen = std::count(in_view.begin(), in_view.end(), 1);
+  Log(log, "irradiance at " + std::to_string(solved.grid.size()) + " grid points (" +
+               std::to_string(seen) + " in view)");
+  const SlotIrradiance irr = IrradianceFor(solved, out.lighting, &in_view);
   Log(log, "rendering " + std::to_string(request.intrinsics.width) + "x" +
                std::to_string(request.intrinsics.height));
   RenderOptions ro;

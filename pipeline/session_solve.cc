@@ -580,10 +580,12 @@ HdrGroup MergeSessionBracket(const Session& session, const std::string& name,
 }
 
 std::vector<SlotIrradiance> IrradianceFor(const SolveResult& solved,
-                                          const std::vector<Lighting>& lightings) {
+                                          const std::vector<Lighting>& lightings,
+                                          const std::vector<uint8_t>* exact) {
   const AlbedoOptions& ao = solved.albedo_options;
   IrradianceOptions io = ao.irradiance;
   io.mesh = &solved.mesh;
+  io.exact_points = exact;
   std::vector<SlotIrradiance> irr =
       ComputeIrradiance(solved.grid, solved.hemisphere, *solved.caster, lightings, io);
   const std::vector<std::shared_ptr<const GroundBounce>> ground =
@@ -595,8 +597,9 @@ std::vector<SlotIrradiance> IrradianceFor(const SolveResult& solved,
   return irr;
 }
 
-SlotIrradiance IrradianceFor(const SolveResult& solved, const Lighting& lighting) {
-  return std::move(IrradianceFor(solved, std::vector<Lighting>{lighting})[0]);
+SlotIrradiance IrradianceFor(const SolveResult& solved, const Lighting& lighting,
+                             const std::vector<uint8_t>* exact) {
+  return std::move(IrradianceFor(solved, std::vector<Lighting>{lighting}, exact)[0]);
 }
 
 }  // namespace rouen

@@ -137,7 +137,17 @@ Validation ValidateSlot(const LoadedScene& scene, const Session& session, int sl
   }
   Log(log, "irradiance under slot " + std::to_string(slot) + "'s measured lighting" +
                (predicted ? " and the lighting predicted from the other slots" : ""));
-  std::vector<SlotIrradiance> irr = IrradianceFor(solved, lightings);
+  // The direct light exact where the slot's views look (everywhere for the terms' table, which
+  // reads every shaded point), the rest only for what it bounces there.
+  std::vector<uint8_t> in_views(solved.grid.size(), 0);
+  for (const std::string& name : views) {
+    const SceneView& view = scene.scene.views.at(name);
+    const std::vector<uint8_t> seen =
+        GridPointsInView(solved.grid, *solved.caster, view.intrinsics, view.pose);
+    for (int i = 0; i < solved.grid.size(); ++i) in_views[i] |= seen[i];
+  }
+  std::vector<SlotIrradiance> irr =
+      IrradianceFor(solved, lightings, options.terms ? nullptr : &in_views);
   const Lighting& measured = lightings[0];
   const SlotIrradiance& irr_measured = irr[0];
   const SlotIrradiance irr_predicted = predicted ? std::move(irr[1]) : SlotIrradiance{};

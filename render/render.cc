@@ -1,5 +1,6 @@
 #include "render/render.h"
 
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <Eigen/Geometry>
@@ -286,6 +287,59 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
     stats->seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
+  return out;
+}
+
+std::vector<uint8_t> GridPointsInView(const SurfaceGrid& grid, const RayCaster& model,
+                                      const Intrinsics& intrinsics, const Pose& pose,
+                                      int supersample) {
+  intrinsics.Validate();
+  if (supersample < 1 || supersample > 16)
+    throw Error("GridPointsInView: supersample must be 1..16");
+  const int w = intrinsics.width, h = intrinsics.height;
+  // Per thread, then merged: no two threads write one flag.
+  tbb::enumerable_thread_specific<std::vector<uint8_t>> seen_by(
+      [&] { return std::vector<uint8_t>(grid.size(), 0); });
+  // The ray through image point (x, y): its hit's stencil flagged, the triangle hit returned
+  // (-1: none).
+  const auto cast = [&](double x, double y, std::vector<uint8_t>* seen) {
+    const Eigen::Vector3d d = pose.rotation * Unproject(intrinsics, Eigen::Vector2d(x, y));
+    if (!d.allFinite() || d.squaredNorm() == 0) return -1;
+    const RayHit hit = model.Intersect(pose.position, d.normalized(), 0.0);
+    if (!hit.hit) return -1;
+    const GridStencil st = grid.Stencil(hit.triangle, hit.u, hit.v);
+    for (int k = 0; k < st.count; ++k) (*seen)[st.index[k]] = 1;
+    const int j = grid.NearestPoint(hit.triangle, hit.u, hit.v);
+    if (j >= 0) (*seen)[j] = 1;
+    return hit.triangle;
+  };
+  // Rays at half-pixel steps (corners, edge middles and centres); a pixel whose nine do not all
+  // meet one triangle (a silhouette, a fold, a triangle's edge) casts its supersamples as well:
+  // those are where a render's rays meet points that the rays around them do not.
+  const int lw = 2 * w + 1;
+  std::vector<int> lattice(static_cast<size_t>(lw) * (2 * h + 1));
+  tbb::parallel_for(0, 2 * h + 1, [&](int y2) {
+    std::vector<uint8_t>& seen = seen_by.local();
+    for (int x2 = 0; x2 < lw; ++x2)
+      lattice[static_cast<size_t>(y2) * lw + x2] = cast(0.5 * x2, 0.5 * y2, &seen);
+  });
+  tbb::parallel_for(0, h, [&](int y) {
+    std::vector<uint8_t>& seen = seen_by.local();
+    for (int x = 0; x < w; ++x) {
+      const int first = lattice[static_cast<size_t>(2 * y) * lw + 2 * x];
+      bool one = true;
+      for (int a = 0; a < 3 && one; ++a)
+        for (int b = 0; b < 3 && one; ++b)
+          one = lattice[static_cast<size_t>(2 * y + a) * lw + 2 * x + b] == first;
+      if (one) continue;
+      for (int a = 0; a < supersample; ++a)
+        for (int b = 0; b < supersample; ++b)
+          cast(x + (b + 0.5) / supersample, y + (a + 0.5) / supersample, &seen);
+    }
+  });
+  std::vector<uint8_t> out(grid.size(), 0);
+  for (const std::vector<uint8_t>& seen : seen_by)
+    for (int i = 0; i < grid.size(); ++i) out[i] |= seen[i];
   return out;
 }
 

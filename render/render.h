@@ -3,6 +3,7 @@
 // and sun disc where rays escape.
 #pragma once
 
+#include <cstdint>
 #include <vector>
 
 #include "core/camera.h"
@@ -57,6 +58,16 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
                  const AlbedoResult& albedo, const Lighting& lighting, const SlotIrradiance& irr,
                  const Intrinsics& intrinsics, const Pose& pose, const RenderOptions& options = {},
                  RenderStats* stats = nullptr);
+
+// The grid points a view shades: the interpolation stencils (and nearest points) of the first
+// hits of the rays through its pixels' corners, edge middles and centres, and of each
+// `supersample`^2 rays where those do not all meet one triangle: where RenderView (with that
+// supersampling) reads E_se. A view's irradiance needs its exact direct term only there
+// (IrradianceOptions::exact_points); a point only a sky lobe's draw meets takes the Monte
+// Carlo estimate. One flag per grid point.
+std::vector<uint8_t> GridPointsInView(const SurfaceGrid& grid, const RayCaster& model,
+                                      const Intrinsics& intrinsics, const Pose& pose,
+                                      int supersample = RenderOptions{}.supersample);
 
 // One channel, pixel centres: model block index of the first hit, -1 where the ray escapes.
 Image RenderBlockIds(const Mesh& mesh, const RayCaster& model, const Intrinsics& intrinsics,

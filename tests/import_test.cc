@@ -399,8 +399,8 @@ TEST(ImportTest, ColmapModelAlignedByControlPoints) {
   WriteText(dir / "sparse" / "cameras.txt", "1 OPENCV 32 24 30 31 16 12 -0.1 0.01 0 0\n");
   WriteText(dir / "sparse" / "images.txt", images);
   std::string control = "# surveyed corners\nx,y,z,east_m,north_m,up_m\n";
-  for (const Eigen::Vector3d site : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(10, 0, 0),
-                                     Eigen::Vector3d(0, 20, 0), Eigen::Vector3d(0, 0, 15)}) {
+  for (const Eigen::Vector3d& site : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(10, 0, 0),
+                                      Eigen::Vector3d(0, 20, 0), Eigen::Vector3d(0, 0, 15)}) {
     const Eigen::Vector3d m = to_model(site);
     char line[200];
     std::snprintf(line, sizeof line, "%.17g,%.17g,%.17g,%g,%g,%g\n", m.x(), m.y(), m.z(), site.x(),
