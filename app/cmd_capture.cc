@@ -148,7 +148,8 @@ std::function<void(const CaptureProgress&)> CaptureProgressPrinter(ProgressLine*
                   "GPS %s",
                   p.slot + 1, p.slots, TargetName(p.target), p.view, p.frames_total, p.exposure_s,
                   100 * p.saturated_fraction, p.gps_status.c_str());
-    line->Update(buf);
+    line->Update(p.camera_status.empty() ? std::string(buf)
+                                         : std::string(buf) + "  camera " + p.camera_status);
   };
 }
 

@@ -3,12 +3,14 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <nlohmann/json.hpp>
 #include <set>
 #include <thread>
 
 #include "core/angles.h"
 #include "core/error.h"
 #include "core/json_text.h"
+#include "core/text.h"
 
 namespace rouen {
 
@@ -127,6 +129,43 @@ void CaptureController::PollGps(SessionWriter& writer) {
         {"source", "gps"}, {"fixes", clock_offset_.count()}, {"spread_s", clock_offset_.Spread()}};
     writer.UpdateInfo(info);
   }
+}
+
+void CaptureController::PollCameraStatus(SessionWriter& writer) {
+  CameraStatus st;
+  try {
+    st = dev_.camera->Status();
+  } catch (const DeviceError&) {
+    return;  // the bracket's first frame meets the same failure and handles it
+  }
+  std::string text;
+  if (st.battery_percent)
+    text = "battery " + std::to_string(std::lround(*st.battery_percent)) + "%";
+  if (st.free_bytes)
+    text += (text.empty() ? "" : ", ") + Formatted("card %.1f GB free", *st.free_bytes / 1e9);
+  progress_.camera_status = text;
+  // The camera's clock against GPS time, as the laptop's is kept (PollGps): the time its files'
+  // EXIF carries, should they be imported from the card later. Read to the second (PTP's
+  // DateTime) against the laptop's clock; a reading within 1.5 s of the kept one is the same
+  // clock read again, while the laptop's own offset from GPS firms up beneath it.
+  if (!st.clock || !dev_.clock->IsLaptopClock() || !clock_offset_.Offset()) return;
+  const UtcTime laptop_now = dev_.clock->Now();
+  double vs_laptop = static_cast<double>(st.clock->ns - laptop_now.ns) * 1e-9;
+  const nlohmann::json& known = writer.info().extra.value("camera_clock", nlohmann::json());
+  const bool same = known.is_object() && known.value("device", "") == dev_.camera->Id() &&
+                    std::abs(known.value("camera_minus_laptop_s", 1e9) - vs_laptop) < 1.5;
+  if (same) vs_laptop = known.value("camera_minus_laptop_s", vs_laptop);
+  const double vs_gps = vs_laptop - writer.info().clock_offset_s;
+  if (same && std::abs(known.value("offset_s", 1e9) - vs_gps) < 1e-6) return;
+  SessionInfo info = writer.info();
+  info.extra["camera_clock"] = {
+      {"device", dev_.camera->Id()},
+      {"offset_s", vs_gps},
+      {"camera_minus_laptop_s", vs_laptop},
+      {"resolution_s", 1},
+      {"read_utc", laptop_now.PlusSeconds(writer.info().clock_offset_s).Iso8601(3)},
+      {"meaning", "camera clock minus GPS time"}};
+  writer.UpdateInfo(info);
 }
 
 namespace {
@@ -313,6 +352,7 @@ bool CaptureController::CaptureGroup(SessionWriter& writer, int slot, Target tar
 
   progress_.target = target;
   progress_.view = view;
+  PollCameraStatus(writer);
   cam.Aim(target, view);
   cam.SetGain(1.0);
 

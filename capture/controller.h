@@ -62,6 +62,9 @@ struct CaptureProgress {
   double exposure_s = 0;
   double saturated_fraction = 0;  // of the last frame's pixels of interest
   std::string gps_status;
+  // The camera's own battery and card ("battery 80%, card 31.9 GB free"), empty when it reports
+  // neither (Camera::Status).
+  std::string camera_status;
   std::string event;  // a one-off message (camera lost, reconnected, ...), else empty
 };
 
@@ -107,6 +110,9 @@ class CaptureController {
                       const std::string& group);
   void Notify(double exposure_s, double saturated_fraction);
   void PollGps(SessionWriter& writer);
+  // Camera::Status before each bracket: the progress line's battery and card, and (field rigs)
+  // the camera clock's offset from GPS time in the session's info.
+  void PollCameraStatus(SessionWriter& writer);
   Site CurrentSite() const;  // the last GPS fix's, else the fallback
   // After a DeviceError: reopens the camera per the policy; false when capture must stop.
   bool Recover(const DeviceError& e, const std::string& group, CaptureSummary& summary);

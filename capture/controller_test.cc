@@ -337,6 +337,46 @@ TEST(ControllerTest, LaptopClockOffsetComesFromGpsFixes) {
   std::filesystem::remove_all(dir);
 }
 
+// A camera that reports its battery, card and clock: 93 s ahead of the laptop's clock, with
+// the laptop itself LaggingGps::skew_s - 0.12 s behind GPS time.
+class StatusCamera : public RampCamera {
+ public:
+  LaptopClock* laptop = nullptr;
+  int status_calls = 0;
+  CameraStatus Status() override {
+    ++status_calls;
+    CameraStatus s;
+    s.battery_percent = 64;
+    s.free_bytes = int64_t{31'900'000'000};
+    s.clock = laptop->Now().PlusSeconds(93);
+    return s;
+  }
+};
+
+// Before each bracket the camera's battery and card reach the progress line, and its clock's
+// offset from GPS time (the laptop's clock corrected by its own offset) the session's info.
+TEST(ControllerTest, CameraBatteryCardAndClockAreReportedAndJournalled) {
+  StatusCamera cam;
+  LaggingGps gps;
+  LaptopClock clock;
+  clock.t = ParseIso8601("2026-08-25T20:00:00Z");
+  cam.laptop = &clock;
+  auto dir = TempDir("camera_status");
+  SessionWriter w = SessionWriter::Create(dir, SessionInfo{});
+  std::vector<std::string> lines;
+  CaptureController(CaptureDevices{&cam, &gps, &clock}, OneSlotPlan(), Site{})
+      .Run(
+          w, [&](const CaptureProgress& p) { lines.push_back(p.camera_status); }, nullptr);
+  EXPECT_GE(cam.status_calls, 3);  // sun, sky, landscape, architecture brackets
+  ASSERT_FALSE(lines.empty());
+  EXPECT_EQ(lines.back(), "battery 64%, card 31.9 GB free");
+  const nlohmann::json& cc = w.info().extra.at("camera_clock");
+  EXPECT_EQ(cc.at("device"), "ramp");
+  // camera - GPS = (laptop + 93) - (laptop + offset)
+  EXPECT_NEAR(cc.at("offset_s").get<double>(), 93 - w.info().clock_offset_s, 1e-6);
+  std::filesystem::remove_all(dir);
+}
+
 TEST(ClockOffsetTest, IgnoresFixesWithoutLaptopTimeAndGlitches) {
   ClockOffsetEstimator est;
   GpsFix f;

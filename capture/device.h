@@ -2,6 +2,7 @@
 // libcamera, aravis, gps) implement them; nothing downstream knows which one made a frame.
 #pragma once
 
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
@@ -37,6 +38,15 @@ struct CapturedFrame {
   std::optional<Pose> pose;  // when the device knows it (sim, replay, calibrated mount)
 };
 
+// What a camera says of itself between frames; a camera that does not report a field leaves
+// it empty.
+struct CameraStatus {
+  std::optional<double> battery_percent;  // 0..100
+  std::optional<int64_t> free_bytes;      // on the card it writes to
+  std::optional<int64_t> free_images;     // as the camera estimates them
+  std::optional<UtcTime> clock;           // its own clock (to the second), read as UTC
+};
+
 class Camera {
  public:
   virtual ~Camera() = default;
@@ -55,6 +65,9 @@ class Camera {
   virtual void Aim(Target target, int view) = 0;
   // Grabs one frame with the current settings. Throws DeviceError.
   virtual CapturedFrame Grab() = 0;
+  // Battery, card and clock as the camera reports them (DSLRs over PTP); nothing by default.
+  // Throws DeviceError.
+  virtual CameraStatus Status() { return {}; }
 };
 
 class Gps {

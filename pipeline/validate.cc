@@ -53,12 +53,18 @@ void ValidateOptions::Validate() const {
 
 namespace {
 
-// ShadedTerms: the sky's direct share from the same lighting with nothing below the horizon.
+// ShadedTerms over every observed shaded point (not only those the slot's views show, so the
+// direct light exact at all of them): the lighting's irradiance, and the sky's direct share from
+// the same lighting with nothing below the horizon.
 std::vector<ShadedTerms> ShadedTermsOf(const SolveResult& solved, const Lighting& measured,
-                                       const SlotIrradiance& irr, const std::vector<int>& blocks,
+                                       const std::vector<int>& blocks,
                                        const std::function<void(const std::string&)>& log) {
-  Log(log, "the irradiance on the shaded faces by term (the sky alone once more)");
-  const SlotIrradiance sky = IrradianceFor(solved, measured.SkyOnly());
+  Log(log,
+      "the irradiance on the shaded faces by term (at every observed point, and the sky "
+      "alone)");
+  const std::vector<SlotIrradiance> both = IrradianceFor(solved, {measured, measured.SkyOnly()});
+  const SlotIrradiance& irr = both[0];
+  const SlotIrradiance& sky = both[1];
   std::vector<ShadedTerms> out(1);
   out[0].block = "all";
   for (int b : blocks) {
@@ -137,8 +143,7 @@ Validation ValidateSlot(const LoadedScene& scene, const Session& session, int sl
   }
   Log(log, "irradiance under slot " + std::to_string(slot) + "'s measured lighting" +
                (predicted ? " and the lighting predicted from the other slots" : ""));
-  // The direct light exact where the slot's views look (everywhere for the terms' table, which
-  // reads every shaded point), the rest only for what it bounces there.
+  // The direct light exact where the slot's views look, the rest only for what it bounces there.
   std::vector<uint8_t> in_views(solved.grid.size(), 0);
   for (const std::string& name : views) {
     const SceneView& view = scene.scene.views.at(name);
@@ -146,13 +151,12 @@ Validation ValidateSlot(const LoadedScene& scene, const Session& session, int sl
         GridPointsInView(solved.grid, *solved.caster, view.intrinsics, view.pose);
     for (int i = 0; i < solved.grid.size(); ++i) in_views[i] |= seen[i];
   }
-  std::vector<SlotIrradiance> irr =
-      IrradianceFor(solved, lightings, options.terms ? nullptr : &in_views);
+  std::vector<SlotIrradiance> irr = IrradianceFor(solved, lightings, &in_views);
   const Lighting& measured = lightings[0];
   const SlotIrradiance& irr_measured = irr[0];
   const SlotIrradiance irr_predicted = predicted ? std::move(irr[1]) : SlotIrradiance{};
 
-  if (options.terms) out.shaded_terms = ShadedTermsOf(solved, measured, irr_measured, blocks, log);
+  if (options.terms) out.shaded_terms = ShadedTermsOf(solved, measured, blocks, log);
 
   MetricsOptions mo;
   mo.response = &scene.scene.response;

@@ -154,7 +154,9 @@ std::map<std::string, TermSums> TermTable(const fs::path& data, const fs::path& 
   for (const std::string& b : s.mesh.block_names)
     roughness.push_back(truth["blocks"].contains(b) ? truth["blocks"][b]["roughness"].get<double>()
                                                     : -1.0);
-  std::map<std::string, TermSums> table;
+  // Every time's lighting and its sky alone, in one pass over the grid (the geometry found once
+  // per point for all of them).
+  std::vector<Lighting> lightings;
   for (const nlohmann::json& t : truth["times"]) {
     const int slot = t["slot"].get<int>();
     RenderRequest request;
@@ -162,8 +164,17 @@ std::map<std::string, TermSums> TermTable(const fs::path& data, const fs::path& 
     request.predict_without_slots = {slot};
     request.intrinsics = FindView(sc, "").intrinsics;  // checked, not used for the lighting
     request.pose = FindView(sc, "").pose;
-    const Lighting lighting = predicted ? RequestedLighting(sc, request) : s.slots[slot].lighting;
-    const std::vector<SlotIrradiance> irr = IrradianceFor(s, {lighting, lighting.SkyOnly()});
+    lightings.push_back(predicted ? RequestedLighting(sc, request) : s.slots[slot].lighting);
+    lightings.push_back(lightings.back().SkyOnly());
+  }
+  const std::vector<SlotIrradiance> all_irr = IrradianceFor(s, lightings);
+  std::map<std::string, TermSums> table;
+  size_t time_index = 0;
+  for (const nlohmann::json& t : truth["times"]) {
+    const int slot = t["slot"].get<int>();
+    const Lighting& lighting = lightings[2 * time_index];
+    const SlotIrradiance* irr = &all_irr[2 * time_index];
+    ++time_index;
     std::vector<TermSums> slot_sums(2 * s.mesh.block_names.size());
     for (const auto& [name, view] : sc.scene.views) {
       if (view.slot != slot || view.target != "architecture") continue;

@@ -840,6 +840,43 @@ CapturedFrame Gphoto2Camera::Grab() {
   return frame;
 }
 
+CameraStatus Gphoto2Camera::Status() {
+  Impl& im = *impl_;
+  CameraStatus out;
+  if (CameraWidget* w = FindWidget(im, options_, stats_, "batterylevel")) {
+    // "80%", "80" or a range widget's number.
+    const std::string t = Trimmed(ValueText(w));
+    gp_widget_free(w);
+    if (const auto v = Number(Trimmed(t.substr(0, t.find('%')))); v && *v >= 0 && *v <= 100)
+      out.battery_percent = *v;
+  }
+  CameraStorageInformation* info = nullptr;
+  int n = 0;
+  const int rc = Retry(
+      im, options_, stats_, "reading the card's free space", true,
+      [&] { return gp_camera_get_storageinfo(im.camera, &info, &n, im.context); }, true);
+  if (rc >= GP_OK && info) {
+    for (int i = 0; i < n; ++i) {
+      if (info[i].fields & GP_STORAGEINFO_FREESPACEKBYTES) {
+        out.free_bytes = static_cast<int64_t>(info[i].freekbytes) * 1024;
+        if (info[i].fields & GP_STORAGEINFO_FREESPACEIMAGES)
+          out.free_images = static_cast<int64_t>(info[i].freeimages);
+        break;
+      }
+    }
+    std::free(info);
+  }
+  if (CameraWidget* w = FindWidget(im, options_, stats_, "datetime")) {
+    CameraWidgetType type;
+    int t = 0;
+    if (gp_widget_get_type(w, &type) == GP_OK && type == GP_WIDGET_DATE &&
+        gp_widget_get_value(w, &t) == GP_OK && t > 0)
+      out.clock = UtcTime::FromUnixSeconds(t);
+    gp_widget_free(w);
+  }
+  return out;
+}
+
 std::vector<Gphoto2CameraInfo> ListGphoto2Cameras() {
   LogHook();
   GPContext* context = gp_context_new();

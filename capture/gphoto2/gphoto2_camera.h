@@ -105,6 +105,11 @@ class Gphoto2Camera : public Camera {
   void Aim(Target, int) override {}  // the rig layer prompts the operator
   // Captures one frame with the current settings (see the file comment). Throws DeviceError.
   CapturedFrame Grab() override;
+  // The battery level ("batterylevel"), the first card's free space and images
+  // (gp_camera_get_storageinfo) and the camera's clock ("datetime", which libgphoto2 reads as
+  // the host's local time; the same time zone on both gives UTC). Busy and I/O errors retried;
+  // a field the camera does not report stays empty.
+  CameraStatus Status() override;
 
   // Sets the nearest aperture the camera offers and returns the f-number it reports.
   double SetAperture(double f_number);

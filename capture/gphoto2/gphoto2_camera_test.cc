@@ -194,6 +194,38 @@ TEST_F(Gphoto2PtpIpTest, ControlsReportTheCamerasRanges) {
 
 // A download folder kept between sessions: a second camera's files do not replace the first's,
 // even when the camera names them the same (IMG_0001.JPG both times here).
+// The camera's battery, card and clock through libgphoto2 ("batterylevel", the storage info,
+// "datetime"): the level the camera reports (12%, not the double's default 80%), the card's
+// free space less each file kept on it, and its clock 93 s ahead of UTC to PTP's second.
+TEST_F(Gphoto2PtpIpTest, StatusReportsBatteryCardAndClock) {
+  // libgphoto2 reads the camera's DateTime as the host's local time: the host in UTC here.
+  ::setenv("TZ", "UTC", 1);
+  ::tzset();
+  PtpIpResponderOptions ro;
+  ro.clock_offset_s = 93;
+  responder_ = std::make_unique<PtpIpResponder>(ro);
+  responder_->SetBatteryLevel(12);
+  Gphoto2Options o = Options();
+  o.delete_on_camera = false;
+  camera_ = std::make_unique<Gphoto2Camera>(o);
+  const CameraStatus before = camera_->Status();
+  ASSERT_TRUE(before.battery_percent);
+  EXPECT_EQ(*before.battery_percent, 12);
+  ASSERT_TRUE(before.free_bytes);
+  EXPECT_EQ(*before.free_bytes, int64_t{32} << 30);
+  ASSERT_TRUE(before.clock);
+  const double ahead = (before.clock->ns - NowUtc().ns) * 1e-9;
+  EXPECT_GT(ahead, 93 - 2.0);  // the second it was read in, and this line's latency
+  EXPECT_LT(ahead, 93 + 1.0);
+
+  camera_->Grab();
+  const CameraStatus after = camera_->Status();
+  ASSERT_TRUE(after.free_bytes);
+  const int64_t file = static_cast<int64_t>(fs::file_size(camera_->LastFile()));
+  EXPECT_EQ(*before.free_bytes - *after.free_bytes, (file + 1023) / 1024 * 1024)
+      << "the card's free space in whole KiB, as libgphoto2 hands it over";
+}
+
 TEST_F(Gphoto2PtpIpTest, DownloadsNeverReplaceEarlierFiles) {
   Open().Grab();
   const std::string first = camera_->LastFile();

@@ -16,6 +16,7 @@
 #include <cstdio>
 #include <cstring>
 #include <ctime>
+#include <functional>
 #include <mutex>
 #include <thread>
 
@@ -52,8 +53,9 @@ constexpr uint16_t kOk = 0x2001, kGeneralError = 0x2002, kSessionNotOpen = 0x200
 // Events, properties, data types, formats.
 constexpr uint16_t kObjectAdded = 0x4002, kCaptureComplete = 0x400D;
 constexpr uint16_t kBatteryLevel = 0x5001, kFNumber = 0x5007, kExposureTime = 0x500D,
-                   kExposureIndex = 0x500F;
-constexpr uint16_t kTypeUint8 = 0x0002, kTypeUint16 = 0x0004, kTypeUint32 = 0x0006;
+                   kExposureIndex = 0x500F, kDateTime = 0x5011;
+constexpr uint16_t kTypeUint8 = 0x0002, kTypeUint16 = 0x0004, kTypeUint32 = 0x0006,
+                   kTypeString = 0xFFFF;
 constexpr uint16_t kFormatExifJpeg = 0x3801;
 constexpr uint32_t kStorageId = 0x00010001;
 constexpr uint32_t kAllStorages = 0xFFFFFFFF, kRootParent = 0xFFFFFFFF;
@@ -124,9 +126,11 @@ struct Received {
   std::vector<uint8_t> payload;
 };
 
-// A device property: an enumeration (or a read-only range) of unsigned integers.
+// A device property: an enumeration (or a read-only range) of unsigned integers, or a read-only
+// string (kTypeString, its value made when asked).
 struct Property {
   uint16_t code = 0, type = 0;
+  std::function<std::string()> text;  // kTypeString
   bool writable = true;
   uint32_t factory = 0, current = 0;
   std::vector<uint32_t> values;         // enumeration; empty = range
@@ -156,9 +160,10 @@ Image BuiltinScene(const PtpShot& s, int w, int h) {
   return im;
 }
 
-// "YYYY:MM:DD HH:MM:SS" (EXIF) or "YYYYMMDDThhmmss" (PTP) of the current UTC time.
-std::string Now(bool exif) {
-  const std::time_t t = std::time(nullptr);
+// "YYYY:MM:DD HH:MM:SS" (EXIF) or "YYYYMMDDThhmmss" (PTP) of the current UTC time plus
+// `offset_s`.
+std::string Now(bool exif, double offset_s = 0) {
+  const std::time_t t = std::time(nullptr) + static_cast<std::time_t>(std::llround(offset_s));
   std::tm tm{};
   gmtime_r(&t, &tm);
   char buf[32];
@@ -239,6 +244,12 @@ PtpIpResponder::PtpIpResponder(PtpIpResponderOptions options)
   battery.max = 100;
   battery.step = 1;
   s.props[kBatteryLevel] = battery;
+  Property clock;
+  clock.code = kDateTime;
+  clock.type = kTypeString;
+  clock.writable = false;
+  clock.text = [offset = options_.clock_offset_s] { return Now(false, offset); };
+  s.props[kDateTime] = clock;
 
   if (::socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, s.wake) != 0)
     throw Error("ptpip responder: socketpair: " + std::string(strerror(errno)));
@@ -305,6 +316,14 @@ void PtpIpResponder::CorruptNextObject() {
 void PtpIpResponder::SetExifExposure(std::optional<double> seconds) {
   std::lock_guard<std::mutex> lock(state_->mu);
   state_->exif_exposure = seconds;
+}
+
+void PtpIpResponder::SetBatteryLevel(int percent) {
+  if (percent < 0 || percent > 100)
+    throw Error("ptpip responder: a battery level is 0..100 percent, not " +
+                std::to_string(percent));
+  std::lock_guard<std::mutex> lock(state_->mu);
+  state_->props[kBatteryLevel].current = static_cast<uint32_t>(percent);
 }
 
 PtpIpResponderStats PtpIpResponder::Stats() const {
@@ -643,6 +662,21 @@ void PtpIpResponder::Run() {
           break;
         }
         const Property& prop = it->second;
+        if (prop.type == kTypeString) {
+          const std::string v = prop.text();
+          if (op == ptp_op::kGetDevicePropDesc) {
+            w.U16(prop.code);
+            w.U16(prop.type);
+            w.U8(0);  // read-only
+            w.Str(v);
+            w.Str(v);
+            w.U8(0);  // no form
+          } else {
+            w.Str(v);
+          }
+          r.has_data = true;
+          break;
+        }
         if (op == ptp_op::kGetDevicePropDesc) {
           w.U16(prop.code);
           w.U16(prop.type);

@@ -18,7 +18,8 @@
 // GetObjectHandles, GetObjectInfo, GetObject, DeleteObject, InitiateCapture,
 // GetDevicePropDesc, GetDevicePropValue, SetDevicePropValue (ExposureTime 0x500D in 0.1 ms,
 // ExposureIndex/ISO 0x500F, FNumber 0x5007 in 1/100, all enumerations; BatteryLevel 0x5001
-// read-only); anything else is answered Operation_Not_Supported.
+// and DateTime 0x5011, "YYYYMMDDThhmmss", read-only); anything else is answered
+// Operation_Not_Supported. GetStorageInfo reports a 32 GiB card less what its objects take.
 //
 // Each capture stores a JPEG whose pixel values scale with the exposure set (by default a
 // gradient scene; `frame` can supply any image) and whose EXIF carries the exposure time, ISO
@@ -73,6 +74,9 @@ struct PtpIpResponderOptions {
   // times a horizontal ramp from 0.5 to 1 (green 0.9, blue 0.8 of red), clamped to 0..255.
   std::function<Image(const PtpShot&)> frame;
   double io_timeout_s = 5;  // a host silent this long in the middle of a packet is dropped
+  // The camera's clock (DateTime) is UTC plus this many seconds (a camera set a little off,
+  // or to local time).
+  double clock_offset_s = 0;
 };
 
 // Counters since the responder started.
@@ -115,6 +119,8 @@ class PtpIpResponder {
   // The EXIF of the following captures states this exposure time instead of the one applied
   // (a camera whose file disagrees with its settings); nullopt restores the truth.
   void SetExifExposure(std::optional<double> seconds);
+  // The battery level the camera reports from now on (BatteryLevel, percent, 0..100).
+  void SetBatteryLevel(int percent);
 
   // Counters so far.
   PtpIpResponderStats Stats() const;
