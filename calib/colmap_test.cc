@@ -127,7 +127,7 @@ TEST_F(ColmapTest, APointProjectsWhereColmapProjectsIt) {
   const ColmapImage& im = m.images[1];
   const Eigen::Matrix3d r = im.pose.rotation.transpose();
   const Eigen::Vector3d t = -(r * im.pose.position);
-  for (const Eigen::Vector3d x : {Eigen::Vector3d(0, 0, 20), Eigen::Vector3d(3, -2, 25)}) {
+  for (const Eigen::Vector3d& x : {Eigen::Vector3d(0, 0, 20), Eigen::Vector3d(3, -2, 25)}) {
     const Eigen::Vector3d c = r * x + t;
     const double u = c.x() / c.z(), v = c.y() / c.z(), r2 = u * u + v * v;
     const double k1 = -0.12, k2 = 0.031, p1 = 0.0011, p2 = -0.0007;

@@ -105,9 +105,11 @@ TEST(BuildEnvironmentMapTest, AveragesSkipsModelAndSunAndFills) {
   EXPECT_EQ(plain.source[hidden], EnvRegionSource::kSkyModel);
   EXPECT_NEAR((plain.radiance[hidden] - Eigen::Vector3d::Constant(7)).norm(), 0, 1e-9);
   // Every region of the sky the panorama did not see takes its band's residual.
-  for (int r = 0; r < env.num_regions(); ++r)
-    if (env.source[r] == EnvRegionSource::kSkyModel)
+  for (int r = 0; r < env.num_regions(); ++r) {
+    if (env.source[r] == EnvRegionSource::kSkyModel) {
       EXPECT_NEAR((env.radiance[r] - Eigen::Vector3d(1, 2, 4)).norm(), 0, 1e-5) << r;
+    }
+  }
   // Below -20 deg everything hits the ground square: filled from nearer bands.
   const int low = env.Region(Dir(10, -60));
   EXPECT_EQ(env.source[low], EnvRegionSource::kNeighbour);
