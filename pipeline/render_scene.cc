@@ -161,4 +161,27 @@ RenderedView RenderSceneViewUnder(const LoadedScene& scene, const RenderRequest&
   return out;
 }
 
+std::vector<SlotIrradiance> IrradianceFor(const SolveResult& solved,
+                                          const std::vector<Lighting>& lightings,
+                                          const std::vector<uint8_t>* exact) {
+  const AlbedoOptions& ao = solved.albedo_options;
+  IrradianceOptions io = ao.irradiance;
+  io.mesh = &solved.mesh;
+  io.exact_points = exact;
+  std::vector<SlotIrradiance> irr =
+      ComputeIrradiance(solved.grid, solved.hemisphere, *solved.caster, lightings, io);
+  const std::vector<std::shared_ptr<const GroundBounce>> ground =
+      GroundBouncesOf(lightings, *solved.caster, solved.grid, solved.hemisphere);
+  for (size_t k = 0; k < irr.size(); ++k)
+    AddInterreflection(solved.grid, solved.hemisphere, solved.albedo.rho_sun, solved.albedo.rho_se,
+                       &irr[k], ao.bounces, solved.albedo.retro, lightings[k].sun_dir, nullptr,
+                       nullptr, ground[k].get());
+  return irr;
+}
+
+SlotIrradiance IrradianceFor(const SolveResult& solved, const Lighting& lighting,
+                             const std::vector<uint8_t>* exact) {
+  return std::move(IrradianceFor(solved, std::vector<Lighting>{lighting}, exact)[0]);
+}
+
 }  // namespace rouen

@@ -3,6 +3,7 @@
 // request to a radiance image with its header, which the CLI, Python, timelapse and export use.
 #pragma once
 
+#include <cstdint>
 #include <functional>
 #include <optional>
 #include <string>
@@ -12,6 +13,7 @@
 #include "core/image.h"
 #include "core/time.h"
 #include "pipeline/scene.h"
+#include "solve/irradiance.h"
 #include "solve/relight.h"
 
 namespace rouen {
@@ -31,6 +33,19 @@ struct RenderRequest {
   Intrinsics intrinsics;
   Pose pose;
 };
+
+// Irradiance of the solved model's grid under other lighting (a novel time), with the
+// interreflection from the recovered albedos, computed as SolveSession computed the slots':
+// the direct sky and environment term exact at the points flagged in `exact` (one flag per
+// grid point, e.g. render/'s GridPointsInView: the points a view shades), the Monte Carlo
+// estimate elsewhere (the light those points send by interreflection); null: exact everywhere.
+SlotIrradiance IrradianceFor(const SolveResult& solved, const Lighting& lighting,
+                             const std::vector<uint8_t>* exact = nullptr);
+// The same for several lightings in one pass over the grid: what depends only on the geometry
+// (the vector flux's clipping, the Monte Carlo's escaping directions) is found once per point.
+std::vector<SlotIrradiance> IrradianceFor(const SolveResult& solved,
+                                          const std::vector<Lighting>& lightings,
+                                          const std::vector<uint8_t>* exact = nullptr);
 
 // The camera of the scene's view `name` (e.g. "slot0/architecture/view0"; empty: the first
 // architecture view). Throws rouen::Error listing the scene's views when there is no such one.

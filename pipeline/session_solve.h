@@ -145,19 +145,6 @@ struct SolveResult {
   std::shared_ptr<const GroundField> ground_field;
 };
 
-// Irradiance of the solved model's grid under other lighting (a novel time), with the
-// interreflection from the recovered albedos, computed as SolveSession computed the slots':
-// the direct sky and environment term exact at the points flagged in `exact` (one flag per
-// grid point, e.g. render/'s GridPointsInView: the points a view shades), the Monte Carlo
-// estimate elsewhere (the light those points send by interreflection); null: exact everywhere.
-SlotIrradiance IrradianceFor(const SolveResult& solved, const Lighting& lighting,
-                             const std::vector<uint8_t>* exact = nullptr);
-// The same for several lightings in one pass over the grid: what depends only on the geometry
-// (the vector flux's clipping, the Monte Carlo's escaping directions) is found once per point.
-std::vector<SlotIrradiance> IrradianceFor(const SolveResult& solved,
-                                          const std::vector<Lighting>& lightings,
-                                          const std::vector<uint8_t>* exact = nullptr);
-
 // The sky pixels of a sky photo for the §3.2 fit (the paper masks buildings and trees out),
 // as session.json's extra.sky_masks says for the group's name (or for "*"): an image file
 // inside the session folder (nonzero = sky), or "auto" for automatic segmentation

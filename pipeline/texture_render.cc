@@ -4,6 +4,7 @@
 
 #include "core/error.h"
 #include "core/limits.h"
+#include "pipeline/render_scene.h"
 #include "pipeline/session_solve.h"
 
 namespace rouen {

@@ -19,6 +19,7 @@
 #include "core/temporaries.h"
 #include "core/version.h"
 #include "pipeline/export.h"
+#include "pipeline/render_scene.h"
 #include "pipeline/session_solve.h"
 #include "solve/relight.h"
 #include "solve/retro.h"

@@ -10,6 +10,7 @@
 #include "core/error.h"
 #include "core/solar.h"
 #include "pipeline/export_test_util.h"
+#include "pipeline/render_scene.h"
 #include "pipeline/session_solve.h"
 
 namespace rouen {
