@@ -10,33 +10,15 @@
 #include <filesystem>
 #include <string>
 
+#include "calib/colmap_test_support.h"
 #include "core/error.h"
+#include "core/error_of.h"
 #include "core/files.h"
 
 namespace rouen {
 namespace {
 
 namespace fs = std::filesystem;
-
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
-
-// A pose as COLMAP writes it: the world-to-camera quaternion (w, x, y, z) and translation.
-std::string ColmapPoseText(const Pose& p) {
-  const Eigen::Matrix3d r = p.rotation.transpose();
-  const Eigen::Quaterniond q(r);
-  const Eigen::Vector3d t = -(r * p.position);
-  char buf[256];
-  std::snprintf(buf, sizeof buf, "%.17g %.17g %.17g %.17g %.17g %.17g %.17g", q.w(), q.x(), q.y(),
-                q.z(), t.x(), t.y(), t.z());
-  return buf;
-}
 
 class ColmapTest : public ::testing::Test {
  protected:

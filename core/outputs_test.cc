@@ -9,6 +9,7 @@
 #include <string>
 
 #include "core/error.h"
+#include "core/error_of.h"
 #include "core/files.h"
 #include "core/image.h"
 
@@ -27,16 +28,6 @@ class OutputsTest : public ::testing::Test {
   void TearDown() override { fs::remove_all(dir_); }
   int Entries() const {
     return static_cast<int>(std::distance(fs::directory_iterator(dir_), fs::directory_iterator()));
-  }
-  // The message of the rouen::Error `f` throws ("" when it throws none).
-  template <typename F>
-  static std::string ErrorOf(F f) {
-    try {
-      f();
-    } catch (const Error& e) {
-      return e.what();
-    }
-    return "";
   }
   fs::path dir_;
 };

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "core/error.h"
+#include "core/error_of.h"
 #include "core/files.h"
 
 namespace rouen {
@@ -22,16 +23,6 @@ class SceneStageTest : public ::testing::Test {
     fs::create_directories(dir_);
   }
   void TearDown() override { fs::remove_all(dir_); }
-  // The message of the rouen::Error `f` throws ("" when it throws none).
-  template <typename F>
-  static std::string ErrorOf(F&& f) {
-    try {
-      f();
-    } catch (const Error& e) {
-      return e.what();
-    }
-    return "";
-  }
   fs::path dir_;
 };
 

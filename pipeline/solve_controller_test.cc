@@ -11,6 +11,7 @@
 
 #include "core/cancel.h"
 #include "core/error.h"
+#include "core/error_of.h"
 #include "core/solar.h"
 #include "pipeline/demo.h"
 #include "pipeline/solve_config.h"
@@ -52,15 +53,6 @@ class SolveControllerTest : public ::testing::Test {
     int n = 0;
     for (const auto& [name, g] : calib_->groups) n = std::max(n, g.slot + 1);
     return n;
-  }
-  template <typename F>
-  static std::string ErrorOf(F&& f) {
-    try {
-      f();
-    } catch (const Error& e) {
-      return e.what();
-    }
-    return "";
   }
 
   static fs::path* dir_;

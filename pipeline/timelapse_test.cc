@@ -8,6 +8,7 @@
 #include <string>
 
 #include "core/error.h"
+#include "core/error_of.h"
 
 namespace rouen {
 namespace {
@@ -18,17 +19,6 @@ const Site kBerkeley{37.8722, -122.2578, 60};
 
 double Elevation(UtcTime t, const Site& site = kBerkeley) {
   return ComputeSunPosition(t, site).elevation_deg;
-}
-
-// The message of the rouen::Error `f` throws ("" when it throws none).
-template <typename F>
-std::string ErrorOf(F f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
 }
 
 TEST(Timelapse, FramesAreNamedByTheirUtcTime) {

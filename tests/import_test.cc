@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "calib/colmap_test_support.h"
 #include "core/angles.h"
 #include "core/error.h"
 #include "core/exif.h"
@@ -272,13 +273,9 @@ TEST(ImportTest, TimezoneSlotsGroupsPosesAndExr) {
 // site's under x_site = s rot x_model + t.
 std::string ColmapImageLine(int id, const std::string& name, const Pose& site_pose,
                             const Eigen::Matrix3d& rot, double s, const Eigen::Vector3d& t) {
-  const Eigen::Matrix3d r = (rot.transpose() * site_pose.rotation).transpose();
-  const Eigen::Quaterniond q(r);
-  const Eigen::Vector3d tt = -(r * (rot.transpose() * (site_pose.position - t) / s));
-  char line[300];
-  std::snprintf(line, sizeof line, "%d %.17g %.17g %.17g %.17g %.17g %.17g %.17g 1 %s\n\n", id,
-                q.w(), q.x(), q.y(), q.z(), tt.x(), tt.y(), tt.z(), name.c_str());
-  return line;
+  const Pose in_model{rot.transpose() * site_pose.rotation,
+                      rot.transpose() * (site_pose.position - t) / s};
+  return std::to_string(id) + " " + ColmapPoseText(in_model) + " 1 " + name + "\n\n";
 }
 
 // A JPEG carrying the GPS position `p` as EXIF writes it (degrees, minutes, seconds, hemisphere).

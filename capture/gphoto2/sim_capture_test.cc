@@ -55,6 +55,15 @@ class SimGphoto2CaptureTest : public ::testing::Test {
     fs::remove_all(dir_, ec);
   }
 
+  // Reopen the camera when it is lost (the rig's `reconnect`), trying every 10 ms for 10 s.
+  static DeviceLossOptions Reconnecting() {
+    DeviceLossOptions loss;
+    loss.policy = DeviceLostPolicy::kReconnect;
+    loss.reconnect_timeout_s = 10;
+    loss.retry_interval_s = 0.01;
+    return loss;
+  }
+
   // The sim rig's 13:30 slot (`whole`: its five slots), with the double's shortest shutter speed
   // (1/10000 s) as the bracket's shortest and the aureole's exposures among its speeds.
   static CapturePlan Plan(bool whole = false) {
@@ -248,10 +257,7 @@ TEST_F(SimGphoto2CaptureTest, DroppedConnectionMidBracketResumesAtTheBracketInFl
   int aureole_frames = 0;
   int lost_capture = 0;
   int reopens = 0;
-  DeviceLossOptions loss;
-  loss.policy = DeviceLostPolicy::kReconnect;
-  loss.reconnect_timeout_s = 10;
-  loss.retry_interval_s = 0.01;
+  const DeviceLossOptions loss = Reconnecting();
   const Run run = Capture(
       "dropped",
       [&](const CaptureProgress& p) {
@@ -320,10 +326,7 @@ TEST_F(SimGphoto2CaptureTest, DroppedConnectionMidBracketResumesAtTheBracketInFl
 TEST_F(SimGphoto2CaptureTest, WholePlanWithBusyRepliesAndADropJournalsEveryFrameOnce) {
   SimPtpIpCamera& cam = OpenCamera();
   int busy_at = -1, drop_at = -1, lost_capture = 0, aureole_frames = 0;
-  DeviceLossOptions loss;
-  loss.policy = DeviceLostPolicy::kReconnect;
-  loss.reconnect_timeout_s = 10;
-  loss.retry_interval_s = 0.01;
+  const DeviceLossOptions loss = Reconnecting();
   const Run run = Capture(
       "whole",
       [&](const CaptureProgress& p) {
