@@ -168,6 +168,9 @@ std::vector<SlotIrradiance> IrradianceFor(const SolveResult& solved,
   IrradianceOptions io = ao.irradiance;
   io.mesh = &solved.mesh;
   io.exact_points = exact;
+  // Where the light comes from matters only to a rough block's reflection.
+  io.light_directions = std::any_of(solved.albedo.retro.begin(), solved.albedo.retro.end(),
+                                    [](double r) { return r != 0; });
   std::vector<SlotIrradiance> irr =
       ComputeIrradiance(solved.grid, solved.hemisphere, *solved.caster, lightings, io);
   const std::vector<std::shared_ptr<const GroundBounce>> ground =

@@ -171,18 +171,26 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
       if (dir.z() >= 0) return lighting.sky.Radiance(dir);
       return env_ok ? lighting.env.Radiance(dir, pose.position.z()) : Eigen::Vector3d::Zero();
     }
+    Eigen::Vector3d n = mesh.Normal(hit.triangle);
+    if (n.dot(dir) > 0) n = -n;  // seen from behind: light the side facing the camera
     Eigen::Vector3d rho_sun, rho_se, e_se;
+    LightMoments se_light;  // where E_se comes from, mixed over the points as E_se is
     if (options.interpolate) {
       const GridStencil st = grid.Stencil(hit.triangle, hit.u, hit.v);
       if (st.count == 0) return Eigen::Vector3d::Zero();
       rho_sun.setZero();
       rho_se.setZero();
       e_se.setZero();
+      double mixed = 0;
       for (int k = 0; k < st.count; ++k) {
         const int j = st.index[k];
         rho_sun += st.weight[k] * albedo.rho_sun[j];
         rho_se += st.weight[k] * albedo.rho_se[j];
         e_se += st.weight[k] * irr.se[j];
+        const double w = st.weight[k] * irr.se[j].sum();
+        se_light =
+            k == 0 ? SeLight(irr, j, n) : LightMoments::Mix(se_light, mixed, SeLight(irr, j, n), w);
+        mixed += w;
       }
     } else {
       const int j = grid.NearestPoint(hit.triangle, hit.u, hit.v);
@@ -190,9 +198,8 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
       rho_sun = albedo.rho_sun[j];
       rho_se = albedo.rho_se[j];
       e_se = irr.se[j];
+      se_light = SeLight(irr, j, n);
     }
-    Eigen::Vector3d n = mesh.Normal(hit.triangle);
-    if (n.dot(dir) > 0) n = -n;  // seen from behind: light the side facing the camera
     const Eigen::Vector3d p = pose.position + hit.t * dir + offset * n;
     Eigen::Vector3d e_sun = Eigen::Vector3d::Zero(), specular = Eigen::Vector3d::Zero();
     const double cosi = n.dot(s);
@@ -210,7 +217,7 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
     }
     // The rough block's sky and environment light brightens towards oblique views as its sun
     // does (solve/retro.h AmbientRetroFactor; 1 for Lambert).
-    const double se_factor = AmbientRetroFactor(BlockRetro(albedo.retro, block), n, -dir);
+    const double se_factor = AmbientRetroFactor(BlockRetro(albedo.retro, block), n, -dir, se_light);
     return (rho_sun.cwiseProduct(e_sun) + se_factor * rho_se.cwiseProduct(e_se)) / kPi + specular;
   };
 

@@ -222,6 +222,7 @@ TEST(RenderTest, TheSunsDiscCastsAPenumbra) {
 struct RetroPixel {
   double lambert = 0, rough = 0;
   Eigen::Vector3d dir;
+  int point = -1;  // the grid point the pixel reads (no interpolation)
 };
 RetroPixel RenderPlazaPixel(Fixture* f) {
   const Intrinsics k = Intrinsics::PinholeFov(160, 120, 60);
@@ -239,6 +240,7 @@ RetroPixel RenderPlazaPixel(Fixture* f) {
   out.dir = (pose.rotation * Unproject(k, Eigen::Vector2d(80.5, 100.5))).normalized();
   const RayHit h = f->rc->Intersect(pose.position, out.dir);
   EXPECT_TRUE(h.hit && f->mesh.triangle_block[h.triangle] == 0);
+  out.point = f->grid.NearestPoint(h.triangle, h.u, h.v);
   return out;
 }
 
@@ -257,9 +259,15 @@ TEST(RenderTest, TheSkyTermFollowsTheBlocksAmbientRetro) {
   f.albedo.rho_sun.assign(f.grid.size(), Eigen::Vector3d::Zero());  // the sky's term alone
   const RetroPixel px = RenderPlazaPixel(&f);
   ASSERT_GT(px.lambert, 0);
-  const double want = AmbientRetroFactor(1.0, Eigen::Vector3d::UnitZ(), -px.dir) * px.lambert;
+  // The factor of the light as it arrives at the pixel's grid point (the slab hides part of
+  // the sky from it): where it comes from matters, not only how much.
+  ASSERT_GE(px.point, 0);
+  const Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
+  const double want =
+      AmbientRetroFactor(1.0, up, -px.dir, SeLight(f.irr, px.point, up)) * px.lambert;
   EXPECT_NEAR(px.rough, want, 1e-5 * want);
-  // An oblique view of a rough plaza is brighter under sky light too (1.067 at this pixel).
+  // An oblique view of a rough plaza is brighter under sky light too (1.067 at this pixel
+  // under a whole uniform sky).
   EXPECT_GT(px.rough, 1.05 * px.lambert);
 }
 

@@ -549,7 +549,7 @@ namespace {
 struct ShadingFactors {
   double sun = 1, se = 1;
 };
-ShadingFactors FactorsOf(const SurfaceGrid& grid, const Observation& ob,
+ShadingFactors FactorsOf(const SurfaceGrid& grid, const Observation& ob, const SlotIrradiance& irr,
                          const SunShading* shading) {
   if (!shading) return {};
   const GridPoint& gp = grid.points[ob.point];
@@ -557,7 +557,7 @@ ShadingFactors FactorsOf(const SurfaceGrid& grid, const Observation& ob,
   if (retro == 0) return {};
   const Eigen::Vector3d v = ob.view_dir.cast<double>();
   return {RetroFactor(retro, gp.normal, shading->sun_dirs[ob.slot], v),
-          AmbientRetroFactor(retro, gp.normal, v)};
+          AmbientRetroFactor(retro, gp.normal, v, SeLight(irr, ob.point, gp.normal))};
 }
 
 // pi I of an observation as the solution `res` predicts it in channel c (eqs. 11-12), with the
@@ -581,7 +581,7 @@ std::vector<double> SlotWeights(const SurfaceGrid& grid,
     if (res.flags[ob.point] & kAlbedoNoObservations) continue;
     const SlotIrradiance& irr = irradiance[ob.slot];
     const double y = kPi * ob.radiance[1];
-    const double pred = Predicted(res, irr, ob, FactorsOf(grid, ob, shading), 1);
+    const double pred = Predicted(res, irr, ob, FactorsOf(grid, ob, irr, shading), 1);
     if (!(y > 0)) continue;
     const double r = std::abs(y - pred) / y;
     per[ob.slot].push_back(r);
@@ -660,7 +660,7 @@ static AlbedoResult SolveWeighted(const SurfaceGrid& grid,
       // 1e-9 of the slot's brightest point is none: the exact irradiance of a point enclosed by
       // faces keeps rounding-level flux through their shared edges).
       if (!((irr.se[ob.point] + irr.sun[ob.point]).maxCoeff() > dark[ob.slot])) continue;
-      const ShadingFactors f = FactorsOf(grid, ob, shading);
+      const ShadingFactors f = FactorsOf(grid, ob, irr, shading);
       eqs.push_back({kPi * ob.radiance.cast<double>(), irr.se[ob.point] * f.se,
                      irr.sun[ob.point] * f.sun, slot_weight.empty() ? 1.0 : slot_weight[ob.slot],
                      kPi * ob.measured.cast<double>()});
@@ -860,7 +860,7 @@ BlockCosts CostsPerBlock(const SurfaceGrid& grid, const std::vector<Observation>
     if (b < 0 || (res.flags[ob.point] & kAlbedoNoObservations)) continue;
     const SlotIrradiance& irr = irradiance[ob.slot];
     bc.sunlit[b] += IsSunlit(irr.sun[ob.point], irr.se[ob.point], options.sunlit_threshold);
-    const ShadingFactors f = FactorsOf(grid, ob, &shading);
+    const ShadingFactors f = FactorsOf(grid, ob, irradiance[ob.slot], &shading);
     for (int c = 0; c < 3; ++c) {
       const double y = kPi * ob.radiance[c];
       if (!(y > 0)) continue;
@@ -966,7 +966,8 @@ std::vector<SpecularLobe> FitSunLobes(const SurfaceGrid& grid,
     if (b < 0 || (res.flags[ob.point] & kAlbedoNoObservations)) continue;
     const double y = kPi * ob.radiance[1];
     if (!(y > 0)) continue;
-    const double pred = Predicted(res, irradiance[ob.slot], ob, FactorsOf(grid, ob, &shading), 1);
+    const double pred = Predicted(res, irradiance[ob.slot], ob,
+                                  FactorsOf(grid, ob, irradiance[ob.slot], &shading), 1);
     rel[b].push_back(std::abs(y - pred) / y);
   }
   // Each block's robust scale of the diffuse fit's relative residuals (MAD), once per block.
@@ -980,7 +981,7 @@ std::vector<SpecularLobe> FitSunLobes(const SurfaceGrid& grid,
     const SlotIrradiance& irr = irradiance[ob.slot];
     if (!IsSunlit(irr.sun[ob.point], irr.se[ob.point], options.sunlit_threshold)) continue;
     const double scale = block_scale[gp.block];
-    const ShadingFactors f = FactorsOf(grid, ob, &shading);
+    const ShadingFactors f = FactorsOf(grid, ob, irradiance[ob.slot], &shading);
     LobeSample s;
     s.normal = gp.normal;
     s.to_light = shading.sun_dirs[ob.slot];
@@ -1100,9 +1101,10 @@ std::vector<SpecularLobe> FitSkyLobes(const SurfaceGrid& grid, const HemisphereC
       of_block.push_back(&ob);
       const double y = kPi * ob.radiance[1];
       if (y > 0)
-        rel.push_back(std::abs(y - Predicted(res, irradiance[ob.slot], ob,
-                                             FactorsOf(grid, ob, &shading), 1)) /
-                      y);
+        rel.push_back(
+            std::abs(y - Predicted(res, irradiance[ob.slot], ob,
+                                   FactorsOf(grid, ob, irradiance[ob.slot], &shading), 1)) /
+            y);
     }
     const double scale = std::max(options.min_scale, 1.4826 * Median(rel));
     const size_t keep =
@@ -1117,7 +1119,7 @@ std::vector<SpecularLobe> FitSkyLobes(const SurfaceGrid& grid, const HemisphereC
       s.to_viewer = ob.view_dir.cast<double>();
       s.pieces = Pieces(grid, cache, model, slots[ob.slot], irr, res, ob.point, s.to_viewer,
                         res.sun_lobes[b], options.sky_lobe.mirror_samples);
-      const ShadingFactors f = FactorsOf(grid, ob, &shading);
+      const ShadingFactors f = FactorsOf(grid, ob, irradiance[ob.slot], &shading);
       const Eigen::Vector3d sun_lobe = SunLobeLight(grid, res.sun_lobes, irr, shading, ob);
       for (int c = 0; c < 3; ++c) {
         s.residual[c] = ob.radiance[c] - Predicted(res, irr, ob, f, c) / kPi - sun_lobe[c];

@@ -163,14 +163,16 @@ std::vector<Observation> ObserveRetro(const World& w, const std::vector<SlotIrra
       for (int c = 0; c < 4; ++c) {
         const Eigen::Vector3d v = (cams[c] - gp.position).normalized();
         if (gp.normal.dot(v) < 0.05) continue;
-        const double d =
-            RetroFactor(gp.block == rough ? retro : 0.0, gp.normal, w.slots[s].sun_dir, v);
+        const double r = gp.block == rough ? retro : 0.0;
+        const double d = RetroFactor(r, gp.normal, w.slots[s].sun_dir, v);
+        // The sky's light reflected as the rough surface reflects it from where it arrives.
+        const double a = AmbientRetroFactor(r, gp.normal, v, SeLight(irr[s], i, gp.normal));
         Observation o;
         o.point = i;
         o.slot = static_cast<int>(s);
         o.photo = static_cast<int>(s * 4 + c);
         o.view_dir = v.cast<float>();
-        o.radiance = ((w.rho_se[i].cwiseProduct(irr[s].se[i]) +
+        o.radiance = ((a * w.rho_se[i].cwiseProduct(irr[s].se[i]) +
                        d * w.rho_sun[i].cwiseProduct(irr[s].sun[i])) /
                       kPi)
                          .cast<float>();

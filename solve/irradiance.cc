@@ -415,6 +415,7 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
   for (auto& irr : out) {
     irr.sun.assign(n, Eigen::Vector3d::Zero());
     irr.direct_se.assign(n, Eigen::Vector3d::Zero());
+    if (options.light_directions) irr.direct_se_light.assign(n, LightMoments{});
     irr.sun_visibility.assign(n, 0.f);
   }
   const int K = cache.directions;
@@ -459,7 +460,8 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
           out[li].sun[i] = ls.sun_e * (cosi * v);
         }
       }
-      if (vector_flux && (!options.exact_points || (*options.exact_points)[i])) {
+      const bool exact = vector_flux && (!options.exact_points || (*options.exact_points)[i]);
+      if (exact) {
         // App. A: vector flux of the visible sky patches / environment regions. The faces in
         // front of the point (an id buffer cast with Embree, or all of them) are projected
         // once, each layout's regions and the sky tree clipped once, for every lighting.
@@ -498,8 +500,10 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
           }
           out[li].direct_se[i] = e;
         }
-        continue;
+        if (!options.light_directions) continue;
       }
+      // The Monte Carlo estimate (the direct term of points not made exact) and the directions
+      // the light arrives from (every point): the hemisphere cache's escaped directions.
       escaped.clear();
       cache.Directions(p, i, &dirs);
       for (int k = 0; k < K; ++k)
@@ -520,10 +524,13 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
           regions_of = &env;
         }
         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+        LightMomentsSum moments(p.normal);
         for (size_t k = 0; k < escaped.size(); ++k) {
           const Eigen::Vector3d& d = escaped[k];
           if (ls.ground && d.z() < 0) {  // the ground's light field instead of the map there
-            sum += ls.ground->Arriving(origin, d);
+            const Eigen::Vector3d l = ls.ground->Arriving(origin, d);
+            sum += l;
+            if (l.sum() > 0) moments.Add(d, l.sum());
             continue;
           }
           // Lighting::EscapedRadiance, with the region found above.
@@ -538,8 +545,11 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
             }
           }
           sum += l;
+          if (l.sum() > 0) moments.Add(d, l.sum());
         }
-        out[li].direct_se[i] = sum * (kPi / K);
+        if (!exact) out[li].direct_se[i] = sum * (kPi / K);
+        if (options.light_directions)
+          out[li].direct_se_light[i] = moments.Moments(UniformLight(p.normal));
       }
     }
   });
@@ -553,6 +563,7 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
       }
     }
     irr.se = irr.direct_se;
+    irr.se_light = irr.direct_se_light;
     irr.seconds = seconds / std::max(nl, 1);
   }
   return out;
@@ -571,7 +582,8 @@ struct ReflectionFactors {
 // The factors of b's cell entries, each point sending light towards its cell's centre as
 // towards another point (AddInterreflection).
 ReflectionFactors CellFactors(const GroundBounce& b, const SurfaceGrid& grid,
-                              const std::vector<double>& retro, const Eigen::Vector3d& sun_dir) {
+                              const std::vector<double>& retro, const Eigen::Vector3d& sun_dir,
+                              const SlotIrradiance& irr) {
   ReflectionFactors f{std::vector<double>(b.cell_point.size()),
                       std::vector<double>(b.cell_point.size())};
   tbb::parallel_for(size_t{0}, b.cells.size(), [&](size_t w) {
@@ -583,7 +595,8 @@ ReflectionFactors CellFactors(const GroundBounce& b, const SurfaceGrid& grid,
       f.sun[m] = f.se[m] = b.cell_weight[m];
       if (r != 0 && to_cell.allFinite()) {
         f.sun[m] *= RetroFactor(r, q.normal, sun_dir, to_cell);
-        f.se[m] *= AmbientRetroFactor(r, q.normal, to_cell);
+        f.se[m] *=
+            AmbientRetroFactor(r, q.normal, to_cell, SeLight(irr, b.cell_point[m], q.normal));
       }
     }
   });
@@ -726,7 +739,7 @@ std::vector<Eigen::Vector3f> GroundWallsIrradiance(const GroundBounce& b, const 
   const Eigen::Vector3d s = sun_dir.normalized();
   std::vector<Eigen::Vector3f> e(static_cast<size_t>(b.field->nx) * b.field->ny,
                                  Eigen::Vector3f::Zero());
-  const ReflectionFactors f = CellFactors(b, grid, retro, s);
+  const ReflectionFactors f = CellFactors(b, grid, retro, s, irr);
   for (size_t w = 0; w < b.cells.size(); ++w)
     e[b.cells[w]] = WallsOnCell(b, w, f, from_sun, from_se).cast<float>();
   return e;
@@ -773,12 +786,14 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
         if (r == 0 || !(d > 0)) continue;
         const Eigen::Vector3d v = to_i / d;
         f.sun[m] *= RetroFactor(r, q.normal, s, v);
-        f.se[m] *= AmbientRetroFactor(r, q.normal, v);
+        f.se[m] *= AmbientRetroFactor(r, q.normal, v, SeLight(*irr, lists.point[m], q.normal));
       }
     }
   });
   const ReflectionFactors cell_factors =
-      ground ? CellFactors(*ground, grid, retro, s) : ReflectionFactors{};
+      ground ? CellFactors(*ground, grid, retro, s, *irr) : ReflectionFactors{};
+  // The directions the last pass's light comes from, mixed into the direct light's (se_light).
+  std::vector<LightMoments> light(irr->direct_se_light.empty() ? 0 : n);
   std::vector<Eigen::Vector3d> walls_e;  // per cell of the ground bounce
   for (int pass = 0; pass < bounces; ++pass) {
     ThrowIfCancelled(cancel);
@@ -796,17 +811,35 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
       });
     }
     tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& range) {
+      // Where the light comes from, when the direct light's directions are known.
+      const bool last = pass + 1 == bounces && !irr->direct_se_light.empty();
       for (int i = range.begin(); i < range.end(); ++i) {
+        const GridPoint& p = grid.points[i];
+        LightMomentsSum bounced(p.normal);
         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
         for (int m = lists.begin[i]; m < lists.begin[i + 1]; ++m) {
           const int j = lists.point[m];
-          sum += f.sun[m] * from_sun[j] + f.se[m] * from_se[j];
+          const Eigen::Vector3d b = f.sun[m] * from_sun[j] + f.se[m] * from_se[j];
+          sum += b;
+          const Eigen::Vector3d to_j = grid.points[j].position - p.position;
+          if (last && b.sum() > 0 && to_j.norm() > 0) bounced.Add(to_j.normalized(), b.sum());
         }
         // (B_j / pi) (pi / K)
         se[i] = irr->direct_se[i] + sum / K;
         if (ground) {
-          for (int m = ground->point_begin[i]; m < ground->point_begin[i + 1]; ++m)
-            se[i] += ground->point_weight[m] * walls_e[ground->point_cell[m]];
+          for (int m = ground->point_begin[i]; m < ground->point_begin[i + 1]; ++m) {
+            const Eigen::Vector3d e = ground->point_weight[m] * walls_e[ground->point_cell[m]];
+            se[i] += e;
+            const Eigen::Vector3d to_cell =
+                ground->field->CellCentre(ground->cells[ground->point_cell[m]]) - p.position;
+            if (last && e.sum() > 0 && to_cell.norm() > 0)
+              bounced.Add(to_cell.normalized(), K * e.sum());
+          }
+        }
+        if (last) {
+          light[i] = LightMoments::Mix(DirectSeLight(*irr, i, p.normal), irr->direct_se[i].sum(),
+                                       bounced.Moments(UniformLight(p.normal)),
+                                       (se[i] - irr->direct_se[i]).sum());
         }
       }
     });
@@ -823,6 +856,7 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
     }
   }
   irr->se = se;
+  if (!irr->direct_se_light.empty()) irr->se_light = std::move(light);
   irr->has_bounce = true;
 }
 

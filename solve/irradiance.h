@@ -17,6 +17,7 @@
 #include "solve/grid.h"
 #include "solve/ground_field.h"
 #include "solve/raycast.h"
+#include "solve/retro.h"
 #include "solve/sky_model.h"
 #include "solve/vector_flux.h"
 
@@ -94,10 +95,26 @@ struct SlotIrradiance {
   std::vector<Eigen::Vector3d> sun;        // E_sun: solar disc, with cast shadows
   std::vector<Eigen::Vector3d> direct_se;  // sky + environment reaching the point directly
   std::vector<Eigen::Vector3d> se;         // E_se = direct_se + interreflection (when added)
-  std::vector<float> sun_visibility;       // fraction of the sun disc samples unoccluded
+  // Beyond the paper: where the light comes from, per point (solve/retro.h; the rough
+  // reflection's AmbientRetroFactor needs it): direct_se's from the hemisphere cache's escaped
+  // directions (ComputeIrradiance), se's with the directions of the points and ground cells
+  // that light it mixed in (AddInterreflection). Empty: from the whole hemisphere at one
+  // radiance.
+  std::vector<LightMoments> direct_se_light, se_light;
+  std::vector<float> sun_visibility;  // fraction of the sun disc samples unoccluded
   bool has_bounce = false;
   double seconds = 0;
 };
+
+// Where point i's E_se light comes from (SlotIrradiance::se_light), or from the whole
+// hemisphere above `normal` when the irradiance does not say.
+inline LightMoments SeLight(const SlotIrradiance& irr, int i, const Eigen::Vector3d& normal) {
+  return static_cast<size_t>(i) < irr.se_light.size() ? irr.se_light[i] : UniformLight(normal);
+}
+inline LightMoments DirectSeLight(const SlotIrradiance& irr, int i, const Eigen::Vector3d& normal) {
+  return static_cast<size_t>(i) < irr.direct_se_light.size() ? irr.direct_se_light[i]
+                                                             : UniformLight(normal);
+}
 
 enum class IrradianceMethod {
   kMonteCarlo,  // the hemisphere cache's directions (noisy, any geometry)
@@ -118,6 +135,10 @@ struct IrradianceOptions {
   // the many points each receiver sees). nullptr: every point exact.
   const std::vector<uint8_t>* exact_points = nullptr;
   int sun_samples = 1;  // shadow rays per point over the sun disc (1: centre only)
+  // Where the light comes from (SlotIrradiance::direct_se_light, se_light), which only a rough
+  // block's reflection needs: false leaves them empty (light as from the whole hemisphere) and
+  // spares the vector-flux points a pass over their escaped directions.
+  bool light_directions = true;
   // Beyond the paper: the environment below the horizon is taken as flat ground at the model's
   // lowest level (GroundLevel), sunlit as the map holds it (EnvOptions::lit_ground); where an
   // escaped ray meets that ground inside the model's cast shadow, its radiance is scaled by the

@@ -87,6 +87,20 @@ TEST(IrradianceTest, VerticalPlaneSeesHalfTheSky) {
   double mean = 0;
   for (int i = 0; i < g.size(); ++i) mean += irr.direct_se[i].x() / g.size();
   EXPECT_NEAR(mean, kPi * L.x() / 2, 1e-3 * kPi * L.x());
+  // Where that light comes from (se_light): the upper half of the projected disc, whose mean
+  // height is 4 / (3 pi), and 2/3 along the normal as for the whole hemisphere.
+  ASSERT_EQ(irr.se_light.size(), static_cast<size_t>(g.size()));
+  Eigen::Vector3d l = Eigen::Vector3d::Zero();
+  for (const LightMoments& m : irr.se_light) l += m.l.cast<double>() / g.size();
+  EXPECT_NEAR(l.y(), -2.0 / 3, 0.01);
+  EXPECT_NEAR(l.z(), 4 / (3 * kPi), 0.01);
+  EXPECT_NEAR(l.x(), 0, 0.01);
+  // Not asked for (no rough block to reflect it): none, and the same irradiance.
+  IrradianceOptions plain;
+  plain.light_directions = false;
+  const SlotIrradiance without = ComputeIrradiance(g, cache, rc, UniformSky(L, {0, 0, 0}), plain);
+  EXPECT_TRUE(without.se_light.empty() && without.direct_se_light.empty());
+  for (int i = 0; i < g.size(); ++i) EXPECT_EQ(without.direct_se[i], irr.direct_se[i]);
 }
 
 TEST(IrradianceTest, SunOnPlaneAndBoxShadow) {
@@ -164,6 +178,7 @@ TEST(IrradianceTest, BounceBetweenFacingPlanesMatchesFormFactor) {
   irr.direct_se.assign(g.size(), Eigen::Vector3d::Zero());
   std::vector<Eigen::Vector3d> rho_sun(g.size(), Eigen::Vector3d::Zero()), rho_se = rho_sun;
   for (int i = 0; i < g.size(); ++i) {
+    irr.direct_se_light.push_back(UniformLight(g.points[i].normal));  // where light comes from
     if (g.points[i].block == upper) {
       irr.direct_se[i].setOnes();
       rho_se[i].setOnes();
@@ -190,6 +205,31 @@ TEST(IrradianceTest, BounceBetweenFacingPlanesMatchesFormFactor) {
   ASSERT_GT(n, 50);
   // The mean error over n independent points shrinks as 1/sqrt(n) (sigma <= 0.5/sqrt(K)).
   EXPECT_LT(std::abs(err_sum / n), 4 * 0.5 / std::sqrt(K * static_cast<double>(n)));
+  // The lower plane's light comes from the upper one (se_light): its cosine-weighted mean
+  // height is that of the upper square seen from the point (a midpoint sum over the square;
+  // 0.84 at the middle, where the sky's whole hemisphere would give 2/3).
+  ASSERT_EQ(irr.se_light.size(), static_cast<size_t>(g.size()));
+  int middle = 0;
+  for (int i = 0; i < g.size(); ++i) {
+    const GridPoint& p = g.points[i];
+    if (p.block != lower || std::abs(p.position.x()) > 0.3 || std::abs(p.position.y()) > 0.3)
+      continue;
+    double cos2 = 0, cos1 = 0;
+    const int cells = 200;
+    for (int a = 0; a < cells; ++a) {
+      for (int bb = 0; bb < cells; ++bb) {
+        const double x = -half + (a + 0.5) * 2 * half / cells - p.position.x();
+        const double y = -half + (bb + 0.5) * 2 * half / cells - p.position.y();
+        const double r2 = x * x + y * y + c * c, cz = c / std::sqrt(r2);
+        cos1 += cz * cz / r2;  // cos x d(omega) / dA, d(omega) = cos dA / r^2
+        cos2 += cz * cz * cz / r2;
+      }
+    }
+    EXPECT_NEAR(irr.se_light[i].l.z(), cos2 / cos1, 0.03) << i;
+    EXPECT_NEAR(irr.se_light[i].l.head<2>().norm(), 0, 0.05) << i;
+    ++middle;
+  }
+  EXPECT_GT(middle, 0);
   // Two bounces add the lower plane's reflection back to the upper one.
   std::vector<Eigen::Vector3d> rho_all(g.size(), Eigen::Vector3d::Constant(0.5));
   SlotIrradiance irr2 = irr;

@@ -9,6 +9,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <optional>
 #include <vector>
 
@@ -23,12 +24,51 @@ constexpr double kRetroMax = 1.5;
 double RetroFactor(double retro, const Eigen::Vector3d& n, const Eigen::Vector3d& l,
                    const Eigen::Vector3d& v);
 
-// The same surface under light of one radiance from the whole hemisphere above it: the mean of
-// D weighted by n.l / pi, in closed form (the moments of that weight). A rough surface
-// brightens towards oblique views under sky light as well as sunlight, which the sky and
-// environment irradiance E_se (one number per point, no direction) cannot show by itself;
-// the albedo solve and the renderer scale E_se by this. 1 for retro == 0; about 1.04 head-on
-// for retro 1.
+// Where a point's sky and environment light comes from, as much as its rough reflection needs:
+// with weights L(l) (n.l) / E over the directions l it arrives from (E the irradiance), the
+// means of l, of s_l = (1 - n.l)^5, of s_l l and of s_l l l^T. D is a polynomial in l (F - 1 is
+// linear in l.v), so these give its mean exactly whatever the light's distribution: a low sun's
+// aureole seen through a street at a grazing angle reflects towards a camera near the sun's
+// side far more than the same irradiance spread over the whole sky.
+struct LightMoments {
+  Eigen::Vector3f l = Eigen::Vector3f::Zero();
+  float s = 0;
+  Eigen::Vector3f sl = Eigen::Vector3f::Zero();
+  std::array<float, 6> sll{};  // xx, xy, xz, yy, yz, zz
+
+  // The mixture of two lights: `a` weighted wa and `b` weighted wb (their irradiances); `a`
+  // when neither weighs anything.
+  static LightMoments Mix(const LightMoments& a, double wa, const LightMoments& b, double wb);
+};
+
+// Sums light arriving at a point of unit normal n, direction by direction.
+class LightMomentsSum {
+ public:
+  explicit LightMomentsSum(const Eigen::Vector3d& n) : n_(n) {}
+  void Add(const Eigen::Vector3d& dir, double w);  // unit dir, weight w > 0 (L n.l)
+  double weight() const { return w_; }
+  // The means; `fallback` when nothing was added.
+  LightMoments Moments(const LightMoments& fallback) const;
+
+ private:
+  Eigen::Vector3d n_;
+  double w_ = 0, s_ = 0;
+  Eigen::Vector3d l_ = Eigen::Vector3d::Zero(), sl_ = Eigen::Vector3d::Zero();
+  std::array<double, 6> sll_{};
+};
+
+// The moments of light of one radiance from the whole hemisphere above n (the closed forms:
+// E[l] = 2/3 n, E[s_l] = 1/21, E[s_l l] = n / 84, E[s_l l l^T] = 1/252 along n, 11/504 across).
+LightMoments UniformLight(const Eigen::Vector3d& n);
+
+// The same surface under light arriving as `light` describes: the mean of D over it. A rough
+// surface brightens towards oblique views under sky light as well as sunlight, which the sky
+// and environment irradiance E_se (one number per point) cannot show by itself; the albedo
+// solve and the renderer scale E_se by this. 1 for retro == 0.
+double AmbientRetroFactor(double retro, const Eigen::Vector3d& n, const Eigen::Vector3d& v,
+                          const LightMoments& light);
+// Under light of one radiance from the whole hemisphere (UniformLight): about 1.04 head-on for
+// retro 1.
 double AmbientRetroFactor(double retro, const Eigen::Vector3d& n, const Eigen::Vector3d& v);
 
 // The sun's side of the reflection model for the albedo solve and the renderer: the sun
