@@ -173,8 +173,13 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
     }
     Eigen::Vector3d n = mesh.Normal(hit.triangle);
     if (n.dot(dir) > 0) n = -n;  // seen from behind: light the side facing the camera
+    const int block = hit.triangle < static_cast<int>(mesh.triangle_block.size())
+                          ? mesh.triangle_block[hit.triangle]
+                          : -1;
+    const double retro = BlockRetro(albedo.retro, block);
     Eigen::Vector3d rho_sun, rho_se, e_se;
-    LightMoments se_light;  // where E_se comes from, mixed over the points as E_se is
+    // Where E_se comes from (a rough block's only), mixed over the points as E_se is.
+    LightMoments se_light;
     if (options.interpolate) {
       const GridStencil st = grid.Stencil(hit.triangle, hit.u, hit.v);
       if (st.count == 0) return Eigen::Vector3d::Zero();
@@ -187,9 +192,10 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
         rho_sun += st.weight[k] * albedo.rho_sun[j];
         rho_se += st.weight[k] * albedo.rho_se[j];
         e_se += st.weight[k] * irr.se[j];
+        if (retro == 0) continue;
         const double w = st.weight[k] * irr.se[j].sum();
-        se_light =
-            k == 0 ? SeLight(irr, j, n) : LightMoments::Mix(se_light, mixed, SeLight(irr, j, n), w);
+        const LightMoments at = LightAt(irr.se_light, j, n);
+        se_light = k == 0 ? at : LightMoments::Mix(se_light, mixed, at, w);
         mixed += w;
       }
     } else {
@@ -198,26 +204,23 @@ Image RenderView(const Mesh& mesh, const SurfaceGrid& grid, const RayCaster& mod
       rho_sun = albedo.rho_sun[j];
       rho_se = albedo.rho_se[j];
       e_se = irr.se[j];
-      se_light = SeLight(irr, j, n);
+      if (retro != 0) se_light = LightAt(irr.se_light, j, n);
     }
     const Eigen::Vector3d p = pose.position + hit.t * dir + offset * n;
     Eigen::Vector3d e_sun = Eigen::Vector3d::Zero(), specular = Eigen::Vector3d::Zero();
     const double cosi = n.dot(s);
-    const int block = hit.triangle < static_cast<int>(mesh.triangle_block.size())
-                          ? mesh.triangle_block[hit.triangle]
-                          : -1;
     if (block >= 0 && block < static_cast<int>(sky_lobes.size()) && sky_lobes[block])
       specular = SkyLobeLight(*sky_lobes[block], n, -dir, p, lighting, model, grid, albedo, irr,
                               options.sky_lobe_samples);
     if (cosi > 0 && !model.Occluded(p, to_sun, 0.0)) {
-      e_sun = sun_e * (cosi * RetroFactor(BlockRetro(albedo.retro, block), n, s, -dir));
+      e_sun = sun_e * (cosi * RetroFactor(retro, n, s, -dir));
       // §4.2: the block's sun lobe (eq. 13) under the sun's irradiance on the surface.
       const SpecularLobe lobe = BlockLobe(albedo.sun_lobes, block);
       if (!lobe.IsZero()) specular += lobe.Eval(n, s, -dir).cwiseProduct(sun_e * cosi);
     }
     // The rough block's sky and environment light brightens towards oblique views as its sun
     // does (solve/retro.h AmbientRetroFactor; 1 for Lambert).
-    const double se_factor = AmbientRetroFactor(BlockRetro(albedo.retro, block), n, -dir, se_light);
+    const double se_factor = AmbientRetroFactor(retro, n, -dir, se_light);
     return (rho_sun.cwiseProduct(e_sun) + se_factor * rho_se.cwiseProduct(e_se)) / kPi + specular;
   };
 

@@ -264,7 +264,7 @@ TEST(RenderTest, TheSkyTermFollowsTheBlocksAmbientRetro) {
   ASSERT_GE(px.point, 0);
   const Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
   const double want =
-      AmbientRetroFactor(1.0, up, -px.dir, SeLight(f.irr, px.point, up)) * px.lambert;
+      AmbientRetroFactor(1.0, up, -px.dir, LightAt(f.irr.se_light, px.point, up)) * px.lambert;
   EXPECT_NEAR(px.rough, want, 1e-5 * want);
   // An oblique view of a rough plaza is brighter under sky light too (1.067 at this pixel
   // under a whole uniform sky).

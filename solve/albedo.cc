@@ -557,7 +557,7 @@ ShadingFactors FactorsOf(const SurfaceGrid& grid, const Observation& ob, const S
   if (retro == 0) return {};
   const Eigen::Vector3d v = ob.view_dir.cast<double>();
   return {RetroFactor(retro, gp.normal, shading->sun_dirs[ob.slot], v),
-          AmbientRetroFactor(retro, gp.normal, v, SeLight(irr, ob.point, gp.normal))};
+          AmbientRetroFactor(retro, gp.normal, v, LightAt(irr.se_light, ob.point, gp.normal))};
 }
 
 // pi I of an observation as the solution `res` predicts it in channel c (eqs. 11-12), with the
@@ -860,7 +860,7 @@ BlockCosts CostsPerBlock(const SurfaceGrid& grid, const std::vector<Observation>
     if (b < 0 || (res.flags[ob.point] & kAlbedoNoObservations)) continue;
     const SlotIrradiance& irr = irradiance[ob.slot];
     bc.sunlit[b] += IsSunlit(irr.sun[ob.point], irr.se[ob.point], options.sunlit_threshold);
-    const ShadingFactors f = FactorsOf(grid, ob, irradiance[ob.slot], &shading);
+    const ShadingFactors f = FactorsOf(grid, ob, irr, &shading);
     for (int c = 0; c < 3; ++c) {
       const double y = kPi * ob.radiance[c];
       if (!(y > 0)) continue;
@@ -981,7 +981,7 @@ std::vector<SpecularLobe> FitSunLobes(const SurfaceGrid& grid,
     const SlotIrradiance& irr = irradiance[ob.slot];
     if (!IsSunlit(irr.sun[ob.point], irr.se[ob.point], options.sunlit_threshold)) continue;
     const double scale = block_scale[gp.block];
-    const ShadingFactors f = FactorsOf(grid, ob, irradiance[ob.slot], &shading);
+    const ShadingFactors f = FactorsOf(grid, ob, irr, &shading);
     LobeSample s;
     s.normal = gp.normal;
     s.to_light = shading.sun_dirs[ob.slot];
@@ -1119,7 +1119,7 @@ std::vector<SpecularLobe> FitSkyLobes(const SurfaceGrid& grid, const HemisphereC
       s.to_viewer = ob.view_dir.cast<double>();
       s.pieces = Pieces(grid, cache, model, slots[ob.slot], irr, res, ob.point, s.to_viewer,
                         res.sun_lobes[b], options.sky_lobe.mirror_samples);
-      const ShadingFactors f = FactorsOf(grid, ob, irradiance[ob.slot], &shading);
+      const ShadingFactors f = FactorsOf(grid, ob, irr, &shading);
       const Eigen::Vector3d sun_lobe = SunLobeLight(grid, res.sun_lobes, irr, shading, ob);
       for (int c = 0; c < 3; ++c) {
         s.residual[c] = ob.radiance[c] - Predicted(res, irr, ob, f, c) / kPi - sun_lobe[c];

@@ -166,7 +166,8 @@ std::vector<Observation> ObserveRetro(const World& w, const std::vector<SlotIrra
         const double r = gp.block == rough ? retro : 0.0;
         const double d = RetroFactor(r, gp.normal, w.slots[s].sun_dir, v);
         // The sky's light reflected as the rough surface reflects it from where it arrives.
-        const double a = AmbientRetroFactor(r, gp.normal, v, SeLight(irr[s], i, gp.normal));
+        const double a =
+            AmbientRetroFactor(r, gp.normal, v, LightAt(irr[s].se_light, i, gp.normal));
         Observation o;
         o.point = i;
         o.slot = static_cast<int>(s);

@@ -530,7 +530,7 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
           if (ls.ground && d.z() < 0) {  // the ground's light field instead of the map there
             const Eigen::Vector3d l = ls.ground->Arriving(origin, d);
             sum += l;
-            if (l.sum() > 0) moments.Add(d, l.sum());
+            if (options.light_directions && l.sum() > 0) moments.Add(d, l.sum());
             continue;
           }
           // Lighting::EscapedRadiance, with the region found above.
@@ -545,7 +545,7 @@ std::vector<SlotIrradiance> ComputeIrradiance(const SurfaceGrid& grid, const Hem
             }
           }
           sum += l;
-          if (l.sum() > 0) moments.Add(d, l.sum());
+          if (options.light_directions && l.sum() > 0) moments.Add(d, l.sum());
         }
         if (!exact) out[li].direct_se[i] = sum * (kPi / K);
         if (options.light_directions)
@@ -595,8 +595,8 @@ ReflectionFactors CellFactors(const GroundBounce& b, const SurfaceGrid& grid,
       f.sun[m] = f.se[m] = b.cell_weight[m];
       if (r != 0 && to_cell.allFinite()) {
         f.sun[m] *= RetroFactor(r, q.normal, sun_dir, to_cell);
-        f.se[m] *=
-            AmbientRetroFactor(r, q.normal, to_cell, SeLight(irr, b.cell_point[m], q.normal));
+        f.se[m] *= AmbientRetroFactor(r, q.normal, to_cell,
+                                      LightAt(irr.se_light, b.cell_point[m], q.normal));
       }
     }
   });
@@ -786,7 +786,8 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
         if (r == 0 || !(d > 0)) continue;
         const Eigen::Vector3d v = to_i / d;
         f.sun[m] *= RetroFactor(r, q.normal, s, v);
-        f.se[m] *= AmbientRetroFactor(r, q.normal, v, SeLight(*irr, lists.point[m], q.normal));
+        f.se[m] *=
+            AmbientRetroFactor(r, q.normal, v, LightAt(irr->se_light, lists.point[m], q.normal));
       }
     }
   });
@@ -837,9 +838,9 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
           }
         }
         if (last) {
-          light[i] = LightMoments::Mix(DirectSeLight(*irr, i, p.normal), irr->direct_se[i].sum(),
-                                       bounced.Moments(UniformLight(p.normal)),
-                                       (se[i] - irr->direct_se[i]).sum());
+          light[i] = LightMoments::Mix(
+              LightAt(irr->direct_se_light, i, p.normal), irr->direct_se[i].sum(),
+              bounced.Moments(UniformLight(p.normal)), (se[i] - irr->direct_se[i]).sum());
         }
       }
     });

@@ -106,14 +106,11 @@ struct SlotIrradiance {
   double seconds = 0;
 };
 
-// Where point i's E_se light comes from (SlotIrradiance::se_light), or from the whole
-// hemisphere above `normal` when the irradiance does not say.
-inline LightMoments SeLight(const SlotIrradiance& irr, int i, const Eigen::Vector3d& normal) {
-  return static_cast<size_t>(i) < irr.se_light.size() ? irr.se_light[i] : UniformLight(normal);
-}
-inline LightMoments DirectSeLight(const SlotIrradiance& irr, int i, const Eigen::Vector3d& normal) {
-  return static_cast<size_t>(i) < irr.direct_se_light.size() ? irr.direct_se_light[i]
-                                                             : UniformLight(normal);
+// Where point i's light comes from in `light` (SlotIrradiance::se_light or direct_se_light), or
+// from the whole hemisphere above `normal` when the irradiance does not say.
+inline LightMoments LightAt(const std::vector<LightMoments>& light, int i,
+                            const Eigen::Vector3d& normal) {
+  return static_cast<size_t>(i) < light.size() ? light[i] : UniformLight(normal);
 }
 
 enum class IrradianceMethod {
