@@ -178,7 +178,7 @@ std::vector<SlotIrradiance> IrradianceFor(const SolveResult& solved,
   for (size_t k = 0; k < irr.size(); ++k)
     AddInterreflection(solved.grid, solved.hemisphere, solved.albedo.rho_sun, solved.albedo.rho_se,
                        &irr[k], ao.bounces, solved.albedo.retro, lightings[k].sun_dir, nullptr,
-                       nullptr, ground[k].get());
+                       nullptr, ground[k].get(), solved.albedo.sun_lobes);
   return irr;
 }
 

@@ -446,9 +446,9 @@ void SolveController::SolveAlbedos() {
     if (!bounce.empty()) {
       for (size_t t = 0; t < field_times_.size(); ++t) {
         const size_t k = field_slots_[t];
-        field_times_[t].walls_e =
-            GroundWallsIrradiance(bounce, r_.grid, r_.albedo.rho_sun, r_.albedo.rho_se,
-                                  r_.irradiance[k], r_.albedo.retro, r_.slots[k].lighting.sun_dir);
+        field_times_[t].walls_e = GroundWallsIrradiance(
+            bounce, r_.grid, r_.albedo.rho_sun, r_.albedo.rho_se, r_.irradiance[k], r_.albedo.retro,
+            r_.slots[k].lighting.sun_dir, r_.albedo.sun_lobes);
       }
       Log("ground field: read again with the light of the walls " +
           std::to_string(bounce.cells.size()) + " cells see");

@@ -1188,65 +1188,70 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   }
   std::vector<double> changes;
   std::vector<double> slot_weight;
-  for (int it = 1; it < options.outer_iterations; ++it) {
-    // Per point, for Newton's step: the sum over the slots of k x the light bounced k times,
-    // and of all the light.
-    std::vector<Eigen::Vector3d> order_sum, light_sum, order;
-    if (options.outer_newton) {
-      order_sum.assign(grid.size(), Eigen::Vector3d::Zero());
-      light_sum.assign(grid.size(), Eigen::Vector3d::Zero());
-    }
-    for (size_t k = 0; k < irr.size(); ++k) {
-      AddInterreflection(grid, cache, res.rho_sun, res.rho_se, &irr[k], options.bounces,
-                         shading.retro, shading.sun_dirs[k], cancel,
-                         options.outer_newton ? &order : nullptr, ground[k].get());
-      if (!options.outer_newton) continue;
+  // The outer iteration from `res` on the observations `obs`, the blocks' sun lobes sending
+  // their glint with the bounce (AddInterreflection's sun_lobes); the retro is fitted at its
+  // first iteration when `fit_retro`.
+  auto iterate = [&](const std::vector<Observation>& obs, const std::vector<SpecularLobe>& lobes,
+                     bool fit_retro) {
+    for (int it = 1; it < options.outer_iterations; ++it) {
+      // Per point, for Newton's step: the sum over the slots of k x the light bounced k times,
+      // and of all the light.
+      std::vector<Eigen::Vector3d> order_sum, light_sum, order;
+      if (options.outer_newton) {
+        order_sum.assign(grid.size(), Eigen::Vector3d::Zero());
+        light_sum.assign(grid.size(), Eigen::Vector3d::Zero());
+      }
+      for (size_t k = 0; k < irr.size(); ++k) {
+        AddInterreflection(grid, cache, res.rho_sun, res.rho_se, &irr[k], options.bounces,
+                           shading.retro, shading.sun_dirs[k], cancel,
+                           options.outer_newton ? &order : nullptr, ground[k].get(), lobes);
+        if (!options.outer_newton) continue;
+        for (int i = 0; i < grid.size(); ++i) {
+          order_sum[i] += order[i];
+          light_sum[i] += irr[k].sun[i] + irr[k].se[i];
+        }
+      }
+      if (options.slot_weighting) slot_weight = SlotWeights(grid, obs, irr, res, &shading);
+      // Once, with the first interreflection: later iterations change the bounce little.
+      if (fit_retro && it == 1)
+        shading.retro =
+            FitRetro(grid, obs, irr, options, slot_weight, shading.sun_dirs, &retro_summary);
+      AlbedoResult next = SolveWeighted(grid, obs, irr, options, slot_weight, &shading, &fill);
+      // The step the new solve proposes, per observed point (relative, the largest over the
+      // channels and both albedos), then the outer update (AlbedoOptions::outer_newton).
+      std::vector<double> step;
       for (int i = 0; i < grid.size(); ++i) {
-        order_sum[i] += order[i];
-        light_sum[i] += irr[k].sun[i] + irr[k].se[i];
-      }
-    }
-    if (options.slot_weighting) slot_weight = SlotWeights(grid, observations, irr, res, &shading);
-    // Once, with the first interreflection: later iterations change the bounce little.
-    if (options.fit_retro && it == 1) {
-      shading.retro =
-          FitRetro(grid, observations, irr, options, slot_weight, shading.sun_dirs, &retro_summary);
-    }
-    AlbedoResult next =
-        SolveWeighted(grid, observations, irr, options, slot_weight, &shading, &fill);
-    // The step the new solve proposes, per observed point (relative, the largest over the
-    // channels and both albedos), then the outer update (AlbedoOptions::outer_newton).
-    std::vector<double> step;
-    for (int i = 0; i < grid.size(); ++i) {
-      double largest = 0;
-      for (int c = 0; c < 3; ++c) {
-        for (const auto& [a, b] : {std::pair{next.rho_sun[i][c], res.rho_sun[i][c]},
-                                   std::pair{next.rho_se[i][c], res.rho_se[i][c]}}) {
-          if (a + b > 0) largest = std::max(largest, std::abs(a - b) / (0.5 * (a + b)));
+        double largest = 0;
+        for (int c = 0; c < 3; ++c) {
+          for (const auto& [a, b] : {std::pair{next.rho_sun[i][c], res.rho_sun[i][c]},
+                                     std::pair{next.rho_se[i][c], res.rho_se[i][c]}}) {
+            if (a + b > 0) largest = std::max(largest, std::abs(a - b) / (0.5 * (a + b)));
+          }
+        }
+        if (next.observations[i] > 0) step.push_back(largest);
+        if (!options.outer_newton) continue;
+        for (int c = 0; c < 3; ++c) {
+          // Newton's step on log rho for rho E(rho) = pi I: the solve's rho_new = pi I / E(rho)
+          // overshoots by E's elasticity s to the albedos (s = sum_k k x light bounced k times,
+          // over all the light), so the root lies 1 / (1 + s) of the way there in log rho.
+          const double sc =
+              light_sum[i][c] > 0 ? std::max(0.0, order_sum[i][c] / light_sum[i][c]) : 0.0;
+          const double f = 1 / (1 + sc);
+          for (auto [a, b] : {std::pair{&next.rho_sun[i][c], res.rho_sun[i][c]},
+                              std::pair{&next.rho_se[i][c], res.rho_se[i][c]}}) {
+            constexpr double kFloor = 1e-4;  // a zero albedo: the log step from this floor
+            if (f < 1)
+              *a = std::exp(std::log(std::max(b, kFloor)) +
+                            f * (std::log(std::max(*a, kFloor)) - std::log(std::max(b, kFloor))));
+          }
         }
       }
-      if (next.observations[i] > 0) step.push_back(largest);
-      if (!options.outer_newton) continue;
-      for (int c = 0; c < 3; ++c) {
-        // Newton's step on log rho for rho E(rho) = pi I: the solve's rho_new = pi I / E(rho)
-        // overshoots by E's elasticity s to the albedos (s = sum_k k x light bounced k times,
-        // over all the light), so the root lies 1 / (1 + s) of the way there in log rho.
-        const double sc =
-            light_sum[i][c] > 0 ? std::max(0.0, order_sum[i][c] / light_sum[i][c]) : 0.0;
-        const double f = 1 / (1 + sc);
-        for (auto [a, b] : {std::pair{&next.rho_sun[i][c], res.rho_sun[i][c]},
-                            std::pair{&next.rho_se[i][c], res.rho_se[i][c]}}) {
-          constexpr double kFloor = 1e-4;  // a zero albedo: the log step from this floor
-          if (f < 1)
-            *a = std::exp(std::log(std::max(b, kFloor)) +
-                          f * (std::log(std::max(*a, kFloor)) - std::log(std::max(b, kFloor))));
-        }
-      }
+      changes.push_back(step.empty() ? 0.0 : Quantile(step, options.outer_quantile));
+      res = std::move(next);
+      if (changes.back() < options.outer_tolerance) break;
     }
-    changes.push_back(step.empty() ? 0.0 : Quantile(step, options.outer_quantile));
-    res = std::move(next);
-    if (changes.back() < options.outer_tolerance) break;
-  }
+  };
+  iterate(observations, warm ? warm->sun_lobes : std::vector<SpecularLobe>{}, options.fit_retro);
   if (options.sun_lobe.fit) {
     AlbedoSummary lobe_summary;
     std::vector<std::vector<LobeSample>> sun_samples;
@@ -1256,9 +1261,9 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
     auto any = [](const std::vector<SpecularLobe>& l) {
       return std::any_of(l.begin(), l.end(), [](const auto& x) { return !x.IsZero(); });
     };
-    // The diffuse albedos again, from what the lobes leave of each observation (a highlight
-    // the lobes over-explain leaves nothing rather than negative light).
-    auto resolve = [&] {
+    // What the lobes leave of each observation (a highlight the lobes over-explain leaves
+    // nothing rather than negative light): the diffuse albedos' observations.
+    auto diffuse_observations = [&] {
       std::vector<Observation> diffuse = observations;
       for (Observation& ob : diffuse) {
         Eigen::Vector3d lobe_light = SunLobeLight(grid, sun_lobes, irr[ob.slot], shading, ob);
@@ -1274,9 +1279,25 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
         ob.measured = ob.measured.cwiseMax(ob.radiance);
         ob.radiance = (ob.radiance - lobe_light.cast<float>()).cwiseMax(0.f);
       }
-      return SolveWeighted(grid, diffuse, irr, options, slot_weight, &shading, &fill);
+      return diffuse;
+    };
+    auto resolve = [&] {
+      return SolveWeighted(grid, diffuse_observations(), irr, options, slot_weight, &shading,
+                           &fill);
+    };
+    // The light the lobes send on (AddInterreflection's sun_lobes: a roof's glint on the walls
+    // across the street), from the albedos so far, for the albedos solved again.
+    auto bounce = [&] {
+      for (size_t k = 0; k < irr.size(); ++k)
+        AddInterreflection(grid, cache, res.rho_sun, res.rho_se, &irr[k], options.bounces,
+                           shading.retro, shading.sun_dirs[k], cancel, nullptr, ground[k].get(),
+                           sun_lobes);
     };
     if (any(sun_lobes)) {
+      // The outer iteration again with the glint in the bounce: the walls it lights take darker
+      // albedos, which light their neighbours less (once, from the albedos so far, the glint's
+      // light counted twice on the nave world's north wall: 4% too bright).
+      iterate(diffuse_observations(), sun_lobes, false);
       res = resolve();
       res.sun_lobes = sun_lobes;
       if (options.sky_lobe.fit) {
@@ -1289,6 +1310,7 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
           const SpecularLobe &l = sun_lobes[b], &f = fitted[b];
           changed |= l.rho_s != f.rho_s || l.n != f.n || l.kappa != f.kappa || l.model != f.model;
         }
+        if (changed) bounce();
         if (any(sky_lobes) || changed) res = resolve();
         res.sun_lobes = sun_lobes;
       }
@@ -1313,7 +1335,8 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
     // rendering these slots).
     for (size_t k = 0; k < irr.size(); ++k) {
       AddInterreflection(grid, cache, res.rho_sun, res.rho_se, &irr[k], options.bounces,
-                         shading.retro, shading.sun_dirs[k], cancel, nullptr, ground[k].get());
+                         shading.retro, shading.sun_dirs[k], cancel, nullptr, ground[k].get(),
+                         res.sun_lobes);
     }
     *irradiance = std::move(irr);
   }

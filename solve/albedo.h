@@ -241,18 +241,18 @@ AlbedoResult SolveAlbedoFixedIrradiance(const SurfaceGrid& grid,
 // one-bounce interreflection from the current albedos -> albedos ... `irradiance` receives
 // the per-slot irradiance with the interreflection from the returned albedos. With
 // options.fit_retro, the first outer iteration with the interreflection (or the only one) also
-// fits every block's retro parameter: the albedos
-// are solved for candidates over [kRetroMin, kRetroMax] and each block keeps the one with the
-// least truncated relative residual, refined by a parabola (the interreflection stays
-// Lambertian). Then, with options.sun_lobe.fit, every block's sun lobe (§4.2.2) and, when some
-// block has one, its sky/environment lobe (§4.2.1, options.sky_lobe.fit) and the albedos once
-// more from the observations less the lobes' light. The direct sky and environment term is
-// options.irradiance's method at every observed point; points no observation sees (their
-// albedos filled from neighbours) take Monte Carlo's for the light they pass on, unless
-// options.irradiance.exact_points says otherwise. With `warm` (a solve of these photos on this
-// grid under other light: the ground field read again), the outer iteration starts from its
-// albedos and retros instead of a solve without the interreflection, so that the first bounce,
-// and the retro fitted with it, see albedos near the answer.
+// fits every block's retro parameter: the albedos are solved for candidates over
+// [kRetroMin, kRetroMax] and each block keeps the one with the least truncated relative
+// residual, refined by a parabola. Then, with options.sun_lobe.fit, every block's sun lobe
+// (§4.2.2); when some block has one, the outer iteration again from the observations less the
+// lobes' light with the lobes' glint in the bounce (AddInterreflection's sun_lobes), its
+// sky/environment lobe (§4.2.1, options.sky_lobe.fit) and the albedos once more. The direct sky
+// and environment term is options.irradiance's method at every observed point; points no
+// observation sees (their albedos filled from neighbours) take Monte Carlo's for the light they
+// pass on, unless options.irradiance.exact_points says otherwise. With `warm` (a solve of these
+// photos on this grid under other light: the ground field read again), the outer iteration
+// starts from its albedos, retros and sun lobes instead of a solve without the interreflection,
+// so that the first bounce, and the retro fitted with it, see albedos near the answer.
 AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
                          const RayCaster& model, const std::vector<Lighting>& slots,
                          const std::vector<Observation>& observations,

@@ -512,6 +512,50 @@ TEST(GroundFieldTest, AWallLightsTheGroundAndTheGroundTheWall) {
   EXPECT_NE(GroundBouncesOf({l}, rc, g, cache)[0], nullptr);
 }
 
+// A wall's sun lobe sends its glint to the ground and by the ground back to the wall as its
+// diffuse light does (GroundWallsIrradiance, AddInterreflection with the bounce, sun_lobes):
+// eq. 13's lobe of exponent 0 under a sun along the wall's normal has f_s = rho_s towards every
+// direction in front, a Lambertian reflector of albedo pi rho_s. So the black wall with that
+// lobe lights the ground, and the wall, as the Lambertian wall of that albedo does, to rounding.
+TEST(GroundFieldTest, AWallsGlintReachesTheGroundAsItsDiffuseLightDoes) {
+  const Wall w;
+  const SurfaceGrid& g = w.g;
+  const std::shared_ptr<GroundField> field = UniformField(0.5, 160, -40);
+  const GroundWalls walls = CastGroundWalls(*field, w.rc, false);
+  for (int c = 0; c < field->nx * field->ny; ++c) field->sky_visibility[c] = walls.SkyVisibility(c);
+  field->walls = true;
+  const GroundBounce bounce = BuildGroundBounce(*field, w.rc, g, w.cache);
+  ASSERT_FALSE(bounce.empty());
+  const Eigen::Vector3d normal = g.points[0].normal;  // -y
+  const double rho_s = 0.1;
+  std::vector<SpecularLobe> lobes(1);
+  lobes[0].rho_s.setConstant(rho_s);
+  lobes[0].n = 0;
+  const std::vector<Eigen::Vector3d> black(g.size(), Eigen::Vector3d::Zero()),
+      lambert(g.size(), Eigen::Vector3d::Constant(kPi * rho_s));
+  SlotIrradiance irr;
+  irr.sun.assign(g.size(), Eigen::Vector3d::Constant(100));
+  irr.direct_se.assign(g.size(), Eigen::Vector3d::Zero());
+  irr.se = irr.direct_se;
+  const std::vector<Eigen::Vector3f> diffuse =
+      GroundWallsIrradiance(bounce, g, lambert, black, irr, {}, normal);
+  const std::vector<Eigen::Vector3f> glint =
+      GroundWallsIrradiance(bounce, g, black, black, irr, {}, normal, lobes);
+  double lit = 0;
+  for (size_t c = 0; c < diffuse.size(); ++c) {
+    EXPECT_NEAR(glint[c].x(), diffuse[c].x(), 1e-5 * (1 + diffuse[c].x())) << c;
+    lit += diffuse[c].x();
+  }
+  EXPECT_GT(lit, 0);
+  SlotIrradiance a = irr, b = irr;
+  AddInterreflection(g, w.cache, lambert, black, &a, 2, {}, normal, nullptr, nullptr, &bounce);
+  AddInterreflection(g, w.cache, black, black, &b, 2, {}, normal, nullptr, nullptr, &bounce, lobes);
+  for (int i = 0; i < g.size(); ++i) {
+    EXPECT_GT(a.se[i].x(), 0) << i;
+    EXPECT_NEAR(b.se[i].x(), a.se[i].x(), 1e-9 * a.se[i].x()) << i;
+  }
+}
+
 // Beside a long 20 m wall north of it, a spot of ground loses the sky the wall hides as that sky
 // is (HiddenSkyExcess), not as the sky's mean: under a sky ten times brighter in the north (a low
 // sun's side) it keeps the southern half and the sliver of northern sky above the wall,

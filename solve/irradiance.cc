@@ -577,15 +577,42 @@ namespace {
 // used by every bounce.
 struct ReflectionFactors {
   std::vector<double> sun, se;
+  // pi f_s / rho_s of the sender's sun lobe towards the receiver, per entry (empty: no block
+  // has a lobe); the light it sends is this times rho_s E_sun (LobeLight).
+  std::vector<double> lobe;
 };
+
+bool AnyLobe(const std::vector<SpecularLobe>& lobes) {
+  return std::any_of(lobes.begin(), lobes.end(), [](const SpecularLobe& l) { return !l.IsZero(); });
+}
+
+// Per grid point, rho_s E_sun of its block's sun lobe (zero without one): times
+// ReflectionFactors::lobe, the sun's glint it sends on.
+std::vector<Eigen::Vector3d> LobeLight(const SurfaceGrid& grid,
+                                       const std::vector<SpecularLobe>& lobes,
+                                       const SlotIrradiance& irr) {
+  std::vector<Eigen::Vector3d> out(grid.size(), Eigen::Vector3d::Zero());
+  if (!AnyLobe(lobes)) return out;
+  for (int j = 0; j < grid.size(); ++j)
+    out[j] = BlockLobe(lobes, grid.points[j].block).rho_s.cwiseProduct(irr.sun[j]);
+  return out;
+}
+
+// pi f_s / rho_s of point q's block lobe for the sun towards v (0 without a lobe).
+double LobeFactor(const std::vector<SpecularLobe>& lobes, const GridPoint& q,
+                  const Eigen::Vector3d& sun_dir, const Eigen::Vector3d& v) {
+  const SpecularLobe lobe = BlockLobe(lobes, q.block);
+  return lobe.IsZero() ? 0.0 : kPi * lobe.Shape(q.normal, sun_dir, v);
+}
 
 // The factors of b's cell entries, each point sending light towards its cell's centre as
 // towards another point (AddInterreflection).
 ReflectionFactors CellFactors(const GroundBounce& b, const SurfaceGrid& grid,
                               const std::vector<double>& retro, const Eigen::Vector3d& sun_dir,
-                              const SlotIrradiance& irr) {
-  ReflectionFactors f{std::vector<double>(b.cell_point.size()),
-                      std::vector<double>(b.cell_point.size())};
+                              const SlotIrradiance& irr, const std::vector<SpecularLobe>& lobes) {
+  ReflectionFactors f{
+      std::vector<double>(b.cell_point.size()), std::vector<double>(b.cell_point.size()), {}};
+  if (AnyLobe(lobes)) f.lobe.assign(b.cell_point.size(), 0.0);
   tbb::parallel_for(size_t{0}, b.cells.size(), [&](size_t w) {
     const Eigen::Vector3d centre = b.field->CellCentre(b.cells[w]);
     for (int m = b.cell_begin[w]; m < b.cell_begin[w + 1]; ++m) {
@@ -593,6 +620,8 @@ ReflectionFactors CellFactors(const GroundBounce& b, const SurfaceGrid& grid,
       const double r = BlockRetro(retro, q.block);
       const Eigen::Vector3d to_cell = (centre - q.position).normalized();
       f.sun[m] = f.se[m] = b.cell_weight[m];
+      if (!f.lobe.empty() && to_cell.allFinite())
+        f.lobe[m] = b.cell_weight[m] * LobeFactor(lobes, q, sun_dir, to_cell);
       if (r != 0 && to_cell.allFinite()) {
         f.sun[m] *= RetroFactor(r, q.normal, sun_dir, to_cell);
         f.se[m] *= AmbientRetroFactor(r, q.normal, to_cell,
@@ -607,11 +636,13 @@ ReflectionFactors CellFactors(const GroundBounce& b, const SurfaceGrid& grid,
 // point's light sent towards the cell as towards another point (`f`: CellFactors).
 Eigen::Vector3d WallsOnCell(const GroundBounce& b, size_t w, const ReflectionFactors& f,
                             const std::vector<Eigen::Vector3d>& from_sun,
-                            const std::vector<Eigen::Vector3d>& from_se) {
+                            const std::vector<Eigen::Vector3d>& from_se,
+                            const std::vector<Eigen::Vector3d>& from_lobe) {
   Eigen::Vector3d e = Eigen::Vector3d::Zero();
   for (int m = b.cell_begin[w]; m < b.cell_begin[w + 1]; ++m) {
     const int j = b.cell_point[m];
     e += f.sun[m] * from_sun[j] + f.se[m] * from_se[j];
+    if (!f.lobe.empty()) e += f.lobe[m] * from_lobe[j];
   }
   return e;
 }
@@ -726,7 +757,8 @@ std::vector<Eigen::Vector3f> GroundWallsIrradiance(const GroundBounce& b, const 
                                                    const std::vector<Eigen::Vector3d>& rho_se,
                                                    const SlotIrradiance& irr,
                                                    const std::vector<double>& retro,
-                                                   const Eigen::Vector3d& sun_dir) {
+                                                   const Eigen::Vector3d& sun_dir,
+                                                   const std::vector<SpecularLobe>& sun_lobes) {
   const size_t n = b.point_begin.empty() ? 0 : b.point_begin.size() - 1;
   if (static_cast<size_t>(grid.size()) != n || rho_sun.size() != n || rho_se.size() != n ||
       irr.sun.size() != n || irr.se.size() != n)
@@ -739,9 +771,10 @@ std::vector<Eigen::Vector3f> GroundWallsIrradiance(const GroundBounce& b, const 
   const Eigen::Vector3d s = sun_dir.normalized();
   std::vector<Eigen::Vector3f> e(static_cast<size_t>(b.field->nx) * b.field->ny,
                                  Eigen::Vector3f::Zero());
-  const ReflectionFactors f = CellFactors(b, grid, retro, s, irr);
+  const ReflectionFactors f = CellFactors(b, grid, retro, s, irr, sun_lobes);
+  const std::vector<Eigen::Vector3d> from_lobe = LobeLight(grid, sun_lobes, irr);
   for (size_t w = 0; w < b.cells.size(); ++w)
-    e[b.cells[w]] = WallsOnCell(b, w, f, from_sun, from_se).cast<float>();
+    e[b.cells[w]] = WallsOnCell(b, w, f, from_sun, from_se, from_lobe).cast<float>();
   return e;
 }
 
@@ -751,7 +784,8 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
                         const std::vector<Eigen::Vector3d>& rho_se, SlotIrradiance* irr,
                         int bounces, const std::vector<double>& retro,
                         const Eigen::Vector3d& sun_dir, const Cancellation* cancel,
-                        std::vector<Eigen::Vector3d>* bounce_order, const GroundBounce* ground) {
+                        std::vector<Eigen::Vector3d>* bounce_order, const GroundBounce* ground,
+                        const std::vector<SpecularLobe>& sun_lobes) {
   const int n = grid.size();
   if (static_cast<int>(rho_sun.size()) != n || static_cast<int>(rho_se.size()) != n ||
       static_cast<int>(irr->sun.size()) != n || static_cast<int>(irr->direct_se.size()) != n) {
@@ -773,8 +807,9 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
     throw Error("interreflection: the ground bounce was built for another grid");
   // Per entry m of the hit lists (point i sees point j in count[m] directions): the count
   // times j's reflection towards i of the sun's light and of the sky's.
-  ReflectionFactors f{std::vector<double>(lists.point.size()),
-                      std::vector<double>(lists.point.size())};
+  ReflectionFactors f{
+      std::vector<double>(lists.point.size()), std::vector<double>(lists.point.size()), {}};
+  if (AnyLobe(sun_lobes)) f.lobe.assign(lists.point.size(), 0.0);
   tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& range) {
     for (int i = range.begin(); i < range.end(); ++i) {
       for (int m = lists.begin[i]; m < lists.begin[i + 1]; ++m) {
@@ -783,8 +818,10 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
         f.sun[m] = f.se[m] = lists.count[m];
         const Eigen::Vector3d to_i = grid.points[i].position - q.position;
         const double d = to_i.norm();
-        if (r == 0 || !(d > 0)) continue;
+        if (!(d > 0)) continue;
         const Eigen::Vector3d v = to_i / d;
+        if (!f.lobe.empty()) f.lobe[m] = lists.count[m] * LobeFactor(sun_lobes, q, s, v);
+        if (r == 0) continue;
         f.sun[m] *= RetroFactor(r, q.normal, s, v);
         f.se[m] *=
             AmbientRetroFactor(r, q.normal, v, LightAt(irr->se_light, lists.point[m], q.normal));
@@ -792,7 +829,9 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
     }
   });
   const ReflectionFactors cell_factors =
-      ground ? CellFactors(*ground, grid, retro, s, *irr) : ReflectionFactors{};
+      ground ? CellFactors(*ground, grid, retro, s, *irr, sun_lobes) : ReflectionFactors{};
+  // The sun's glint, which does not change from pass to pass (E_sun does not).
+  const std::vector<Eigen::Vector3d> from_lobe = LobeLight(grid, sun_lobes, *irr);
   // The directions the last pass's light comes from, mixed into the direct light's (se_light).
   std::vector<LightMoments> light(irr->direct_se_light.empty() ? 0 : n);
   std::vector<Eigen::Vector3d> walls_e;  // per cell of the ground bounce
@@ -807,8 +846,9 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
       // over pi, before its reflection towards a point.
       walls_e.assign(ground->cells.size(), Eigen::Vector3d::Zero());
       tbb::parallel_for(size_t{0}, ground->cells.size(), [&](size_t w) {
-        walls_e[w] = ground->field->Albedo(ground->cells[w])
-                         .cwiseProduct(WallsOnCell(*ground, w, cell_factors, from_sun, from_se));
+        walls_e[w] =
+            ground->field->Albedo(ground->cells[w])
+                .cwiseProduct(WallsOnCell(*ground, w, cell_factors, from_sun, from_se, from_lobe));
       });
     }
     tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& range) {
@@ -820,7 +860,8 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
         for (int m = lists.begin[i]; m < lists.begin[i + 1]; ++m) {
           const int j = lists.point[m];
-          const Eigen::Vector3d b = f.sun[m] * from_sun[j] + f.se[m] * from_se[j];
+          Eigen::Vector3d b = f.sun[m] * from_sun[j] + f.se[m] * from_se[j];
+          if (!f.lobe.empty()) b += f.lobe[m] * from_lobe[j];
           sum += b;
           const Eigen::Vector3d to_j = grid.points[j].position - p.position;
           if (last && b.sum() > 0 && to_j.norm() > 0) bounced.Add(to_j.normalized(), b.sum());

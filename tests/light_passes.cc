@@ -297,8 +297,9 @@ GroundPrediction GroundBesideWalls(const fs::path& data, const fs::path& scene_d
   std::vector<Eigen::Vector3f> walls;
   if (f.walls) {
     const GroundBounce bounce = BuildGroundBounce(f, *s.caster, s.grid, s.hemisphere);
-    walls = GroundWallsIrradiance(bounce, s.grid, s.albedo.rho_sun, s.albedo.rho_se,
-                                  IrradianceFor(s, l), s.albedo.retro, l.sun_dir);
+    walls =
+        GroundWallsIrradiance(bounce, s.grid, s.albedo.rho_sun, s.albedo.rho_se,
+                              IrradianceFor(s, l), s.albedo.retro, l.sun_dir, s.albedo.sun_lobes);
   }
   const GroundLight light(f, *s.caster, l.sun_dir, l.sun_radiance * l.sun_solid_angle_sr,
                           l.env.HorizontalSkyIrradiance());
