@@ -33,14 +33,20 @@ function(rouen_library name)
   endif()
 endfunction()
 
-# rouen_discover_tests(TARGET LABEL label [SHARED_SETUP suite...])
+# rouen_discover_tests(TARGET LABEL label [SHARED_SETUP suite[=seconds]...])
 # One CTest entry per GoogleTest test of TARGET, except the SHARED_SETUP suites: each of those
 # is one entry running all its tests in one process, so that a costly SetUpTestSuite (a
-# session captured, scenes solved) runs once rather than once per test.
+# session captured, scenes solved) runs once rather than once per test. `=seconds`, about what
+# the suite takes, is its COST: `ctest -j` starts the costliest first. Without it, a fresh
+# checkout (no timings of an earlier run) started them in the order of their numbers, the
+# longest last, with the other core idle while it ran.
 function(rouen_discover_tests target)
   cmake_parse_arguments(ARG "" "LABEL" "SHARED_SETUP" ${ARGN})
   set(filter "")
-  foreach(suite ${ARG_SHARED_SETUP})
+  set(suites "")
+  foreach(entry ${ARG_SHARED_SETUP})
+    string(REGEX REPLACE "=.*$" "" suite "${entry}")
+    list(APPEND suites ${suite})
     string(APPEND filter ":${suite}.*")
   endforeach()
   if(filter)
@@ -50,9 +56,13 @@ function(rouen_discover_tests target)
   else()
     gtest_discover_tests(${target} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS ${ARG_LABEL})
   endif()
-  foreach(suite ${ARG_SHARED_SETUP})
+  foreach(entry ${ARG_SHARED_SETUP})
+    string(REGEX REPLACE "=.*$" "" suite "${entry}")
     add_test(NAME ${suite} COMMAND ${target} --gtest_filter=${suite}.*)
     set_tests_properties(${suite} PROPERTIES LABELS ${ARG_LABEL})
+    if(entry MATCHES "=([0-9]+)$")
+      set_tests_properties(${suite} PROPERTIES COST ${CMAKE_MATCH_1})
+    endif()
   endforeach()
 endfunction()
 
