@@ -37,7 +37,8 @@ endfunction()
 # One CTest entry per GoogleTest test of TARGET, except the SHARED_SETUP suites: each of those
 # is one entry running all its tests in one process, so that a costly SetUpTestSuite (a
 # session captured, scenes solved) runs once rather than once per test. `=seconds`, about what
-# the suite takes, is its COST: `ctest -j` starts the costliest first. Without it, a fresh
+# the suite takes, is its COST (`ctest -j` starts the costliest first) and a third of its
+# TIMEOUT. Without it, a fresh
 # checkout (no timings of an earlier run) started them in the order of their numbers, the
 # longest last, with the other core idle while it ran.
 function(rouen_discover_tests target)
@@ -61,7 +62,13 @@ function(rouen_discover_tests target)
     add_test(NAME ${suite} COMMAND ${target} --gtest_filter=${suite}.*)
     set_tests_properties(${suite} PROPERTIES LABELS ${ARG_LABEL})
     if(entry MATCHES "=([0-9]+)$")
-      set_tests_properties(${suite} PROPERTIES COST ${CMAKE_MATCH_1})
+      # Three times that for its timeout (at least the default): a slower machine still passes,
+      # a hang still fails.
+      math(EXPR timeout "${CMAKE_MATCH_1} * 3")
+      if(timeout LESS 600)
+        set(timeout 600)
+      endif()
+      set_tests_properties(${suite} PROPERTIES COST ${CMAKE_MATCH_1} TIMEOUT ${timeout})
     endif()
   endforeach()
 endfunction()
