@@ -231,7 +231,7 @@ std::vector<Eigen::Vector3f> GroundWallsIrradiance(
 // Beyond the paper: a point of a block with a sun lobe (`sun_lobes` per block, §4.2.2's eq. 13
 // or the microfacet lobe; empty: none) also sends the sun's glint, B_j += pi f_s(sun_dir, v)
 // E_sun_j: a slate roof's north slope under a high sun throws it onto the houses across the
-// street (on the nave world, without it their sunlit walls got 6-9% less light than Cycles'
+// street (on the nave world, without it their sunlit walls got 6-10% less light than Cycles'
 // passes say, with it 0.99-1.03 of it).
 void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
                         const std::vector<Eigen::Vector3d>& rho_sun,
