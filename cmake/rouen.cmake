@@ -38,16 +38,13 @@ endfunction()
 # is one entry running all its tests in one process, so that a costly SetUpTestSuite (a
 # session captured, scenes solved) runs once rather than once per test. `=seconds`, about what
 # the suite takes, is its COST (`ctest -j` starts the costliest first) and a third of its
-# TIMEOUT. Without it, a fresh
-# checkout (no timings of an earlier run) started them in the order of their numbers, the
-# longest last, with the other core idle while it ran.
+# TIMEOUT. Without it, a fresh checkout (no timings of an earlier run) started them in the order
+# of their numbers, the longest last, with the other core idle while it ran.
 function(rouen_discover_tests target)
   cmake_parse_arguments(ARG "" "LABEL" "SHARED_SETUP" ${ARGN})
   set(filter "")
-  set(suites "")
   foreach(entry ${ARG_SHARED_SETUP})
     string(REGEX REPLACE "=.*$" "" suite "${entry}")
-    list(APPEND suites ${suite})
     string(APPEND filter ":${suite}.*")
   endforeach()
   if(filter)

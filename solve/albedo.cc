@@ -1281,9 +1281,8 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
       }
       return diffuse;
     };
-    auto resolve = [&] {
-      return SolveWeighted(grid, diffuse_observations(), irr, options, slot_weight, &shading,
-                           &fill);
+    auto resolve = [&](const std::vector<Observation>& diffuse) {
+      return SolveWeighted(grid, diffuse, irr, options, slot_weight, &shading, &fill);
     };
     // The light the lobes send on (AddInterreflection's sun_lobes: a roof's glint on the walls
     // across the street), from the albedos so far, for the albedos solved again.
@@ -1297,8 +1296,9 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
       // The outer iteration again with the glint in the bounce: the walls it lights take darker
       // albedos, which light their neighbours less (once, from the albedos so far, the glint's
       // light counted twice on the nave world's north wall: 4% too bright).
-      iterate(diffuse_observations(), sun_lobes, false);
-      res = resolve();
+      const std::vector<Observation> diffuse = diffuse_observations();
+      iterate(diffuse, sun_lobes, false);
+      res = resolve(diffuse);
       res.sun_lobes = sun_lobes;
       if (options.sky_lobe.fit) {
         const std::vector<SpecularLobe> fitted = sun_lobes;
@@ -1311,7 +1311,7 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
           changed |= l.rho_s != f.rho_s || l.n != f.n || l.kappa != f.kappa || l.model != f.model;
         }
         if (changed) bounce();
-        if (any(sky_lobes) || changed) res = resolve();
+        if (any(sky_lobes) || changed) res = resolve(diffuse_observations());
         res.sun_lobes = sun_lobes;
       }
     }

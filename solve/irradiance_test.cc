@@ -244,34 +244,57 @@ TEST(IrradianceTest, BounceBetweenFacingPlanesMatchesFormFactor) {
   }
 }
 
+// A 1 x 1 m plate facing down `height` above a square ground of half-size `half` (its grid
+// `ground_spacing`, the plate's 0.25 m), 1,024 gathering directions per point, and the ground
+// under a sun of irradiance 1 (E_sun = 1 on every ground point, nothing else).
+struct PlateOverGround {
+  PlateOverGround(double half, double height, double ground_spacing)
+      : m(Make(half, height)), g(Grid(m, ground_spacing)), rc(m), cache(Cache(g, rc)) {
+    irr.sun.assign(g.size(), Eigen::Vector3d::Zero());
+    irr.direct_se.assign(g.size(), Eigen::Vector3d::Zero());
+    for (int i = 0; i < g.size(); ++i)
+      if (g.points[i].block == ground) irr.sun[i].setOnes();
+  }
+  static Mesh Make(double half, double height) {
+    Mesh m;
+    testing::AddHorizontalRect(&m, -half, half, -half, half, 0, true, m.AddBlock("ground"));
+    testing::AddHorizontalRect(&m, -0.5, 0.5, -0.5, 0.5, height, false, m.AddBlock("plate"));
+    return m;
+  }
+  static SurfaceGrid Grid(const Mesh& m, double ground_spacing) {
+    GridOptions go;
+    go.spacing_m = 0.25;
+    go.block_spacing_m["ground"] = ground_spacing;
+    return BuildSurfaceGrid(m, go);
+  }
+  static HemisphereCache Cache(const SurfaceGrid& g, const RayCaster& rc) {
+    HemisphereOptions ho;
+    ho.directions = 1024;
+    return BuildHemisphereCache(g, rc, ho);
+  }
+  static constexpr int ground = 0, plate = 1;  // the blocks, in Make's order
+  const Mesh m;
+  const SurfaceGrid g;
+  const RayCaster rc;
+  const HemisphereCache cache;
+  SlotIrradiance irr;
+};
+
 // A tall tower's own shadow on the unmodelled ground darkens what its shaded side sees.
 // A rough surface sends its light towards each receiver as the photos would see it there
 // (RetroFactor): ground lit from the zenith, seen from a plate 1 m above it, is brighter at
 // oblique views, D(theta) = 1 + retro (1/2 + cos theta) (1 - cos theta)^5, so the plate gets
 // the integral of D over its cosine-weighted view of the ground instead of the form factor.
 TEST(IrradianceTest, RoughSurfacesReflectTowardsEachReceiverAsTheyLook) {
-  Mesh m;
-  const int ground = m.AddBlock("ground"), plate = m.AddBlock("plate");
   const double half = 20, c = 1;
-  testing::AddHorizontalRect(&m, -half, half, -half, half, 0, true, ground);
-  testing::AddHorizontalRect(&m, -0.5, 0.5, -0.5, 0.5, c, false, plate);
-  GridOptions go;
-  go.spacing_m = 0.25;
-  go.block_spacing_m["ground"] = 0.5;
-  const SurfaceGrid g = BuildSurfaceGrid(m, go);
-  const RayCaster rc(m);
-  HemisphereOptions ho;
-  ho.directions = 1024;
-  const HemisphereCache cache = BuildHemisphereCache(g, rc, ho);
-  SlotIrradiance irr;
-  irr.sun.assign(g.size(), Eigen::Vector3d::Zero());
-  irr.direct_se.assign(g.size(), Eigen::Vector3d::Zero());
+  const PlateOverGround w(half, c, 0.5);
+  const SurfaceGrid& g = w.g;
+  const HemisphereCache& cache = w.cache;
+  const int ground = w.ground, plate = w.plate;
+  const SlotIrradiance& irr = w.irr;  // the sun at the zenith: B = rho_sun E_sun = 1 (Lambert)
   std::vector<Eigen::Vector3d> rho_sun(g.size(), Eigen::Vector3d::Zero()), rho_se = rho_sun;
-  for (int i = 0; i < g.size(); ++i) {
-    if (g.points[i].block != ground) continue;
-    irr.sun[i].setOnes();  // the sun at the zenith: B = rho_sun E_sun = 1 (Lambert)
-    rho_sun[i].setOnes();
-  }
+  for (int i = 0; i < g.size(); ++i)
+    if (g.points[i].block == ground) rho_sun[i].setOnes();
   const Eigen::Vector3d zenith = Eigen::Vector3d::UnitZ();
   SlotIrradiance lambert = irr, lambert_zero = irr, rough = irr;
   AddInterreflection(g, cache, rho_sun, rho_se, &lambert, 1);
@@ -313,23 +336,12 @@ TEST(IrradianceTest, RoughSurfacesReflectTowardsEachReceiverAsTheyLook) {
 // cache's estimate per plate point scatters; the mean over the points is checked within 4
 // standard errors of that mean. Without the lobe the diffuse-black ground sends nothing.
 TEST(IrradianceTest, AGlossySurfaceSendsTheSunsGlintOn) {
-  Mesh m;
-  const int ground = m.AddBlock("ground"), plate = m.AddBlock("plate");
   const double half = 10, c = 2;
-  testing::AddHorizontalRect(&m, -half, half, -half, half, 0, true, ground);
-  testing::AddHorizontalRect(&m, -0.5, 0.5, -0.5, 0.5, c, false, plate);
-  GridOptions go;
-  go.spacing_m = 0.25;
-  const SurfaceGrid g = BuildSurfaceGrid(m, go);
-  const RayCaster rc(m);
-  HemisphereOptions ho;
-  ho.directions = 1024;
-  const HemisphereCache cache = BuildHemisphereCache(g, rc, ho);
-  SlotIrradiance irr;
-  irr.sun.assign(g.size(), Eigen::Vector3d::Zero());
-  irr.direct_se.assign(g.size(), Eigen::Vector3d::Zero());
-  for (int i = 0; i < g.size(); ++i)
-    if (g.points[i].block == ground) irr.sun[i].setOnes();
+  const PlateOverGround w(half, c, 0.25);
+  const SurfaceGrid& g = w.g;
+  const HemisphereCache& cache = w.cache;
+  const int ground = w.ground, plate = w.plate;
+  const SlotIrradiance& irr = w.irr;
   const std::vector<Eigen::Vector3d> black(g.size(), Eigen::Vector3d::Zero());
   // The lobe about 24 degrees wide, the ground's points 3.6 degrees apart as the plate sees them
   // below it (the interreflection takes a hit point's direction as its grid point's).
