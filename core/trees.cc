@@ -178,7 +178,7 @@ std::string TreesObjText(const std::vector<Tree>& trees, const TreeMeshOptions& 
     const int n = static_cast<int>(v.size());
     for (const auto& f : faces) {
       out += "f";
-      for (int k : f) out += " " + std::to_string(k - n);
+      for (int k : f) out.append(" ").append(std::to_string(k - n));
       out += "\n";
     }
   }

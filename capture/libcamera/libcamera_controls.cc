@@ -34,15 +34,15 @@ std::optional<double> NumberOf(const libcamera::ControlValue& v) {
 std::vector<std::string> ExposureApi::Notes() const {
   std::vector<std::string> notes;
   if (manual_switch == ManualSwitch::kNone) {
-    notes.push_back(
+    notes.emplace_back(
         "camera offers neither AeEnable nor ExposureTimeMode: automatic exposure cannot be "
         "switched off, applied exposure is read back from each frame's metadata");
   }
   if (!exposure_time_id) {
-    notes.push_back("no ExposureTime control: exposure cannot be set");
+    notes.emplace_back("no ExposureTime control: exposure cannot be set");
   }
   if (!analogue_gain_id) {
-    notes.push_back("no AnalogueGain control: gain stays at the sensor's default");
+    notes.emplace_back("no AnalogueGain control: gain stays at the sensor's default");
   }
   return notes;
 }
