@@ -308,6 +308,7 @@ json SolveConfigJson(const SolveConfig& c) {
             {"outer_tolerance", a.outer_tolerance},
             {"outer_quantile", a.outer_quantile},
             {"outer_newton", a.outer_newton},
+            {"outer_aitken", a.outer_aitken},
             {"bounces", a.bounces},
             {"sunlit_threshold", a.sunlit_threshold},
             {"never_shadowed_prior", a.never_shadowed_prior},
@@ -538,6 +539,7 @@ SolveConfig ApplySolveConfig(const json& j, SolveConfig c, const std::string& wh
     f.Number("outer_tolerance", &a.outer_tolerance, 0, 0.5);
     f.Number("outer_quantile", &a.outer_quantile, 0.5, 1);
     f.Bool("outer_newton", &a.outer_newton);
+    f.Bool("outer_aitken", &a.outer_aitken);
     f.Int("bounces", &a.bounces, 0, 16);
     f.Number("sunlit_threshold", &a.sunlit_threshold, 0, kInf);
     f.Number("never_shadowed_prior", &a.never_shadowed_prior, 0, kInf);

@@ -206,13 +206,15 @@ void PlanFillPass(const SurfaceGrid& grid, double radius, double plane_tolerance
                            static_cast<int>(std::floor(p.y() / R)),
                            static_cast<int>(std::floor(p.z() / R)));
   };
-  auto hash = [](const Eigen::Vector3i& k) {
+  // A cell per block: a point looks only at its own block's points.
+  auto hash = [](const Eigen::Vector3i& k, int block) {
     return (static_cast<int64_t>(k.x()) * 73856093) ^ (static_cast<int64_t>(k.y()) * 19349663) ^
-           (static_cast<int64_t>(k.z()) * 83492791);
+           (static_cast<int64_t>(k.z()) * 83492791) ^ (static_cast<int64_t>(block) * 2654435761);
   };
   std::unordered_map<int64_t, std::vector<int>> cells;
   for (int i = 0; i < n; ++i) {
-    if (cat[i] >= 1 && cat[i] <= 3) cells[hash(key(grid.points[i].position))].push_back(i);
+    const GridPoint& p = grid.points[i];
+    if (cat[i] >= 1 && cat[i] <= 3) cells[hash(key(p.position), p.block)].push_back(i);
   }
   // Per point: its nearest sources (distance, index), found in parallel.
   std::vector<std::array<std::pair<double, int>, kMaxSources>> found(n);
@@ -225,7 +227,7 @@ void PlanFillPass(const SurfaceGrid& grid, double radius, double plane_tolerance
     for (int dx = -1; dx <= 1; ++dx) {
       for (int dy = -1; dy <= 1; ++dy) {
         for (int dz = -1; dz <= 1; ++dz) {
-          auto it = cells.find(hash(k + Eigen::Vector3i(dx, dy, dz)));
+          auto it = cells.find(hash(k + Eigen::Vector3i(dx, dy, dz), p.block));
           if (it == cells.end()) continue;
           for (int j : it->second) {
             const GridPoint& q = grid.points[j];
@@ -1151,6 +1153,42 @@ std::vector<SpecularLobe> FitSkyLobes(const SurfaceGrid& grid, const HemisphereC
 
 }  // namespace
 
+// Aitken's extrapolation of the outer iteration, per point, channel and albedo in log rho: two
+// steps in the same direction, the second lambda times the first (0 < lambda < 1), say the
+// iteration contracts by lambda, so the rest of the way is the second step times
+// lambda / (1 - lambda) (lambda at most kMaxRatio: at most 4 more steps). Every other iteration,
+// after one not extrapolated, whose step measures lambda afresh.
+void Extrapolate(const AlbedoResult& from, AlbedoResult* to,
+                 std::vector<std::array<double, 6>>* last_step) {
+  constexpr double kMaxRatio = 0.8;
+  constexpr double kFloor = 1e-4;  // a zero albedo: the log step from this floor
+  const size_t n = to->rho_sun.size();
+  const bool extrapolate = !last_step->empty();
+  std::vector<std::array<double, 6>> steps(extrapolate ? 0 : n);
+  for (size_t i = 0; i < n; ++i) {
+    if (to->observations[i] <= 0) {
+      if (!extrapolate) steps[i].fill(0);
+      continue;
+    }
+    for (int a = 0; a < 2; ++a) {
+      for (int c = 0; c < 3; ++c) {
+        double& x = (a == 0 ? to->rho_sun[i] : to->rho_se[i])[c];
+        const double b = (a == 0 ? from.rho_sun[i] : from.rho_se[i])[c];
+        const double d = std::log(std::max(x, kFloor)) - std::log(std::max(b, kFloor));
+        if (!extrapolate) {
+          steps[i][3 * a + c] = d;
+          continue;
+        }
+        const double d0 = (*last_step)[i][3 * a + c];
+        if (!(d * d0 > 0 && std::abs(d) < std::abs(d0)) || x <= 0) continue;
+        const double lambda = std::min(d / d0, kMaxRatio);
+        x = std::exp(std::log(x) + d * lambda / (1 - lambda));
+      }
+    }
+  }
+  *last_step = std::move(steps);
+}
+
 // §4.1: albedos, then the one-bounce interreflection from them, then albedos again.
 AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
                          const RayCaster& model, const std::vector<Lighting>& slots,
@@ -1193,6 +1231,9 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
   // first iteration when `fit_retro`.
   auto iterate = [&](const std::vector<Observation>& obs, const std::vector<SpecularLobe>& lobes,
                      bool fit_retro) {
+    // Per point, channel and albedo (sun, then sky + environment): the last outer step in log
+    // rho, when it was not extrapolated (AlbedoOptions::outer_aitken).
+    std::vector<std::array<double, 6>> last_step;
     for (int it = 1; it < options.outer_iterations; ++it) {
       // Per point, for Newton's step: the sum over the slots of k x the light bounced k times,
       // and of all the light.
@@ -1247,8 +1288,12 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
         }
       }
       changes.push_back(step.empty() ? 0.0 : Quantile(step, options.outer_quantile));
+      // Not at the last iteration: what the iteration returns is a solve's.
+      const bool done = changes.back() < options.outer_tolerance;
+      if (options.outer_aitken && !done && it + 1 < options.outer_iterations)
+        Extrapolate(res, &next, &last_step);
       res = std::move(next);
-      if (changes.back() < options.outer_tolerance) break;
+      if (done) break;
     }
   };
   iterate(observations, warm ? warm->sun_lobes : std::vector<SpecularLobe>{}, options.fit_retro);

@@ -123,6 +123,12 @@ struct AlbedoOptions {
   // their next albedo is too low -- and diverges where E grows faster than rho (a deep well's
   // walls, a belfry's open storey with eight bounces). false: the paper's plain update.
   bool outer_newton = true;
+  // Beyond the paper: every other outer iteration extrapolates each point's albedos by
+  // Aitken's rule from its last two steps (in log rho, where they go the same way and shrink),
+  // as far as the iteration's own rate of contraction says it would go. Newton's step assumes
+  // every albedo around a point changes as its own does; where only the point's own is off, it
+  // steps too short, and the nave world's walls crept 0.54 of the way per iteration.
+  bool outer_aitken = true;
   // Radiosity passes in each interreflection update: 1 is the paper's one-bounce reflection;
   // Cycles' worlds carry 8 diffuse bounces, and light bounced 3-8 times is 10% of a narrow
   // street's north wall (the nave world) and of the belfry's open storey (the tower world).

@@ -834,28 +834,66 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
   const std::vector<Eigen::Vector3d> from_lobe = LobeLight(grid, sun_lobes, *irr);
   // The directions the last pass's light comes from, mixed into the direct light's (se_light).
   std::vector<LightMoments> light(irr->direct_se_light.empty() ? 0 : n);
-  std::vector<Eigen::Vector3d> walls_e;  // per cell of the ground bounce
+  // The light that no pass changes (E_sun does not): per point, what it gets from the sun's
+  // light and glint its neighbours and the ground cells reflect; each pass adds their
+  // reflection of the last pass's E_se. The last pass sums each entry whole, for the directions
+  // of its light.
+  std::vector<Eigen::Vector3d> fixed(n, Eigen::Vector3d::Zero());
+  for (int j = 0; j < n; ++j) from_sun[j] = rho_sun[j].cwiseProduct(irr->sun[j]);
+  std::vector<Eigen::Vector3d> walls_fixed, walls_e;  // per cell of the ground bounce
+  const std::vector<Eigen::Vector3d> none(ground ? n : 0, Eigen::Vector3d::Zero());
+  if (ground) {
+    // The walls' irradiance on each cell times the cell's albedo: what the cell reflects, over
+    // pi, before its reflection towards a point.
+    walls_fixed.assign(ground->cells.size(), Eigen::Vector3d::Zero());
+    tbb::parallel_for(size_t{0}, ground->cells.size(), [&](size_t w) {
+      walls_fixed[w] =
+          ground->field->Albedo(ground->cells[w])
+              .cwiseProduct(WallsOnCell(*ground, w, cell_factors, from_sun, none, from_lobe));
+    });
+  }
+  tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& range) {
+    for (int i = range.begin(); i < range.end(); ++i) {
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      for (int m = lists.begin[i]; m < lists.begin[i + 1]; ++m) {
+        sum += f.sun[m] * from_sun[lists.point[m]];
+        if (!f.lobe.empty()) sum += f.lobe[m] * from_lobe[lists.point[m]];
+      }
+      fixed[i] = sum / K;
+      if (!ground) continue;
+      for (int m = ground->point_begin[i]; m < ground->point_begin[i + 1]; ++m)
+        fixed[i] += ground->point_weight[m] * walls_fixed[ground->point_cell[m]];
+    }
+  });
   for (int pass = 0; pass < bounces; ++pass) {
     ThrowIfCancelled(cancel);
-    for (int j = 0; j < n; ++j) {
-      from_sun[j] = rho_sun[j].cwiseProduct(irr->sun[j]);
-      from_se[j] = rho_se[j].cwiseProduct(se_prev[j]);
-    }
+    // Where the light comes from, when the direct light's directions are known.
+    const bool last = pass + 1 == bounces && !irr->direct_se_light.empty();
+    for (int j = 0; j < n; ++j) from_se[j] = rho_se[j].cwiseProduct(se_prev[j]);
     if (ground) {
-      // The walls' irradiance on each cell times the cell's albedo: what the cell reflects,
-      // over pi, before its reflection towards a point.
       walls_e.assign(ground->cells.size(), Eigen::Vector3d::Zero());
       tbb::parallel_for(size_t{0}, ground->cells.size(), [&](size_t w) {
         walls_e[w] =
             ground->field->Albedo(ground->cells[w])
-                .cwiseProduct(WallsOnCell(*ground, w, cell_factors, from_sun, from_se, from_lobe));
+                .cwiseProduct(
+                    last ? WallsOnCell(*ground, w, cell_factors, from_sun, from_se, from_lobe)
+                         : WallsOnCell(*ground, w, cell_factors, none, from_se, none));
       });
     }
     tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& range) {
-      // Where the light comes from, when the direct light's directions are known.
-      const bool last = pass + 1 == bounces && !irr->direct_se_light.empty();
       for (int i = range.begin(); i < range.end(); ++i) {
         const GridPoint& p = grid.points[i];
+        if (!last) {
+          Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+          for (int m = lists.begin[i]; m < lists.begin[i + 1]; ++m)
+            sum += f.se[m] * from_se[lists.point[m]];
+          // (B_j / pi) (pi / K)
+          se[i] = irr->direct_se[i] + fixed[i] + sum / K;
+          if (!ground) continue;
+          for (int m = ground->point_begin[i]; m < ground->point_begin[i + 1]; ++m)
+            se[i] += ground->point_weight[m] * walls_e[ground->point_cell[m]];
+          continue;
+        }
         LightMomentsSum bounced(p.normal);
         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
         for (int m = lists.begin[i]; m < lists.begin[i + 1]; ++m) {
@@ -864,9 +902,8 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
           if (!f.lobe.empty()) b += f.lobe[m] * from_lobe[j];
           sum += b;
           const Eigen::Vector3d to_j = grid.points[j].position - p.position;
-          if (last && b.sum() > 0 && to_j.norm() > 0) bounced.Add(to_j.normalized(), b.sum());
+          if (b.sum() > 0 && to_j.norm() > 0) bounced.Add(to_j.normalized(), b.sum());
         }
-        // (B_j / pi) (pi / K)
         se[i] = irr->direct_se[i] + sum / K;
         if (ground) {
           for (int m = ground->point_begin[i]; m < ground->point_begin[i + 1]; ++m) {
@@ -874,15 +911,12 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
             se[i] += e;
             const Eigen::Vector3d to_cell =
                 ground->field->CellCentre(ground->cells[ground->point_cell[m]]) - p.position;
-            if (last && e.sum() > 0 && to_cell.norm() > 0)
-              bounced.Add(to_cell.normalized(), K * e.sum());
+            if (e.sum() > 0 && to_cell.norm() > 0) bounced.Add(to_cell.normalized(), K * e.sum());
           }
         }
-        if (last) {
-          light[i] = LightMoments::Mix(
-              LightAt(irr->direct_se_light, i, p.normal), irr->direct_se[i].sum(),
-              bounced.Moments(UniformLight(p.normal)), (se[i] - irr->direct_se[i]).sum());
-        }
+        light[i] = LightMoments::Mix(
+            LightAt(irr->direct_se_light, i, p.normal), irr->direct_se[i].sum(),
+            bounced.Moments(UniformLight(p.normal)), (se[i] - irr->direct_se[i]).sum());
       }
     });
     if (bounce_order) {  // the light this pass added was bounced pass + 1 times
