@@ -1151,7 +1151,8 @@ std::vector<SpecularLobe> FitSkyLobes(const SurfaceGrid& grid, const HemisphereC
   return lobes;
 }
 
-}  // namespace
+// A zero albedo in the outer iteration's steps in log rho: the step from this floor.
+constexpr double kLogFloor = 1e-4;
 
 // Aitken's extrapolation of the outer iteration, per point, channel and albedo in log rho: two
 // steps in the same direction, the second lambda times the first (0 < lambda < 1), say the
@@ -1161,20 +1162,16 @@ std::vector<SpecularLobe> FitSkyLobes(const SurfaceGrid& grid, const HemisphereC
 void Extrapolate(const AlbedoResult& from, AlbedoResult* to,
                  std::vector<std::array<double, 6>>* last_step) {
   constexpr double kMaxRatio = 0.8;
-  constexpr double kFloor = 1e-4;  // a zero albedo: the log step from this floor
   const size_t n = to->rho_sun.size();
   const bool extrapolate = !last_step->empty();
   std::vector<std::array<double, 6>> steps(extrapolate ? 0 : n);
   for (size_t i = 0; i < n; ++i) {
-    if (to->observations[i] <= 0) {
-      if (!extrapolate) steps[i].fill(0);
-      continue;
-    }
+    if (to->observations[i] <= 0) continue;  // its steps stay 0: never extrapolated
     for (int a = 0; a < 2; ++a) {
       for (int c = 0; c < 3; ++c) {
         double& x = (a == 0 ? to->rho_sun[i] : to->rho_se[i])[c];
         const double b = (a == 0 ? from.rho_sun[i] : from.rho_se[i])[c];
-        const double d = std::log(std::max(x, kFloor)) - std::log(std::max(b, kFloor));
+        const double d = std::log(std::max(x, kLogFloor)) - std::log(std::max(b, kLogFloor));
         if (!extrapolate) {
           steps[i][3 * a + c] = d;
           continue;
@@ -1188,6 +1185,8 @@ void Extrapolate(const AlbedoResult& from, AlbedoResult* to,
   }
   *last_step = std::move(steps);
 }
+
+}  // namespace
 
 // §4.1: albedos, then the one-bounce interreflection from them, then albedos again.
 AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
@@ -1280,10 +1279,10 @@ AlbedoResult SolveAlbedo(const SurfaceGrid& grid, const HemisphereCache& cache,
           const double f = 1 / (1 + sc);
           for (auto [a, b] : {std::pair{&next.rho_sun[i][c], res.rho_sun[i][c]},
                               std::pair{&next.rho_se[i][c], res.rho_se[i][c]}}) {
-            constexpr double kFloor = 1e-4;  // a zero albedo: the log step from this floor
             if (f < 1)
-              *a = std::exp(std::log(std::max(b, kFloor)) +
-                            f * (std::log(std::max(*a, kFloor)) - std::log(std::max(b, kFloor))));
+              *a = std::exp(
+                  std::log(std::max(b, kLogFloor)) +
+                  f * (std::log(std::max(*a, kLogFloor)) - std::log(std::max(b, kLogFloor))));
           }
         }
       }

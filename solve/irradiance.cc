@@ -633,7 +633,8 @@ ReflectionFactors CellFactors(const GroundBounce& b, const SurfaceGrid& grid,
 }
 
 // The walls' irradiance on entry w of b.cells: (pi / N) sum over its rays of B_j / pi, each
-// point's light sent towards the cell as towards another point (`f`: CellFactors).
+// point's light sent towards the cell as towards another point (`f`: CellFactors). An empty
+// `from_*` leaves its term out.
 Eigen::Vector3d WallsOnCell(const GroundBounce& b, size_t w, const ReflectionFactors& f,
                             const std::vector<Eigen::Vector3d>& from_sun,
                             const std::vector<Eigen::Vector3d>& from_se,
@@ -641,8 +642,9 @@ Eigen::Vector3d WallsOnCell(const GroundBounce& b, size_t w, const ReflectionFac
   Eigen::Vector3d e = Eigen::Vector3d::Zero();
   for (int m = b.cell_begin[w]; m < b.cell_begin[w + 1]; ++m) {
     const int j = b.cell_point[m];
-    e += f.sun[m] * from_sun[j] + f.se[m] * from_se[j];
-    if (!f.lobe.empty()) e += f.lobe[m] * from_lobe[j];
+    if (!from_sun.empty()) e += f.sun[m] * from_sun[j];
+    if (!from_se.empty()) e += f.se[m] * from_se[j];
+    if (!f.lobe.empty() && !from_lobe.empty()) e += f.lobe[m] * from_lobe[j];
   }
   return e;
 }
@@ -841,7 +843,6 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
   std::vector<Eigen::Vector3d> fixed(n, Eigen::Vector3d::Zero());
   for (int j = 0; j < n; ++j) from_sun[j] = rho_sun[j].cwiseProduct(irr->sun[j]);
   std::vector<Eigen::Vector3d> walls_fixed, walls_e;  // per cell of the ground bounce
-  const std::vector<Eigen::Vector3d> none(ground ? n : 0, Eigen::Vector3d::Zero());
   if (ground) {
     // The walls' irradiance on each cell times the cell's albedo: what the cell reflects, over
     // pi, before its reflection towards a point.
@@ -849,7 +850,7 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
     tbb::parallel_for(size_t{0}, ground->cells.size(), [&](size_t w) {
       walls_fixed[w] =
           ground->field->Albedo(ground->cells[w])
-              .cwiseProduct(WallsOnCell(*ground, w, cell_factors, from_sun, none, from_lobe));
+              .cwiseProduct(WallsOnCell(*ground, w, cell_factors, from_sun, {}, from_lobe));
     });
   }
   tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& range) {
@@ -877,7 +878,7 @@ void AddInterreflection(const SurfaceGrid& grid, const HemisphereCache& cache,
             ground->field->Albedo(ground->cells[w])
                 .cwiseProduct(
                     last ? WallsOnCell(*ground, w, cell_factors, from_sun, from_se, from_lobe)
-                         : WallsOnCell(*ground, w, cell_factors, none, from_se, none));
+                         : WallsOnCell(*ground, w, cell_factors, {}, from_se, {}));
       });
     }
     tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& range) {
